@@ -1,0 +1,188 @@
+"""Named parameters and presets of the EV, battery-wear and cost models.
+
+Every number that is not a physical constant lives here, in a frozen dataclass, with its unit in its
+name and its source in the docs (README "Parameters" table, docs/MODEL.md). Algorithms take these
+objects as arguments; nothing here reads the environment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+G_MPS2 = 9.80665
+"""Standard gravity [m/s²]."""
+
+GAS_CONSTANT_J_PER_MOL_K = 8.3144
+"""Ideal gas constant as used by the paper [J/(mol K)]."""
+
+MPH_TO_MPS = 0.44704
+SPEED_LIMIT_MPS = 55.0 * MPH_TO_MPS
+"""The paper's speed limit, 55 mph = 88.5 km/h [m/s]."""
+
+
+def _check_frac(name: str, value: float, *, allow_zero: bool = False) -> None:
+    low_ok = value >= 0.0 if allow_zero else value > 0.0
+    if not (low_ok and value <= 1.0):
+        raise ValueError(f"{name} must be in {'[0' if allow_zero else '(0'}, 1], got {value}")
+
+
+def _check_positive(**values: float) -> None:
+    for name, value in values.items():
+        if not value > 0.0:
+            raise ValueError(f"{name} must be > 0, got {value}")
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleParams:
+    """Longitudinal model of one EV (paper Eq. 1) plus the pieces the paper leaves out.
+
+    Units are in the field names. ``rolling_coef`` and ``rolling_speed_coef_s_per_m`` are the
+    paper's C_r1 [-] and C_r2 [s/m]: rolling force = (C_r1 + C_r2 v) m g cos(theta).
+    """
+
+    name: str
+    mass_kg: float
+    rolling_coef: float
+    rolling_speed_coef_s_per_m: float
+    frontal_area_m2: float
+    drag_coef: float
+    trans_eff_frac: float
+    motor_eff_frac: float
+    inverter_eff_frac: float
+    pack_energy_kwh: float
+    pack_voltage_v: float
+    air_density_kg_per_m3: float = 1.225
+    regen_share_frac: float = 1.0
+    regen_power_max_w: float = 60e3
+    aux_power_w: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_positive(
+            mass_kg=self.mass_kg,
+            frontal_area_m2=self.frontal_area_m2,
+            drag_coef=self.drag_coef,
+            pack_energy_kwh=self.pack_energy_kwh,
+            pack_voltage_v=self.pack_voltage_v,
+            air_density_kg_per_m3=self.air_density_kg_per_m3,
+        )
+        for name in ("trans_eff_frac", "motor_eff_frac", "inverter_eff_frac"):
+            _check_frac(name, getattr(self, name))
+        _check_frac("regen_share_frac", self.regen_share_frac, allow_zero=True)
+        if self.rolling_coef < 0 or self.rolling_speed_coef_s_per_m < 0:
+            raise ValueError("rolling coefficients must be >= 0")
+        if self.regen_power_max_w < 0 or self.aux_power_w < 0:
+            raise ValueError("regen_power_max_w and aux_power_w must be >= 0")
+
+    @property
+    def drivetrain_eff_frac(self) -> float:
+        """eta_trans * eta_motor * eta_invert, the paper's Eq. 1 denominator [-]."""
+        return self.trans_eff_frac * self.motor_eff_frac * self.inverter_eff_frac
+
+    @property
+    def pack_capacity_ah(self) -> float:
+        """Pack charge capacity at nominal voltage [Ah]."""
+        return self.pack_energy_kwh * 1000.0 / self.pack_voltage_v
+
+
+@dataclass(frozen=True, slots=True)
+class DegradationParams:
+    """Graphite/LiFePO4 cycle-life model of Wang et al. (2011), paper Eq. 2-3.
+
+    ``m_c_rates`` / ``m_prefactor`` are the measured pre-exponential factors M(c); between them M is
+    interpolated linearly in C-rate. The whole model (M and Ea) is evaluated at C-rates clamped to
+    [c_rate_min, c_rate_max], the range the fit was measured on (see ``advisory.battery``).
+    ``decay_multiplier`` scales the SOH decay rate (the paper's 10x for NCA).
+    """
+
+    m_c_rates: tuple[float, ...] = (0.5, 2.0, 6.0, 10.0)
+    m_prefactor: tuple[float, ...] = (31630.0, 21681.0, 12934.0, 15512.0)
+    activation_j_per_mol: float = 31700.0
+    activation_slope_j_per_mol_c: float = 370.3
+    power_law_z: float = 0.55
+    capacity_loss_eol_pct: float = 20.0
+    temperature_k: float = 298.15
+    cell_capacity_ah: float = 2.2
+    c_rate_min: float = 0.5
+    c_rate_max: float = 10.0
+    decay_multiplier: float = 1.0
+
+    def __post_init__(self) -> None:
+        if len(self.m_c_rates) != len(self.m_prefactor) or len(self.m_c_rates) < 2:
+            raise ValueError("m_c_rates and m_prefactor need the same length >= 2")
+        if any(b <= a for a, b in zip(self.m_c_rates, self.m_c_rates[1:], strict=False)):
+            raise ValueError("m_c_rates must increase")
+        _check_positive(
+            power_law_z=self.power_law_z,
+            capacity_loss_eol_pct=self.capacity_loss_eol_pct,
+            temperature_k=self.temperature_k,
+            cell_capacity_ah=self.cell_capacity_ah,
+            c_rate_min=self.c_rate_min,
+            decay_multiplier=self.decay_multiplier,
+        )
+        if self.c_rate_max <= self.c_rate_min:
+            raise ValueError("c_rate_max must exceed c_rate_min")
+
+
+@dataclass(frozen=True, slots=True)
+class CostParams:
+    """Prices of paper Eq. 4."""
+
+    electricity_usd_per_kwh: float = 0.12
+    battery_usd_per_kwh: float = 125.0
+
+
+@dataclass(frozen=True, slots=True)
+class ModelParams:
+    """Everything the scoring and the optimizer need: vehicle, battery wear and prices."""
+
+    vehicle: VehicleParams
+    degradation: DegradationParams = field(default_factory=DegradationParams)
+    cost: CostParams = field(default_factory=CostParams)
+
+    def with_decay_multiplier(self, multiplier: float) -> ModelParams:
+        return replace(self, degradation=replace(self.degradation, decay_multiplier=multiplier))
+
+
+PAPER_54KWH = VehicleParams(
+    name="paper_54kwh",
+    mass_kg=1611.0,
+    rolling_coef=0.0065,
+    rolling_speed_coef_s_per_m=4.92e-5,
+    frontal_area_m2=2.22,
+    drag_coef=0.23,
+    trans_eff_frac=0.8536,
+    motor_eff_frac=0.90,
+    inverter_eff_frac=0.95,
+    pack_energy_kwh=54.0,
+    pack_voltage_v=350.0,
+)
+"""Paper Table 1 (Tesla Model 3 standard range); motor, pack voltage and regen are our choices."""
+
+PAPER_75KWH = replace(PAPER_54KWH, name="paper_75kwh", mass_kg=1726.0, pack_energy_kwh=75.0)
+"""Paper Sec. 4.3: the long-range Model 3, 75 kWh and 1726 kg, same pack voltage."""
+
+CALIBRATED = replace(
+    PAPER_54KWH,
+    name="calibrated",
+    mass_kg=1747.0,
+    trans_eff_frac=0.97,
+    motor_eff_frac=0.88,
+    inverter_eff_frac=0.97,
+    aux_power_w=250.0,
+)
+"""Public-data efficiency chain for a Model 3 RWD on the EPA dynamometer (docs/MODEL.md)."""
+
+VEHICLE_PRESETS: dict[str, VehicleParams] = {
+    v.name: v for v in (PAPER_54KWH, PAPER_75KWH, CALIBRATED)
+}
+DEFAULT_VEHICLE = PAPER_54KWH.name
+
+
+def model_params(vehicle: str | VehicleParams = DEFAULT_VEHICLE, decay_multiplier: float = 1.0) -> ModelParams:
+    """A ModelParams for a preset name (or a VehicleParams) with the paper's LFP model and prices."""
+    if isinstance(vehicle, str):
+        try:
+            vehicle = VEHICLE_PRESETS[vehicle]
+        except KeyError:
+            raise ValueError(f"unknown vehicle preset {vehicle!r}; choose from {sorted(VEHICLE_PRESETS)}") from None
+    return ModelParams(vehicle).with_decay_multiplier(decay_multiplier)

@@ -1,0 +1,119 @@
+"""Fixed-time traffic lights and the paper's scenarios (two lights, [x, y] timing, spacing s).
+
+Pure schedule functions; times are seconds since the car entered the control zone. A light is red on
+half-open intervals ``[start, start + red_s)``: a car may cross a stop line at the very instant the light
+turns green (the paper's eco-driver does exactly that), never while it is red.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from advisory.params import SPEED_LIMIT_MPS
+
+
+@dataclass(frozen=True, slots=True)
+class FixedTimeSignal:
+    """A two-phase light (no amber, as in the paper) at ``position_m`` along the route.
+
+    ``red_start_s`` is one instant at which a red phase begins (the paper's x or y); the plan repeats
+    every ``red_s + green_s`` seconds in both directions of time.
+    """
+
+    position_m: float
+    red_start_s: float
+    red_s: float = 30.0
+    green_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        if not (self.red_s > 0 and self.green_s > 0):
+            raise ValueError("red_s and green_s must be > 0")
+
+    @property
+    def cycle_s(self) -> float:
+        return self.red_s + self.green_s
+
+    def phase_s(self, t_s):
+        """Seconds since the last red began, in [0, cycle). [s]"""
+        return np.mod(np.asarray(t_s, dtype=float) - self.red_start_s, self.cycle_s)
+
+    def is_red(self, t_s):
+        """True where the light is red at ``t_s`` (scalar or array)."""
+        return self.phase_s(t_s) < self.red_s
+
+    def next_green_start_s(self, t_s: float) -> float:
+        """``t_s`` itself if green now, else the instant the current red ends. [s]"""
+        phase = float(self.phase_s(t_s))
+        return t_s + (self.red_s - phase) if phase < self.red_s else t_s
+
+    def next_red_start_s(self, t_s: float) -> float:
+        """``t_s`` itself if red now, else the instant the current green ends. [s]"""
+        phase = float(self.phase_s(t_s))
+        return t_s if phase < self.red_s else t_s + (self.cycle_s - phase)
+
+    def red_intervals(self, t0_s: float, t1_s: float) -> list[tuple[float, float]]:
+        """Red intervals ``[start, end)`` that overlap ``[t0_s, t1_s]``. [s]"""
+        k0 = int(np.floor((t0_s - self.red_start_s) / self.cycle_s)) - 1
+        out = []
+        start = self.red_start_s + k0 * self.cycle_s
+        while start <= t1_s:
+            if start + self.red_s > t0_s:
+                out.append((start, start + self.red_s))
+            start += self.cycle_s
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class Scenario:
+    """A control zone: lights along a straight route from 0 to ``zone_length_m``, entered at t = 0."""
+
+    name: str
+    signals: tuple[FixedTimeSignal, ...]
+    zone_length_m: float
+    speed_limit_mps: float = SPEED_LIMIT_MPS
+    initial_speed_mps: float = SPEED_LIMIT_MPS
+
+    def __post_init__(self) -> None:
+        positions = [s.position_m for s in self.signals]
+        if positions != sorted(positions) or (positions and not 0 < positions[0] and positions[-1] < self.zone_length_m):
+            raise ValueError("signals must be ordered and strictly inside the zone")
+        if not 0 <= self.initial_speed_mps <= self.speed_limit_mps:
+            raise ValueError("initial speed must be within [0, speed limit]")
+
+
+PAPER_TIMINGS_S = (-30.0, -15.0, 0.0, 15.0)
+PAPER_SPACINGS_M = (200.0, 400.0, 600.0, 800.0)
+PAPER_APPROACH_M = 100.0
+PAPER_EXIT_M = 100.0
+
+
+def paper_scenario(
+    x_s: float,
+    y_s: float,
+    spacing_m: float,
+    *,
+    approach_m: float = PAPER_APPROACH_M,
+    exit_m: float = PAPER_EXIT_M,
+    red_s: float = 30.0,
+    green_s: float = 30.0,
+) -> Scenario:
+    """The paper's zone: light 1 at ``approach_m``, light 2 ``spacing_m`` later, then ``exit_m`` to the end.
+
+    ``x_s`` / ``y_s``: seconds after entry at which light 1 / light 2 turn red (negative: before entry).
+    """
+    light1 = FixedTimeSignal(approach_m, x_s, red_s, green_s)
+    light2 = FixedTimeSignal(approach_m + spacing_m, y_s, red_s, green_s)
+    return Scenario(
+        name=f"[{x_s:g} {y_s:g}] s={spacing_m:g}m",
+        signals=(light1, light2),
+        zone_length_m=approach_m + spacing_m + exit_m,
+    )
+
+
+def paper_scenarios(**kwargs) -> list[Scenario]:
+    """The 64 cases of paper Table 2: 16 timings [x, y] x 4 spacings s (row-major, as the table reads)."""
+    return [
+        paper_scenario(x, y, s, **kwargs) for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S for s in PAPER_SPACINGS_M
+    ]

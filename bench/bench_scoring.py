@@ -1,0 +1,46 @@
+"""Scoring throughput after JIT: samples per second of score_trace (target >= 10 million/s).
+
+Also prints the ratio against the same model written as whole-array numpy (tests/test_scoring.py's
+reference), measured in the same run.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from advisory.params import model_params  # noqa: E402
+from advisory.scoring import score_trace  # noqa: E402
+from tests.test_scoring import numpy_reference  # noqa: E402
+
+
+def best_of(fn, repeats=5):
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main() -> None:
+    n = 5_000_000
+    rng = np.random.default_rng(0)
+    t = np.arange(n, dtype=float)
+    v = np.clip(15 + np.cumsum(rng.normal(0, 0.5, n)) % 20, 0, 35)
+    grade = 0.02 * np.sin(t / 200)
+    params = model_params()
+    score_trace(t[:100], v[:100], params, grade[:100])  # JIT / cache load
+    kernel_s = best_of(lambda: score_trace(t, v, params, grade))
+    numpy_s = best_of(lambda: numpy_reference(t, v, params, grade), repeats=3)
+    print(f"score_trace: {n:,} samples in {kernel_s * 1e3:.0f} ms = {n / kernel_s / 1e6:.1f} M samples/s (target >= 10)")
+    print(f"plain numpy : {n / numpy_s / 1e6:.1f} M samples/s; numba/numpy speed ratio {numpy_s / kernel_s:.1f}x")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""The FastAPI advisory service (to come; see the service issue)."""

@@ -1,0 +1,1 @@
+"""Signal plans and SPaT messages (to come; see the spat_feed issue). Fixed-time lights live in advisory.signals."""

@@ -1,0 +1,27 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from advisory.params import model_params
+
+REPO = Path(__file__).resolve().parents[1]
+CYCLES = REPO.parent / "shared" / "data" / "cycles"
+
+
+@pytest.fixture(scope="session")
+def paper():
+    return model_params("paper_54kwh")
+
+
+@pytest.fixture(scope="session")
+def calibrated():
+    return model_params("calibrated")
+
+
+def load_cycle(name: str) -> tuple[np.ndarray, np.ndarray]:
+    path = CYCLES / f"{name}.csv"
+    if not path.exists():
+        pytest.skip(f"{path} not present (shared/ sits beside the checkout)")
+    data = np.loadtxt(path, delimiter=",", skiprows=1)
+    return data[:, 0], data[:, 1]
