@@ -48,16 +48,23 @@ class DriverParams:
         return max(self.look_ahead_m, speed_limit_mps**2 / (2.0 * self.brake_max_mps2) + self.stop_gap_m)
 
 
-def time_to_cover_s(distance_m: float, v_mps: float, accel_mps2: float, v_max_mps: float) -> float:
-    """Time to drive ``distance_m`` from ``v_mps``, accelerating at ``accel_mps2`` up to ``v_max_mps``. [s]"""
-    if distance_m <= 0.0:
-        return 0.0
-    if v_mps >= v_max_mps - _EPS:
-        return distance_m / v_max_mps
-    d_acc = (v_max_mps**2 - v_mps**2) / (2.0 * accel_mps2)
-    if distance_m <= d_acc:
-        return (-v_mps + np.sqrt(v_mps**2 + 2.0 * accel_mps2 * distance_m)) / accel_mps2
-    return (v_max_mps - v_mps) / accel_mps2 + (distance_m - d_acc) / v_max_mps
+def time_to_cover_s(distance_m, v_mps, accel_mps2, v_max_mps):
+    """
+    Shortest time to drive ``distance_m`` from ``v_mps``, accelerating at ``accel_mps2`` up to ``v_max_mps``.
+
+    Elementwise over numpy arrays; returns a float for scalar inputs. [s]
+
+    >>> float(time_to_cover_s(100.0, 20.0, 2.0, 20.0))
+    5.0
+    >>> round(float(time_to_cover_s(25.0, 0.0, 2.0, 20.0)), 6)  # all accelerating: sqrt(2 * 25 / 2)
+    5.0
+    """
+    d = np.maximum(np.asarray(distance_m, dtype=float), 0.0)
+    v = np.minimum(np.asarray(v_mps, dtype=float), v_max_mps)
+    d_acc = (v_max_mps**2 - v * v) / (2.0 * accel_mps2)
+    t_partial = (np.sqrt(v * v + 2.0 * accel_mps2 * np.minimum(d, d_acc)) - v) / accel_mps2
+    t = np.where(d <= d_acc, t_partial, (v_max_mps - v) / accel_mps2 + (d - d_acc) / v_max_mps)
+    return t if t.ndim else float(t)
 
 
 class _Sim:

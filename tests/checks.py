@@ -33,9 +33,9 @@ def violations(traj: Trajectory, scenario: Scenario, accel_max=2.0, brake_max=4.
         for start, end in light.red_intervals(0.0, t[-1]):
             if start + TOL < t_cross < end - TOL:
                 out.append(f"light {i + 1}: reaches the stop line at {t_cross:.3f} s, red [{start:g}, {end:g})")
-    # never stands on a stop line: every standstill is short of, or clear of, each line
+    # never stands on a stop line while it is red (halting exactly on it during green is legal)
     for light in scenario.signals:
-        at_line = np.abs(x[v <= TOL] - light.position_m) <= TOL
-        if np.any(at_line):
-            out.append(f"stands on the stop line at {light.position_m:g} m")
+        on_line = (v <= TOL) & (np.abs(x - light.position_m) <= TOL)
+        if np.any(light.is_red(t[on_line] - TOL) & light.is_red(t[on_line] + TOL)):
+            out.append(f"stands on the stop line at {light.position_m:g} m during red")
     return out

@@ -1,0 +1,325 @@
+"""Eco-driving DP (paper Sec. 2): minimise electricity + battery-wear cost through a signalized zone.
+
+Formulation
+-----------
+* **Stages** every ``stage_m`` metres from the zone start to its end; every stop line is a stage.
+* **State** (speed, time) at each stage. Speed nodes form a *coasting chain* (:func:`coast_chain_mps`): one
+  node down over one stage is exactly coasting, at every speed. The optimum coasts a lot, and on a uniform
+  grid it can only alternate holding speed and braking, which costs several per cent and converges slowly
+  (the convergence table in bench/bench_dp.py shows it); the chain makes coasting exact at any resolution.
+* **Transitions** between nodes at constant acceleration, ``a = (v'² - v²) / (2 ds)`` in
+  ``[-brake_max, accel_max]``, ``dt = 2 ds / (v + v')``; cost = paper Eq. 4 on the mid-step battery power
+  (``advisory.model``). At standstill (not on a stop line) the car may wait in steps of ``dwell_s``.
+* **Time** is carried **exactly** on each label; labels are only *binned* by time (``time_bin_s``) to
+  decide which of two paths to keep. A stop line may be crossed only at an exact time outside red, and
+  the trip-time limit is checked on exact times: no rounding of time can let a path cheat a red light,
+  and paths that run along the speed-limit boundary (the regular driver barely brakes) stay representable.
+* **End state**: both drivers are compared back at the speed limit (``advisory.endstate``): the terminal
+  cost is the re-acceleration penalty, and its time part counts against the trip-time limit
+  ``(T_regular + penalty time of the regular driver) · (1 + time_buffer_frac)``.
+
+The recursion runs in ``_kernels.forward_pass`` (numba); ``solve_numpy`` is the same recursion in plain
+NumPy/Python, used by tests and the benchmark.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import numpy as np
+
+from advisory.endstate import reacceleration_penalty
+from advisory.model import I_AUX, battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, forward_pass
+from advisory.params import ModelParams, VehicleParams
+from advisory.regular import time_to_cover_s
+from advisory.signals import Scenario
+from advisory.trajectory import Trajectory
+
+
+@dataclass(frozen=True, slots=True)
+class GridSpec:
+    """DP resolution and limits. Units in names.
+
+    ``stage_m`` sets both the distance step and the speed nodes (a coasting chain, see
+    :func:`coast_chain_mps`); ``coast_split`` > 1 adds nodes between chain nodes (finer accelerations,
+    coasting stays exact every ``coast_split`` nodes); ``time_bin_s`` is the width of the time bins that
+    decide which of two labels to keep (times themselves are exact).
+    """
+
+    stage_m: float = 10.0
+    coast_split: int = 1
+    time_bin_s: float = 0.25
+    dwell_s: float = 0.5
+    allow_dwell: bool = True
+    accel_max_mps2: float = 2.0
+    brake_max_mps2: float = 4.0
+    time_buffer_frac: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("stage_m", "time_bin_s", "dwell_s", "accel_max_mps2", "brake_max_mps2"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0")
+        if self.coast_split < 1:
+            raise ValueError("coast_split must be >= 1")
+        if self.time_buffer_frac <= -1:
+            raise ValueError("time_buffer_frac must be > -1")
+
+    def refined(self, factor: int = 2) -> GridSpec:
+        """Every step divided by ``factor``: stage length, speed spacing (via the stage), time bin, dwell."""
+        return replace(
+            self,
+            stage_m=self.stage_m / factor,
+            time_bin_s=self.time_bin_s / factor,
+            dwell_s=self.dwell_s / factor,
+        )
+
+
+def _coast_step_mps(v_mps: float, stage_m: float, p: np.ndarray) -> float:
+    """Speed after coasting (zero wheel power, flat) one stage from ``v_mps``, in the DP's mid-step model."""
+    if step_wheel_power_w(v_mps, 0.0, 2.0 * stage_m / v_mps, 0.0, p) >= 0.0:
+        return 0.0  # the car stops within the stage
+    lo, hi = 0.0, v_mps
+    for _ in range(60):  # wheel power of the step is increasing in v'; bisect for zero
+        mid = 0.5 * (lo + hi)
+        if step_wheel_power_w(v_mps, mid, 2.0 * stage_m / (v_mps + mid), 0.0, p) < 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+@lru_cache(maxsize=64)
+def coast_chain_mps(speed_limit_mps: float, stage_m: float, vehicle: VehicleParams, coast_split: int = 1) -> np.ndarray:
+    """
+    Speed nodes: the limit, the speed after coasting one stage from it, after two stages, ..., 0.
+
+    Going one node down over one stage is then exactly coasting (zero wheel power on the flat), the
+    cheapest way to slow down, at every speed; other moves are the accelerations between nodes, about one
+    coasting deceleration apart (~0.19 m/s² at 88 km/h, 0.065 m/s² at walking pace). ``coast_split``
+    inserts nodes evenly in v² between chain nodes. Ascending, shape (n_v,). [m/s]
+    """
+    p, _, _ = pack(ModelParams(vehicle))
+    chain = [speed_limit_mps]
+    while chain[-1] > 0.0:
+        chain.append(_coast_step_mps(chain[-1], stage_m, p))
+    v2 = np.array(chain[::-1]) ** 2
+    if coast_split > 1:
+        frac = np.arange(coast_split) / coast_split
+        v2 = np.concatenate([(v2[:-1, None] + np.diff(v2)[:, None] * frac[None, :]).ravel(), v2[-1:]])
+    return np.sqrt(v2)
+
+
+class InfeasibleError(RuntimeError):
+    """No path on the grid meets the constraints (with the reason)."""
+
+
+@dataclass(frozen=True, slots=True)
+class DPProblem:
+    """A scenario laid on a grid: everything the kernel needs, plus what is needed to read its result."""
+
+    scenario: Scenario
+    grid: GridSpec
+    params: ModelParams
+    speed_mps: np.ndarray
+    band_lo: np.ndarray
+    band_hi: np.ndarray
+    grade_frac: np.ndarray
+    stop_red_start_s: np.ndarray
+    stop_red_s: np.ndarray
+    stop_cycle_s: np.ndarray
+    is_stop: np.ndarray
+    t_lo_s: np.ndarray
+    t_max_s: float
+    t_rem_min_s: np.ndarray
+    i_start: int
+    n_bins: int
+    terminal_cost_usd: np.ndarray
+    terminal_time_s: np.ndarray
+
+    @property
+    def n_stages(self) -> int:
+        return self.grade_frac.shape[0]
+
+
+def build_problem(
+    scenario: Scenario, params: ModelParams, grid: GridSpec, t_max_s: float, speed_nodes_mps: np.ndarray | None = None
+) -> DPProblem:
+    """
+    Lay ``scenario`` on ``grid``. ``t_max_s``: latest exact arrival at the end state (zone time + penalty time).
+
+    ``speed_nodes_mps`` replaces the coasting chain (tests use a handful of nodes to compare with brute force).
+    """
+    ds = grid.stage_m
+    n_stage = int(round(scenario.zone_length_m / ds))
+    if abs(n_stage * ds - scenario.zone_length_m) > 1e-9:
+        raise ValueError(f"stage_m = {ds} does not divide the zone length {scenario.zone_length_m} m")
+    v_lim = scenario.speed_limit_mps
+    if speed_nodes_mps is None:
+        speed_nodes_mps = coast_chain_mps(v_lim, ds, params.vehicle, grid.coast_split)
+    speed = np.unique(np.append(speed_nodes_mps, scenario.initial_speed_mps))
+    if speed[0] < 0 or speed[-1] > v_lim + 1e-12:
+        raise ValueError("speed nodes must lie in [0, speed limit]")
+    v2 = speed**2
+    band_lo = np.searchsorted(v2, v2 - 2 * grid.brake_max_mps2 * ds - 1e-9, side="left").astype(np.int64)
+    band_hi = (np.searchsorted(v2, v2 + 2 * grid.accel_max_mps2 * ds + 1e-9, side="right") - 1).astype(np.int64)
+    red_start, red_s, cycle = np.zeros(n_stage + 1), np.ones(n_stage + 1), np.full(n_stage + 1, 2.0)
+    is_stop = np.zeros(n_stage + 1, dtype=np.bool_)
+    for light in scenario.signals:
+        k = int(round(light.position_m / ds))
+        if abs(k * ds - light.position_m) > 1e-9:
+            raise ValueError(f"stage_m = {ds} does not divide the stop-line position {light.position_m} m")
+        red_start[k], red_s[k], cycle[k], is_stop[k] = light.red_start_s, light.red_s, light.cycle_s, True
+    x = np.arange(n_stage + 1) * ds
+    t_lo = x / v_lim - 1e-9
+    remaining = scenario.zone_length_m - x
+    t_rem = time_to_cover_s(remaining[:, None], speed[None, :], grid.accel_max_mps2, v_lim)
+    n_bins = int(np.ceil((t_max_s - scenario.zone_length_m / v_lim) / grid.time_bin_s)) + 2
+    if n_bins < 2:
+        raise InfeasibleError(f"time limit {t_max_s:.3f} s is below the fastest possible {scenario.zone_length_m / v_lim:.3f} s")
+    pen = reacceleration_penalty(speed, params, v_lim, grid.accel_max_mps2)
+    return DPProblem(
+        scenario=scenario,
+        grid=grid,
+        params=params,
+        speed_mps=speed,
+        band_lo=band_lo,
+        band_hi=band_hi,
+        grade_frac=np.zeros(n_stage),
+        stop_red_start_s=red_start,
+        stop_red_s=red_s,
+        stop_cycle_s=cycle,
+        is_stop=is_stop,
+        t_lo_s=t_lo,
+        t_max_s=float(t_max_s),
+        t_rem_min_s=np.ascontiguousarray(t_rem),
+        i_start=int(np.flatnonzero(np.isclose(speed, scenario.initial_speed_mps, rtol=0, atol=1e-12))[0]),
+        n_bins=n_bins,
+        terminal_cost_usd=np.asarray(pen.cost_usd),
+        terminal_time_s=np.asarray(pen.time_s),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class DPSolution:
+    """Optimal trajectory through the zone and its DP cost (zone cost + terminal penalty) [$]."""
+
+    problem: DPProblem
+    trajectory: Trajectory
+    cost_usd: float
+    end_time_s: float
+    n_labels: int
+
+
+def _empty_tables(prob: DPProblem):
+    shape = (prob.n_stages + 1, prob.speed_mps.size, prob.n_bins)
+    return np.full(shape, np.inf), np.full(shape, np.nan), np.full(shape, -2, dtype=np.int64)
+
+
+def _kernel_args(prob: DPProblem):
+    p, rates, pref = pack(prob.params)
+    g = prob.grid
+    return (
+        prob.speed_mps, prob.band_lo, prob.band_hi, g.stage_m, prob.grade_frac, prob.stop_red_start_s,
+        prob.stop_red_s, prob.stop_cycle_s, prob.is_stop, prob.t_lo_s, g.time_bin_s, g.dwell_s, g.allow_dwell,
+        prob.t_max_s, prob.t_rem_min_s, prob.i_start, p, rates, pref,
+    )
+
+
+def _read_solution(prob: DPProblem, cost, time, parent) -> DPSolution:
+    total = cost[-1] + prob.terminal_cost_usd[:, None]
+    late = time[-1] + prob.terminal_time_s[:, None] > prob.t_max_s + LATE_TOL_S
+    total = np.where(late | ~np.isfinite(cost[-1]), np.inf, total)
+    flat = int(np.argmin(total))
+    best = float(total.flat[flat])
+    if not np.isfinite(best):
+        raise InfeasibleError(
+            f"{prob.scenario.name}: no path reaches the end state by {prob.t_max_s:.3f} s on this grid "
+            f"(stage {prob.grid.stage_m} m, {prob.speed_mps.size} speeds, bin {prob.grid.time_bin_s} s)"
+        )
+    i, b = divmod(flat, prob.n_bins)
+    k = prob.n_stages
+    knots = []
+    while True:
+        knots.append((time[k, i, b], k * prob.grid.stage_m, prob.speed_mps[i]))
+        code = parent[k, i, b]
+        if code == -1:
+            break
+        if code <= -2:  # dwell: same stage, standstill, earlier bin
+            b = -code - 2
+        else:
+            i, b = divmod(int(code), prob.n_bins)
+            k -= 1
+    t, x, v = (np.array(c, dtype=float) for c in zip(*reversed(knots), strict=True))
+    return DPSolution(prob, Trajectory(t, x, v), best, float(t[-1]), int(np.isfinite(cost).sum()))
+
+
+def solve_problem(prob: DPProblem) -> DPSolution:
+    """Run the numba forward pass on a built problem and read off the optimal trajectory."""
+    cost, time, parent = _empty_tables(prob)
+    forward_pass(*_kernel_args(prob), cost, time, parent)
+    return _read_solution(prob, cost, time, parent)
+
+
+def time_limit_s(regular: Trajectory, params: ModelParams, scenario: Scenario, grid: GridSpec) -> float:
+    """The DP's trip-time limit: the regular driver's time to the common end state, with the buffer."""
+    pen = reacceleration_penalty(regular.v_mps[-1], params, scenario.speed_limit_mps, grid.accel_max_mps2)
+    return (regular.duration_s + float(pen.time_s[0])) * (1.0 + grid.time_buffer_frac)
+
+
+def solve(scenario: Scenario, params: ModelParams, grid: GridSpec | None = None, t_max_s: float | None = None) -> DPSolution:
+    """
+    Optimal eco-driving trajectory through ``scenario``.
+
+    ``t_max_s`` defaults to the regular driver's time to the common end state (paper: the regular
+    driver's trip time is the eco-driver's upper limit), times ``1 + grid.time_buffer_frac``.
+    """
+    from advisory.regular import regular_driver
+
+    grid = grid or GridSpec()
+    if t_max_s is None:
+        t_max_s = time_limit_s(regular_driver(scenario), params, scenario, grid)
+    return solve_problem(build_problem(scenario, params, grid, t_max_s))
+
+
+def solve_numpy(prob: DPProblem) -> DPSolution:
+    """The same forward recursion as ``forward_pass`` in plain NumPy/Python (reference and benchmark)."""
+    cost, time, parent = _empty_tables(prob)
+    p, rates, pref = pack(prob.params)
+    g = prob.grid
+    nb = prob.n_bins
+    cost[0, prob.i_start, 0], time[0, prob.i_start, 0], parent[0, prob.i_start, 0] = 0.0, 0.0, -1
+    idle = step_cost_usd(p[I_AUX], g.dwell_s, p, rates, pref)
+    v = prob.speed_mps
+    for k in range(prob.n_stages):
+        if g.allow_dwell and v[0] == 0.0 and not prob.is_stop[k]:
+            for b in range(nb):
+                if np.isfinite(cost[k, 0, b]):
+                    t2 = time[k, 0, b] + g.dwell_s
+                    b2 = int((t2 - prob.t_lo_s[k]) / g.time_bin_s)
+                    if t2 + prob.t_rem_min_s[k, 0] <= prob.t_max_s + LATE_TOL_S and b2 < nb and cost[k, 0, b] + idle < cost[k, 0, b2]:
+                        cost[k, 0, b2], time[k, 0, b2], parent[k, 0, b2] = cost[k, 0, b] + idle, t2, -(b + 2)
+        k2 = k + 1
+        for i in range(v.size):
+            src = np.flatnonzero(np.isfinite(cost[k, i]))
+            if src.size == 0:
+                continue
+            i2 = np.arange(prob.band_lo[i], prob.band_hi[i] + 1)
+            i2 = i2[v[i] + v[i2] > 0]
+            dt = 2.0 * g.stage_m / (v[i] + v[i2])
+            battery = battery_power_for_wheel_w(step_wheel_power_w(v[i], v[i2], dt, prob.grade_frac[k], p), p)
+            step = step_cost_usd(battery, dt, p, rates, pref)
+            for j, target in enumerate(i2):
+                t2 = time[k, i, src] + dt[j]
+                ok = t2 <= prob.t_max_s + LATE_TOL_S - prob.t_rem_min_s[k2, target]
+                if prob.is_stop[k2]:
+                    phase = (t2 - prob.stop_red_start_s[k2]) % prob.stop_cycle_s[k2]
+                    ok &= ~(phase < prob.stop_red_s[k2] - RED_TOL_S)
+                b2 = ((t2 - prob.t_lo_s[k2]) / g.time_bin_s).astype(np.int64)
+                ok &= b2 < nb
+                c2 = cost[k, i, src] + step[j]
+                for s_b, tb, cb, tt in zip(src[ok], b2[ok], c2[ok], t2[ok], strict=True):  # first minimum wins
+                    if cb < cost[k2, target, tb]:
+                        cost[k2, target, tb], time[k2, target, tb], parent[k2, target, tb] = cb, tt, i * nb + s_b
+    return _read_solution(prob, cost, time, parent)

@@ -1,0 +1,187 @@
+"""DP optimizer: brute force on tiny grids, the NumPy twin, constraints, and the paper scenarios."""
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from advisory.endstate import reacceleration_penalty, score_in_end_state
+from advisory.model import battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.optimizer.dp import (
+    GridSpec,
+    InfeasibleError,
+    build_problem,
+    coast_chain_mps,
+    solve,
+    solve_numpy,
+    solve_problem,
+    time_limit_s,
+)
+from advisory.params import PAPER_54KWH, model_params
+from advisory.regular import regular_driver
+from advisory.signals import FixedTimeSignal, Scenario, paper_scenario, paper_scenarios
+from tests.checks import violations
+
+COARSE = GridSpec(stage_m=20.0)
+
+
+def brute_force(scenario, params, grid, speeds, t_max_s, max_dwell_steps=8):
+    """Cheapest path by enumerating every speed sequence on the nodes (and every dwell), exact times."""
+    p, rates, pref = pack(params)
+    ds = grid.stage_m
+    n_stage = int(round(scenario.zone_length_m / ds))
+    stops = {int(round(s.position_m / ds)): s for s in scenario.signals}
+    v_lim = scenario.speed_limit_mps
+    pen = reacceleration_penalty(speeds, params, v_lim, grid.accel_max_mps2)
+    idle = step_cost_usd(params.vehicle.aux_power_w, grid.dwell_s, p, rates, pref)
+    best = np.inf
+    i0 = int(np.argmin(abs(speeds - scenario.initial_speed_mps)))
+    for seq in itertools.product(range(len(speeds)), repeat=n_stage):
+        path = (i0, *seq)
+        v = speeds[list(path)]
+        a = (v[1:] ** 2 - v[:-1] ** 2) / (2 * ds)
+        if np.any(a > grid.accel_max_mps2 + 1e-9) or np.any(a < -grid.brake_max_mps2 - 1e-9):
+            continue
+        if np.any(v[1:] + v[:-1] == 0):
+            continue
+        dt = 2 * ds / (v[1:] + v[:-1])
+        steps = [step_cost_usd(battery_power_for_wheel_w(step_wheel_power_w(v[k], v[k + 1], dt[k], 0.0, p), p), dt[k], p, rates, pref)
+                 for k in range(n_stage)]
+        # where the car stands still (not on a stop line) it may wait 0..max_dwell_steps dwell steps
+        waits = [k for k in range(n_stage) if v[k] == 0 and k not in stops]
+        for counts in itertools.product(range(max_dwell_steps + 1), repeat=len(waits)):
+            wait = dict(zip(waits, counts, strict=True))
+            t, cost, ok = 0.0, 0.0, True
+            for k in range(n_stage):
+                t += wait.get(k, 0) * grid.dwell_s
+                cost += wait.get(k, 0) * idle
+                t += dt[k]
+                cost += steps[k]
+                if k + 1 in stops and stops[k + 1].is_red(t + 1e-9) and stops[k + 1].is_red(t - 1e-9):
+                    ok = False
+                    break
+            if ok and t + pen.time_s[path[-1]] <= t_max_s + 1e-9:
+                best = min(best, cost + pen.cost_usd[path[-1]])
+    return best
+
+
+TINY_LIGHT = FixedTimeSignal(position_m=30.0, red_start_s=0.0, red_s=4.5, green_s=20.0)
+TINY = Scenario("tiny", (TINY_LIGHT,), zone_length_m=50.0, speed_limit_mps=10.0, initial_speed_mps=10.0)
+
+
+@pytest.mark.parametrize("t_max_s", [6.0, 6.8, 7.5, 12.0])
+def test_dp_equals_brute_force_on_a_tiny_grid(t_max_s):
+    params = model_params()
+    grid = GridSpec(stage_m=10.0, time_bin_s=1e-4, dwell_s=0.75)
+    speeds = np.array([0.0, 2.5, 4.5, 6.5, 8.0, 9.0, 10.0])
+    prob = build_problem(TINY, params, grid, t_max_s, speed_nodes_mps=speeds)
+    if t_max_s == 6.0:  # red until 4.5 s at 30 m, then 20 m at <= 10 m/s: 6.5 s at best
+        assert brute_force(TINY, params, grid, prob.speed_mps, t_max_s) == np.inf
+        with pytest.raises(InfeasibleError):
+            solve_problem(prob)
+        return
+    sol = solve_problem(prob)
+    assert sol.cost_usd == pytest.approx(brute_force(TINY, params, grid, prob.speed_mps, t_max_s), rel=1e-12)
+    assert violations(sol.trajectory, TINY) == []
+
+
+def test_tiny_grid_with_a_wait():
+    """Red until 14 s 30 m ahead of a car at 10 m/s: creeping is not slow enough, it must halt and wait."""
+    light = FixedTimeSignal(position_m=30.0, red_start_s=0.0, red_s=14.0, green_s=20.0)
+    sc = Scenario("wait", (light,), zone_length_m=40.0, speed_limit_mps=10.0, initial_speed_mps=10.0)
+    params = model_params("calibrated")  # aux power: waiting is not free
+    grid = GridSpec(stage_m=10.0, time_bin_s=1e-4, dwell_s=1.0)
+    speeds = np.array([0.0, 3.0, 6.0, 8.0, 10.0])
+    prob = build_problem(sc, params, grid, 20.0, speed_nodes_mps=speeds)
+    sol = solve_problem(prob)
+    stand = sol.trajectory.t_s[sol.trajectory.v_mps == 0]
+    assert stand.size >= 2 and np.ptp(stand) > 0  # halts, then leaves later from the same place
+    assert sol.cost_usd == pytest.approx(brute_force(sc, params, grid, prob.speed_mps, 20.0, 12), rel=1e-12)
+    assert violations(sol.trajectory, sc) == []
+
+
+@pytest.mark.parametrize("case", [(15, 15, 400), (-15, 15, 200), (0, 0, 200)])
+def test_numba_and_numpy_recursions_agree(case):
+    sc = paper_scenario(*case)
+    params = model_params()
+    grid = GridSpec(stage_m=20.0, time_bin_s=0.5, dwell_s=1.0)
+    prob = build_problem(sc, params, grid, time_limit_s(regular_driver(sc), params, sc, grid))
+    fast, slow = solve_problem(prob), solve_numpy(prob)
+    assert fast.cost_usd == pytest.approx(slow.cost_usd, rel=1e-12)
+    np.testing.assert_allclose(fast.trajectory.t_s, slow.trajectory.t_s, rtol=1e-12)
+    np.testing.assert_array_equal(fast.trajectory.v_mps, slow.trajectory.v_mps)
+
+
+def test_coast_chain_steps_are_exact_coasting():
+    chain = coast_chain_mps(24.5872, 10.0, PAPER_54KWH)
+    p, _, _ = pack(model_params())
+    v0, v1 = chain[1:], chain[:-1]
+    wheel = step_wheel_power_w(v0, v1, 2 * 10.0 / (v0 + v1), 0.0, p)
+    assert np.all(np.abs(wheel[1:]) < 1e-6)  # one node down over one stage: zero wheel power
+    assert chain[0] == 0 and chain[-1] == pytest.approx(24.5872)
+
+
+@pytest.mark.parametrize("scenario", paper_scenarios(), ids=lambda s: s.name)
+def test_paper_scenarios_obey_constraints_and_beat_the_regular_driver(scenario):
+    params = model_params()
+    regular = regular_driver(scenario)
+    sol = solve(scenario, params, COARSE)
+    assert violations(sol.trajectory, scenario) == []
+    eco = score_in_end_state(sol.trajectory, params, scenario.speed_limit_mps)
+    reg = score_in_end_state(regular, params, scenario.speed_limit_mps)
+    assert eco.time_s <= reg.time_s + 1e-6  # never slower to the common end state
+    assert eco.cost_usd <= reg.cost_usd * (1 + 1e-9)
+    # the DP's own bookkeeping agrees with re-scoring the trajectory at 0.1 s
+    assert sol.cost_usd == pytest.approx(eco.cost_usd, rel=0.01)
+
+
+@pytest.mark.parametrize("case", [(15, 15, 800), (-30, 0, 400), (-15, 15, 400)])
+def test_refining_the_grid_does_not_raise_the_optimum(case):
+    """Stated tolerance: halving every step never raises the optimal cost by more than 0.5 %."""
+    sc = paper_scenario(*case)
+    params = model_params()
+    coarse = solve(sc, params, COARSE).cost_usd
+    fine = solve(sc, params, COARSE.refined(2)).cost_usd
+    assert fine <= coarse * 1.005
+
+
+def test_boundary_case_regular_driver_barely_brakes():
+    # light 2 (500 m) turns green at 20.6 s; the regular driver arrives at 20.34 s at the limit: it sees red at
+    # its decision point, brakes, and re-accelerates on green without stopping. The only eco paths hug the limit.
+    sc = paper_scenario(-30, -9.4, 400)
+    regular = regular_driver(sc)
+    assert regular.v_mps.min() > 10 and regular.accel_mps2.min() < 0
+    params = model_params()
+    for grid in (COARSE, GridSpec(), GridSpec(time_bin_s=1.0)):
+        sol = solve(sc, params, grid)
+        assert violations(sol.trajectory, sc) == []
+        assert sol.trajectory.crossing_time_s(500.0) >= 20.6 - 1e-9
+        assert sol.end_time_s <= regular.duration_s + 1e-6
+
+
+def test_infeasible_time_limit_is_an_error_not_a_silent_result():
+    sc = paper_scenario(15, 15, 400)
+    with pytest.raises(InfeasibleError, match="below the fastest possible"):
+        solve(sc, model_params(), COARSE, t_max_s=10.0)
+    with pytest.raises(InfeasibleError, match="no path reaches the end state"):
+        solve(sc, model_params(), COARSE, t_max_s=30.0)  # light 2 blocks until 45 s
+
+
+def test_grid_must_align_with_stop_lines():
+    with pytest.raises(ValueError, match="does not divide"):
+        solve(paper_scenario(15, 15, 400), model_params(), GridSpec(stage_m=30.0))
+
+
+@settings(max_examples=12, deadline=None)
+@given(x=st.floats(-60, 60), y=st.floats(-60, 60), s=st.sampled_from([200.0, 300.0, 500.0]),
+       red=st.sampled_from([20.0, 30.0, 45.0]), green=st.sampled_from([20.0, 30.0, 45.0]))
+def test_random_timings_feasible_and_no_worse_than_regular(x, y, s, red, green):
+    sc = paper_scenario(x, y, s, red_s=red, green_s=green)
+    params = model_params()
+    sol = solve(sc, params, COARSE)
+    assert violations(sol.trajectory, sc) == []
+    eco = score_in_end_state(sol.trajectory, params, sc.speed_limit_mps)
+    reg = score_in_end_state(regular_driver(sc), params, sc.speed_limit_mps)
+    assert eco.cost_usd <= reg.cost_usd * (1 + 1e-9)
