@@ -72,7 +72,23 @@ def forward_pass(
     occ_hi[0, i_start] = 0
     # standstill: only accessories draw power
     idle_cost = step_cost_usd(p[I_AUX], dwell_s, p, m_c_rates, m_prefactor)
+    max_band = 0
+    for i in range(n_v):
+        max_band = max(max_band, band_hi[i] - band_lo[i] + 1)
+    step_dt = np.empty((n_v, max_band))
+    step_usd = np.empty((n_v, max_band))
     for k in range(n_stage):
+        if k == 0 or grade_frac[k] != grade_frac[k - 1]:  # transition table: once per distinct grade
+            for i in range(n_v):
+                for j in range(band_hi[i] - band_lo[i] + 1):
+                    v, v2 = speed_mps[i], speed_mps[band_lo[i] + j]
+                    if v + v2 <= 0.0:
+                        step_dt[i, j] = np.inf
+                        continue
+                    dt = 2.0 * stage_m / (v + v2)
+                    battery_w = battery_power_for_wheel_w(step_wheel_power_w(v, v2, dt, grade_frac[k], p), p)
+                    step_dt[i, j] = dt
+                    step_usd[i, j] = step_cost_usd(battery_w, dt, p, m_c_rates, m_prefactor)
         # dwell at standstill (never on a stop line), bins in ascending order so waits chain
         if allow_dwell and speed_mps[0] == 0.0 and not is_stop[k] and occ_hi[k, 0] >= 0:
             b = occ_lo[k, 0]
@@ -90,26 +106,26 @@ def forward_pass(
                                 occ_hi[k, 0] = b2
                 b += 1
         k2 = k + 1
+        stop_next = is_stop[k2]
         for i in range(n_v):
             if occ_hi[k, i] < 0:
                 continue
-            v = speed_mps[i]
-            for i2 in range(band_lo[i], band_hi[i] + 1):
-                v2 = speed_mps[i2]
-                if v + v2 <= 0.0:
+            b_lo, b_hi = occ_lo[k, i], occ_hi[k, i] + 1
+            for j in range(band_hi[i] - band_lo[i] + 1):
+                dt = step_dt[i, j]
+                if dt == np.inf:
                     continue
-                dt = 2.0 * stage_m / (v + v2)
-                battery_w = battery_power_for_wheel_w(step_wheel_power_w(v, v2, dt, grade_frac[k], p), p)
-                step = step_cost_usd(battery_w, dt, p, m_c_rates, m_prefactor)
+                i2 = band_lo[i] + j
+                step = step_usd[i, j]
                 slack = t_max_s + LATE_TOL_S - t_rem_min_s[k2, i2]
-                for b in range(occ_lo[k, i], occ_hi[k, i] + 1):
+                for b in range(b_lo, b_hi):
                     c0 = cost_usd[k, i, b]
                     if c0 == np.inf:
                         continue
                     t2 = time_s[k, i, b] + dt
                     if t2 > slack:
                         continue
-                    if is_stop[k2] and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
+                    if stop_next and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
                         continue
                     b2 = int((t2 - t_lo_s[k2]) / bin_s)
                     if b2 >= n_bins:

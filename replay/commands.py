@@ -1,0 +1,29 @@
+"""`ecodrive <command>`: one entry point for the project's commands.
+
+Commands: ``study`` (the paper's study), ``score`` (same as ``replay``: score a trace).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+
+COMMANDS = {
+    "study": "replay.study",
+    "score": "replay.cli",
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
+        known = ", ".join(COMMANDS)
+        print(f"usage: ecodrive {{{known}}} [options]   (ecodrive <command> --help for more)", file=sys.stderr if argv else sys.stdout)
+        return 0 if not argv or argv[0] in ("-h", "--help") else 2
+    import importlib
+
+    return importlib.import_module(COMMANDS[argv[0]]).main(argv[1:])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,361 @@
+"""SPaT messages: a JSON schema aligned with SAE J2735 SPAT, and conversion to J2735 TimeMarks.
+
+The JSON uses J2735's names (``intersections``, ``signalGroup``, ``eventState``, ``startTime``,
+``minEndTime``, ``maxEndTime``, ``likelyTime``, ``confidence``, ``nextTime``) and its
+MovementPhaseState spellings, but every time is an absolute UTC instant (ISO 8601 with ``Z``), so a
+receiver needs no knowledge of the sender's hour. :func:`to_j2735` / :func:`from_j2735` convert to and
+from the J2735 form, where times are TimeMarks (tenths of a second in the hour; see
+:mod:`spat_feed.timemark`) and the message time is MinuteOfTheYear + DSecond.
+
+One message carries several intersections; :func:`parse_spat_text` validates each intersection on its
+own, so one malformed intersection is dropped (and reported) without losing the others.
+
+Python attribute names are snake_case with units where they are numbers; JSON uses the J2735 aliases.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, AwareDatetime, BaseModel, ConfigDict, Field, PlainSerializer, ValidationError, model_validator
+from pydantic.alias_generators import to_camel
+
+from spat_feed.plans import ChangeWindow, MovementPhaseState, Plan, UncertainPlan, next_changes, state_at, state_start_s
+from spat_feed.timemark import PAST_WINDOW_START_S, timemark_to_unix, unix_to_timemark
+
+# J2735 DE_TimeIntervalConfidence: index -> probability that the change falls inside [minEnd, maxEnd].
+CONFIDENCE_FRAC = (0.21, 0.36, 0.47, 0.56, 0.62, 0.68, 0.73, 0.77, 0.81, 0.85, 0.88, 0.91, 0.94, 0.96, 0.98, 1.00)
+
+
+def confidence_index(confidence_frac: float) -> int:
+    """The J2735 TimeIntervalConfidence index (0..15) for a probability, rounding down (conservative).
+
+    Examples
+    --------
+    >>> confidence_index(1.0), confidence_index(0.9), confidence_index(0.1)
+    (15, 10, 0)
+    """
+    return max([i for i, p in enumerate(CONFIDENCE_FRAC) if p <= confidence_frac + 1e-9], default=0)
+
+
+def _to_utc(value: datetime) -> datetime:
+    return value.astimezone(timezone.utc)
+
+
+def _iso_z(value: datetime) -> str:
+    return value.astimezone(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+UtcTime = Annotated[AwareDatetime, AfterValidator(_to_utc), PlainSerializer(_iso_z, return_type=str)]
+"""A timezone-aware instant, stored in UTC and written as ``YYYY-MM-DDTHH:MM:SS.mmmZ``; naive times are refused."""
+
+
+def from_unix_s(t_unix_s: float) -> datetime:
+    """Unix seconds to an aware UTC datetime (millisecond precision on output)."""
+    return datetime.fromtimestamp(t_unix_s, tz=timezone.utc)
+
+
+def to_unix_s(value: datetime) -> float:
+    """An aware datetime to Unix seconds."""
+    return value.timestamp()
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(alias_generator=to_camel, populate_by_name=True, extra="forbid", frozen=True)
+
+
+class TimeChangeDetails(_Model):
+    """J2735 DF_TimeChangeDetails with absolute UTC times. ``min_end_time`` is required, as in J2735."""
+
+    start_time: UtcTime | None = None
+    min_end_time: UtcTime
+    max_end_time: UtcTime | None = None
+    likely_time: UtcTime | None = None
+    confidence: int | None = Field(default=None, ge=0, le=15)
+    next_time: UtcTime | None = None
+
+    @model_validator(mode="after")
+    def _ordered(self) -> TimeChangeDetails:
+        if self.max_end_time is not None and self.max_end_time < self.min_end_time:
+            raise ValueError("maxEndTime is before minEndTime")
+        if self.likely_time is not None and not (
+            self.min_end_time <= self.likely_time and (self.max_end_time is None or self.likely_time <= self.max_end_time)
+        ):
+            raise ValueError("likelyTime is outside [minEndTime, maxEndTime]")
+        return self
+
+
+class MovementEvent(_Model):
+    """J2735 DF_MovementEvent: a state and when it ends."""
+
+    event_state: MovementPhaseState
+    timing: TimeChangeDetails | None = None
+
+
+class MovementState(_Model):
+    """J2735 DF_MovementState: one signal group's current and coming events (``state-time-speed``)."""
+
+    signal_group: int = Field(ge=0, le=255)
+    movement_name: str | None = Field(default=None, max_length=63)
+    state_time_speed: list[MovementEvent] = Field(min_length=1, max_length=16)
+
+
+class IntersectionState(_Model):
+    """J2735 DF_IntersectionState: one intersection's signal groups at ``timestamp``."""
+
+    id: int = Field(ge=0, le=65_535)
+    name: str | None = Field(default=None, max_length=63)
+    revision: int = Field(default=0, ge=0, le=127)
+    timestamp: UtcTime
+    states: list[MovementState] = Field(min_length=1, max_length=255)
+
+    def movement(self, signal_group: int) -> MovementState | None:
+        """The state of ``signal_group``, or ``None`` if this intersection does not report it."""
+        return next((m for m in self.states if m.signal_group == signal_group), None)
+
+
+class SpatMessage(_Model):
+    """A SPaT message: its send time and the intersections it reports (J2735 MessageFrame SPAT, as JSON)."""
+
+    timestamp: UtcTime
+    name: str | None = Field(default=None, max_length=63)
+    intersections: list[IntersectionState] = Field(max_length=32)
+
+
+# --------------------------------------------------------------------------------------------------
+# From plans to messages and back
+
+
+def movement_events(plan: Plan, now_unix_s: float, n_events: int = 3) -> list[MovementEvent]:
+    """The current state and the next ``n_events - 1`` ones of a plan on the Unix axis, as J2735 events.
+
+    The current event's ``startTime`` is when its state began; each event's end is its change window,
+    with ``minEndTime`` clipped to ``now_unix_s`` (a controller never says a change is possible in the
+    past). An uncertain plan may yield fewer events near its horizon.
+    """
+    current = state_at(plan, now_unix_s)
+    start_s = state_start_s(plan, now_unix_s)
+    events: list[MovementEvent] = []
+    states = [current]
+    changes = next_changes(plan, now_unix_s, n_events)
+    for i, change in enumerate(changes):
+        state = states[-1]
+        min_s = max(change.min_s, now_unix_s)
+        likely_s = max(change.likely_s, min_s)
+        timing = TimeChangeDetails(
+            start_time=from_unix_s(start_s) if math.isfinite(start_s) else None,
+            min_end_time=from_unix_s(min_s),
+            max_end_time=from_unix_s(max(change.max_s, likely_s)) if math.isfinite(change.max_s) else None,
+            likely_time=from_unix_s(likely_s),
+            confidence=confidence_index(change.confidence_frac),
+            next_time=from_unix_s(changes[i + 1].likely_s) if i + 1 < len(changes) else None,
+        )
+        events.append(MovementEvent(event_state=state, timing=timing))
+        states.append(change.state)
+        start_s = change.likely_s
+    if not events:  # an uncertain plan past its last change: the state holds, end unknown
+        events.append(MovementEvent(event_state=current))
+    return events
+
+
+def plan_from_movement(movement: MovementState) -> UncertainPlan:
+    """An :class:`~spat_feed.plans.UncertainPlan` on the Unix axis from a received movement state.
+
+    Event ``i``'s state holds until its ``timing`` window, then event ``i + 1``'s; after the last
+    event (or an event without timing) nothing is known (``UNAVAILABLE``). A missing ``likelyTime`` is
+    taken as the middle of the window (``minEndTime`` if the window is open-ended); a missing
+    ``maxEndTime`` is unbounded on the last event and the next event's ``minEndTime`` otherwise;
+    a missing confidence counts as 0 (21 %). Windows that overlap a later one are cut to fit.
+    """
+    states = []
+    changes: list[ChangeWindow] = []
+    events = movement.state_time_speed
+    for i, ev in enumerate(events):
+        states.append(ev.event_state)
+        if ev.timing is None:
+            break
+        min_s = to_unix_s(ev.timing.min_end_time)
+        if changes:
+            min_s = max(min_s, changes[-1].max_end_s)
+        if ev.timing.max_end_time is not None:
+            max_s = max(to_unix_s(ev.timing.max_end_time), min_s)
+        elif i + 1 < len(events) and events[i + 1].timing is not None:
+            max_s = max(to_unix_s(events[i + 1].timing.min_end_time), min_s)
+        else:
+            max_s = math.inf
+        if ev.timing.likely_time is not None:
+            likely_s = min(max(to_unix_s(ev.timing.likely_time), min_s), max_s)
+        else:
+            likely_s = min_s if math.isinf(max_s) else 0.5 * (min_s + max_s)
+        conf = CONFIDENCE_FRAC[ev.timing.confidence] if ev.timing.confidence is not None else CONFIDENCE_FRAC[0]
+        changes.append(ChangeWindow(min_s, likely_s, max_s, conf))
+    states.append(MovementPhaseState.UNAVAILABLE)
+    if len(states) > len(changes) + 1:  # stopped at an event without timing: its state holds for good
+        states = states[: len(changes) + 1]
+    return UncertainPlan(tuple(states), tuple(changes))
+
+
+# --------------------------------------------------------------------------------------------------
+# Parsing with per-intersection rejection
+
+
+@dataclass(frozen=True, slots=True)
+class ParsedSpat:
+    """A received message split into its valid intersections and the reasons for the rejected ones."""
+
+    timestamp_unix_s: float | None
+    intersections: tuple[IntersectionState, ...]
+    errors: tuple[str, ...]
+
+
+def parse_spat_text(text: str | bytes) -> ParsedSpat:
+    """Parse a SPaT JSON text; keep each intersection that validates, report the others.
+
+    A text that is not JSON, or whose envelope (``timestamp``, ``intersections``) is wrong, yields no
+    intersections and one error. Never raises on bad input.
+    """
+    try:
+        raw = json.loads(text)
+    except (ValueError, UnicodeDecodeError) as exc:
+        return ParsedSpat(None, (), (f"not JSON: {exc}",))
+    if not isinstance(raw, dict) or not isinstance(raw.get("intersections"), list):
+        return ParsedSpat(None, (), ("not a SPaT message: no 'intersections' list",))
+    try:
+        envelope = SpatMessage.model_validate({k: v for k, v in raw.items() if k != "intersections"} | {"intersections": []})
+    except ValidationError as exc:
+        return ParsedSpat(None, (), (f"bad envelope: {_short(exc)}",))
+    good, errors = [], []
+    for i, item in enumerate(raw["intersections"]):
+        try:
+            good.append(IntersectionState.model_validate(item))
+        except ValidationError as exc:
+            ident = item.get("id") if isinstance(item, dict) else None
+            errors.append(f"intersection #{i} (id={ident!r}) rejected: {_short(exc)}")
+    return ParsedSpat(to_unix_s(envelope.timestamp), tuple(good), tuple(errors))
+
+
+def _short(exc: ValidationError) -> str:
+    return "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors(include_url=False)[:3])
+
+
+# --------------------------------------------------------------------------------------------------
+# J2735 TimeMark form
+
+
+def _minute_of_year_and_ms(t_unix_s: float) -> tuple[int, int]:
+    """J2735 MinuteOfTheYear (0..527040) and DSecond (milliseconds in the minute, 0..59999)."""
+    dt = from_unix_s(t_unix_s)
+    year_start = datetime(dt.year, 1, 1, tzinfo=timezone.utc).timestamp()
+    minutes, rem_s = divmod(t_unix_s - year_start, 60.0)
+    return int(minutes), min(int(round(rem_s * 1000.0)), 59_999)
+
+
+def _from_minute_of_year(moy: int, dsecond_ms: int, ref_unix_s: float) -> float:
+    """Unix time of (MinuteOfTheYear, DSecond) in the year of ``ref_unix_s`` (or the one before/after, nearest)."""
+    year = from_unix_s(ref_unix_s).year
+    candidates = [datetime(y, 1, 1, tzinfo=timezone.utc).timestamp() + moy * 60.0 + dsecond_ms / 1000.0 for y in (year - 1, year, year + 1)]
+    return min(candidates, key=lambda t: abs(t - ref_unix_s))
+
+
+_TIME_FIELDS = ("start_time", "min_end_time", "max_end_time", "likely_time", "next_time")
+
+
+def to_j2735(message: SpatMessage) -> dict:
+    """The message in J2735 form: times as TimeMarks, message time as ``moy`` + ``timeStamp``.
+
+    Field names follow the J2735 ASN.1 (``state-time-speed``, ``id: {id: n}``). A time more than an
+    hour after the intersection's timestamp becomes 36000 (beyond the hour); an absent optional time
+    is left out. ``minEndTime`` is always present.
+    """
+    moy, _ = _minute_of_year_and_ms(to_unix_s(message.timestamp))
+    out: dict[str, Any] = {"timeStamp": moy, "intersections": []}
+    if message.name is not None:
+        out["name"] = message.name
+    for ix in message.intersections:
+        ref_s = to_unix_s(ix.timestamp)
+        ix_moy, ix_ms = _minute_of_year_and_ms(ref_s)
+        states = []
+        for mv in ix.states:
+            events = []
+            for ev in mv.state_time_speed:
+                event: dict[str, Any] = {"eventState": ev.event_state.value}
+                if ev.timing is not None:
+                    timing: dict[str, Any] = {}
+                    for name in _TIME_FIELDS:
+                        value = getattr(ev.timing, name)
+                        if value is not None:
+                            timing[to_camel(name)] = unix_to_timemark(to_unix_s(value), ref_s)
+                    if ev.timing.confidence is not None:
+                        timing["confidence"] = ev.timing.confidence
+                    event["timing"] = timing
+                events.append(event)
+            state: dict[str, Any] = {"signalGroup": mv.signal_group, "state-time-speed": events}
+            if mv.movement_name is not None:
+                state["movementName"] = mv.movement_name
+            states.append(state)
+        item: dict[str, Any] = {"id": {"id": ix.id}, "revision": ix.revision, "status": "0000", "moy": ix_moy, "timeStamp": ix_ms, "states": states}
+        if ix.name is not None:
+            item["name"] = ix.name
+        out["intersections"].append(item)
+    return out
+
+
+def from_j2735(data: dict, ref_unix_s: float) -> SpatMessage:
+    """Rebuild a :class:`SpatMessage` from :func:`to_j2735` output, resolving TimeMarks near each timestamp.
+
+    ``ref_unix_s`` (the receiver's clock) fixes the year of MinuteOfTheYear; the intersection's own
+    ``moy`` + ``timeStamp`` then fix the hour of every TimeMark (see :func:`timemark_to_unix`), so the
+    hour rollover is handled. ``minEndTime`` = 36000 ("at least an hour") decodes as timestamp + 1 h;
+    36001 (unknown) as the timestamp itself (the change may come at any moment). Other unknown times
+    are left out. Raises ``ValueError`` (or ``pydantic.ValidationError``) on malformed input.
+    """
+    intersections = []
+    latest_s = None
+    for item in data["intersections"]:
+        ref_s = _from_minute_of_year(item["moy"], item.get("timeStamp", 0), ref_unix_s)
+        latest_s = ref_s if latest_s is None else max(latest_s, ref_s)
+        states = []
+        for st in item["states"]:
+            events = []
+            for ev in st["state-time-speed"]:
+                timing = None
+                if "timing" in ev:
+                    raw = ev["timing"]
+                    fields: dict[str, Any] = {}
+                    for name in _TIME_FIELDS:
+                        key = to_camel(name)
+                        if key not in raw:
+                            continue
+                        window = PAST_WINDOW_START_S if name == "start_time" else -300.0
+                        t_s = timemark_to_unix(raw[key], ref_s, window)
+                        if t_s is None and name == "min_end_time":
+                            t_s = ref_s + 3600.0 if raw[key] == 36_000 else ref_s
+                        if t_s is not None:
+                            fields[name] = from_unix_s(t_s)
+                    if "confidence" in raw:
+                        fields["confidence"] = raw["confidence"]
+                    timing = TimeChangeDetails(**fields)
+                events.append(MovementEvent(event_state=MovementPhaseState(ev["eventState"]), timing=timing))
+            states.append(MovementState(signal_group=st["signalGroup"], movement_name=st.get("movementName"), state_time_speed=events))
+        intersections.append(
+            IntersectionState(
+                id=item["id"]["id"], name=item.get("name"), revision=item.get("revision", 0), timestamp=from_unix_s(ref_s), states=states
+            )
+        )
+    if "timeStamp" in data:
+        msg_s = _from_minute_of_year(data["timeStamp"], 0, ref_unix_s)
+        if latest_s is not None and 0 <= latest_s - msg_s < 60.0:
+            msg_s = latest_s  # MinuteOfTheYear alone drops the seconds; the intersection time is finer
+    else:
+        msg_s = latest_s if latest_s is not None else ref_unix_s
+    return SpatMessage(timestamp=from_unix_s(msg_s), name=data.get("name"), intersections=intersections)
+
+
+def intersections_by_id(items: Iterable[IntersectionState]) -> dict[int, IntersectionState]:
+    """Index intersections by J2735 id (later ones win)."""
+    return {ix.id: ix for ix in items}

@@ -1,0 +1,17 @@
+"""Run the spat_feed docstring examples (the default test paths collect doctests only from advisory/)."""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ["plans", "timemark", "messages", "corridors", "source", "client"]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples(name):
+    module = importlib.import_module(f"spat_feed.{name}")
+    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0
