@@ -22,8 +22,12 @@ How the advice is made (docs/ADVISOR.md):
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
+
+from advisory.energy import road_load_force_n
+from advisory.params import PAPER_54KWH, VehicleParams
 
 MPH_PER_MPS = 1 / 0.44704
 KMH_PER_MPS = 3.6
@@ -85,7 +89,10 @@ class Observation:
 
 @dataclass(frozen=True, slots=True)
 class Advice:
-    """One advisory. ``action``: cruise, ease_off, accelerate, stop, resume or none (no speed advice)."""
+    """One advisory. ``action``: cruise, ease_off (lift off and coast down to the target, then hold it),
+    coast (brake gently to the target, then keep coasting to the light), slow_down (brake gently to the
+    target, then hold it), brake_to (brake firmly to it, then hold), accelerate, stop, resume, or none (no
+    speed advice; ``reason`` says why)."""
 
     action: str
     reason: str
@@ -95,6 +102,7 @@ class Advice:
     message: str = ""
     speak: bool = False
     source: str = "rules"  # "dp_table" when the target came from the lookup tables
+    current_speed_mps: float | None = None
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__slots__}
@@ -104,9 +112,10 @@ class Advice:
 class AdvisorParams:
     """Advisor settings. Units in names."""
 
-    min_cruise_speed_mps: float = 20 * 0.44704  # drivers found < 20 mph hard to hold (paper Sec. 4.4)
+    min_cruise_speed_mps: float = 10 * 0.44704  # slowest speed ever advised (a creep towards a red)
     reaction_s: float = 1.0
     comfort_decel_mps2: float = 1.5
+    firm_decel_mps2: float = 3.0  # "brake to X" when gentle braking cannot make the green (regular driver: 4)
     comfort_accel_mps2: float = 1.5
     too_close_s: float = 3.0  # closer than this many seconds to the line at current speed: no advice
     too_close_m: float = 15.0
@@ -116,6 +125,7 @@ class AdvisorParams:
     speak_change_mps: float = 5 * 0.44704
     speed_step_mps: float = 0.44704  # candidates in whole mph: the spoken number is the advised one
     units: str = "mph"
+    vehicle: VehicleParams = PAPER_54KWH  # for the coast-down profile
 
     def __post_init__(self) -> None:
         if self.units not in ("mph", "kmh"):
@@ -131,33 +141,92 @@ class AdvisorMemory:
     history: tuple[str, ...] = field(default=())
 
 
-def crossing_time_s(distance_m: float, v0_mps: float, v_target_mps: float, params: AdvisorParams) -> float:
-    """Time to reach a line ``distance_m`` ahead: reaction at v0, comfortable ramp to the target, cruise. [s]"""
+@lru_cache(maxsize=16)
+def coast_profile(vehicle: VehicleParams, v_max_mps: float = 40.0, dt_s: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Coast-down (zero wheel power, flat) from ``v_max_mps`` to rest: speed [m/s] (decreasing), distance [m]
+    and time [s] since the start, shape (n,). Coasting from v0 to v1 takes ``x(v1) - x(v0)`` and ``t(v1) - t(v0)``.
+    """
+    v, x, t = [v_max_mps], [0.0], [0.0]
+    args = (vehicle.mass_kg, vehicle.rolling_coef, vehicle.rolling_speed_coef_s_per_m, vehicle.drag_coef,
+            vehicle.frontal_area_m2, vehicle.air_density_kg_per_m3)
+    while v[-1] > 0.0:
+        decel = road_load_force_n(v[-1], 0.0, *args) / vehicle.mass_kg
+        v_next = max(v[-1] - decel * dt_s, 0.0)
+        h = dt_s if v_next > 0 else v[-1] / decel
+        x.append(x[-1] + 0.5 * (v[-1] + v_next) * h)
+        t.append(t[-1] + h)
+        v.append(v_next)
+    return np.array(v), np.array(x), np.array(t)
+
+
+def coast_decel_mps2(v_mps: float, vehicle: VehicleParams) -> float:
+    """Deceleration while coasting on the flat: road load over mass. [m/s²]"""
+    return float(road_load_force_n(v_mps, 0.0, vehicle.mass_kg, vehicle.rolling_coef, vehicle.rolling_speed_coef_s_per_m,
+                                   vehicle.drag_coef, vehicle.frontal_area_m2, vehicle.air_density_kg_per_m3)) / vehicle.mass_kg
+
+
+def crossing_time_s(
+    distance_m: float, v0_mps: float, v_target_mps: float, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None
+) -> float:
+    """
+    Time to reach a line ``distance_m`` ahead: reaction at v0, then a speed change to the target, then cruise. [s]
+
+    ``mode``: how the speed changes: "coast" (lift off: zero wheel power), "brake" (comfortable braking),
+    or "auto" (coast when slowing, accelerate comfortably when speeding up).
+    """
+    reaction = params.reaction_s if reaction_s is None else reaction_s
     d = max(distance_m, 0.0)
-    d_react = v0_mps * params.reaction_s
+    d_react = v0_mps * reaction
     if d <= d_react:
         return d / v0_mps if v0_mps > 0 else np.inf
     d -= d_react
-    rate = params.comfort_decel_mps2 if v_target_mps < v0_mps else params.comfort_accel_mps2
+    v, x, t = coast_profile(params.vehicle)
+    rv, rx, rt = v[::-1], x[::-1], t[::-1]  # ascending speed for interpolation
+    if mode == "brake_coast":  # brake gently to the target, then coast all the way
+        v1 = min(v_target_mps, v0_mps)
+        d_b = (v0_mps**2 - v1**2) / (2.0 * params.comfort_decel_mps2)
+        if d <= d_b:
+            v_line = np.sqrt(max(v0_mps**2 - 2.0 * params.comfort_decel_mps2 * d, 0.0))
+            return reaction + (v0_mps - v_line) / params.comfort_decel_mps2
+        x0, t0 = np.interp(v1, rv, rx), np.interp(v1, rv, rt)
+        if x0 + (d - d_b) > x[-1]:
+            return np.inf  # would roll to a stop first
+        return reaction + (v0_mps - v1) / params.comfort_decel_mps2 + float(np.interp(x0 + d - d_b, x, t)) - t0
+    if v_target_mps < v0_mps and mode in ("auto", "coast"):
+        x0, t0 = np.interp(v0_mps, rv, rx), np.interp(v0_mps, rv, rt)
+        x1, t1 = np.interp(v_target_mps, rv, rx), np.interp(v_target_mps, rv, rt)
+        if d <= x1 - x0:  # the line comes while coasting
+            return reaction + float(np.interp(x0 + d, x, t)) - t0
+        return reaction + (t1 - t0) + (d - (x1 - x0)) / v_target_mps if v_target_mps > 0 else np.inf
+    if v_target_mps < v0_mps:
+        rate = params.firm_decel_mps2 if mode == "firm" else params.comfort_decel_mps2
+    else:
+        rate = params.comfort_accel_mps2
     d_ramp = abs(v0_mps**2 - v_target_mps**2) / (2.0 * rate)
     if d <= d_ramp:  # the line comes during the ramp
         disc = v0_mps**2 + 2.0 * (rate if v_target_mps >= v0_mps else -rate) * d
         v_line = np.sqrt(max(disc, 0.0))
-        return params.reaction_s + abs(v_line - v0_mps) / rate if v_line > 0 else np.inf
+        return reaction + abs(v_line - v0_mps) / rate if v_line > 0 else np.inf
     t_ramp = abs(v0_mps - v_target_mps) / rate
-    return params.reaction_s + t_ramp + (d - d_ramp) / v_target_mps if v_target_mps > 0 else np.inf
+    return reaction + t_ramp + (d - d_ramp) / v_target_mps if v_target_mps > 0 else np.inf
 
 
-def feasible_speeds_mps(obs: Observation, params: AdvisorParams) -> np.ndarray:
+def feasible_speeds_mps(obs: Observation, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None) -> np.ndarray:
     """Candidate cruise speeds in [min cruise, limit] that cross the next two lines on green. [m/s]"""
     speeds = np.arange(params.min_cruise_speed_mps, obs.speed_limit_mps + 1e-9, params.speed_step_mps)
     speeds = np.unique(np.append(speeds, obs.speed_limit_mps))
     ok = np.ones(speeds.size, dtype=bool)
     for light in obs.lights[:2]:
         for n, v in enumerate(speeds):
-            if ok[n] and light.is_red_at(crossing_time_s(light.distance_m, obs.speed_mps, v, params)):
+            if ok[n] and not _green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, v, params, mode, reaction_s)):
                 ok[n] = False
     return speeds[ok]
+
+
+def _green_crossing(light: LightView, t_s: float) -> bool:
+    """The line is reached (finite time) and not during a (conservative) red."""
+    return bool(np.isfinite(t_s)) and not light.is_red_at(t_s)
 
 
 def _say_speed(speed_mps: float, units: str) -> str:
@@ -168,7 +237,7 @@ def phrase(advice: Advice, units: str = "mph") -> str:
     """Short, voice-ready English for an advisory (numbers rounded, speed in mph or km/h)."""
     unit_word = "miles per hour" if units == "mph" else "kilometers per hour"
     t = advice.seconds_to_change_s
-    when = "" if t is None or t <= 0 else f"{round(t):d} seconds"
+    when = "" if t is None or round(t) < 1 else f"{round(t):d} seconds"
     if advice.action == "none":
         return {
             "no_spat": "No signal data. Drive normally.",
@@ -184,8 +253,17 @@ def phrase(advice: Advice, units: str = "mph") -> str:
         return f"Red light ahead. Prepare to stop. Green in {when}." if when else "Red light ahead. Prepare to stop."
     if advice.action == "resume":
         return f"Last light passed. Resume {speed}."
-    verb = {"ease_off": "Ease off to", "accelerate": "Speed up to", "cruise": "Hold"}[advice.action]
+    if advice.action == "coast":
+        if advice.target_speed_mps is not None and advice.target_speed_mps < 0.97 * advice_speed_hint(advice):
+            return f"{light}Slow to {speed}, then coast."
+        return f"{light}Lift off and coast."
+    verb = {"ease_off": "Ease off to", "slow_down": "Slow down to", "brake_to": "Brake to", "accelerate": "Speed up to", "cruise": "Hold"}[advice.action]
     return f"{light}{verb} {speed}."
+
+
+def advice_speed_hint(advice: Advice) -> float:
+    """The car's speed when the advice was made (kept in ``history``-free form on the advice itself)."""
+    return advice.current_speed_mps if advice.current_speed_mps is not None else np.inf
 
 
 def _light_timing(light: LightView) -> tuple[bool, float | None]:
@@ -209,32 +287,54 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if nxt.distance_m < max(params.too_close_m, obs.speed_mps * params.too_close_s):
         return Advice("none", "too_close", light_red=red, seconds_to_change_s=to_change)
     usable = tuple(light for light in obs.lights[:2] if light.fresh and light.confidence_frac >= params.min_confidence_frac)
-    feasible = feasible_speeds_mps(replace(obs, lights=usable), params)
-    if feasible.size == 0 and len(usable) > 1:  # no speed makes both greens: plan for the next light only
-        feasible = feasible_speeds_mps(replace(obs, lights=usable[:1]), params)
+    last = memory.last
+    modes = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", "ease_off": "auto", "accelerate": "auto", "cruise": "auto"}
+    if last is not None and last.target_speed_mps is not None and last.action in modes and usable:
+        # the driver is already following the last advice: keep it while it still works (no new reaction delay)
+        keep_mode = modes[last.action]
+        keep_target = last.target_speed_mps
+        if keep_mode == "brake_coast":
+            keep_target = min(keep_target, obs.speed_mps)
+        still = feasible_speeds_mps(replace(obs, lights=usable), params, keep_mode, reaction_s=0.0)
+        ok = np.any(np.abs(still - last.target_speed_mps) < 1e-9) or (
+            keep_mode == "brake_coast" and all(
+                _green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, keep_target, params, keep_mode, 0.0)) for light in usable
+            )
+        )
+        if ok:
+            return replace(last, light_red=red, seconds_to_change_s=to_change, message="", speak=False,
+                           action=last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise")
+    # Lift off and coast (or speed up) if that makes the greens; brake gently only if coasting cannot;
+    # if no speed makes both lights, plan for the next one alone.
+    for lights in (usable, usable[:1]) if len(usable) > 1 else (usable,):
+        for mode in ("auto", "brake_coast", "brake", "firm"):
+            feasible = feasible_speeds_mps(replace(obs, lights=lights), params, mode)
+            if feasible.size:
+                break
+        if feasible.size:
+            break
     if feasible.size == 0:
         arrival = crossing_time_s(nxt.distance_m, obs.speed_mps, obs.speed_mps, params) if obs.speed_mps > 0 else np.inf
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)
-        slowest = crossing_time_s(nxt.distance_m, obs.speed_mps, params.min_cruise_speed_mps, params)
+        slowest = crossing_time_s(nxt.distance_m, obs.speed_mps, params.min_cruise_speed_mps, params, "brake")
         return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red,
                       seconds_to_change_s=nxt.seconds_to_green_after(min(arrival, slowest)))
     target, source = float(feasible.max()), "rules"
     if tables is not None:
         wanted = tables.target_speed_mps(obs)
-        if wanted is not None:  # the DP's speed, snapped to the nearest feasible one
+        if wanted is not None:  # the DP's speed at the next stop line, snapped to the nearest feasible one
             target, source = float(feasible[np.argmin(np.abs(feasible - wanted))]), "dp_table"
-    last = memory.last
-    if (
-        last is not None
-        and last.target_speed_mps is not None
-        and last.action in ("cruise", "ease_off", "accelerate")
-        and abs(last.target_speed_mps - target) < params.hysteresis_mps
-        and np.any(np.abs(feasible - last.target_speed_mps) < 1e-9)
-    ):
-        target = last.target_speed_mps
-    if target < obs.speed_mps - params.hysteresis_mps:
-        action = "ease_off"
+    if last is not None and last.target_speed_mps is not None and last.action in ("cruise", "ease_off", "accelerate", "slow_down", "coast"):
+        # the driver is already following the last advice: keep it while it still works (no new reaction delay)
+        keep_mode = {"slow_down": "brake", "coast": "brake_coast"}.get(last.action, "auto")
+        still = feasible_speeds_mps(replace(obs, lights=lights), params, keep_mode, reaction_s=0.0)
+        if abs(last.target_speed_mps - target) < params.speak_change_mps and np.any(np.abs(still - last.target_speed_mps) < 1e-9):
+            target, mode = last.target_speed_mps, keep_mode
+    if mode == "brake_coast":
+        action = "coast"
+    elif target < obs.speed_mps - params.hysteresis_mps:
+        action = {"brake": "slow_down", "firm": "brake_to"}.get(mode, "ease_off")
     elif target > obs.speed_mps + params.hysteresis_mps:
         action = "accelerate"
     else:
@@ -265,7 +365,7 @@ def advise(
     """
     memory = memory or AdvisorMemory()
     params = params or AdvisorParams()
-    advice = _decide(obs, memory, params, tables)
+    advice = replace(_decide(obs, memory, params, tables), current_speed_mps=obs.speed_mps)
     speak = _meaningful_change(advice, memory.spoken, params)
     advice = replace(advice, message=phrase(advice, params.units), speak=speak and bool(phrase(advice, params.units)))
     spoken = advice if advice.speak else memory.spoken

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from advisory.advisor import Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise
+from advisory.advisor import Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise, coast_decel_mps2
 from advisory.regular import DriverParams
 from advisory.signals import Scenario
 from advisory.trajectory import Trajectory
@@ -30,6 +30,7 @@ class DriverModel:
     low_speed_mps: float = 25 * 0.44704  # below this advised speed the driver drifts up
     drift_mps: float = 1.0
     noise_mps: float = 0.0  # standard deviation of the tracking error, redrawn every advice
+    min_coast_mps: float = 2.0  # below this the driver stops coasting and drives on
     seed: int = 0
 
 
@@ -100,6 +101,8 @@ def simulate(
             v_cmd = active.target_speed_mps + (driver.drift_mps if active.target_speed_mps < driver.low_speed_mps else 0.0)
             v_cmd = float(np.clip(v_cmd + error, 0.0, v_lim))
         rate_up, rate_down = driver.accel_mps2, driver.decel_mps2
+        if active is not None and active.action == "brake_to":
+            rate_down = advisor.firm_decel_mps2
         # the driver's own eyes: decide once per light at the decision point, like the regular driver
         ahead = [(n, s) for n, s in enumerate(scenario.signals) if s.position_m > x + 1e-9]
         if ahead:
@@ -107,7 +110,9 @@ def simulate(
             dist = light.position_m - x
             room = dist - rules.stop_gap_m
             if n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
-                if light.is_red(t) or (v > 0.1 and light.is_red(t + dist / v)):
+                # go only if no red can begin before the car is over the line (crawling cars included)
+                arrival = t + (dist / v if v > 0.1 else np.sqrt(2.0 * dist / driver.accel_mps2) + driver.reaction_s)
+                if light.is_red(t) or light.next_red_start_s(t) <= arrival:
                     if braking_for != n and (active is None or active.action != "stop"):
                         overrides += 1
                     braking_for = n
@@ -119,6 +124,13 @@ def simulate(
                 rate_down = min(v * v / (2.0 * room), 4.0) if room > 1e-6 else 4.0
             elif n in committed:
                 v_cmd = max(v_cmd if active is None or active.action != "stop" else v_lim, v)  # going: no slowing
+        if braking_for is None and active is not None and active.action == "ease_off" and v_cmd < v:
+            rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast
+        if braking_for is None and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
+            if v > driver.min_coast_mps:
+                v_cmd, rate_down = 0.0, coast_decel_mps2(v, advisor.vehicle)  # target reached: keep coasting
+            else:
+                v_cmd = v_lim  # nobody coasts to a standstill: drive on
         gap = v_cmd - v
         a = float(np.clip(gap / dt_s, -rate_down, rate_up))
         if v + a * dt_s < 0.0:  # comes to rest within the step: a knot where it stops
@@ -137,3 +149,50 @@ def simulate(
         step += 1
     arr = np.array(knots)
     return ClosedLoopResult(Trajectory(arr[:, 0], arr[:, 1], arr[:, 2]), log, overrides, stops, max_advised)
+
+
+@dataclass(frozen=True, slots=True)
+class Evaluation:
+    """One scenario: costs [$] and times [s] of the regular driver, the advised driver and the DP optimum."""
+
+    name: str
+    regular_usd: float
+    advised_usd: float
+    optimum_usd: float
+    regular_s: float
+    advised_s: float
+    optimum_s: float
+    stops: int
+    overrides: int
+    violations: tuple[str, ...]
+
+    @property
+    def kept_frac(self) -> float | None:
+        """Share of the DP's saving over the regular driver that the advised driver keeps (None if nothing to save)."""
+        saving = self.regular_usd - self.optimum_usd
+        return None if saving < 1e-6 * self.regular_usd else (self.regular_usd - self.advised_usd) / saving
+
+
+def evaluate(scenario: Scenario, params, tables=None, advisor: AdvisorParams | None = None, driver: DriverModel | None = None, grid=None) -> Evaluation:
+    """Closed-loop run of ``scenario`` scored against the regular driver and the DP optimum (same end state)."""
+    from advisory.endstate import score_in_end_state
+    from advisory.optimizer.dp import GridSpec, solve
+    from advisory.regular import regular_driver
+
+    run = simulate(scenario, advisor, tables, driver)
+    v_lim = scenario.speed_limit_mps
+    reg = score_in_end_state(regular_driver(scenario), params, v_lim)
+    adv = score_in_end_state(run.trajectory, params, v_lim)
+    opt = score_in_end_state(solve(scenario, params, grid or GridSpec(stage_m=20.0)).trajectory, params, v_lim)
+    return Evaluation(scenario.name, reg.cost_usd, adv.cost_usd, opt.cost_usd, reg.time_s, adv.time_s, opt.time_s,
+                      run.stops, run.overrides, tuple(red_light_violations(run.trajectory, scenario)))
+
+
+def red_light_violations(traj: Trajectory, scenario: Scenario, tol_s: float = 1e-6) -> list[str]:
+    """Stop lines reached while red (crossing instants inside a red interval)."""
+    out = []
+    for n, light in enumerate(scenario.signals):
+        t_cross = traj.crossing_time_s(light.position_m)
+        if np.isfinite(t_cross) and light.is_red(t_cross - tol_s) and light.is_red(t_cross + tol_s):
+            out.append(f"light {n + 1} reached at {t_cross:.2f} s during red")
+    return out
