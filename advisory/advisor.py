@@ -167,66 +167,83 @@ def coast_decel_mps2(v_mps: float, vehicle: VehicleParams) -> float:
 
 
 def crossing_time_s(
-    distance_m: float, v0_mps: float, v_target_mps: float, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None
-) -> float:
+    distance_m: float, v0_mps: float, v_target_mps, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None
+):
     """
-    Time to reach a line ``distance_m`` ahead: reaction at v0, then a speed change to the target, then cruise. [s]
+    Time to reach a line ``distance_m`` ahead: reaction at v0, a speed change to the target, then cruise. [s]
 
-    ``mode``: how the speed changes: "coast" (lift off: zero wheel power), "brake" (comfortable braking),
-    or "auto" (coast when slowing, accelerate comfortably when speeding up).
+    ``v_target_mps`` may be an array (one time per target). ``mode``: how the speed changes: "auto" (lift
+    off and coast when slowing, accelerate comfortably when speeding up), "brake_coast" (brake gently to the
+    target, then coast all the way), "brake" / "firm" (brake gently / firmly to the target, then hold).
+    ``inf`` where the car would not reach the line.
     """
+    vt = np.asarray(v_target_mps, dtype=float)
     reaction = params.reaction_s if reaction_s is None else reaction_s
     d = max(distance_m, 0.0)
     d_react = v0_mps * reaction
     if d <= d_react:
-        return d / v0_mps if v0_mps > 0 else np.inf
+        out = np.full(vt.shape, d / v0_mps if v0_mps > 0 else np.inf)
+        return out if out.ndim else float(out)
     d -= d_react
     v, x, t = coast_profile(params.vehicle)
     rv, rx, rt = v[::-1], x[::-1], t[::-1]  # ascending speed for interpolation
-    if mode == "brake_coast":  # brake gently to the target, then coast all the way
-        v1 = min(v_target_mps, v0_mps)
-        d_b = (v0_mps**2 - v1**2) / (2.0 * params.comfort_decel_mps2)
-        if d <= d_b:
-            v_line = np.sqrt(max(v0_mps**2 - 2.0 * params.comfort_decel_mps2 * d, 0.0))
-            return reaction + (v0_mps - v_line) / params.comfort_decel_mps2
-        x0, t0 = np.interp(v1, rv, rx), np.interp(v1, rv, rt)
-        if x0 + (d - d_b) > x[-1]:
-            return np.inf  # would roll to a stop first
-        return reaction + (v0_mps - v1) / params.comfort_decel_mps2 + float(np.interp(x0 + d - d_b, x, t)) - t0
-    if v_target_mps < v0_mps and mode in ("auto", "coast"):
-        x0, t0 = np.interp(v0_mps, rv, rx), np.interp(v0_mps, rv, rt)
-        x1, t1 = np.interp(v_target_mps, rv, rx), np.interp(v_target_mps, rv, rt)
-        if d <= x1 - x0:  # the line comes while coasting
-            return reaction + float(np.interp(x0 + d, x, t)) - t0
-        return reaction + (t1 - t0) + (d - (x1 - x0)) / v_target_mps if v_target_mps > 0 else np.inf
-    if v_target_mps < v0_mps:
-        rate = params.firm_decel_mps2 if mode == "firm" else params.comfort_decel_mps2
-    else:
-        rate = params.comfort_accel_mps2
-    d_ramp = abs(v0_mps**2 - v_target_mps**2) / (2.0 * rate)
-    if d <= d_ramp:  # the line comes during the ramp
-        disc = v0_mps**2 + 2.0 * (rate if v_target_mps >= v0_mps else -rate) * d
-        v_line = np.sqrt(max(disc, 0.0))
-        return reaction + abs(v_line - v0_mps) / rate if v_line > 0 else np.inf
-    t_ramp = abs(v0_mps - v_target_mps) / rate
-    return reaction + t_ramp + (d - d_ramp) / v_target_mps if v_target_mps > 0 else np.inf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if mode == "brake_coast":  # brake gently to the target, then coast all the way
+            dec = params.comfort_decel_mps2
+            v1 = np.minimum(vt, v0_mps)
+            d_b = (v0_mps**2 - v1**2) / (2.0 * dec)
+            during = reaction + (v0_mps - np.sqrt(np.maximum(v0_mps**2 - 2.0 * dec * d, 0.0))) / dec
+            x0, t0 = np.interp(v1, rv, rx), np.interp(v1, rv, rt)
+            xs = x0 + d - d_b
+            after = np.where(xs > x[-1], np.inf, reaction + (v0_mps - v1) / dec + np.interp(xs, x, t) - t0)
+            out = np.where(d <= d_b, during, after)
+        else:
+            slower = vt < v0_mps
+            # coasting down (auto, slowing)
+            x0, t0 = np.interp(v0_mps, rv, rx), np.interp(v0_mps, rv, rt)
+            x1, t1 = np.interp(vt, rv, rx), np.interp(vt, rv, rt)
+            coast = np.where(d <= x1 - x0, reaction + np.interp(x0 + d, x, t) - t0,
+                             np.where(vt > 0, reaction + (t1 - t0) + (d - (x1 - x0)) / vt, np.inf))
+            # a constant-rate ramp (speeding up; or braking in brake / firm modes)
+            down = params.firm_decel_mps2 if mode == "firm" else params.comfort_decel_mps2
+            rate = np.where(slower, down, params.comfort_accel_mps2)
+            d_ramp = np.abs(v0_mps**2 - vt**2) / (2.0 * rate)
+            v_line = np.sqrt(np.maximum(v0_mps**2 + 2.0 * np.where(slower, -rate, rate) * d, 0.0))
+            ramp_during = np.where(v_line > 0, reaction + np.abs(v_line - v0_mps) / rate, np.inf)
+            ramp_after = np.where(vt > 0, reaction + np.abs(v0_mps - vt) / rate + (d - d_ramp) / vt, np.inf)
+            ramp = np.where(d <= d_ramp, ramp_during, ramp_after)
+            out = np.where(slower & (mode == "auto"), coast, ramp)
+    return out if out.ndim else float(out)
 
 
-def feasible_speeds_mps(obs: Observation, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None) -> np.ndarray:
-    """Candidate cruise speeds in [min cruise, limit] that cross the next two lines on green. [m/s]"""
-    speeds = np.arange(params.min_cruise_speed_mps, obs.speed_limit_mps + 1e-9, params.speed_step_mps)
-    speeds = np.unique(np.append(speeds, obs.speed_limit_mps))
+@lru_cache(maxsize=64)
+def _candidates_mps(low_mps: float, limit_mps: float, step_mps: float) -> np.ndarray:
+    speeds = np.unique(np.append(np.arange(low_mps, limit_mps + 1e-9, step_mps), limit_mps))
+    speeds.setflags(write=False)
+    return speeds
+
+
+def feasible_speeds_mps(
+    obs: Observation, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None, lights=None
+) -> np.ndarray:
+    """Candidate cruise speeds in [min cruise, limit] that cross the next two lines on green. [m/s]
+
+    ``lights`` replaces ``obs.lights`` (the advisor checks subsets of the lights ahead).
+    """
+    speeds = _candidates_mps(params.min_cruise_speed_mps, obs.speed_limit_mps, params.speed_step_mps)
     ok = np.ones(speeds.size, dtype=bool)
-    for light in obs.lights[:2]:
-        for n, v in enumerate(speeds):
-            if ok[n] and not _green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, v, params, mode, reaction_s)):
-                ok[n] = False
+    for light in (obs.lights if lights is None else lights)[:2]:
+        ok &= _green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, speeds, params, mode, reaction_s))
     return speeds[ok]
 
 
-def _green_crossing(light: LightView, t_s: float) -> bool:
-    """The line is reached (finite time) and not during a (conservative) red."""
-    return bool(np.isfinite(t_s)) and not light.is_red_at(t_s)
+def _green_crossing(light: LightView, t_s):
+    """Where the line is reached (finite time) and not during a (conservative) red (scalar or array)."""
+    t = np.asarray(t_s, dtype=float)
+    red = np.zeros(t.shape, dtype=bool)
+    for start, end in light.red_windows_s:
+        red |= (start <= t) & (t < end)
+    return np.isfinite(t) & ~red
 
 
 def _say_speed(speed_mps: float, units: str) -> str:
@@ -295,10 +312,10 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         keep_target = last.target_speed_mps
         if keep_mode == "brake_coast":
             keep_target = min(keep_target, obs.speed_mps)
-        still = feasible_speeds_mps(replace(obs, lights=usable), params, keep_mode, reaction_s=0.0)
+        still = feasible_speeds_mps(obs, params, keep_mode, reaction_s=0.0, lights=usable)
         ok = np.any(np.abs(still - last.target_speed_mps) < 1e-9) or (
             keep_mode == "brake_coast" and all(
-                _green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, keep_target, params, keep_mode, 0.0)) for light in usable
+                bool(_green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, keep_target, params, keep_mode, 0.0))) for light in usable
             )
         )
         if ok:
@@ -308,7 +325,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     # if no speed makes both lights, plan for the next one alone.
     for lights in (usable, usable[:1]) if len(usable) > 1 else (usable,):
         for mode in ("auto", "brake_coast", "brake", "firm"):
-            feasible = feasible_speeds_mps(replace(obs, lights=lights), params, mode)
+            feasible = feasible_speeds_mps(obs, params, mode, lights=lights)
             if feasible.size:
                 break
         if feasible.size:
@@ -328,7 +345,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if last is not None and last.target_speed_mps is not None and last.action in ("cruise", "ease_off", "accelerate", "slow_down", "coast"):
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
         keep_mode = {"slow_down": "brake", "coast": "brake_coast"}.get(last.action, "auto")
-        still = feasible_speeds_mps(replace(obs, lights=lights), params, keep_mode, reaction_s=0.0)
+        still = feasible_speeds_mps(obs, params, keep_mode, reaction_s=0.0, lights=lights)
         if abs(last.target_speed_mps - target) < params.speak_change_mps and np.any(np.abs(still - last.target_speed_mps) < 1e-9):
             target, mode = last.target_speed_mps, keep_mode
     if mode == "brake_coast":

@@ -123,7 +123,12 @@ def simulate(
                 v_cmd = 0.0
                 rate_down = min(v * v / (2.0 * room), 4.0) if room > 1e-6 else 4.0
             elif n in committed:
-                v_cmd = max(v_cmd if active is None or active.action != "stop" else v_lim, v)  # going: no slowing
+                if active is not None and active.action == "stop":
+                    v_cmd = v_lim
+                # going: slow down only if the line is still cleared before a red can begin
+                slowest = driver.min_coast_mps if active is not None and active.action in ("coast", "ease_off") else v_cmd
+                if v_cmd < v and light.next_red_start_s(t) <= t + dist / max(min(slowest, v_cmd), 0.5) + 1.0:
+                    v_cmd = v
         if braking_for is None and active is not None and active.action == "ease_off" and v_cmd < v:
             rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast
         if braking_for is None and active is not None and active.action == "coast" and v <= v_cmd + 0.05:

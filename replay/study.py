@@ -218,11 +218,33 @@ def make_study_figures(results, out: Path) -> list[Path]:
         note = [f"reg -{100 * (1 - b.regular.soh_lost_frac / a.regular.soh_lost_frac):.0f} %, eco -{100 * (1 - b.eco.soh_lost_frac / a.eco.soh_lost_frac):.0f} %"
                 for a, b in zip(small, big, strict=True)]
         paths.append(figures.grouped_bars([f"s = {s} m" for s in SPACINGS], decay, "SOH lost [1e-6 of life]", "[15 15], 10x decay: capacity decay, 54 vs 75 kWh", out / "decay_battery_size_15_15.png", note))
+    base = results.get(("lfp54", 15.0, 15.0, 400.0))
+    if base is not None:
+        paths.append(advisor_figure(base, out / "advisor_vs_dp_15_15_s400.png"))
     ours2 = table2(results)
     if not np.all(np.isnan(ours2)):
         paths.append(figures.table_maps([f"[{x} {y}]" for x, y in TIMINGS], [f"{s} m" for s in SPACINGS], ours2,
                                         np.array(paper_tables.TABLE2_COST_REDUCTION_PCT), "Table 2: cost reduction (%)", out / "table2_cost_reduction.png"))
     return paths
+
+
+def advisor_figure(res: CaseResult, path: Path) -> Path:
+    """The advisor in closed loop (virtual driver, 1 s reaction) against the DP optimum and the regular driver."""
+    from advisory.closed_loop import simulate
+    from advisory.endstate import score_in_end_state
+    from advisory.params import model_params
+    from advisory.tables import AdviceTables, TableGrid
+
+    sc = paper_scenario(res.x_s, res.y_s, res.spacing_m)
+    params = model_params()
+    run = simulate(sc, tables=AdviceTables.build(sc, params, TableGrid()))
+    advised = score_in_end_state(run.trajectory, params, sc.speed_limit_mps, keep_series=True)
+    runs = [("advised driver (solid) vs DP optimum (dashed)", advised.zone.series, res.eco.zone.series, sc.signals),
+            ("regular driver", res.regular.zone.series, None, ())]
+    spoken = "; ".join(f"{t:.0f} s: {a.message}" for t, a in run.advice if a.speak)
+    title = (f"[{res.x_s:g} {res.y_s:g}], s = {res.spacing_m:g} m: cost regular {res.regular.cost_usd * 100:.2f} c, "
+             f"advised {advised.cost_usd * 100:.2f} c, DP {res.eco.cost_usd * 100:.2f} c\n{spoken}")
+    return figures.trajectory_panels(runs, title, path, ("advised / regular", "DP optimum"))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,129 @@
+"""Advisor benchmarks: advise() latency, table build time and memory, closed-loop quality and safety.
+
+Run: .venv/bin/python bench/bench_advisor.py [--runs N]   (default 10,000 randomized closed-loop runs)
+
+* advise() latency in-process over realistic observations (p50 / p99, target p99 < 0.5 ms), with tables.
+* Lookup tables for the paper corridor (4 spacings x 4 relative offsets): build time and memory.
+* The 64 paper scenarios in closed loop (virtual driver: 1 s reaction, drifts up at low speed): share of
+  the DP's cost saving over the regular driver that the advised driver keeps (target >= 90 %), stops, time.
+* The field-test timing (light 1 turns green 15 s, light 2 red 30 s after entry): energy / decay / cost
+  savings of the advised driver against the regular driver (paper's field test: -29 / -38 / -32 %).
+* N randomized runs (spacing 150-1000 m, random offsets, cycle 40-120 s, red share 30-70 %, tracking
+  noise): red-light violations and advised speeds above the limit (target: 0 and 0).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from advisory.advisor import AdvisorMemory, advise  # noqa: E402
+from advisory.closed_loop import DriverModel, evaluate, observe, red_light_violations, simulate  # noqa: E402
+from advisory.endstate import score_in_end_state  # noqa: E402
+from advisory.params import model_params  # noqa: E402
+from advisory.regular import regular_driver  # noqa: E402
+from advisory.signals import PAPER_SPACINGS_M, PAPER_TIMINGS_S, paper_scenario  # noqa: E402
+from advisory.tables import AdviceTables, TableGrid, paper_offsets_s  # noqa: E402
+
+PARAMS = model_params()
+_TABLES: dict[float, AdviceTables] = {}
+
+
+def tables_for(spacing_m: float) -> AdviceTables:
+    if spacing_m not in _TABLES:
+        _TABLES[spacing_m] = AdviceTables.build(paper_scenario(0, 0, spacing_m), PARAMS, TableGrid(), paper_offsets_s())
+    return _TABLES[spacing_m]
+
+
+def paper_case(case):
+    x, y, s = case
+    return case, evaluate(paper_scenario(x, y, s), PARAMS, tables_for(s)), evaluate(paper_scenario(x, y, s), PARAMS, None)
+
+
+def random_run(seed: int):
+    rng = np.random.default_rng(seed)
+    cycle = rng.uniform(40, 120)
+    share = rng.uniform(0.3, 0.7)
+    sc = paper_scenario(rng.uniform(-cycle, cycle), rng.uniform(-cycle, cycle), rng.uniform(150, 1000),
+                        red_s=cycle * share, green_s=cycle * (1 - share))
+    run = simulate(sc, driver=DriverModel(noise_mps=rng.uniform(0, 1.0), seed=seed))
+    return len(red_light_violations(run.trajectory, sc)), run.max_advised_mps > sc.speed_limit_mps + 1e-9, run.overrides
+
+
+def main() -> None:
+    runs = int(sys.argv[sys.argv.index("--runs") + 1]) if "--runs" in sys.argv else 10_000
+    workers = os.cpu_count() or 1
+
+    t0 = time.perf_counter()
+    for s in PAPER_SPACINGS_M:
+        tables_for(s)
+    build_s = time.perf_counter() - t0
+    mem = sum(t.nbytes for t in _TABLES.values())
+    print(f"Lookup tables, paper corridor: 4 spacings x 4 offsets built in {build_s:.1f} s; "
+          f"{mem / 1e6:.1f} MB in all, {mem / 4e6:.1f} MB per corridor (budget 100 MB)")
+
+    # advise() latency along real closed-loop observations
+    sc = paper_scenario(15, 15, 400)
+    tables = tables_for(400.0)
+    run = simulate(sc, tables=tables)
+    obs = [observe(sc, t, float(run.trajectory.position_at(t)), float(run.trajectory.speed_at(t))) for t, _ in run.advice]
+    memory = AdvisorMemory()
+    for o in obs:  # warm up
+        memory = advise(o, memory, None, tables)[1]
+    lat = []
+    for _ in range(20):
+        memory = AdvisorMemory()
+        for o in obs:
+            t1 = time.perf_counter()
+            _, memory = advise(o, memory, None, tables)
+            lat.append(time.perf_counter() - t1)
+    lat = np.array(lat) * 1e3
+    print(f"advise() with tables: p50 {np.percentile(lat, 50):.3f} ms, p99 {np.percentile(lat, 99):.3f} ms, "
+          f"max {lat.max():.3f} ms over {lat.size} calls (target p99 < 0.5 ms)")
+
+    cases = [(x, y, s) for s in PAPER_SPACINGS_M for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S]
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(workers) as pool:
+        results = list(pool.map(paper_case, cases))
+    for label, idx in (("with DP tables", 1), ("rules only", 2)):
+        ev = [r[idx] for r in results]
+        kept = np.array([e.kept_frac for e in ev if e.kept_frac is not None])
+        reg = sum(e.regular_usd for e in ev)
+        adv = sum(e.advised_usd for e in ev)
+        opt = sum(e.optimum_usd for e in ev)
+        slower = sum(e.advised_s > e.regular_s + 1.0 for e in ev)
+        print(f"64 paper scenarios, {label}: mean share of the DP saving kept {100 * np.mean(np.minimum(kept, 1)):.1f} % "
+              f"(capped at 100 %; uncapped {100 * kept.mean():.1f} %; of the summed saving {100 * (reg - adv) / (reg - opt):.1f} %) "
+              f"over {kept.size} cases with a saving; stops {sum(e.stops for e in ev)}, slower than regular by >1 s in {slower}, "
+              f"violations {sum(len(e.violations) for e in ev)}")
+    print(f"  ({time.perf_counter() - t0:.1f} s)")
+
+    # field-test timing: light 1 green at 15 s (x = -15), light 2 red at 30 s (y = 30)
+    for s in (400.0, 600.0):
+        sc = paper_scenario(-15, 30, s)
+        run = simulate(sc, tables=AdviceTables.build(sc, PARAMS, TableGrid()), driver=DriverModel(noise_mps=0.3, seed=1))
+        a = score_in_end_state(run.trajectory, PARAMS, sc.speed_limit_mps)
+        r = score_in_end_state(regular_driver(sc), PARAMS, sc.speed_limit_mps)
+        print(f"Field-test timing, s = {s:.0f} m: advised vs regular: energy {100 * (a.energy_kwh / r.energy_kwh - 1):+.0f} %, "
+              f"decay {100 * (a.soh_lost_frac / r.soh_lost_frac - 1):+.0f} %, cost {100 * (a.cost_usd / r.cost_usd - 1):+.0f} % "
+              f"(paper field test: -29 / -38 / -32 %)")
+
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(workers) as pool:
+        out = list(pool.map(random_run, range(runs), chunksize=50))
+    violations = sum(o[0] for o in out)
+    above = sum(o[1] for o in out)
+    overrides = sum(o[2] for o in out)
+    print(f"{runs:,} randomized closed-loop runs: {violations} red-light violations, {above} advised speeds above the limit, "
+          f"{overrides} times the driver had to brake on its own ({time.perf_counter() - t0:.0f} s on {workers} processes)")
+
+
+if __name__ == "__main__":
+    main()
