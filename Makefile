@@ -13,9 +13,11 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/replay ../shared/data/cycles/udds.csv
+	sh scripts/system-deps.sh
+	$(VENV)/bin/ecodrive serve
 
 test: $(STAMP)
+	sh scripts/system-deps.sh
 	$(PY) -m pytest -q
 
 study: $(STAMP)

@@ -239,7 +239,7 @@ class AdviceTables:
             return None
         tau_first, first, rel = found
         cycle = self.cycle_s
-        for offs, (value, policy) in self.offsets_s.items():
+        for offs, (_value, policy) in self.offsets_s.items():
             full = (0.0, *offs)
             if any(abs(((full[k] - full[first]) - rel[k] + cycle / 2) % cycle - cycle / 2) > MATCH_TOL_S for k in rel):
                 continue

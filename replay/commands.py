@@ -11,6 +11,7 @@ from collections.abc import Sequence
 COMMANDS = {
     "study": "replay.study",
     "score": "replay.cli",
+    "serve": "server.main",
 }
 
 

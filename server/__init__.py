@@ -1,1 +1,1 @@
-"""The FastAPI advisory service (to come; see the service issue)."""
+"""The advisory web service: FastAPI only (config, deps, schemas, routes, wiring). ``create_app`` in ``server.app``."""

@@ -7,7 +7,6 @@ from hypothesis import strategies as st
 
 from advisory.advisor import (
     Advice,
-    AdvisorMemory,
     AdvisorParams,
     LightView,
     Observation,

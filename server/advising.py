@@ -1,0 +1,195 @@
+"""The service's core wiring: create trips, and turn one GPS fix into one advisory.
+
+From a fix to an advisory (:meth:`Engine.on_fix`):
+
+1. **Order**: a fix not newer than the trip's last one is a duplicate or late; it changes nothing and the
+   latest advisory is returned, flagged.
+2. **Map matching** (``server.gps``): station along the corridor, cross-track offset and distance to the
+   route, WGS 84 geodesics via pyproj. Farther than ``off_route_m`` (or a fix less accurate than
+   ``max_accuracy_m``): the advice pauses and says so.
+3. **Speed**: the fix's speed over ground, else the least-squares slope of the last seconds' stations.
+4. **SPaT at the fix's own time**: the trip's plans (simulated or from the feed) for the next two lights,
+   turned into conservative red windows relative to the fix (``server.observe``).
+5. **Advice**: ``advisory.advisor.advise(observation, memory, params, tables)``; the trip keeps the new memory.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+from advisory.advisor import Advice, AdvisorParams, advise
+from advisory.params import VEHICLE_PRESETS
+from spat_feed.corridors import TIMING_PRESETS, Corridor, timing_for_trip
+from spat_feed.scenarios import FeedScenario, Uncertainty
+
+from server.config import Settings
+from server.errors import ApiError
+from server.gps import Fix, RouteMatcher
+from server.observe import observation
+from server.ratelimit import TokenBucket
+from server.schemas import AdviceOut, TripCreate
+from server.spat import RemoteFeed, SimulatedSpat, TripSpat
+from server.trips import Trip, TripStore
+
+SERVER_PHRASES = {
+    "poor_gps": "GPS signal weak. Advice paused.",
+    "no_speed": "Waiting for speed.",
+    "no_fix": "No position yet.",
+}
+"""Wording for the pauses the service decides itself (the advisor words its own)."""
+
+
+class Engine:
+    """Trips, corridors, SPaT sources and tables, and the per-fix pipeline."""
+
+    def __init__(
+        self,
+        settings: Settings,
+        corridors: dict[str, Corridor],
+        tables: dict[str, object] | None = None,
+        params: AdvisorParams | None = None,
+        remote: RemoteFeed | None = None,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.settings = settings
+        self.corridors = corridors
+        self.matchers = {name: RouteMatcher(c) for name, c in corridors.items()}
+        self.tables = tables or {}
+        self.params = params or AdvisorParams()
+        self.remote = remote
+        self.clock = clock
+        self.trips = TripStore(settings.max_trips)
+        self.create_bucket = TokenBucket(settings.create_rate_per_s, settings.create_burst)
+        self.on_advice: Callable[[Trip, Advice, str, float], None] | None = None  # metrics hooks
+        self.on_ignored_fix: Callable[[str], None] | None = None
+        self.on_rate_limited: Callable[[], None] | None = None
+
+    # -- trips ----------------------------------------------------------------------------------------
+    def check_time(self, t_unix_s: float, what: str) -> None:
+        now = self.clock()
+        s = self.settings
+        if t_unix_s > now + s.max_fix_future_s:
+            raise ApiError(422, "time_out_of_range", f"{what} = {t_unix_s:.3f} is {t_unix_s - now:.1f} s ahead of server time (limit {s.max_fix_future_s:g} s); check the device clock")
+        if t_unix_s < now - s.max_fix_past_s:
+            raise ApiError(422, "time_out_of_range", f"{what} = {t_unix_s:.3f} is {now - t_unix_s:.1f} s behind server time (limit {s.max_fix_past_s:g} s)")
+
+    async def create_trip(self, body: TripCreate) -> Trip:
+        s = self.settings
+        if wait_s := self.create_bucket.take():
+            raise ApiError(429, "rate_limited", "too many trips created; retry later", headers={"Retry-After": str(max(1, math.ceil(wait_s)))})
+        corridor_name = body.corridor or s.default_corridor
+        corridor = self.corridors.get(corridor_name)
+        if corridor is None:
+            raise ApiError(422, "unknown_corridor", f"unknown corridor {corridor_name!r}; choose from {sorted(self.corridors)}")
+        vehicle = body.vehicle or s.default_vehicle
+        if vehicle not in VEHICLE_PRESETS:
+            raise ApiError(422, "unknown_vehicle", f"unknown vehicle {vehicle!r}; choose from {sorted(VEHICLE_PRESETS)}")
+        now = self.clock()
+        entry = now if body.entry_unix_s is None else body.entry_unix_s
+        if body.entry_unix_s is not None:
+            self.check_time(entry, "entry_unix_s")
+        if body.timing is None or body.timing == "trip":
+            timing = timing_for_trip(entry)
+        elif body.timing in TIMING_PRESETS:
+            timing = TIMING_PRESETS[body.timing]
+        else:
+            raise ApiError(422, "unknown_timing", f"unknown timing {body.timing!r}; choose from {sorted(TIMING_PRESETS)} or 'trip'")
+        if len(timing.red_starts_s) != len(corridor.intersections):
+            raise ApiError(422, "timing_mismatch", f"timing {timing.name!r} has {len(timing.red_starts_s)} lights, corridor {corridor.name!r} has {len(corridor.intersections)}")
+        uncertainty = Uncertainty(s.spat_early_s, s.spat_late_s, s.spat_confidence_frac)
+        scenario = FeedScenario(corridor, timing, float(entry), uncertainty)
+        self.trips.check_capacity()
+        spat: TripSpat = await self.remote.subscribe(scenario) if self.remote is not None else SimulatedSpat(scenario, self.clock)
+        trip = Trip(
+            corridor, self.matchers[corridor_name], scenario, spat, vehicle, now,
+            TokenBucket(s.rate_per_s, s.rate_burst), s.dropout_s,
+            tables=self.tables.get(corridor_name) if vehicle == s.default_vehicle else None,
+        )  # fmt: skip
+        try:
+            self.trips.add(trip)
+        except ApiError:
+            await spat.close()
+            raise
+        return trip
+
+    async def end_trip(self, trip_id: str) -> Trip:
+        trip = self.trips.pop(trip_id)
+        await trip.spat.close()
+        return trip
+
+    def rate_limit(self, trip: Trip) -> None:
+        if wait_s := trip.bucket.take():
+            if self.on_rate_limited is not None:
+                self.on_rate_limited()
+            raise ApiError(429, "rate_limited", f"too many requests for this trip (limit {self.settings.rate_per_s:g}/s, burst {self.settings.rate_burst:g}); retry in {wait_s:.1f} s",
+                           headers={"Retry-After": str(max(1, math.ceil(wait_s)))})  # fmt: skip
+
+    # -- fixes ----------------------------------------------------------------------------------------
+    def latest(self, trip: Trip, fix_status: str = "none") -> AdviceOut:
+        """The trip's latest advisory (a 'no position yet' one before the first fix), with ``fix_status``."""
+        if trip.last is None:
+            return AdviceOut.model_construct(
+                trip_id=trip.id, seq=0, t_unix_s=None, fix_status=fix_status, on_route=False, station_m=None, cross_track_m=None,
+                offset_m=None, speed_mps=None, speed_source="none", next_intersection_id=None, distance_to_line_m=None,
+                spat_fresh=None, action="none", reason="no_fix", target_speed_mps=None, light_red=None, seconds_to_change_s=None,
+                message=SERVER_PHRASES["no_fix"], speak=False, source="service",
+            )  # fmt: skip
+        return trip.last if trip.last.fix_status == fix_status else trip.last.model_copy(update={"fix_status": fix_status})
+
+    def on_fix(self, trip: Trip, fix: Fix) -> AdviceOut:
+        """Apply one validated fix to ``trip`` and return the advisory (see the module docstring)."""
+        self.check_time(fix.t_unix_s, "t_unix_s")
+        status = trip.track.order(fix.t_unix_s)
+        if status != "ok":
+            if self.on_ignored_fix is not None:
+                self.on_ignored_fix(status)
+            return self.latest(trip, status)
+        t0 = time.perf_counter()
+        s = self.settings
+        m = trip.matcher.match(fix.lat_deg, fix.lon_deg)
+        poor = fix.accuracy_m is not None and fix.accuracy_m > s.max_accuracy_m
+        on_route = m.offset_m <= s.off_route_m and not poor
+        point = trip.track.add(fix.t_unix_s, m.station_m if on_route else None, fix.speed_mps)
+        speed = point.speed_mps if point is not None else fix.speed_mps
+        lights = ()
+        spat_fresh = None
+        if poor:
+            advice, memory = Advice("none", "poor_gps", message=SERVER_PHRASES["poor_gps"]), trip.memory
+        elif on_route and speed is None:
+            advice, memory = Advice("none", "no_speed", message=SERVER_PHRASES["no_speed"]), trip.memory
+        else:
+            readings = trip.spat.readings(fix.t_unix_s) if on_route else {}
+            obs = observation(trip.corridor, m.station_m, speed or 0.0, fix.t_unix_s, readings, s.speed_limit_mps, on_route=on_route)
+            lights = obs.lights
+            spat_fresh = lights[0].fresh if lights else None
+            advice, memory = advise(obs, trip.memory, self.params, trip.tables)
+        trip.memory = memory
+        trip.n_fixes += 1
+        if on_route and speed is not None and len(trip.trace_t) < s.max_trace_fixes:
+            trip.trace_t.append(fix.t_unix_s)
+            trip.trace_v.append(speed)
+            trip.trace_x.append(m.station_m)
+        nxt = lights[0] if lights else None
+        out = AdviceOut.model_construct(
+            trip_id=trip.id, seq=trip.n_fixes, t_unix_s=fix.t_unix_s, fix_status="ok", on_route=on_route,
+            station_m=round(m.station_m, 2), cross_track_m=round(m.cross_track_m, 2), offset_m=round(m.offset_m, 2),
+            speed_mps=speed, speed_source=point.speed_source if point is not None else ("gps" if fix.speed_mps is not None else "none"),
+            next_intersection_id=nxt.intersection_id if nxt else None, distance_to_line_m=round(nxt.distance_m, 2) if nxt else None,
+            spat_fresh=spat_fresh, action=advice.action, reason=advice.reason, target_speed_mps=advice.target_speed_mps,
+            light_red=advice.light_red, seconds_to_change_s=_finite(advice.seconds_to_change_s), message=advice.message,
+            speak=advice.speak, source=advice.source,
+        )  # fmt: skip
+        trip.last = out
+        if self.on_advice is not None:
+            self.on_advice(trip, advice, "ok" if on_route else ("poor_gps" if poor else "off_route"), time.perf_counter() - t0)
+        return out
+
+
+def _finite(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def fix_from_schema(body) -> Fix:
+    return Fix(body.t_unix_s, body.lat_deg, body.lon_deg, body.speed_mps, body.heading_deg, body.accuracy_m)

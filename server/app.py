@@ -1,0 +1,147 @@
+"""``create_app(settings)``: the advisory service as a FastAPI app.
+
+Start-up (``lifespan``): load the corridors, build (or load) the DP lookup tables for each, start the
+speech engine and, with ``ECO_SPAT_FEED_URL``, the remote-feed connection manager; warm the numba code
+paths so the first request is not slow. A background task closes trips idle for ``trip_idle_ttl_s``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+import numpy as np
+from fastapi import FastAPI
+
+from advisory.advisor import AdvisorParams
+from advisory.params import model_params
+from spat_feed.corridors import Corridor, load_corridor
+from spat_feed.scenarios import make_scenario
+
+from server.advising import Engine
+from server.audio import Speech
+from server.config import Settings
+from server.errors import install_handlers
+from server.metrics import Metrics
+from server.middleware import GuardMiddleware
+from server.routes import audio, corridors, health, stream, trips
+from server.score import trip_score
+from server.spat import RemoteFeed
+
+log = logging.getLogger("server")
+
+DESCRIPTION = """Eco-driving advice for connected EVs at signalised intersections.
+
+Create a trip on a corridor (`POST /v1/trips`), then send GPS fixes (`POST /v1/trips/{id}/fixes`, or the
+WebSocket `/v1/trips/{id}/stream`) and receive, for each, the advisory computed at the fix's time from the
+signals' SPaT. End the trip to get its energy, battery wear and cost against the paper's regular driver.
+Every error is JSON: `{"error": code, "message": sentence, "detail": ...}`.
+"""
+
+
+def load_corridors(settings: Settings) -> dict[str, Corridor]:
+    out = {name: load_corridor(name) for name in settings.corridors}
+    if settings.corridor_file is not None:
+        extra = load_corridor(settings.corridor_file)
+        out[extra.name] = extra
+    if settings.default_corridor not in out:
+        raise ValueError(f"default corridor {settings.default_corridor!r} is not among the served corridors {sorted(out)}")
+    return out
+
+
+def build_tables(settings: Settings, corridors: dict[str, Corridor]) -> dict[str, object]:
+    """DP lookup tables per corridor for the default vehicle (cached as .npz in ``tables_dir`` if set).
+
+    A corridor whose geometry the tables cannot handle (lights of other durations, stations off the grid)
+    gets none: the advisor then uses its rules.
+    """
+    if not settings.tables:
+        return {}
+    from advisory.tables import AdviceTables, paper_offsets_s
+
+    params = model_params(settings.default_vehicle)
+    out: dict[str, object] = {}
+    for name, corridor in corridors.items():
+        if len(corridor.intersections) != 2:
+            continue
+        path = None if settings.tables_dir is None else Path(settings.tables_dir) / f"{name}_{settings.default_vehicle}.npz"
+        try:
+            if path is not None and path.exists():
+                out[name] = AdviceTables.load(path, params)
+                continue
+            geometry = make_scenario(corridor, "15_15", 0.0).advisory_scenario()
+            geometry = type(geometry)(geometry.name, geometry.signals, geometry.zone_length_m, settings.speed_limit_mps)
+            tables = AdviceTables.build(geometry, params, offsets_s=paper_offsets_s())
+            if path is not None:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tables.save(path)
+            out[name] = tables
+        except (ValueError, KeyError) as exc:
+            log.warning("no lookup tables for corridor %s: %s", name, exc)
+    return out
+
+
+def warm_up(engine: Engine) -> None:
+    """Run each numba/pyproj path once (compiles or loads the cached machine code)."""
+    corridor = next(iter(engine.corridors.values()))
+    scenario = make_scenario(corridor, "15_15", 0.0)
+    engine.matchers[corridor.name].match(*corridor.position(10.0))
+    t = np.array([0.0, 1.0, 2.0])
+    v = np.array([20.0, 20.0, 20.0])
+    trip_score("warm-up", scenario, engine.settings.default_vehicle, t, v, np.array([0.0, 20.0, 40.0]), engine.settings.speed_limit_mps)
+
+
+async def _expire_idle(engine: Engine, metrics: Metrics, period_s: float) -> None:
+    while True:
+        await asyncio.sleep(period_s)
+        for trip_id in engine.trips.idle(engine.settings.trip_idle_ttl_s):
+            with contextlib.suppress(Exception):
+                await engine.end_trip(trip_id)
+                metrics.trips_closed.labels("expired").inc()
+
+
+def create_app(settings: Settings | None = None, *, clock: Callable[[], float] = time.time, advisor_params: AdvisorParams | None = None) -> FastAPI:
+    """The app. ``clock`` (Unix seconds) is injected for tests; the server's real clock by default."""
+    settings = settings or Settings()
+    corridors_ = load_corridors(settings)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        t0 = time.perf_counter()
+        tables = await asyncio.to_thread(build_tables, settings, corridors_)
+        remote = RemoteFeed(settings.spat_feed_url, settings.spat_stale_after_s) if settings.spat_feed_url else None
+        engine = Engine(settings, corridors_, tables, advisor_params, remote, clock)
+        engine.on_advice = metrics.observe_advice
+        engine.on_ignored_fix = lambda status: metrics.fixes.labels(status).inc()
+        engine.on_rate_limited = metrics.rate_limited.inc
+        app.state.engine = engine
+        await asyncio.to_thread(warm_up, engine)
+        await speech.start()
+        sweeper = asyncio.create_task(_expire_idle(engine, metrics, min(60.0, settings.trip_idle_ttl_s / 2)))
+        log.info("advisory service ready in %.1f s: %d corridors, tables for %s, speech %s", time.perf_counter() - t0, len(corridors_), sorted(tables), speech.reason)
+        try:
+            yield
+        finally:
+            sweeper.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await sweeper
+            await speech.stop()
+            if remote is not None:
+                await remote.close()
+
+    app = FastAPI(title="ecodrive advisory service", version="1.0.0", description=DESCRIPTION, lifespan=lifespan)
+    app.state.settings = settings
+    speech = Speech(settings.speech, settings.audio_cache_size)
+    app.state.speech = speech
+    metrics = Metrics(lambda: len(app.state.engine.trips) if hasattr(app.state, "engine") else 0)
+    app.state.metrics = metrics
+    for module in (health, corridors, trips, audio, stream):
+        app.include_router(module.router)
+    install_handlers(app)
+    app.add_middleware(GuardMiddleware, max_body_bytes=settings.max_body_bytes, metrics=metrics)
+    return app

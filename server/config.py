@@ -1,0 +1,81 @@
+"""Deployment settings of the advisory service, read from the environment (prefix ``ECO_``) or ``.env``.
+
+Only ``server/`` reads the environment. Algorithm settings (advisor hysteresis, table grid) stay in
+``advisory`` dataclasses; what is here is deployment: which corridors, where SPaT comes from, limits, keys.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+from advisory.params import SPEED_LIMIT_MPS
+from spat_feed.corridors import PAPER_CORRIDOR_NAMES
+
+
+class Settings(BaseSettings):
+    """Every field can be set as ``ECO_<NAME>`` (e.g. ``ECO_SPAT_FEED_URL=http://feed:8765``)."""
+
+    model_config = SettingsConfigDict(env_prefix="ECO_", env_file=".env", extra="ignore", frozen=True)
+
+    # corridors and vehicles
+    corridors: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=PAPER_CORRIDOR_NAMES, description="corridor presets served (comma-separated in the environment)"
+    )
+    corridor_file: Path | None = Field(default=None, description="an extra corridor JSON file to serve")
+    default_corridor: str = "paper_s400"
+    default_vehicle: str = "paper_54kwh"
+    speed_limit_mps: float = Field(default=SPEED_LIMIT_MPS, gt=0, le=70)
+
+    # SPaT
+    spat_feed_url: str | None = Field(default=None, description="remote SPaT feed (http://host:port); None = in-process simulation")
+    spat_stale_after_s: float = Field(default=2.0, gt=0)
+    spat_early_s: float = Field(default=0.0, ge=0, description="simulated actuated windows: earliest change before the plan [s]")
+    spat_late_s: float = Field(default=0.0, ge=0)
+    spat_confidence_frac: float = Field(default=1.0, ge=0, le=1)
+
+    # lookup tables (advisory.tables), built or loaded at start-up
+    tables: bool = Field(default=True, description="build/load the DP lookup tables at start-up")
+    tables_dir: Path | None = Field(default=None, description="cache folder for the tables (.npz); None = build in memory")
+
+    # speech
+    speech: bool = True
+    audio_cache_size: int = Field(default=256, ge=0)
+
+    # auth: keys allowed to create trips ("Authorization: Bearer <key>"); empty = open creation (development)
+    api_keys: Annotated[tuple[str, ...], NoDecode] = ()
+
+    # limits
+    max_trips: int = Field(default=20_000, ge=1)
+    trip_idle_ttl_s: float = Field(default=1800.0, gt=0)
+    max_body_bytes: int = Field(default=16_384, ge=256)
+    ws_max_message_bytes: int = Field(default=16_384, ge=256)
+    rate_per_s: float = Field(default=5.0, gt=0, description="per-trip token bucket: refill rate [1/s]")
+    rate_burst: float = Field(default=20.0, ge=1, description="per-trip token bucket: capacity")
+    create_rate_per_s: float = Field(default=500.0, gt=0, description="trip creation, whole service [1/s]")
+    create_burst: float = Field(default=2_500.0, ge=1)
+    max_fix_past_s: float = Field(default=300.0, gt=0, description="reject fixes older than this vs server time [s]")
+    max_fix_future_s: float = Field(default=30.0, gt=0, description="reject fixes this far ahead of server time [s]")
+
+    # GPS
+    off_route_m: float = Field(default=30.0, gt=0, description="farther than this from the route: advice paused [m]")
+    max_accuracy_m: float = Field(default=50.0, gt=0, description="fixes less accurate than this are not used [m]")
+    dropout_s: float = Field(default=5.0, gt=0, description="longer gaps reset the position-derived speed [s]")
+    max_trace_fixes: int = Field(default=7_200, ge=10, description="fixes kept per trip for its score")
+
+    @field_validator("corridors", "api_keys", mode="before")
+    @classmethod
+    def _split_commas(cls, value: object) -> object:
+        if isinstance(value, str):
+            return tuple(part.strip() for part in value.split(",") if part.strip())
+        return value
+
+    @field_validator("corridors")
+    @classmethod
+    def _some_corridor(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        if not value:
+            raise ValueError("at least one corridor")
+        return value

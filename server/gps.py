@@ -1,0 +1,116 @@
+"""GPS fixes onto a corridor: map matching, plausibility, and the speed when the fix has none.
+
+:class:`RouteMatcher` projects a fix onto the corridor polyline with pyproj's WGS 84 geodesics
+(``Corridor.project`` / ``Corridor.position``): station along the route, signed cross-track offset, and
+the geodesic distance from the fix to the route (which also catches fixes before the zone start or past
+its end). :class:`Track` is one trip's fix history: it orders fixes, drops duplicates and late arrivals,
+and estimates the speed from positions (least squares over the last seconds) when the fix carries none.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from spat_feed.corridors import WGS84, Corridor
+
+SPEED_WINDOW_S = 4.0
+"""Positions of the last this many seconds give the speed when the fix has none. [s]"""
+
+
+@dataclass(frozen=True, slots=True)
+class Fix:
+    """One GPS fix as received. Angles in degrees, clockwise from true north for the heading."""
+
+    t_unix_s: float
+    lat_deg: float
+    lon_deg: float
+    speed_mps: float | None = None
+    heading_deg: float | None = None
+    accuracy_m: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Match:
+    """A fix placed on the route. ``offset_m``: geodesic distance from the fix to the route. [m]"""
+
+    station_m: float
+    cross_track_m: float
+    offset_m: float
+
+
+class RouteMatcher:
+    """Projects fixes onto one corridor."""
+
+    def __init__(self, corridor: Corridor) -> None:
+        self.corridor = corridor
+
+    def match(self, lat_deg: float, lon_deg: float) -> Match:
+        station_m, cross_m = self.corridor.project(lat_deg, lon_deg)
+        offset_m = abs(cross_m)
+        if station_m <= 0.0 or station_m >= self.corridor.length_m:  # beyond an end: distance to that end
+            lat_e, lon_e = self.corridor.position(station_m)
+            _, _, offset_m = WGS84.inv(lon_e, lat_e, lon_deg, lat_deg)
+        return Match(float(station_m), float(cross_m), float(offset_m))
+
+
+@dataclass(frozen=True, slots=True)
+class TrackPoint:
+    """An accepted fix on the route: time [s], station [m], speed used [m/s] (None: not known yet)."""
+
+    t_unix_s: float
+    station_m: float
+    speed_mps: float | None
+    speed_source: str  # "gps", "positions" or "none"
+
+
+class Track:
+    """One trip's recent fixes: ordering, duplicates, speed from positions. Bounded memory."""
+
+    __slots__ = ("last_t_unix_s", "_recent", "dropout_s")
+
+    def __init__(self, dropout_s: float = 5.0, keep: int = 8) -> None:
+        self.last_t_unix_s: float | None = None
+        self._recent: deque[tuple[float, float]] = deque(maxlen=keep)  # (t, station) of on-route fixes
+        self.dropout_s = dropout_s
+
+    def order(self, t_unix_s: float) -> str:
+        """``"ok"`` for a fix newer than every fix so far, ``"duplicate"`` (same time) or ``"out_of_order"``."""
+        last = self.last_t_unix_s
+        if last is None or t_unix_s > last:
+            return "ok"
+        return "duplicate" if t_unix_s == last else "out_of_order"
+
+    def add(self, t_unix_s: float, station_m: float | None, fix_speed_mps: float | None) -> TrackPoint | None:
+        """Record a fix (call :meth:`order` first; only ``"ok"`` fixes belong here).
+
+        ``station_m`` None: the fix is off the route (kept for ordering only; it breaks the position chain).
+        """
+        if self.last_t_unix_s is not None and t_unix_s - self.last_t_unix_s > self.dropout_s:
+            self._recent.clear()  # after a dropout, old positions say nothing about the speed now
+        self.last_t_unix_s = t_unix_s
+        if station_m is None:
+            self._recent.clear()
+            return None
+        self._recent.append((t_unix_s, station_m))
+        if fix_speed_mps is not None:
+            return TrackPoint(t_unix_s, station_m, fix_speed_mps, "gps")
+        speed = self.speed_from_positions_mps()
+        return TrackPoint(t_unix_s, station_m, speed, "positions" if speed is not None else "none")
+
+    def speed_from_positions_mps(self) -> float | None:
+        """Least-squares slope of station over time in the last ``SPEED_WINDOW_S``, >= 0; None if < 2 fixes. [m/s]"""
+        if not self._recent:
+            return None
+        t_last = self._recent[-1][0]
+        pts = [(t, s) for t, s in self._recent if t_last - t <= SPEED_WINDOW_S + 1e-9]
+        if len(pts) < 2 or pts[-1][0] - pts[0][0] < 0.5:
+            return None
+        n = len(pts)
+        t_mean = sum(t for t, _ in pts) / n
+        s_mean = sum(s for _, s in pts) / n
+        var = sum((t - t_mean) ** 2 for t, _ in pts)
+        cov = sum((t - t_mean) * (s - s_mean) for t, s in pts)
+        slope = cov / var
+        return max(slope, 0.0) if math.isfinite(slope) else None

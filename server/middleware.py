@@ -1,0 +1,78 @@
+"""Pure ASGI middleware (cheap on the hot path): request-body size limit and request metrics."""
+
+from __future__ import annotations
+
+import json
+import time
+
+from fastapi import HTTPException
+
+from server.metrics import Metrics
+
+
+def _too_large(limit: int) -> HTTPException:
+    return HTTPException(413, f"request body larger than {limit} bytes")
+
+
+class GuardMiddleware:
+    """Refuses bodies over ``max_body_bytes`` with 413 (by Content-Length, or while reading a chunked body)
+    and counts every HTTP request by method, route template and status."""
+
+    def __init__(self, app, max_body_bytes: int, metrics: Metrics) -> None:
+        self.app = app
+        self.max_body_bytes = max_body_bytes
+        self.metrics = metrics
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        limit = self.max_body_bytes
+        for name, value in scope.get("headers", ()):
+            if name == b"content-length":
+                try:
+                    too_big = int(value) > limit
+                except ValueError:
+                    too_big = False
+                if too_big:
+                    await _send_json(send, 413, {"error": "payload_too_large", "message": f"request body larger than {limit} bytes", "detail": None})
+                    self._count(scope, 413, 0.0)
+                    return
+                break
+        seen = 0
+
+        async def limited_receive():
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > limit:
+                    raise _too_large(limit)
+            return message
+
+        status = 500
+        started = time.perf_counter()
+
+        async def counting_send(message) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = message["status"]
+            await send(message)
+
+        try:
+            await self.app(scope, limited_receive, counting_send)
+        finally:
+            self._count(scope, status, time.perf_counter() - started)
+
+    def _count(self, scope, status: int, seconds: float) -> None:
+        route = scope.get("route")
+        path = getattr(route, "path", None) or "unmatched"
+        self.metrics.requests.labels(scope.get("method", ""), path, str(status)).inc()
+        if seconds:
+            self.metrics.request_s.labels(path).observe(seconds)
+
+
+async def _send_json(send, status: int, body: dict) -> None:
+    data = json.dumps(body).encode()
+    await send({"type": "http.response.start", "status": status, "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(data)).encode()), (b"connection", b"close")]})
+    await send({"type": "http.response.body", "body": data})

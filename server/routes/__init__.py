@@ -1,0 +1,1 @@
+"""One router per file: health/metrics, corridors, trips (REST), stream (WebSocket), audio."""

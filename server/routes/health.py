@@ -1,0 +1,32 @@
+"""``/health`` (liveness, for the compose health check) and ``/metrics`` (Prometheus text format)."""
+
+from __future__ import annotations
+
+import time
+
+from fastapi import APIRouter, Response
+
+from server.deps import EngineDep, MetricsDep, SettingsDep, SpeechDep
+from server.metrics import CONTENT_TYPE_LATEST
+from server.schemas import HealthOut
+
+router = APIRouter(tags=["service"])
+
+
+@router.get("/health", response_model=HealthOut)
+async def health(engine: EngineDep, settings: SettingsDep, speech: SpeechDep) -> HealthOut:
+    """The service is up and its tables are loaded."""
+    return HealthOut(
+        status="ok",
+        now_unix_s=time.time(),
+        trips=len(engine.trips),
+        spat=f"remote {settings.spat_feed_url}" if settings.spat_feed_url else "in-process simulation",
+        tables=sorted(engine.tables),
+        speech=speech.available,
+    )
+
+
+@router.get("/metrics", response_class=Response, responses={200: {"content": {CONTENT_TYPE_LATEST: {}}, "description": "Prometheus metrics"}})
+async def metrics(metrics: MetricsDep) -> Response:
+    """Prometheus metrics: requests, fixes, advisories, trips, WebSocket streams."""
+    return Response(metrics.render(), media_type=CONTENT_TYPE_LATEST)

@@ -1,0 +1,69 @@
+"""WebSocket stream: GPS fixes in, advisories out (one advisory per fix), for the trip's lifetime.
+
+Authenticate with ``Authorization: Bearer <trip token>`` or ``?token=<trip token>``. A refused connection is
+accepted, told why (``{"error": ..., "status": 401|403|404}``) and closed with code 4000 + HTTP status. A bad
+message gets an error object and the stream goes on; nothing about the trip changes.
+"""
+
+from __future__ import annotations
+
+import json
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from pydantic import ValidationError
+
+from server.advising import fix_from_schema
+from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token
+from server.errors import ApiError, clean_errors, validation_summary
+from server.schemas import GpsFixIn
+
+router = APIRouter(prefix="/v1/trips", tags=["stream"])
+
+
+def _error(exc: ApiError) -> str:
+    return json.dumps({**exc.body(), "status": exc.status})
+
+
+@router.websocket("/{trip_id}/stream")
+async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: MetricsDep, settings: SettingsDep) -> None:
+    await ws.accept()
+    try:
+        trip = engine.trips.authorize(trip_id, bearer_token(ws))
+    except ApiError as exc:
+        await ws.send_text(_error(exc))
+        await ws.close(code=4000 + exc.status, reason=exc.error)
+        return
+    metrics.ws_open.inc()
+    limit = settings.ws_max_message_bytes
+    try:
+        while True:
+            message = await ws.receive()
+            if message["type"] == "websocket.disconnect":
+                break
+            text = message.get("text")
+            if text is None:
+                data = message.get("bytes") or b""
+                text = data.decode("utf-8", errors="replace")
+            try:
+                if len(text) > limit:
+                    raise ApiError(413, "payload_too_large", f"message larger than {limit} bytes")
+                if not engine.trips.is_open(trip):
+                    raise ApiError(404, "unknown_trip", "the trip has ended")
+                try:
+                    fix = GpsFixIn.model_validate_json(text)
+                except ValidationError as exc:
+                    errors = clean_errors(exc.errors())
+                    kind = "malformed_json" if any(e["type"] == "json_invalid" for e in errors) else "validation_error"
+                    raise ApiError(422, kind, validation_summary(errors), detail=errors) from None
+                engine.rate_limit(trip)
+                out = engine.on_fix(trip, fix_from_schema(fix))
+                await ws.send_text(out.model_dump_json())
+            except ApiError as exc:
+                await ws.send_text(_error(exc))
+                if exc.status == 404:
+                    await ws.close(code=4404, reason="trip ended")
+                    break
+    except WebSocketDisconnect:
+        pass
+    finally:
+        metrics.ws_open.dec()

@@ -1,0 +1,78 @@
+"""Trips over REST: create, send fixes and get advice, poll the latest advice, current SPaT, end and score."""
+
+from __future__ import annotations
+
+import numpy as np
+from fastapi import APIRouter, Response
+from fastapi.concurrency import run_in_threadpool
+
+from server.advising import fix_from_schema
+from server.deps import ApiKeyDep, EngineDep, MetricsDep, TripDep
+from server.schemas import AdviceOut, ErrorOut, GpsFixIn, TripCreate, TripCreated, TripLinks, TripScoreOut
+from server.score import trip_score
+
+router = APIRouter(prefix="/v1/trips", tags=["trips"])
+
+ERRORS = {code: {"model": ErrorOut} for code in (401, 403, 404, 422, 429)}
+
+
+@router.post("", response_model=TripCreated, status_code=201, responses={401: {"model": ErrorOut}, 403: {"model": ErrorOut}, 422: {"model": ErrorOut}, 429: {"model": ErrorOut}, 503: {"model": ErrorOut}})
+async def create_trip(body: TripCreate, engine: EngineDep, metrics: MetricsDep, _: ApiKeyDep) -> TripCreated:
+    """Start a trip: a car on a corridor. Returns its id and a bearer token valid for this trip only.
+
+    With the simulated SPaT feed, the lights' timing is relative to the trip's **creation** instant (or
+    ``entry_unix_s``): the car is taken to enter the zone (station 0) then.
+    """
+    trip = await engine.create_trip(body)
+    metrics.trips_created.inc()
+    base = f"/v1/trips/{trip.id}"
+    return TripCreated(
+        trip_id=trip.id,
+        token=trip.token,
+        corridor=trip.corridor.name,
+        timing=trip.timing,
+        vehicle=trip.vehicle,
+        entry_unix_s=trip.entry_unix_s,
+        created_unix_s=trip.created_unix_s,
+        idle_ttl_s=engine.settings.trip_idle_ttl_s,
+        links=TripLinks(fixes=f"{base}/fixes", advice=f"{base}/advice", stream=f"{base}/stream", audio=f"{base}/advice.wav", spat=f"{base}/spat", end=f"{base}/end"),
+    )
+
+
+@router.post("/{trip_id}/fixes", response_model=AdviceOut, responses=ERRORS)
+async def post_fix(fix: GpsFixIn, trip: TripDep, engine: EngineDep) -> Response:
+    """Send one GPS fix; get the advisory computed at the fix's time.
+
+    Duplicate or older fixes are ignored (``fix_status``), the latest advisory is returned. Inline on the
+    event loop: a few hundred microseconds of pure computation, cheaper than a thread hop. The body is
+    serialised here (``AdviceOut`` is built by the service, no need to validate it again).
+    """
+    engine.rate_limit(trip)
+    return _json(engine.on_fix(trip, fix_from_schema(fix)))
+
+
+def _json(out: AdviceOut) -> Response:
+    return Response(out.model_dump_json(), media_type="application/json")
+
+
+@router.get("/{trip_id}/advice", response_model=AdviceOut, responses=ERRORS)
+async def get_advice(trip: TripDep, engine: EngineDep) -> Response:
+    """The latest advisory (for polling clients)."""
+    engine.rate_limit(trip)
+    return _json(engine.latest(trip))
+
+
+@router.get("/{trip_id}/spat", responses=ERRORS)
+async def get_spat(trip: TripDep, engine: EngineDep) -> dict:
+    """The trip's current SPaT message (J2735-aligned JSON, see docs/SPAT.md)."""
+    engine.rate_limit(trip)
+    return trip.spat.message()
+
+
+@router.post("/{trip_id}/end", response_model=TripScoreOut, responses=ERRORS)
+async def end_trip(trip: TripDep, engine: EngineDep, metrics: MetricsDep) -> TripScoreOut:
+    """End the trip (its token stops working) and score it: energy, wear and cost, against the regular driver."""
+    trip = await engine.end_trip(trip.id)
+    metrics.trips_closed.labels("ended").inc()
+    t, v, x = (np.frombuffer(a, dtype=np.float64).copy() for a in (trip.trace_t, trip.trace_v, trip.trace_x))
+    return await run_in_threadpool(trip_score, trip.id, trip.scenario, trip.vehicle, t, v, x, engine.settings.speed_limit_mps)

@@ -1,0 +1,63 @@
+"""Fixtures for the service tests: real ``python -m server`` / ``python -m spat_feed`` processes on loopback.
+
+Every process is started on a free port, waited for on ``/health`` (bounded), and killed at the end.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+
+from spat_feed.corridors import load_corridor
+
+from tests.procs import REPO, Proc, free_port  # noqa: F401  (re-exported for the test modules)
+
+
+SERVICE_ENV = {
+    "ECO_CORRIDORS": "paper_s200,paper_s400",
+    "ECO_DEFAULT_CORRIDOR": "paper_s200",
+    "ECO_RATE_PER_S": "50",
+    "ECO_RATE_BURST": "60",
+}
+
+
+def service_proc(log_dir: Path, **env: str) -> Proc:
+    return Proc(["-m", "server", "--log-level", "warning", "--no-access-log"], log_dir / "service.log", {**SERVICE_ENV, **env})
+
+
+@pytest.fixture(scope="session")
+def service(tmp_path_factory) -> Iterator[Proc]:
+    """One advisory service for the read-mostly live tests (tables for paper_s200 only, to start fast)."""
+    proc = service_proc(tmp_path_factory.mktemp("service"), ECO_CORRIDORS="paper_s200,paper_s400", ECO_TABLES="true",
+                        ECO_TABLES_DIR=str(tmp_path_factory.mktemp("tables"))).start()  # fmt: skip
+    yield proc
+    proc.kill()
+
+
+@pytest.fixture
+def start_proc(tmp_path) -> Iterator:
+    """``start_proc(Proc) -> Proc``; everything started is killed at the end of the test."""
+    procs: list[Proc] = []
+
+    def start(proc: Proc) -> Proc:
+        procs.append(proc)
+        return proc.start()
+
+    yield start
+    for proc in procs:
+        proc.kill()
+
+
+@pytest.fixture(scope="session")
+def s200():
+    return load_corridor("paper_s200")
+
+
+def new_trip(client: httpx.Client, **body) -> tuple[str, dict[str, str], dict]:
+    r = client.post("/v1/trips", json=body)
+    assert r.status_code == 201, r.text
+    data = r.json()
+    return data["trip_id"], {"Authorization": f"Bearer {data['token']}"}, data
