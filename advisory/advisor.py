@@ -198,21 +198,24 @@ def crossing_time_s(
             after = np.where(xs > x[-1], np.inf, reaction + (v0_mps - v1) / dec + np.interp(xs, x, t) - t0)
             out = np.where(d <= d_b, during, after)
         else:
+            out = np.empty(vt.shape)
             slower = vt < v0_mps
-            # coasting down (auto, slowing)
-            x0, t0 = np.interp(v0_mps, rv, rx), np.interp(v0_mps, rv, rt)
-            x1, t1 = np.interp(vt, rv, rx), np.interp(vt, rv, rt)
-            coast = np.where(d <= x1 - x0, reaction + np.interp(x0 + d, x, t) - t0,
-                             np.where(vt > 0, reaction + (t1 - t0) + (d - (x1 - x0)) / vt, np.inf))
-            # a constant-rate ramp (speeding up; or braking in brake / firm modes)
-            down = params.firm_decel_mps2 if mode == "firm" else params.comfort_decel_mps2
-            rate = np.where(slower, down, params.comfort_accel_mps2)
-            d_ramp = np.abs(v0_mps**2 - vt**2) / (2.0 * rate)
-            v_line = np.sqrt(np.maximum(v0_mps**2 + 2.0 * np.where(slower, -rate, rate) * d, 0.0))
-            ramp_during = np.where(v_line > 0, reaction + np.abs(v_line - v0_mps) / rate, np.inf)
-            ramp_after = np.where(vt > 0, reaction + np.abs(v0_mps - vt) / rate + (d - d_ramp) / vt, np.inf)
-            ramp = np.where(d <= d_ramp, ramp_during, ramp_after)
-            out = np.where(slower & (mode == "auto"), coast, ramp)
+            coast = slower & (mode == "auto")
+            if coast.any():  # lift off and coast down to the target, then hold it
+                vc = vt[coast]
+                x0, t0 = np.interp(v0_mps, rv, rx), np.interp(v0_mps, rv, rt)
+                x1, t1 = np.interp(vc, rv, rx), np.interp(vc, rv, rt)
+                during = reaction + np.interp(x0 + d, x, t) - t0
+                out[coast] = np.where(d <= x1 - x0, during, np.where(vc > 0, reaction + (t1 - t0) + (d - (x1 - x0)) / vc, np.inf))
+            ramp = ~coast
+            if ramp.any():  # a constant-rate change (speeding up; or braking in the brake / firm modes)
+                vr, down = vt[ramp], slower[ramp]
+                rate = np.where(down, params.firm_decel_mps2 if mode == "firm" else params.comfort_decel_mps2, params.comfort_accel_mps2)
+                d_ramp = np.abs(v0_mps**2 - vr**2) / (2.0 * rate)
+                v_line = np.sqrt(np.maximum(v0_mps**2 + 2.0 * np.where(down, -rate, rate) * d, 0.0))
+                during = np.where(v_line > 0, reaction + np.abs(v_line - v0_mps) / rate, np.inf)
+                after = np.where(vr > 0, reaction + np.abs(v0_mps - vr) / rate + (d - d_ramp) / vr, np.inf)
+                out[ramp] = np.where(d <= d_ramp, during, after)
     return out if out.ndim else float(out)
 
 
