@@ -15,9 +15,9 @@ from advisory.endstate import EndStateScore, score_in_end_state
 from advisory.params import model_params
 from advisory.regular import regular_driver
 from advisory.signals import Scenario
+from advisory.track import entry_instant_s, trajectory_from_samples
 from advisory.trajectory import Trajectory
-from spat_feed.plans import to_fixed_time_signal
-from spat_feed.scenarios import FeedScenario
+from spat_feed.scenarios import FeedScenario, advisory_scenario_at
 
 from server.schemas import DriverScoreOut, TripScoreOut
 
@@ -27,11 +27,7 @@ EDGE_M = 25.0
 
 def scenario_from(scenario: FeedScenario, entry_unix_s: float, speed_limit_mps: float) -> Scenario:
     """The trip's lights as an ``advisory.signals.Scenario`` whose time 0 is ``entry_unix_s``."""
-    plans = scenario.fixed_plans()
-    signals = tuple(
-        to_fixed_time_signal(plans[(ix.id, ix.signal_groups[0].id)], ix.stop_line_m, t0_s=entry_unix_s) for ix in scenario.corridor.intersections
-    )
-    return Scenario(f"{scenario.corridor.name} {scenario.timing.name}", signals, scenario.corridor.length_m, speed_limit_mps)
+    return advisory_scenario_at(scenario, entry_unix_s, speed_limit_mps)
 
 
 def _out(score: EndStateScore, traj: Trajectory) -> DriverScoreOut:
@@ -58,7 +54,7 @@ def trip_score(
     n = int(t.size)
     notes = []
     if n >= 1 and x[0] <= EDGE_M:
-        entry_s = float(t[0] - x[0] / max(v[0], 1.0))
+        entry_s = entry_instant_s(t[0], x[0], v[0])
     else:
         entry_s = scenario.entry_unix_s
         notes.append("no fix near the zone entry: the regular driver enters at the trip's entry instant")
@@ -69,9 +65,7 @@ def trip_score(
     coverage = float((x.max() - x.min()) / length_m) if n >= 2 else 0.0
     complete = n >= 2 and x[0] <= EDGE_M and x[-1] >= length_m - EDGE_M
     if n >= 2:
-        dt = np.diff(t)
-        x_int = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
-        traj = Trajectory(t - t[0], x_int + x[0], v)
+        traj = trajectory_from_samples(t, v, x0_m=x[0])
         driven = score_in_end_state(traj, params, speed_limit_mps)
         driven_out = _out(driven, traj)
         savings = {

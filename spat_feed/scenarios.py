@@ -9,7 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import lru_cache
 
-from advisory.signals import FixedTimeSignal, Scenario
+from advisory.params import SPEED_LIMIT_MPS
+from advisory.signals import Scenario
 from spat_feed.corridors import TIMING_PRESETS, Corridor, Timing, load_corridor, timing_for_trip
 from spat_feed.messages import IntersectionState, MovementState, SpatMessage, from_unix_s, movement_events
 from spat_feed.plans import FixedTimePlan, Plan, to_fixed_time_signal, uncertain_from_fixed
@@ -86,12 +87,21 @@ class FeedScenario:
 
     def advisory_scenario(self) -> Scenario:
         """The :class:`advisory.signals.Scenario` the DP advisor plans against (time 0 = zone entry)."""
-        plans = self.fixed_plans()
-        signals: list[FixedTimeSignal] = []
-        for ix in self.corridor.intersections:
-            plan = plans[(ix.id, ix.signal_groups[0].id)]
-            signals.append(to_fixed_time_signal(plan, ix.stop_line_m, t0_s=self.entry_unix_s))
-        return Scenario(name=f"{self.corridor.name} {self.timing.name}", signals=tuple(signals), zone_length_m=self.corridor.length_m)
+        return advisory_scenario_at(self, self.entry_unix_s)
+
+
+def advisory_scenario_at(scenario: FeedScenario, entry_unix_s: float, speed_limit_mps: float = SPEED_LIMIT_MPS) -> Scenario:
+    """The lights of ``scenario`` as an :class:`advisory.signals.Scenario` whose time 0 is ``entry_unix_s``.
+
+    The plans stay anchored at ``scenario.entry_unix_s``; ``entry_unix_s`` is when a car really crossed
+    station 0 (a recorded drive rarely enters at the planned instant to the millisecond). With
+    ``entry_unix_s == scenario.entry_unix_s`` this is :meth:`FeedScenario.advisory_scenario`.
+    """
+    plans = scenario.fixed_plans()
+    signals = tuple(
+        to_fixed_time_signal(plans[(ix.id, ix.signal_groups[0].id)], ix.stop_line_m, t0_s=entry_unix_s) for ix in scenario.corridor.intersections
+    )
+    return Scenario(f"{scenario.corridor.name} {scenario.timing.name}", signals, scenario.corridor.length_m, speed_limit_mps)
 
 
 @lru_cache(maxsize=64)

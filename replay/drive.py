@@ -1,0 +1,300 @@
+"""Score a recorded GPS drive: map matching, the zone trajectory, and the comparison drivers.
+
+``score_drive(trace, params, ...)`` is what ``replay`` runs on a GPS trace:
+
+1. **Corridor**: given (``--corridor`` or the trace's ``# corridor:`` line), else found among the shipped
+   ones by map matching (``replay.matching.find_corridor``).
+2. **Stations** of every fix (``replay.matching.match``); fixes more than 30 m off the route are dropped.
+3. **Speeds**: the fixes' speed over ground; where a fix has none, the slope of the stations over time.
+   Optionally a Gaussian smoothing (``smooth_s``; default: none for GPS speeds, 1 s for speeds from
+   positions), then speeds under 0.2 m/s set to 0. Speed noise reads as kinetic-energy churn, which the
+   model charges at the drivetrain and regen efficiencies; smoothing rounds off braking peaks, which the
+   regen power limit rewards. docs/REPLAY.md has the numbers for both.
+4. **The zone**: from the instant the fixes cross station 0 to the instant they cross ``length_m``
+   (interpolated between fixes; a trace that starts inside the zone is extrapolated back, as the
+   service does), as a trajectory whose positions are integrated from the speeds
+   (``advisory.track.trajectory_from_samples``).
+5. **The lights**: the timing (``--timing`` / ``# timing:``) anchored at ``entry_unix_s`` (``--entry`` /
+   ``# entry_unix_s:``, default: the measured zone entry), seen from the measured entry
+   (``spat_feed.scenarios.advisory_scenario_at``).
+6. **Scores** (``advisory.endstate.score_in_end_state``: zone + re-acceleration to the limit) of the drive,
+   the paper's regular driver entering at the same instant at the limit, and the DP optimum
+   (``advisory.optimizer.dp.solve``, 20 m stages), and the changes against the regular driver.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from advisory.endstate import EndStateScore, score_in_end_state
+from advisory.params import SPEED_LIMIT_MPS, ModelParams
+from advisory.scoring import DriveScore
+from advisory.signals import Scenario
+from advisory.track import entry_instant_s, trajectory_from_samples
+from advisory.trajectory import Trajectory
+from replay.matching import CorridorChoice, MatchedTrace, find_corridor, match
+from replay.trace_io import GpsTrace, TraceError
+from spat_feed.corridors import TIMING_PRESETS, load_corridor
+from spat_feed.scenarios import FeedScenario, advisory_scenario_at, make_scenario
+
+SMOOTH_POSITIONS_S = 1.0
+"""Default Gaussian smoothing (standard deviation) of speeds derived from positions. [s]
+GPS (Doppler) speeds are not smoothed by default: at 1 Hz the sampling already rounds off the braking
+peaks, and smoothing them further lowers the energy more than the noise raises it (docs/REPLAY.md)."""
+STANDSTILL_MPS = 0.2
+"""Smoothed speeds below this are taken as a standstill. [m/s]"""
+EDGE_M = 25.0
+"""The fixes must reach within this of the zone entry and exit for the drive to be complete. [m]"""
+DP_STAGE_M = 20.0
+
+
+def smooth_speed_mps(t_s: np.ndarray, v_mps: np.ndarray, sigma_s: float) -> np.ndarray:
+    """Gaussian-weighted average of the speeds within ±3 ``sigma_s`` of each sample (uneven times allowed).
+
+    Examples
+    --------
+    >>> smooth_speed_mps(np.arange(5.0), np.full(5, 3.0), 1.0).tolist()
+    [3.0, 3.0, 3.0, 3.0, 3.0]
+    """
+    if sigma_s <= 0 or v_mps.size < 3:
+        return v_mps.copy()
+    min_dt = max(float(np.min(np.diff(t_s))), 0.05)
+    half = int(min(np.ceil(3.0 * sigma_s / min_dt), v_mps.size - 1))
+    num = np.zeros_like(v_mps)
+    den = np.zeros_like(v_mps)
+    n = v_mps.size
+    for k in range(-half, half + 1):
+        lo, hi = max(0, -k), min(n, n - k)
+        w = np.exp(-0.5 * ((t_s[lo + k : hi + k] - t_s[lo:hi]) / sigma_s) ** 2)
+        num[lo:hi] += w * v_mps[lo + k : hi + k]
+        den[lo:hi] += w
+    return num / den
+
+
+def speed_from_stations_mps(t_s: np.ndarray, station_m: np.ndarray) -> np.ndarray:
+    """Central-difference slope of station over time, >= 0 (one-sided at the ends). [m/s]"""
+    return np.maximum(np.gradient(station_m, t_s), 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class DriverResult:
+    """One driver over the zone: its trajectory and its end-state score."""
+
+    trajectory: Trajectory
+    score: EndStateScore
+
+    def as_dict(self) -> dict:
+        s = self.score
+        return {
+            "distance_m": s.zone.distance_m,
+            "duration_s": self.trajectory.duration_s,
+            "exit_speed_mps": s.exit_speed_mps,
+            "zone_net_kwh": s.zone.net_kwh,
+            "energy_kwh": s.energy_kwh,
+            "soh_lost_frac": s.soh_lost_frac,
+            "electricity_usd": s.electricity_usd,
+            "wear_usd": s.wear_usd,
+            "cost_usd": s.cost_usd,
+            "time_to_end_state_s": s.time_s,
+        }
+
+
+def change_pct(a: EndStateScore, b: EndStateScore) -> dict[str, float]:
+    """Change of ``a`` against ``b`` in %, negative = saving: energy, decay (SOH lost), cost."""
+
+    def pct(x: float, y: float) -> float:
+        return 100.0 * (x / y - 1.0) if y != 0 else float("nan")
+
+    return {"energy": pct(a.energy_kwh, b.energy_kwh), "decay": pct(a.soh_lost_frac, b.soh_lost_frac), "cost": pct(a.cost_usd, b.cost_usd)}
+
+
+@dataclass
+class DriveResult:
+    """What ``replay`` reports on a GPS trace."""
+
+    trace: GpsTrace
+    corridor: CorridorChoice
+    matched: MatchedTrace
+    speed_source: str
+    smooth_s: float
+    zone_entry_unix_s: float
+    entry_unix_s: float | None  # the timing's anchor
+    timing: str | None
+    complete: bool
+    driven: DriverResult
+    scenario: Scenario | None = None
+    regular: DriverResult | None = None
+    dp: DriverResult | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def zone(self) -> DriveScore:
+        return self.driven.score.zone
+
+    def changes(self) -> dict[str, dict[str, float]]:
+        if self.regular is None:
+            return {}
+        out = {"driven": change_pct(self.driven.score, self.regular.score)}
+        if self.dp is not None:
+            out["dp_optimum"] = change_pct(self.dp.score, self.regular.score)
+        return out
+
+    def as_dict(self) -> dict:
+        m = self.matched
+        on = m.on_route
+        return {
+            "trace": self.trace.source,
+            "kind": "gps",
+            "complete": self.complete,
+            "corridor": {
+                "name": m.corridor.name,
+                "how": self.corridor.how,
+                "also_fits": list(self.corridor.ambiguous),
+                "length_m": m.corridor.length_m,
+            },
+            "timing": self.timing,
+            "entry_unix_s": self.entry_unix_s,
+            "zone_entry_unix_s": self.zone_entry_unix_s,
+            "fixes": {
+                "n": int(self.trace.t_s.size),
+                "on_route": int(on.sum()),
+                "median_cross_track_m": float(np.median(np.abs(m.cross_track_m[on]))) if on.any() else None,
+                "speed_source": self.speed_source,
+                "smooth_s": self.smooth_s,
+            },
+            **self.zone.as_dict(),
+            "comparison": {
+                "driven": self.driven.as_dict(),
+                "regular": self.regular.as_dict() if self.regular else None,
+                "dp_optimum": self.dp.as_dict() if self.dp else None,
+                "change_vs_regular_pct": self.changes(),
+            },
+            "notes": self.trace.notes + self.notes,
+        }
+
+
+def _crossing(t: np.ndarray, s: np.ndarray, level: float, start: int = 0) -> tuple[int, float] | None:
+    """(index k, instant) of the first crossing of ``level`` by the stations between samples k-1 and k."""
+    above = np.flatnonzero(s[start:] >= level)
+    if above.size == 0:
+        return None
+    k = start + int(above[0])
+    if k == 0:
+        return 0, float(t[0])
+    frac = (level - s[k - 1]) / (s[k] - s[k - 1])
+    return k, float(t[k - 1] + frac * (t[k] - t[k - 1]))
+
+
+def score_drive(
+    trace: GpsTrace,
+    params: ModelParams,
+    *,
+    corridor: str | None = None,
+    timing: str | None = None,
+    entry_unix_s: float | None = None,
+    smooth_s: float | None = None,
+    compare: bool = True,
+    speed_limit_mps: float = SPEED_LIMIT_MPS,
+) -> DriveResult:
+    """Score a GPS trace over its corridor's zone and compare it (see the module docstring)."""
+    notes: list[str] = []
+    corridor = corridor or trace.meta.get("corridor")
+    timing = timing or trace.meta.get("timing")
+    if entry_unix_s is None and trace.meta.get("entry_unix_s"):
+        try:
+            entry_unix_s = float(trace.meta["entry_unix_s"])
+        except ValueError:
+            raise TraceError(f"{trace.source}: '# entry_unix_s: {trace.meta['entry_unix_s']}' is not a number") from None
+    if timing is not None and timing not in TIMING_PRESETS:
+        raise TraceError(f"unknown timing {timing!r}; choose from {sorted(TIMING_PRESETS)}")
+    if corridor:
+        try:
+            cor = load_corridor(corridor)
+        except (KeyError, OSError, ValueError) as exc:
+            raise TraceError(f"corridor {corridor!r}: {exc}") from None
+        choice = CorridorChoice(match(cor, trace.lat_deg, trace.lon_deg), "given")
+    else:
+        choice = find_corridor(trace.lat_deg, trace.lon_deg)
+        if choice.ambiguous:
+            notes.append(f"corridor {choice.matched.corridor.name} {choice.how}; {', '.join(choice.ambiguous)} fit as well: give --corridor")
+    m = choice.matched
+    length_m = m.corridor.length_m
+    on = m.on_route
+    if on.sum() < 2:
+        raise TraceError(f"{trace.source}: fewer than two fixes within 30 m of corridor {m.corridor.name}")
+    if (~on).any():
+        lines = trace.lines[~on]
+        notes.append(f"{int((~on).sum())} fix(es) more than 30 m off the route dropped (first at line {lines[0]})")
+    t, st = trace.t_s[on], m.station_m[on]
+    v_fix = trace.speed_mps[on]
+    have = np.isfinite(v_fix)
+    if have.all():
+        speed_source = "gps"
+        v = v_fix.copy()
+    else:
+        v_pos = speed_from_stations_mps(t, st)
+        v = np.where(have, v_fix, v_pos)
+        speed_source = "positions" if not have.any() else "gps+positions"
+        if have.any():
+            notes.append(f"{int((~have).sum())} fix(es) without a speed: speed from positions there")
+    if smooth_s is None:
+        smooth_s = 0.0 if speed_source == "gps" else SMOOTH_POSITIONS_S
+    v = smooth_speed_mps(t, v, smooth_s)
+    v[v < STANDSTILL_MPS] = 0.0
+
+    # the zone: from the entry crossing to the exit crossing
+    entry = _crossing(t, st, 0.0)
+    if entry is None:
+        raise TraceError(f"{trace.source}: the fixes never reach the zone of {m.corridor.name} (station 0)")
+    k0, t_in = entry
+    if k0 == 0 and st[0] > 0.0:
+        t_in = entry_instant_s(t[0], st[0], v[0])
+        notes.append(f"the trace starts {st[0]:.0f} m inside the zone: entry extrapolated back to {t_in - t[0]:+.1f} s")
+    exit_ = _crossing(t, st, length_m, start=k0)
+    if exit_ is None:
+        k1, t_out = t.size, float(t[-1])
+    else:
+        k1, t_out = exit_
+    v_in = float(np.interp(t_in, t, v))
+    v_out = float(np.interp(t_out, t, v))
+    inner = slice(k0, k1)
+    zt = np.concatenate([[t_in], t[inner], [t_out]])
+    zv = np.concatenate([[v_in], v[inner], [v_out]])
+    keep = np.concatenate([[True], np.diff(zt) > 1e-6])  # a fix exactly on a crossing
+    zt, zv = zt[keep], zv[keep]
+    if zt.size < 2:
+        raise TraceError(f"{trace.source}: no fixes inside the zone of {m.corridor.name}")
+    complete = bool(st[0] <= EDGE_M and st[-1] >= length_m - EDGE_M) and exit_ is not None
+    if not complete:
+        notes.append(f"the fixes cover stations {max(st.min(), 0):.0f}-{min(st.max(), length_m):.0f} m of 0-{length_m:.0f} m: the drive is incomplete, comparisons are indicative")
+    traj = trajectory_from_samples(zt, zv, x0_m=0.0, t0_s=t_in)
+    driven = DriverResult(traj, score_in_end_state(traj, params, speed_limit_mps, keep_series=True))
+
+    result = DriveResult(trace, choice, m, speed_source, float(smooth_s), t_in, entry_unix_s, timing, complete, driven, notes=notes)
+    if timing is None:
+        notes.append("no signal timing (--timing or '# timing:'): no comparison with the regular driver and the DP optimum")
+        return result
+    anchor = t_in if entry_unix_s is None else entry_unix_s
+    result.entry_unix_s = anchor
+    try:
+        feed: FeedScenario = make_scenario(m.corridor, timing, anchor)
+    except ValueError as exc:
+        raise TraceError(str(exc)) from None
+    scenario = advisory_scenario_at(feed, t_in, speed_limit_mps)
+    result.scenario = scenario
+    if not compare:
+        return result
+    from advisory.optimizer import dp
+    from advisory.regular import regular_driver
+
+    reg = regular_driver(scenario)
+    result.regular = DriverResult(reg, score_in_end_state(reg, params, speed_limit_mps, keep_series=True))
+    try:
+        sol = dp.solve(scenario, params, dp.GridSpec(stage_m=DP_STAGE_M))
+    except dp.InfeasibleError as exc:
+        notes.append(f"DP optimum: {exc}")
+    else:
+        result.dp = DriverResult(sol.trajectory, score_in_end_state(sol.trajectory, params, speed_limit_mps, keep_series=True))
+    return result

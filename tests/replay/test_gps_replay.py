@@ -1,0 +1,168 @@
+"""`replay` on GPS traces: the shipped field-test traces, GPX, validation, map matching, comparison."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from advisory.params import model_params
+from replay.cli import main
+from replay.drive import score_drive, smooth_speed_mps
+from replay.matching import find_corridor, match
+from replay.trace_io import read_trace
+from spat_feed.corridors import load_corridor
+
+DATA = Path(__file__).resolve().parents[2] / "replay" / "data"
+ADVISED, REGULAR, GPX = DATA / "field_test_advised.csv", DATA / "field_test_regular.csv", DATA / "field_test_advised.gpx"
+
+
+def run_json(capsys, *argv) -> tuple[int, dict]:
+    rc = main([*map(str, argv), "--json"])
+    return rc, json.loads(capsys.readouterr().out)
+
+
+def test_entry_point_scores_the_shipped_advised_trace():
+    """Through the installed console script, as a user runs it."""
+    exe = Path(sys.executable).with_name("replay")
+    out = subprocess.run([str(exe), str(ADVISED), "--json"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    d = json.loads(out.stdout)
+    assert d["corridor"]["name"] == "paper_s400" and d["timing"] == "field_test" and d["complete"]
+    assert d["distance_m"] == pytest.approx(600, rel=0.02)
+    ch = d["comparison"]["change_vs_regular_pct"]
+    assert ch["driven"]["energy"] < -20 and ch["driven"]["cost"] < -20  # the advised drive saves
+    assert ch["dp_optimum"]["cost"] <= ch["driven"]["cost"]  # and the optimum saves more
+
+
+def test_regular_trace_reads_like_the_model_regular_driver(capsys):
+    rc, d = run_json(capsys, REGULAR)
+    assert rc == 0
+    c = d["comparison"]
+    assert c["driven"]["energy_kwh"] == pytest.approx(c["regular"]["energy_kwh"], rel=0.08)  # GPS noise and 1 Hz only
+    assert c["driven"]["duration_s"] == pytest.approx(c["regular"]["duration_s"], abs=1.5)
+
+
+def test_field_test_reproduction_against_the_regular_trace(capsys):
+    rc, d = run_json(capsys, ADVISED, "--baseline", REGULAR)
+    assert rc == 0
+    ch = d["baseline"]["change_pct"]
+    assert -60 < ch["energy"] < -20 and -60 < ch["decay"] < -20 and -60 < ch["cost"] < -20  # paper: -29 / -38 / -32
+
+
+def test_gpx_gives_the_same_score_as_the_csv(capsys):
+    _, a = run_json(capsys, ADVISED, "--no-compare")
+    _, b = run_json(capsys, GPX, "--no-compare")
+    assert b["timing"] == "field_test" and b["corridor"]["name"] == "paper_s400"
+    assert b["net_kwh"] == pytest.approx(a["net_kwh"], rel=1e-3)
+
+
+def test_table_output_and_plot(tmp_path, capsys):
+    png = tmp_path / "panels.png"
+    assert main([str(ADVISED), "--plot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "Comparison through the same lights" in out and "DP optimum vs regular" in out
+    assert png.stat().st_size > 10_000
+
+
+def _rewrite(tmp_path: Path, src: Path, *, keep_meta=True, edit=None) -> Path:
+    lines = src.read_text().splitlines()
+    meta = [ln for ln in lines if ln.startswith("#")]
+    body = [ln for ln in lines if not ln.startswith("#")]
+    if edit:
+        body = edit(body)
+    f = tmp_path / src.name
+    f.write_text("\n".join((meta if keep_meta else []) + body) + "\n")
+    return f
+
+
+def test_duplicates_backward_times_and_gaps_are_handled_and_reported(tmp_path, capsys):
+    def edit(body):
+        hdr, rows = body[0], body[1:]
+        rows = rows[:10] + [rows[9], rows[5]] + rows[10:30] + rows[34:]  # duplicate, backward, 5 s gap
+        return [hdr, *rows]
+
+    rc, d = run_json(capsys, _rewrite(tmp_path, ADVISED, edit=edit))
+    assert rc == 0
+    notes = " ".join(d["notes"])
+    assert "duplicate timestamp dropped (line(s) 18)" in notes  # 6 meta lines + header + 11th row
+    assert "older than the fix before dropped (line(s) 19)" in notes
+    assert "gap(s) longer than" in notes
+
+
+def test_speed_from_positions_when_the_fixes_have_none(tmp_path, capsys):
+    def edit(body):
+        return [",".join(c for i, c in enumerate(row.split(",")) if i != 3) for row in body]  # drop speed_mps
+
+    rc, d = run_json(capsys, _rewrite(tmp_path, ADVISED, edit=edit))
+    assert rc == 0 and d["fixes"]["speed_source"] == "positions" and d["fixes"]["smooth_s"] == 1.0
+    _, ref = run_json(capsys, ADVISED)
+    assert d["comparison"]["driven"]["energy_kwh"] == pytest.approx(ref["comparison"]["driven"]["energy_kwh"], rel=0.15)
+
+
+def test_corridor_found_by_map_matching_without_header(tmp_path, capsys):
+    f = _rewrite(tmp_path, ADVISED, keep_meta=False)
+    rc, d = run_json(capsys, f, "--timing", "field_test", "--entry", "1714557600")
+    assert rc == 0
+    assert d["corridor"]["how"].startswith("found by map matching")
+    assert d["corridor"]["name"] in ("paper_s400", "paper_s600")  # all paper corridors share the road
+    rc, d = run_json(capsys, f, "--corridor", "paper_s400")
+    assert d["corridor"]["how"] == "given" and d["comparison"]["regular"] is None  # no timing: score only
+
+
+def test_trimmed_trace_is_incomplete_exit_1(tmp_path, capsys):
+    f = _rewrite(tmp_path, ADVISED, edit=lambda body: body[:45])
+    rc, d = run_json(capsys, f)
+    assert rc == 1 and not d["complete"]
+    assert any("incomplete" in n for n in d["notes"])
+
+
+@pytest.mark.parametrize(
+    "content,needle",
+    [
+        ("time,lat,lon\n0,48.86,2.32\n1,48.86,abc\n", ":3: 'lon' is not a number: 'abc'"),
+        ("time,lat,lon\n0,48.86,2.32\nyesterday,48.86,2.32\n", ":3: 'time' is not a time"),
+        ("# corridor: paper_s400\ntime,lat,lon,speed_mps\n0,48.86,2.32,1\n1,48.86,2.32,-3\n", ":4: 'speed_mps' = -3 is outside"),
+        ("time,lat,lon\n0,95,2.32\n", ":2: 'lat' = 95 is outside"),
+        ("time,lat,lon\n0,48.86,2.32\n0,48.86,2.32\n", "at least two fixes"),
+        ("time,lat,lon\n0,0.0,0.0\n1,0.0,0.0001\n", "follows none of the shipped corridors"),
+        ("# timing: nope\ntime,lat,lon\n0,48.8658,2.3176\n10,48.8665,2.3146\n", "unknown timing 'nope'"),
+    ],
+)
+def test_malformed_gps_files_name_the_line(tmp_path, capsys, content, needle):
+    f = tmp_path / "bad.csv"
+    f.write_text(content)
+    assert main([str(f)]) == 2
+    assert needle in capsys.readouterr().err
+
+
+def test_malformed_gpx(tmp_path, capsys):
+    f = tmp_path / "bad.gpx"
+    f.write_text("<gpx><trk><trkseg><trkpt lat='48.86' lon='2.32'></trkpt>")
+    assert main([str(f)]) == 2
+    assert "bad.gpx" in capsys.readouterr().err
+
+
+def test_matching_agrees_with_corridor_project():
+    cor = load_corridor("paper_s400")
+    stations = np.array([3.0, 99.0, 250.0, 555.0])
+    lat, lon = zip(*(cor.position(s) for s in stations), strict=True)
+    m = match(cor, lat, lon)
+    np.testing.assert_allclose(m.station_m, stations, atol=0.01)
+    np.testing.assert_allclose(m.cross_track_m, 0.0, atol=0.01)
+    before = match(cor, *zip(cor.position(-50.0), strict=True))  # extended before the entry
+    assert before.station_m[0] == pytest.approx(-50.0, abs=0.05)
+    choice = find_corridor(lat, lon)
+    assert choice.matched.median_offset_m < 0.1
+
+
+def test_smoothing_keeps_constants_and_score_drive_is_reusable():
+    t = np.arange(0.0, 10.0)
+    assert np.allclose(smooth_speed_mps(t, np.full(10, 7.0), 2.0), 7.0)
+    trace = read_trace(ADVISED)
+    r = score_drive(trace, model_params("paper_54kwh"), compare=False)
+    assert r.regular is None and r.scenario is not None and len(r.scenario.signals) == 2
