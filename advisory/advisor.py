@@ -21,7 +21,7 @@ How the advice is made (docs/ADVISOR.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -102,7 +102,7 @@ class Advice:
     message: str = ""
     speak: bool = False
     source: str = "rules"  # "dp_table" when the target came from the lookup tables
-    current_speed_mps: float | None = None
+    current_speed_mps: float | None = None  # the car's speed when advised ("Slow to X, then coast" vs "Lift off")
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__slots__}
@@ -138,7 +138,6 @@ class AdvisorMemory:
 
     last: Advice | None = None
     spoken: Advice | None = None
-    history: tuple[str, ...] = field(default=())
 
 
 @lru_cache(maxsize=16)
@@ -274,16 +273,12 @@ def phrase(advice: Advice, units: str = "mph") -> str:
     if advice.action == "resume":
         return f"Last light passed. Resume {speed}."
     if advice.action == "coast":
-        if advice.target_speed_mps is not None and advice.target_speed_mps < 0.97 * advice_speed_hint(advice):
+        speed_now = advice.current_speed_mps if advice.current_speed_mps is not None else np.inf
+        if advice.target_speed_mps is not None and advice.target_speed_mps < 0.97 * speed_now:
             return f"{light}Slow to {speed}, then coast."
         return f"{light}Lift off and coast."
     verb = {"ease_off": "Ease off to", "slow_down": "Slow down to", "brake_to": "Brake to", "accelerate": "Speed up to", "cruise": "Hold"}[advice.action]
     return f"{light}{verb} {speed}."
-
-
-def advice_speed_hint(advice: Advice) -> float:
-    """The car's speed when the advice was made (kept in ``history``-free form on the advice itself)."""
-    return advice.current_speed_mps if advice.current_speed_mps is not None else np.inf
 
 
 def _light_timing(light: LightView) -> tuple[bool, float | None]:
@@ -391,4 +386,4 @@ def advise(
     spoken = advice if advice.speak else memory.spoken
     if advice.action == "none" and advice.reason in ("too_close", "short_wait"):
         spoken = memory.spoken  # silence keeps the last spoken advice as the reference
-    return advice, AdvisorMemory(last=advice, spoken=spoken, history=(memory.history + (advice.action,))[-10:])
+    return advice, AdvisorMemory(last=advice, spoken=spoken)
