@@ -28,7 +28,7 @@ from advisory.signals import paper_scenario  # noqa: E402
 from advisory.study import study_cases  # noqa: E402
 from replay.study import run_study  # noqa: E402
 
-BENCH_GRID = GridSpec(stage_m=20.0, time_bin_s=0.25, dwell_s=0.5)
+BENCH_GRID = GridSpec(stage_m=20.0, time_bin_s=0.5, dwell_s=1.0)
 
 
 def problem(case, grid):
@@ -70,10 +70,8 @@ def main() -> None:
     print(f"  {'case':18} {'stage m':>7} {'speeds':>6} {'bin s':>6} {'cost m$':>9} {'change':>8} {'solve ms':>9} {'tables MB':>9}")
     for c in ((15, 15, 800), (-15, 15, 400), (0, 0, 800)):
         prev = None
-        for factor in (0.5, 1, 2) if not quick else (1, 2):
-            g = GridSpec(stage_m=20.0 / factor, time_bin_s=0.25 / factor, dwell_s=0.5 / factor) if factor >= 1 else GridSpec(stage_m=40.0 if c[2] % 40 == 0 and 100 % 40 == 0 else 20.0, time_bin_s=0.5, dwell_s=1.0)
-            if factor < 1 and g.stage_m == 20.0:
-                g = GridSpec(stage_m=20.0, time_bin_s=0.5, dwell_s=1.0)
+        for factor in (1, 2, 4) if not quick else (1, 2):
+            g = BENCH_GRID.refined(factor) if factor > 1 else BENCH_GRID
             p = problem(c, g)
             solve_problem(p)
             t, s = best_time(lambda p=p: solve_problem(p), repeats=2)

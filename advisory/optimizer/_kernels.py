@@ -107,10 +107,13 @@ def forward_pass(
                 b += 1
         k2 = k + 1
         stop_next = is_stop[k2]
+        red_start, red_len, cycle = stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]
+        t_lo2 = t_lo_s[k2]
         for i in range(n_v):
             if occ_hi[k, i] < 0:
                 continue
             b_lo, b_hi = occ_lo[k, i], occ_hi[k, i] + 1
+            cost_row, time_row = cost_usd[k, i], time_s[k, i]
             for j in range(band_hi[i] - band_lo[i] + 1):
                 dt = step_dt[i, j]
                 if dt == np.inf:
@@ -118,24 +121,27 @@ def forward_pass(
                 i2 = band_lo[i] + j
                 step = step_usd[i, j]
                 slack = t_max_s + LATE_TOL_S - t_rem_min_s[k2, i2]
+                cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]
+                lo2, hi2 = occ_lo[k2, i2], occ_hi[k2, i2]
                 for b in range(b_lo, b_hi):
-                    c0 = cost_usd[k, i, b]
+                    c0 = cost_row[b]
                     if c0 == np.inf:
                         continue
-                    t2 = time_s[k, i, b] + dt
+                    t2 = time_row[b] + dt
                     if t2 > slack:
                         continue
-                    if stop_next and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
+                    if stop_next and is_red(t2, red_start, red_len, cycle):
                         continue
-                    b2 = int((t2 - t_lo_s[k2]) / bin_s)
+                    b2 = int((t2 - t_lo2) / bin_s)
                     if b2 >= n_bins:
                         continue
                     c2 = c0 + step
-                    if c2 < cost_usd[k2, i2, b2]:
-                        cost_usd[k2, i2, b2] = c2
-                        time_s[k2, i2, b2] = t2
-                        parent[k2, i2, b2] = i * n_bins + b
-                        if b2 < occ_lo[k2, i2]:
-                            occ_lo[k2, i2] = b2
-                        if b2 > occ_hi[k2, i2]:
-                            occ_hi[k2, i2] = b2
+                    if c2 < cost_next[b2]:
+                        cost_next[b2] = c2
+                        time_next[b2] = t2
+                        parent_next[b2] = i * n_bins + b
+                        if b2 < lo2:
+                            lo2 = b2
+                        if b2 > hi2:
+                            hi2 = b2
+                occ_lo[k2, i2], occ_hi[k2, i2] = lo2, hi2
