@@ -354,6 +354,9 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         action = "accelerate"
     else:
         action = "cruise"
+        near = feasible[np.abs(feasible - obs.speed_mps) <= params.hysteresis_mps]
+        if near.size:  # within the band: hold the speed the car has, don't nudge it by a mile per hour
+            target = float(near[np.argmin(np.abs(near - obs.speed_mps))])
     return Advice(action, "green_wave", target_speed_mps=min(target, obs.speed_limit_mps), light_red=red,
                   seconds_to_change_s=to_change, source=source)
 

@@ -129,7 +129,7 @@ def simulate(
                 slowest = driver.min_coast_mps if active is not None and active.action in ("coast", "ease_off") else v_cmd
                 if v_cmd < v and light.next_red_start_s(t) <= t + dist / max(min(slowest, v_cmd), 0.5) + 1.0:
                     v_cmd = v
-        if braking_for is None and active is not None and active.action == "ease_off" and v_cmd < v:
+        if braking_for is None and active is not None and active.action in ("ease_off", "cruise") and v_cmd < v:
             rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast
         if braking_for is None and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
             if v > driver.min_coast_mps:
@@ -170,11 +170,18 @@ class Evaluation:
     stops: int
     overrides: int
     violations: tuple[str, ...]
+    optimum_same_time_usd: float  # the DP allowed the advised driver's own trip time (if longer than the regular's)
 
     @property
     def kept_frac(self) -> float | None:
         """Share of the DP's saving over the regular driver that the advised driver keeps (None if nothing to save)."""
         saving = self.regular_usd - self.optimum_usd
+        return None if saving < 1e-6 * self.regular_usd else (self.regular_usd - self.advised_usd) / saving
+
+    @property
+    def kept_same_time_frac(self) -> float | None:
+        """The same share against the DP given the advised driver's trip time: slowness earns no credit."""
+        saving = self.regular_usd - self.optimum_same_time_usd
         return None if saving < 1e-6 * self.regular_usd else (self.regular_usd - self.advised_usd) / saving
 
 
@@ -188,9 +195,13 @@ def evaluate(scenario: Scenario, params, tables=None, advisor: AdvisorParams | N
     v_lim = scenario.speed_limit_mps
     reg = score_in_end_state(regular_driver(scenario), params, v_lim)
     adv = score_in_end_state(run.trajectory, params, v_lim)
-    opt = score_in_end_state(solve(scenario, params, grid or GridSpec(stage_m=20.0)).trajectory, params, v_lim)
+    grid = grid or GridSpec(stage_m=20.0)
+    opt = score_in_end_state(solve(scenario, params, grid).trajectory, params, v_lim)
+    same = opt
+    if adv.time_s > reg.time_s + 1e-6:
+        same = score_in_end_state(solve(scenario, params, grid, t_max_s=adv.time_s).trajectory, params, v_lim)
     return Evaluation(scenario.name, reg.cost_usd, adv.cost_usd, opt.cost_usd, reg.time_s, adv.time_s, opt.time_s,
-                      run.stops, run.overrides, tuple(red_light_violations(run.trajectory, scenario)))
+                      run.stops, run.overrides, tuple(red_light_violations(run.trajectory, scenario)), same.cost_usd)
 
 
 def red_light_violations(traj: Trajectory, scenario: Scenario, tol_s: float = 1e-6) -> list[str]:
