@@ -31,6 +31,9 @@ from advisory.params import PAPER_54KWH, VehicleParams
 
 MPH_PER_MPS = 1 / 0.44704
 KMH_PER_MPS = 3.6
+SLOW_FIRST_FRAC = 0.97
+"""A "coast" advice whose target is below this share of the current speed is worded "Slow to X, then coast";
+otherwise the braking part is negligible and it is "Lift off and coast". [-]"""
 
 
 @dataclass(frozen=True, slots=True)
@@ -274,7 +277,7 @@ def phrase(advice: Advice, units: str = "mph") -> str:
         return f"Last light passed. Resume {speed}."
     if advice.action == "coast":
         speed_now = advice.current_speed_mps if advice.current_speed_mps is not None else np.inf
-        if advice.target_speed_mps is not None and advice.target_speed_mps < 0.97 * speed_now:
+        if advice.target_speed_mps is not None and advice.target_speed_mps < SLOW_FIRST_FRAC * speed_now:
             return f"{light}Slow to {speed}, then coast."
         return f"{light}Lift off and coast."
     verb = {"ease_off": "Ease off to", "slow_down": "Slow down to", "brake_to": "Brake to", "accelerate": "Speed up to", "cruise": "Hold"}[advice.action]
