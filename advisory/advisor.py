@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
 from advisory.energy import road_load_force_n
 from advisory.params import PAPER_54KWH, VehicleParams
@@ -168,6 +169,98 @@ def coast_decel_mps2(v_mps: float, vehicle: VehicleParams) -> float:
                                    vehicle.drag_coef, vehicle.frontal_area_m2, vehicle.air_density_kg_per_m3)) / vehicle.mass_kg
 
 
+MODE_CODES = {"auto": 0, "brake_coast": 1, "brake": 2, "firm": 3}
+"""How the speed changes towards a target (see :func:`crossing_time_s`), as kernel codes."""
+
+
+COAST_TABLE_DV_MPS = 0.01
+COAST_TABLE_DX_M = 0.25
+"""Steps of the uniform coast-down tables the kernels interpolate in O(1) (speed [m/s], distance [m])."""
+
+
+@lru_cache(maxsize=16)
+def _coast_arrays(vehicle: VehicleParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The coast-down profile on uniform grids: distance and time from the top speed down to speed ``i dv``
+    (ascending speed), and time to cover distance ``j dx``. [m], [s], [s]"""
+    v, x, t = coast_profile(vehicle)
+    v_grid = np.arange(0.0, v[0] + COAST_TABLE_DV_MPS, COAST_TABLE_DV_MPS)
+    x_grid = np.arange(0.0, x[-1] + COAST_TABLE_DX_M, COAST_TABLE_DX_M)
+    x_of_v, t_of_v = np.interp(v_grid, v[::-1], x[::-1]), np.interp(v_grid, v[::-1], t[::-1])
+    return x_of_v, t_of_v, np.interp(x_grid, x, t)
+
+
+@njit(cache=True, inline="always")
+def _lerp(table, step, q):
+    u = q / step
+    i = int(u)
+    if i >= table.size - 1:
+        return table[-1]
+    if i < 0:
+        return table[0]
+    return table[i] + (u - i) * (table[i + 1] - table[i])
+
+
+@njit(cache=True)
+def _time_to_line_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+    """Time to a line ``d_m`` ahead for one target speed (see :func:`crossing_time_s`). [s]"""
+    dv, dx = COAST_TABLE_DV_MPS, COAST_TABLE_DX_M
+    d = max(d_m, 0.0)
+    d_react = v0 * reaction_s
+    if d <= d_react:
+        return d / v0 if v0 > 0.0 else np.inf
+    d -= d_react
+    if mode == 1:  # brake gently to the target, then coast all the way
+        v1 = min(vt, v0)
+        d_b = (v0 * v0 - v1 * v1) / (2.0 * brake_mps2)
+        if d <= d_b:
+            return reaction_s + (v0 - np.sqrt(max(v0 * v0 - 2.0 * brake_mps2 * d, 0.0))) / brake_mps2
+        xs = _lerp(x_of_v, dv, v1) + d - d_b
+        if xs > x_of_v[0]:
+            return np.inf
+        return reaction_s + (v0 - v1) / brake_mps2 + _lerp(t_of_x, dx, xs) - _lerp(t_of_v, dv, v1)
+    slower = vt < v0
+    if slower and mode == 0:  # lift off and coast down to the target, then hold it
+        x0, t0 = _lerp(x_of_v, dv, v0), _lerp(t_of_v, dv, v0)
+        x1, t1 = _lerp(x_of_v, dv, vt), _lerp(t_of_v, dv, vt)
+        if d <= x1 - x0:
+            return reaction_s + _lerp(t_of_x, dx, x0 + d) - t0
+        return reaction_s + (t1 - t0) + (d - (x1 - x0)) / vt if vt > 0.0 else np.inf
+    # a constant-rate change (speeding up; or braking in the brake / firm modes)
+    rate = (firm_mps2 if mode == 3 else brake_mps2) if slower else accel_mps2
+    d_ramp = abs(v0 * v0 - vt * vt) / (2.0 * rate)
+    if d <= d_ramp:
+        v_line = np.sqrt(max(v0 * v0 + 2.0 * (-rate if slower else rate) * d, 0.0))
+        return reaction_s + abs(v_line - v0) / rate if v_line > 0.0 else np.inf
+    return reaction_s + abs(v0 - vt) / rate + (d - d_ramp) / vt if vt > 0.0 else np.inf
+
+
+@njit(cache=True)
+def _crossing_times_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+    out = np.empty(vt.size)
+    for i in range(vt.size):
+        out[i] = _time_to_line_s(d_m, v0, vt[i], mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x)
+    return out
+
+
+@njit(cache=True)
+def _green_mask(speeds, distances_m, red_start_s, red_end_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+    """Per candidate speed: every line (row of the padded red windows) reached on green. bool (n,)"""
+    ok = np.ones(speeds.size, dtype=np.bool_)
+    for i in range(speeds.size):
+        for j in range(distances_m.size):
+            tc = _time_to_line_s(distances_m[j], v0, speeds[i], mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x)
+            if not np.isfinite(tc):
+                ok[i] = False
+                break
+            for k in range(red_start_s.shape[1]):
+                if red_start_s[j, k] <= tc < red_end_s[j, k]:
+                    ok[i] = False
+                    break
+            if not ok[i]:
+                break
+    return ok
+
+
 def crossing_time_s(
     distance_m: float, v0_mps: float, v_target_mps, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None
 ):
@@ -181,44 +274,9 @@ def crossing_time_s(
     """
     vt = np.asarray(v_target_mps, dtype=float)
     reaction = params.reaction_s if reaction_s is None else reaction_s
-    d = max(distance_m, 0.0)
-    d_react = v0_mps * reaction
-    if d <= d_react:
-        out = np.full(vt.shape, d / v0_mps if v0_mps > 0 else np.inf)
-        return out if out.ndim else float(out)
-    d -= d_react
-    v, x, t = coast_profile(params.vehicle)
-    rv, rx, rt = v[::-1], x[::-1], t[::-1]  # ascending speed for interpolation
-    with np.errstate(divide="ignore", invalid="ignore"):
-        if mode == "brake_coast":  # brake gently to the target, then coast all the way
-            dec = params.comfort_decel_mps2
-            v1 = np.minimum(vt, v0_mps)
-            d_b = (v0_mps**2 - v1**2) / (2.0 * dec)
-            during = reaction + (v0_mps - np.sqrt(np.maximum(v0_mps**2 - 2.0 * dec * d, 0.0))) / dec
-            x0, t0 = np.interp(v1, rv, rx), np.interp(v1, rv, rt)
-            xs = x0 + d - d_b
-            after = np.where(xs > x[-1], np.inf, reaction + (v0_mps - v1) / dec + np.interp(xs, x, t) - t0)
-            out = np.where(d <= d_b, during, after)
-        else:
-            out = np.empty(vt.shape)
-            slower = vt < v0_mps
-            coast = slower & (mode == "auto")
-            if coast.any():  # lift off and coast down to the target, then hold it
-                vc = vt[coast]
-                x0, t0 = np.interp(v0_mps, rv, rx), np.interp(v0_mps, rv, rt)
-                x1, t1 = np.interp(vc, rv, rx), np.interp(vc, rv, rt)
-                during = reaction + np.interp(x0 + d, x, t) - t0
-                out[coast] = np.where(d <= x1 - x0, during, np.where(vc > 0, reaction + (t1 - t0) + (d - (x1 - x0)) / vc, np.inf))
-            ramp = ~coast
-            if ramp.any():  # a constant-rate change (speeding up; or braking in the brake / firm modes)
-                vr, down = vt[ramp], slower[ramp]
-                rate = np.where(down, params.firm_decel_mps2 if mode == "firm" else params.comfort_decel_mps2, params.comfort_accel_mps2)
-                d_ramp = np.abs(v0_mps**2 - vr**2) / (2.0 * rate)
-                v_line = np.sqrt(np.maximum(v0_mps**2 + 2.0 * np.where(down, -rate, rate) * d, 0.0))
-                during = np.where(v_line > 0, reaction + np.abs(v_line - v0_mps) / rate, np.inf)
-                after = np.where(vr > 0, reaction + np.abs(v0_mps - vr) / rate + (d - d_ramp) / vr, np.inf)
-                out[ramp] = np.where(d <= d_ramp, during, after)
-    return out if out.ndim else float(out)
+    out = _crossing_times_s(float(distance_m), float(v0_mps), vt.reshape(-1), MODE_CODES[mode], float(reaction),
+                            params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *_coast_arrays(params.vehicle))  # fmt: skip
+    return out.reshape(vt.shape) if vt.ndim else float(out[0])
 
 
 @lru_cache(maxsize=64)
@@ -228,6 +286,36 @@ def _candidates_mps(low_mps: float, limit_mps: float, step_mps: float) -> np.nda
     return speeds
 
 
+@dataclass(frozen=True, slots=True)
+class _Lines:
+    """The lights to cross, packed for the kernel: distances (n,) and red windows padded with +inf (n, k)."""
+
+    distances_m: np.ndarray
+    red_start_s: np.ndarray
+    red_end_s: np.ndarray
+
+    @classmethod
+    def of(cls, lights) -> _Lines:
+        k = max((len(light.red_windows_s) for light in lights), default=0)
+        start, end = np.full((len(lights), max(k, 1)), np.inf), np.full((len(lights), max(k, 1)), np.inf)
+        for j, light in enumerate(lights):
+            if light.red_windows_s:
+                w = np.asarray(light.red_windows_s, dtype=float)
+                start[j, : len(w)], end[j, : len(w)] = w[:, 0], w[:, 1]
+        return cls(np.array([light.distance_m for light in lights], dtype=float), start, end)
+
+    def first(self) -> _Lines:
+        return _Lines(self.distances_m[:1], self.red_start_s[:1], self.red_end_s[:1])
+
+
+def _feasible(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, reaction_s: float | None = None) -> np.ndarray:
+    speeds = _candidates_mps(params.min_cruise_speed_mps, obs.speed_limit_mps, params.speed_step_mps)
+    reaction = params.reaction_s if reaction_s is None else reaction_s
+    ok = _green_mask(speeds, lines.distances_m, lines.red_start_s, lines.red_end_s, float(obs.speed_mps), MODE_CODES[mode], float(reaction),
+                     params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *_coast_arrays(params.vehicle))  # fmt: skip
+    return speeds[ok]
+
+
 def feasible_speeds_mps(
     obs: Observation, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None, lights=None
 ) -> np.ndarray:
@@ -235,20 +323,12 @@ def feasible_speeds_mps(
 
     ``lights`` replaces ``obs.lights`` (the advisor checks subsets of the lights ahead).
     """
-    speeds = _candidates_mps(params.min_cruise_speed_mps, obs.speed_limit_mps, params.speed_step_mps)
-    ok = np.ones(speeds.size, dtype=bool)
-    for light in (obs.lights if lights is None else lights)[:2]:
-        ok &= _green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, speeds, params, mode, reaction_s))
-    return speeds[ok]
+    return _feasible(_Lines.of((obs.lights if lights is None else lights)[:2]), obs, params, mode, reaction_s)
 
 
-def _green_crossing(light: LightView, t_s):
-    """Where the line is reached (finite time) and not during a (conservative) red (scalar or array)."""
-    t = np.asarray(t_s, dtype=float)
-    red = np.zeros(t.shape, dtype=bool)
-    for start, end in light.red_windows_s:
-        red |= (start <= t) & (t < end)
-    return np.isfinite(t) & ~red
+def _green_crossing(light: LightView, t_s: float) -> bool:
+    """The line is reached (finite time) and not during a (conservative) red."""
+    return bool(np.isfinite(t_s)) and not light.is_red_at(t_s)
 
 
 def _say_speed(speed_mps: float, units: str) -> str:
@@ -290,6 +370,10 @@ def _light_timing(light: LightView) -> tuple[bool, float | None]:
     return False, light.seconds_to_red()
 
 
+KEEP_MODES = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", "ease_off": "auto", "accelerate": "auto", "cruise": "auto"}
+"""How a driver following each action changes speed (the mode its feasibility is re-checked in)."""
+
+
 def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tables) -> Advice:
     if not obs.on_route:
         return Advice("none", "off_route")
@@ -305,15 +389,15 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if nxt.distance_m < max(params.too_close_m, obs.speed_mps * params.too_close_s):
         return Advice("none", "too_close", light_red=red, seconds_to_change_s=to_change)
     usable = tuple(light for light in obs.lights[:2] if light.fresh and light.confidence_frac >= params.min_confidence_frac)
+    both = _Lines.of(usable)
     last = memory.last
-    modes = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", "ease_off": "auto", "accelerate": "auto", "cruise": "auto"}
-    if last is not None and last.target_speed_mps is not None and last.action in modes and usable:
+    if last is not None and last.target_speed_mps is not None and last.action in KEEP_MODES and usable:
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
-        keep_mode = modes[last.action]
+        keep_mode = KEEP_MODES[last.action]
         keep_target = last.target_speed_mps
         if keep_mode == "brake_coast":
             keep_target = min(keep_target, obs.speed_mps)
-        still = feasible_speeds_mps(obs, params, keep_mode, reaction_s=0.0, lights=usable)
+        still = _feasible(both, obs, params, keep_mode, reaction_s=0.0)
         ok = np.any(np.abs(still - last.target_speed_mps) < 1e-9) or (
             keep_mode == "brake_coast" and all(
                 bool(_green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, keep_target, params, keep_mode, 0.0))) for light in usable
@@ -324,9 +408,9 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
                            action=last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise")
     # Lift off and coast (or speed up) if that makes the greens; brake gently only if coasting cannot;
     # if no speed makes both lights, plan for the next one alone.
-    for lights in (usable, usable[:1]) if len(usable) > 1 else (usable,):
+    for lines in (both, both.first()) if len(usable) > 1 else (both,):
         for mode in ("auto", "brake_coast", "brake", "firm"):
-            feasible = feasible_speeds_mps(obs, params, mode, lights=lights)
+            feasible = _feasible(lines, obs, params, mode)
             if feasible.size:
                 break
         if feasible.size:
@@ -346,7 +430,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if last is not None and last.target_speed_mps is not None and last.action in ("cruise", "ease_off", "accelerate", "slow_down", "coast"):
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
         keep_mode = {"slow_down": "brake", "coast": "brake_coast"}.get(last.action, "auto")
-        still = feasible_speeds_mps(obs, params, keep_mode, reaction_s=0.0, lights=lights)
+        still = _feasible(lines, obs, params, keep_mode, reaction_s=0.0)
         if abs(last.target_speed_mps - target) < params.speak_change_mps and np.any(np.abs(still - last.target_speed_mps) < 1e-9):
             target, mode = last.target_speed_mps, keep_mode
     if mode == "brake_coast":
@@ -386,9 +470,10 @@ def advise(
     """
     memory = memory or AdvisorMemory()
     params = params or AdvisorParams()
-    advice = replace(_decide(obs, memory, params, tables), current_speed_mps=obs.speed_mps)
-    speak = _meaningful_change(advice, memory.spoken, params)
-    advice = replace(advice, message=phrase(advice, params.units), speak=speak and bool(phrase(advice, params.units)))
+    advice = _decide(obs, memory, params, tables)
+    advice = replace(advice, current_speed_mps=obs.speed_mps) if advice.current_speed_mps != obs.speed_mps else advice
+    message = phrase(advice, params.units)
+    advice = replace(advice, message=message, speak=bool(message) and _meaningful_change(advice, memory.spoken, params))
     spoken = advice if advice.speak else memory.spoken
     if advice.action == "none" and advice.reason in ("too_close", "short_wait"):
         spoken = memory.spoken  # silence keeps the last spoken advice as the reference

@@ -1,11 +1,9 @@
-"""Map matching a whole GPS trace onto a corridor at once (vectorised), and finding the corridor.
+"""Map matching a whole GPS trace onto a corridor at once, and finding the corridor.
 
-For each fix, the nearest route segment is chosen in a local flat frame (equirectangular about the
-segment, exact to millimetres on 50 m segments), then the station and signed cross-track offset on that
-segment are computed with WGS 84 geodesics (pyproj), as ``Corridor.project`` does fix by fix. Unlike
-``Corridor.project``, the first and last segments are extended: a fix before the zone entry gets a
-negative station and one past the exit a station beyond ``length_m``, so the entry and exit crossings
-can be found.
+``Corridor.project_many`` does the projection (nearest segment in a local flat frame, then station and
+signed cross-track offset with WGS 84 geodesics; first and last segments extended, so a fix before the
+zone entry gets a negative station and one past the exit a station beyond ``length_m``, and the entry and
+exit crossings can be found).
 """
 
 from __future__ import annotations
@@ -14,10 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spat_feed.corridors import WGS84, Corridor, load_corridor, preset_names
+from spat_feed.corridors import Corridor, load_corridor, preset_names
 
-EARTH_M_PER_DEG = 6_371_008.8 * np.pi / 180.0
-CHUNK = 512
 ON_ROUTE_M = 30.0
 """A fix farther than this from the route counts as off route (the service's default ``off_route_m``). [m]"""
 
@@ -50,42 +46,7 @@ class MatchedTrace:
 
 def match(corridor: Corridor, lat_deg, lon_deg) -> MatchedTrace:
     """Stations and cross-track offsets of fixes ``(lat_deg, lon_deg)`` (arrays (n,)) on ``corridor``."""
-    lat = np.asarray(lat_deg, dtype=float)
-    lon = np.asarray(lon_deg, dtype=float)
-    pts = corridor.polyline
-    st = np.array([p.station_m for p in pts])
-    vlat = np.array([p.lat_deg for p in pts])
-    vlon = np.array([p.lon_deg for p in pts])
-    n_seg = st.size - 1
-    best = np.empty(lat.size, dtype=np.int64)
-    # segment choice in each segment's local flat frame
-    kx = EARTH_M_PER_DEG * np.cos(np.radians(vlat[:-1]))  # (n_seg,)
-    ky = EARTH_M_PER_DEG
-    sx = (vlon[1:] - vlon[:-1]) * kx
-    sy = (vlat[1:] - vlat[:-1]) * ky
-    seg_len2 = np.maximum(sx * sx + sy * sy, 1e-9)
-    for a in range(0, lat.size, CHUNK):
-        px = (lon[a : a + CHUNK, None] - vlon[None, :-1]) * kx[None, :]
-        py = (lat[a : a + CHUNK, None] - vlat[None, :-1]) * ky
-        u = (px * sx + py * sy) / seg_len2
-        u_lo = np.where(np.arange(n_seg) == 0, -np.inf, 0.0)
-        u_hi = np.where(np.arange(n_seg) == n_seg - 1, np.inf, 1.0)
-        u = np.clip(u, u_lo, u_hi)
-        d2 = (px - u * sx) ** 2 + (py - u * sy) ** 2
-        best[a : a + CHUNK] = np.argmin(d2, axis=1)
-    # exact along / across on the chosen segment (geodesics)
-    seg_az, _, _ = WGS84.inv(vlon[best], vlat[best], vlon[best + 1], vlat[best + 1])
-    az, _, dist = WGS84.inv(vlon[best], vlat[best], lon, lat)
-    d_rad = np.radians(np.asarray(az) - np.asarray(seg_az))
-    along = np.asarray(dist) * np.cos(d_rad)
-    cross = np.asarray(dist) * np.sin(d_rad)
-    seg_len = st[best + 1] - st[best]
-    lo = np.where(best == 0, -np.inf, 0.0)
-    hi = np.where(best == n_seg - 1, np.inf, seg_len)
-    along_c = np.clip(along, lo, hi)
-    # beyond a vertex (clipped): the offset is the distance to that vertex, sign of the cross track
-    off = np.hypot(along - along_c, cross) * np.where(cross < 0, -1.0, 1.0)
-    return MatchedTrace(corridor, st[best] + along_c, off)
+    return MatchedTrace(corridor, *corridor.project_many(lat_deg, lon_deg))
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 import time
 from collections.abc import AsyncIterator, Callable
@@ -123,6 +124,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         await asyncio.to_thread(warm_up, engine)
         await speech.start()
         sweeper = asyncio.create_task(_expire_idle(engine, metrics, min(60.0, settings.trip_idle_ttl_s / 2)))
+        gc.freeze()  # start-up objects (tables, corridors, numba) to the permanent generation: collections stop rescanning them
         log.info("advisory service ready in %.1f s: %d corridors, tables for %s, speech %s", time.perf_counter() - t0, len(corridors_), sorted(tables), speech.reason)
         try:
             yield

@@ -49,9 +49,10 @@ class RouteMatcher:
     def match(self, lat_deg: float, lon_deg: float) -> Match:
         station_m, cross_m = self.corridor.project(lat_deg, lon_deg)
         offset_m = abs(cross_m)
-        if station_m <= 0.0 or station_m >= self.corridor.length_m:  # beyond an end: distance to that end
-            lat_e, lon_e = self.corridor.position(station_m)
-            _, _, offset_m = WGS84.inv(lon_e, lat_e, lon_deg, lat_deg)
+        if station_m < 0.0 or station_m > self.corridor.length_m:  # beyond an end: distance to that end
+            end = self.corridor.polyline[0 if station_m < 0.0 else -1]
+            _, _, offset_m = WGS84.inv(end.lon_deg, end.lat_deg, lon_deg, lat_deg)
+            station_m = min(max(station_m, 0.0), self.corridor.length_m)
         return Match(float(station_m), float(cross_m), float(offset_m))
 
 

@@ -15,6 +15,7 @@ LATENCY_BUCKETS_S = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25,
 class Metrics:
     def __init__(self, open_trips: Callable[[], int]) -> None:
         r = self.registry = CollectorRegistry(auto_describe=True)
+        self._children: dict[tuple, object] = {}
         self.requests = Counter("ecodrive_http_requests", "HTTP requests by route and status", ["method", "route", "status"], registry=r)
         self.request_s = Histogram("ecodrive_http_request_seconds", "HTTP request handling time", ["route"], buckets=LATENCY_BUCKETS_S, registry=r)
         self.fixes = Counter("ecodrive_fixes", "GPS fixes by outcome", ["outcome"], registry=r)
@@ -28,9 +29,17 @@ class Metrics:
         self.trips_open.set_function(open_trips)
 
     def observe_advice(self, trip, advice, outcome: str, seconds: float) -> None:
-        self.fixes.labels(outcome).inc()
-        self.advice.labels(advice.action, advice.source).inc()
+        self.child(self.fixes, outcome).inc()
+        self.child(self.advice, advice.action, advice.source).inc()
         self.advice_s.observe(seconds)
+
+    def child(self, metric, *labels: str):
+        """``metric.labels(*labels)``, memoised: the hot path pays a dict lookup, not prometheus' label checks."""
+        key = (id(metric), labels)
+        child = self._children.get(key)
+        if child is None:
+            child = self._children[key] = metric.labels(*labels)
+        return child
 
     def render(self) -> bytes:
         return generate_latest(self.registry)

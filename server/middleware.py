@@ -67,9 +67,9 @@ class GuardMiddleware:
     def _count(self, scope, status: int, seconds: float) -> None:
         route = scope.get("route")
         path = getattr(route, "path", None) or "unmatched"
-        self.metrics.requests.labels(scope.get("method", ""), path, str(status)).inc()
+        self.metrics.child(self.metrics.requests, scope.get("method", ""), path, str(status)).inc()
         if seconds:
-            self.metrics.request_s.labels(path).observe(seconds)
+            self.metrics.child(self.metrics.request_s, path).observe(seconds)
 
 
 async def _send_json(send, status: int, body: dict) -> None:

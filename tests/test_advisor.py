@@ -176,3 +176,43 @@ def test_randomized_closed_loop_never_runs_a_red_nor_advises_above_the_limit(x, 
     assert red_light_violations(run.trajectory, sc) == []
     assert run.max_advised_mps <= sc.speed_limit_mps + 1e-9
     assert run.trajectory.x_m[-1] >= sc.zone_length_m - 1e-6
+
+
+def _simulated_crossing_s(d_m, v0, vt, mode, params=P, dt=1e-3):
+    """Brute force: step the motion crossing_time_s assumes (reaction, then the speed change, then hold or coast)."""
+    from advisory.advisor import coast_decel_mps2
+
+    x, v, t = 0.0, v0, 0.0
+    while x < d_m:
+        if t < params.reaction_s:
+            a = 0.0
+        elif mode == "brake_coast":
+            a = -params.comfort_decel_mps2 if v > min(vt, v0) + 1e-9 else -coast_decel_mps2(v, params.vehicle)
+        elif v > vt + 1e-9:
+            a = {"auto": -coast_decel_mps2(v, params.vehicle), "brake": -params.comfort_decel_mps2, "firm": -params.firm_decel_mps2}[mode]
+        elif v < vt - 1e-9:
+            a = params.comfort_accel_mps2
+        else:
+            a = 0.0
+        v_next = v + a * dt
+        if a < 0.0 and v_next < vt and mode != "brake_coast":
+            v_next = vt
+        if a > 0.0 and v_next > vt:
+            v_next = vt
+        if v_next <= 0.0:
+            return np.inf
+        x += 0.5 * (v + v_next) * dt
+        v, t = v_next, t + dt
+    return t
+
+
+@pytest.mark.parametrize("mode", ["auto", "brake_coast", "brake", "firm"])
+@pytest.mark.parametrize(("d_m", "v0", "vt"), [(300.0, 24.0, 15.0), (120.0, 20.0, 8.0), (400.0, 10.0, 22.0), (60.0, 24.0, 23.0), (900.0, 24.0, 5.0)])
+def test_crossing_time_matches_a_brute_force_simulation(mode, d_m, v0, vt):
+    """The O(1) coast tables and closed forms against stepping the same motion at 1 ms."""
+    got = crossing_time_s(d_m, v0, np.array([vt]), P, mode)[0]
+    want = _simulated_crossing_s(d_m, v0, vt, mode)
+    if np.isinf(want):
+        assert np.isinf(got)
+    else:
+        assert got == pytest.approx(want, abs=0.02)

@@ -104,3 +104,20 @@ def test_timing_presets():
     assert TIMING_PRESETS["field_test"].red_starts_s == (-15.0, 30.0)
     names = {timing_for_trip(60.0 * k).name for k in range(16)}
     assert len(names) == 16 and timing_for_trip(0.0) == timing_for_trip(16 * 60.0)
+
+
+def test_project_extends_the_ends_and_matches_project_many(corridor):
+    heading = corridor.intersections[0].approach_heading_deg
+    start, end = corridor.polyline[0], corridor.polyline[-1]
+    lon_b, lat_b, _ = WGS84.fwd(start.lon_deg, start.lat_deg, heading + 180.0, 20.0)  # 20 m before the entry
+    lon_a, lat_a, _ = WGS84.fwd(end.lon_deg, end.lat_deg, heading, 15.0)  # 15 m past the exit
+    assert corridor.project(lat_b, lon_b) == pytest.approx((-20.0, 0.0), abs=0.05)
+    assert corridor.project(lat_a, lon_a) == pytest.approx((corridor.length_m + 15.0, 0.0), abs=0.05)
+    rng = np.random.default_rng(3)
+    pts = [corridor.position(s) for s in rng.uniform(-50.0, corridor.length_m + 50.0, 40)]
+    lat = np.array([p[0] for p in pts]) + rng.normal(0.0, 1e-4, 40)
+    lon = np.array([p[1] for p in pts]) + rng.normal(0.0, 1e-4, 40)
+    st, off = corridor.project_many(lat, lon)
+    one = np.array([corridor.project(a, b) for a, b in zip(lat, lon)])
+    np.testing.assert_allclose(one[:, 0], st, atol=1e-9)
+    np.testing.assert_allclose(one[:, 1], off, atol=1e-9)
