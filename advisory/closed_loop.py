@@ -3,9 +3,11 @@
 The driver asks for advice once a second and acts on it after a reaction delay. It tracks advised speeds
 at comfortable rates, drifting *up* when the advised speed is low (the paper's field-test driver found
 ~20 mph hard to hold). It is also a human who sees the lights: like the regular driver, it decides at the
-decision point before each stop line, brakes for a light that will be red on arrival, and after deciding
-to go never slows down before the line. Everything else comes from the advice; ``overrides`` counts the
-times the driver's own braking was needed although the advice did not say "stop".
+decision point before each stop line, brakes for a light that will be red on arrival at its current
+speed (a red showing then must end ``red_end_margin_s`` before that arrival: the advice counts the seconds
+to green), and after deciding to go neither slows down so much that a red catches it nor speeds up while
+the light is still red. Everything else comes from the advice; ``overrides`` counts the times the
+driver's own braking was needed although the advice did not say "stop".
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ class DriverModel:
     drift_mps: float = 1.0
     noise_mps: float = 0.0  # standard deviation of the tracking error, redrawn every advice
     min_coast_mps: float = 2.0  # below this the driver stops coasting and drives on
+    red_end_margin_s: float = 1.0  # a red seen at the decision point must end this long before arrival to go on
     seed: int = 0
 
 
@@ -109,10 +112,14 @@ def simulate(
             n, light = ahead[0]
             dist = light.position_m - x
             room = dist - rules.stop_gap_m
+            red_now = light.is_red(t)
+            green_at = light.next_green_start_s(t)  # t itself when green
+            next_red = light.next_red_start_s(green_at)  # the next red to begin after any current one
             if n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
-                # go only if no red can begin before the car is over the line (crawling cars included)
+                # go only if the light will be green on arrival at the current speed (a red now must end
+                # ``red_end_margin_s`` before) and no red can begin before the car is over the line
                 arrival = t + (dist / v if v > 0.1 else np.sqrt(2.0 * dist / driver.accel_mps2) + driver.reaction_s)
-                if light.is_red(t) or light.next_red_start_s(t) <= arrival:
+                if (red_now and (v <= 0.1 or green_at > arrival - driver.red_end_margin_s)) or next_red <= arrival:
                     if braking_for != n and (active is None or active.action != "stop"):
                         overrides += 1
                     braking_for = n
@@ -123,11 +130,13 @@ def simulate(
                 v_cmd = 0.0
                 rate_down = min(v * v / (2.0 * room), 4.0) if room > 1e-6 else 4.0
             elif n in committed:
-                if active is not None and active.action == "stop":
+                if red_now:  # committed while red: it turns green before arrival at this speed, not faster
+                    v_cmd = min(v_cmd, v)
+                elif active is not None and active.action == "stop":
                     v_cmd = v_lim
                 # going: slow down only if the line is still cleared before a red can begin
                 slowest = driver.min_coast_mps if active is not None and active.action in ("coast", "ease_off") else v_cmd
-                if v_cmd < v and light.next_red_start_s(t) <= t + dist / max(min(slowest, v_cmd), 0.5) + 1.0:
+                if v_cmd < v and next_red <= t + dist / max(min(slowest, v_cmd), 0.5) + 1.0:
                     v_cmd = v
         if braking_for is None and active is not None and active.action in ("ease_off", "cruise") and v_cmd < v:
             rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast
@@ -141,7 +150,8 @@ def simulate(
         if v + a * dt_s < 0.0:  # comes to rest within the step: a knot where it stops
             h = v / -a
             x += 0.5 * v * h
-            knots.append((t + h, x, 0.0))
+            if h > 1e-9:  # (a car already all but stopped adds no knot: times stay increasing)
+                knots.append((t + h, x, 0.0))
             v_new = 0.0
         else:
             v_new = v + a * dt_s

@@ -216,3 +216,16 @@ def test_crossing_time_matches_a_brute_force_simulation(mode, d_m, v0, vt):
         assert np.isinf(got)
     else:
         assert got == pytest.approx(want, abs=0.02)
+
+
+def test_virtual_driver_goes_on_against_a_red_that_ends_before_it_arrives():
+    """[-30 0] at s = 400 m: light 2 shows red at the decision point, but the advised car arrives after green
+    (the advice counts the seconds down); it keeps going, does not stop, and crosses on green."""
+    sc = paper_scenario(-30, 0, 400)
+    run = simulate(sc)
+    light2 = sc.signals[1]
+    t_decide = np.interp(light2.position_m - 76.57, run.trajectory.x_m, run.trajectory.t_s)
+    t_cross = run.trajectory.crossing_time_s(light2.position_m)
+    assert light2.is_red(t_decide) and not light2.is_red(t_cross)
+    assert t_cross >= light2.next_green_start_s(t_decide) + DriverModel().red_end_margin_s - 1e-9
+    assert run.stops == 0 and red_light_violations(run.trajectory, sc) == []
