@@ -134,10 +134,14 @@ def simulate(
                     v_cmd = min(v_cmd, v)
                 elif active is not None and active.action == "stop":
                     v_cmd = v_lim
-                # going: slow down only if the line is still cleared before a red can begin
-                slowest = driver.min_coast_mps if active is not None and active.action in ("coast", "ease_off") else v_cmd
-                if v_cmd < v and next_red <= t + dist / max(min(slowest, v_cmd), 0.5) + 1.0:
-                    v_cmd = v
+                # going: slow down only if the line is still cleared, with a second to spare, before the next
+                # red can begin (a coasting car keeps slowing after its target: count 70 % of it)
+                if v_cmd < v:
+                    coasting = active is not None and active.action in ("coast", "ease_off", "cruise")
+                    v_to = max(0.7 * v_cmd, driver.min_coast_mps) if coasting else v_cmd
+                    rate = coast_decel_mps2(v, advisor.vehicle) if active is not None and active.action in ("ease_off", "cruise") else rate_down
+                    if next_red <= t + _time_to_cover_s(dist, v, v_to, rate) + 1.0:
+                        v_cmd = v
         if braking_for is None and active is not None and active.action in ("ease_off", "cruise") and v_cmd < v:
             rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast
         if braking_for is None and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
@@ -150,7 +154,7 @@ def simulate(
         if v + a * dt_s < 0.0:  # comes to rest within the step: a knot where it stops
             h = v / -a
             x += 0.5 * v * h
-            if h > 1e-9:  # (a car already all but stopped adds no knot: times stay increasing)
+            if 1e-9 < h < dt_s - 1e-9:  # (no knot within a nanosecond of another: times stay increasing)
                 knots.append((t + h, x, 0.0))
             v_new = 0.0
         else:
@@ -164,6 +168,17 @@ def simulate(
         step += 1
     arr = np.array(knots)
     return ClosedLoopResult(Trajectory(arr[:, 0], arr[:, 1], arr[:, 2]), log, overrides, stops, max_advised)
+
+
+def _time_to_cover_s(dist_m: float, v_mps: float, v_to_mps: float, decel_mps2: float) -> float:
+    """Time to cover ``dist_m`` slowing at ``decel_mps2`` from ``v_mps`` to ``v_to_mps``, then holding it. [s]"""
+    v_to = max(v_to_mps, 0.5)
+    if v_mps <= v_to:
+        return dist_m / max(v_mps, 0.5)
+    d_brake = (v_mps**2 - v_to**2) / (2.0 * decel_mps2)
+    if dist_m <= d_brake:
+        return (v_mps - np.sqrt(max(v_mps**2 - 2.0 * decel_mps2 * dist_m, 0.0))) / decel_mps2
+    return (v_mps - v_to) / decel_mps2 + (dist_m - d_brake) / v_to
 
 
 @dataclass(frozen=True, slots=True)

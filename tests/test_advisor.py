@@ -229,3 +229,11 @@ def test_virtual_driver_goes_on_against_a_red_that_ends_before_it_arrives():
     assert light2.is_red(t_decide) and not light2.is_red(t_cross)
     assert t_cross >= light2.next_green_start_s(t_decide) + DriverModel().red_end_margin_s - 1e-9
     assert run.stops == 0 and red_light_violations(run.trajectory, sc) == []
+
+
+def test_time_to_cover_by_hand():
+    from advisory.closed_loop import _time_to_cover_s
+
+    assert _time_to_cover_s(100.0, 20.0, 10.0, 2.0) == pytest.approx(5.0 + 25.0 / 10.0)  # brake 75 m, then hold
+    assert _time_to_cover_s(50.0, 20.0, 10.0, 2.0) == pytest.approx((20.0 - np.sqrt(200.0)) / 2.0)  # still braking
+    assert _time_to_cover_s(30.0, 8.0, 10.0, 2.0) == pytest.approx(3.75)  # not slowing: 30 m at its own 8 m/s
