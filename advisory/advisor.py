@@ -119,7 +119,6 @@ class AdvisorParams:
     min_cruise_speed_mps: float = 10 * 0.44704  # slowest speed ever advised (a creep towards a red)
     reaction_s: float = 1.0
     green_margin_s: float = 2.0  # advised crossings at least this long after a red ends (driver reaction, tracking error) [s]
-    red_margin_s: float = 3.0  # ... and at least this long before a red may begin [s]
     comfort_decel_mps2: float = 1.5
     firm_decel_mps2: float = 3.0  # "brake to X" when gentle braking cannot make the green (regular driver: 4)
     comfort_accel_mps2: float = 1.5
@@ -245,9 +244,9 @@ def _crossing_times_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, acce
 
 
 @njit(cache=True)
-def _green_mask(speeds, distances_m, red_start_s, red_end_s, after_red_s, before_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+def _green_mask(speeds, distances_m, red_start_s, red_end_s, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
     """Per candidate speed: every line (row of the padded red windows) reached on green, at least
-    ``after_red_s`` after a red ends and ``before_red_s`` before one begins. bool (n,)"""
+    ``after_red_s`` after a red ends. bool (n,)"""
     ok = np.ones(speeds.size, dtype=np.bool_)
     for i in range(speeds.size):
         for j in range(distances_m.size):
@@ -256,7 +255,7 @@ def _green_mask(speeds, distances_m, red_start_s, red_end_s, after_red_s, before
                 ok[i] = False
                 break
             for k in range(red_start_s.shape[1]):
-                if red_start_s[j, k] - before_red_s <= tc < red_end_s[j, k] + after_red_s:
+                if red_start_s[j, k] <= tc < red_end_s[j, k] + after_red_s:
                     ok[i] = False
                     break
             if not ok[i]:
@@ -314,7 +313,7 @@ class _Lines:
 def _feasible(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, reaction_s: float | None = None) -> np.ndarray:
     speeds = _candidates_mps(params.min_cruise_speed_mps, obs.speed_limit_mps, params.speed_step_mps)
     reaction = params.reaction_s if reaction_s is None else reaction_s
-    ok = _green_mask(speeds, lines.distances_m, lines.red_start_s, lines.red_end_s, params.green_margin_s, params.red_margin_s, float(obs.speed_mps), MODE_CODES[mode], float(reaction),
+    ok = _green_mask(speeds, lines.distances_m, lines.red_start_s, lines.red_end_s, params.green_margin_s, float(obs.speed_mps), MODE_CODES[mode], float(reaction),
                      params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *_coast_arrays(params.vehicle))  # fmt: skip
     return speeds[ok]
 

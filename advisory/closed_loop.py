@@ -74,7 +74,8 @@ def simulate(
     t, x, v = 0.0, 0.0, scenario.initial_speed_mps
     knots = [(t, x, v)]
     memory = AdvisorMemory()
-    pending: list[tuple[float, Advice, float]] = []
+    pending: list[tuple[float, Advice, float, float]] = []  # (when acted on, advice, tracking error, its stop line)
+    stop_line_m = np.inf  # the line the active advice is about
     active: Advice | None = None
     error = 0.0
     log: list[tuple[float, Advice]] = []
@@ -90,16 +91,17 @@ def simulate(
             log.append((t, adv))
             if adv.target_speed_mps is not None:
                 max_advised = max(max_advised, adv.target_speed_mps)
-            pending.append((t + driver.reaction_s, adv, rng.normal(0.0, driver.noise_mps) if driver.noise_mps else 0.0))
+            line = min((s.position_m for s in scenario.signals if s.position_m > x + 1e-9), default=np.inf)
+            pending.append((t + driver.reaction_s, adv, rng.normal(0.0, driver.noise_mps) if driver.noise_mps else 0.0, line))
         while pending and pending[0][0] <= t + 1e-9:
-            _, new, err = pending.pop(0)
+            _, new, err, line = pending.pop(0)
             if not (new.action == "none" and new.reason in ("too_close", "short_wait")):
-                active, error = new, err
+                active, error, stop_line_m = new, err, line
         # what the advice asks for
         if active is None or active.target_speed_mps is None or active.action in ("none", "resume"):
             v_cmd = v_lim  # no speed advice: drive normally
         elif active.action == "stop":
-            v_cmd = 0.0
+            v_cmd = 0.0 if x < stop_line_m else v_lim  # a "stop" is void once its line is behind (crossed on green)
         else:
             v_cmd = active.target_speed_mps + (driver.drift_mps if active.target_speed_mps < driver.low_speed_mps else 0.0)
             v_cmd = float(np.clip(v_cmd + error, 0.0, v_lim))

@@ -237,3 +237,33 @@ def test_time_to_cover_by_hand():
     assert _time_to_cover_s(100.0, 20.0, 10.0, 2.0) == pytest.approx(5.0 + 25.0 / 10.0)  # brake 75 m, then hold
     assert _time_to_cover_s(50.0, 20.0, 10.0, 2.0) == pytest.approx((20.0 - np.sqrt(200.0)) / 2.0)  # still braking
     assert _time_to_cover_s(30.0, 8.0, 10.0, 2.0) == pytest.approx(3.75)  # not slowing: 30 m at its own 8 m/s
+
+
+def test_a_stop_advice_is_void_once_its_line_is_behind():
+    """[-15 -15] at s = 200 m: light 1 is red at entry, light 2 green on arrival. The driver stops once, at light 1;
+    after crossing it at green it does not obey the old "stop" again before light 2 (a human would not)."""
+    sc = paper_scenario(-15, -15, 200)
+    run = simulate(sc)
+    assert any(a.action == "stop" for _, a in run.advice)
+    assert run.stops == 1 and red_light_violations(run.trajectory, sc) == []
+    past = run.trajectory.x_m > sc.signals[0].position_m + 1.0
+    assert run.trajectory.v_mps[past].min() > 1.0  # no second halt between the lights
+
+
+NO_LIGHT_IN_THE_WAY = [(-30, -30, 200), (-30, 15, 200), (15, -30, 200), (15, 15, 200), (-30, -30, 600), (15, -15, 600), (-30, 0, 800)]
+
+
+@pytest.mark.parametrize(("x", "y", "s"), NO_LIGHT_IN_THE_WAY)
+def test_where_no_light_is_in_the_way_the_advice_costs_nothing(x, y, s):
+    """The regular driver sails through both greens: the advised driver must not be slower or costlier
+    (a margin before red once made it crawl 43 s to the next green at 2.5 times the cost)."""
+    from advisory.endstate import score_in_end_state
+    from advisory.regular import regular_driver
+
+    sc = paper_scenario(x, y, s)
+    params = model_params()
+    reg = score_in_end_state(regular_driver(sc), params, V)
+    run = simulate(sc)
+    adv = score_in_end_state(run.trajectory, params, V)
+    assert run.stops == 0
+    assert adv.time_s <= reg.time_s + 1.5 and adv.cost_usd <= reg.cost_usd * 1.01
