@@ -105,6 +105,9 @@ def main() -> None:
               f"over {kept.size} cases with a saving; against the DP given the advised trip time (slowness earns no credit) "
               f"{100 * np.mean(np.minimum(same, 1)):.1f} %; stops {sum(e.stops for e in ev)}, slower than regular by >1 s in {slower}, "
               f"violations {sum(len(e.violations) for e in ev)}")
+        free = [e for e in ev if e.kept_frac is None]  # nothing to save: the advice must cost nothing
+        print(f"  {len(free)} cases with nothing to save: advised vs regular cost at most "
+              f"{100 * max(e.advised_usd / e.regular_usd - 1 for e in free):+.1f} %, time at most {max(e.advised_s - e.regular_s for e in free):+.1f} s")
     print(f"  ({time.perf_counter() - t0:.1f} s)")
 
     # field-test timing: light 1 green at 15 s (x = -15), light 2 red at 30 s (y = 30)
