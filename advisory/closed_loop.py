@@ -34,6 +34,7 @@ class DriverModel:
     noise_mps: float = 0.0  # standard deviation of the tracking error, redrawn every advice
     min_coast_mps: float = 2.0  # below this the driver stops coasting and drives on
     red_end_margin_s: float = 1.0  # a red seen at the decision point must end this long before arrival to go on
+    coast_floor_frac: float = 0.7  # a coasting car keeps slowing past its target: plan with this share of it [-]
     seed: int = 0
 
 
@@ -137,10 +138,10 @@ def simulate(
                 elif active is not None and active.action == "stop":
                     v_cmd = v_lim
                 # going: slow down only if the line is still cleared, with a second to spare, before the next
-                # red can begin (a coasting car keeps slowing after its target: count 70 % of it)
+                # red can begin (a coasting car keeps slowing after its target: count ``coast_floor_frac`` of it)
                 if v_cmd < v:
                     coasting = active is not None and active.action in ("coast", "ease_off", "cruise")
-                    v_to = max(0.7 * v_cmd, driver.min_coast_mps) if coasting else v_cmd
+                    v_to = max(driver.coast_floor_frac * v_cmd, driver.min_coast_mps) if coasting else v_cmd
                     rate = coast_decel_mps2(v, advisor.vehicle) if active is not None and active.action in ("ease_off", "cruise") else rate_down
                     if next_red <= t + _time_to_cover_s(dist, v, v_to, rate) + 1.0:
                         v_cmd = v
