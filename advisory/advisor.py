@@ -21,7 +21,7 @@ How the advice is made (docs/ADVISOR.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -244,23 +244,38 @@ def _crossing_times_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, acce
 
 
 @njit(cache=True)
-def _green_mask(speeds, distances_m, red_start_s, red_end_s, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
-    """Per candidate speed: every line (row of the padded red windows) reached on green, at least
-    ``after_red_s`` after a red ends. bool (n,)"""
+def _green_mask(speeds, distances_m, windows_s, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+    """Per candidate speed: each of the first ``n_lines`` lines reached on green, at least ``after_red_s``
+    after a red ends (``windows_s``: padded red windows, (lines, k, 2)). bool (n,)"""
     ok = np.ones(speeds.size, dtype=np.bool_)
     for i in range(speeds.size):
-        for j in range(distances_m.size):
+        for j in range(n_lines):
             tc = _time_to_line_s(distances_m[j], v0, speeds[i], mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x)
             if not np.isfinite(tc):
                 ok[i] = False
                 break
-            for k in range(red_start_s.shape[1]):
-                if red_start_s[j, k] <= tc < red_end_s[j, k] + after_red_s:
+            for k in range(windows_s.shape[1]):
+                if windows_s[j, k, 0] <= tc < windows_s[j, k, 1] + after_red_s:
                     ok[i] = False
                     break
             if not ok[i]:
                 break
     return ok
+
+
+@njit(cache=True)
+def _first_feasible(speeds, distances_m, windows_s, after_red_s, v0, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+    """The advisor's search in one call: all lines, else the first alone; in each, the modes in the order
+    auto, brake_coast, brake, firm (:data:`MODE_CODES`). Returns (lines used, mode code, mask of speeds)."""
+    n = distances_m.size
+    ok = np.zeros(speeds.size, dtype=np.bool_)
+    for attempt in range(2 if n > 1 else 1):
+        n_lines = n if attempt == 0 else 1
+        for mode in range(4):
+            ok = _green_mask(speeds, distances_m, windows_s, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x)
+            if ok.any():
+                return n_lines, mode, ok
+    return n, 0, ok
 
 
 def crossing_time_s(
@@ -290,32 +305,41 @@ def _candidates_mps(low_mps: float, limit_mps: float, step_mps: float) -> np.nda
 
 @dataclass(frozen=True, slots=True)
 class _Lines:
-    """The lights to cross, packed for the kernel: distances (n,) and red windows padded with +inf (n, k)."""
+    """The lights to cross, packed for the kernels: distances (n,) and red windows (n, k, 2), padded with +inf."""
 
     distances_m: np.ndarray
-    red_start_s: np.ndarray
-    red_end_s: np.ndarray
+    windows_s: np.ndarray
 
     @classmethod
     def of(cls, lights) -> _Lines:
-        k = max((len(light.red_windows_s) for light in lights), default=0)
-        start, end = np.full((len(lights), max(k, 1)), np.inf), np.full((len(lights), max(k, 1)), np.inf)
-        for j, light in enumerate(lights):
-            if light.red_windows_s:
-                w = np.asarray(light.red_windows_s, dtype=float)
-                start[j, : len(w)], end[j, : len(w)] = w[:, 0], w[:, 1]
-        return cls(np.array([light.distance_m for light in lights], dtype=float), start, end)
-
-    def first(self) -> _Lines:
-        return _Lines(self.distances_m[:1], self.red_start_s[:1], self.red_end_s[:1])
+        k = max(max((len(light.red_windows_s) for light in lights), default=0), 1)
+        pad = ((np.inf, np.inf),) * k
+        windows = np.array([(light.red_windows_s + pad)[:k] for light in lights], dtype=float).reshape(len(lights), k, 2)
+        return cls(np.array([light.distance_m for light in lights], dtype=float), windows)
 
 
-def _feasible(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, reaction_s: float | None = None) -> np.ndarray:
+def _kernel_args(obs: Observation, params: AdvisorParams, reaction_s: float | None) -> tuple:
     speeds = _candidates_mps(params.min_cruise_speed_mps, obs.speed_limit_mps, params.speed_step_mps)
     reaction = params.reaction_s if reaction_s is None else reaction_s
-    ok = _green_mask(speeds, lines.distances_m, lines.red_start_s, lines.red_end_s, params.green_margin_s, float(obs.speed_mps), MODE_CODES[mode], float(reaction),
-                     params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *_coast_arrays(params.vehicle))  # fmt: skip
-    return speeds[ok]
+    return speeds, float(obs.speed_mps), float(reaction), params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *_coast_arrays(params.vehicle)
+
+
+def _feasible(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, reaction_s: float | None = None, n_lines: int | None = None) -> np.ndarray:
+    speeds, v0, reaction, *rest = _kernel_args(obs, params, reaction_s)
+    n = lines.distances_m.size if n_lines is None else n_lines
+    return speeds[_green_mask(speeds, lines.distances_m, lines.windows_s, n, params.green_margin_s, v0, MODE_CODES[mode], reaction, *rest)]
+
+
+MODE_NAMES = {code: name for name, code in MODE_CODES.items()}
+
+
+def _search(lines: _Lines, obs: Observation, params: AdvisorParams) -> tuple[int, str, np.ndarray]:
+    """Lift off and coast (or speed up) if that makes the greens; brake gently only if coasting cannot;
+    firmly only if gentle braking cannot; if no speed makes all lines, plan for the next one alone.
+    Returns (lines planned for, mode, feasible speeds)."""
+    speeds, v0, reaction, *rest = _kernel_args(obs, params, None)
+    n_lines, mode, ok = _first_feasible(speeds, lines.distances_m, lines.windows_s, params.green_margin_s, v0, reaction, *rest)
+    return n_lines, MODE_NAMES[mode], speeds[ok]
 
 
 def feasible_speeds_mps(
@@ -406,17 +430,9 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             )
         )
         if ok:
-            return replace(last, light_red=red, seconds_to_change_s=to_change, message="", speak=False,
-                           action=last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise")
-    # Lift off and coast (or speed up) if that makes the greens; brake gently only if coasting cannot;
-    # if no speed makes both lights, plan for the next one alone.
-    for lines in (both, both.first()) if len(usable) > 1 else (both,):
-        for mode in ("auto", "brake_coast", "brake", "firm"):
-            feasible = _feasible(lines, obs, params, mode)
-            if feasible.size:
-                break
-        if feasible.size:
-            break
+            action = last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise"
+            return Advice(action, last.reason, last.target_speed_mps, red, to_change, source=last.source)
+    n_lines, mode, feasible = _search(both, obs, params)
     if feasible.size == 0:
         arrival = crossing_time_s(nxt.distance_m, obs.speed_mps, obs.speed_mps, params) if obs.speed_mps > 0 else np.inf
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:
@@ -432,7 +448,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if last is not None and last.target_speed_mps is not None and last.action in ("cruise", "ease_off", "accelerate", "slow_down", "coast"):
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
         keep_mode = {"slow_down": "brake", "coast": "brake_coast"}.get(last.action, "auto")
-        still = _feasible(lines, obs, params, keep_mode, reaction_s=0.0)
+        still = _feasible(both, obs, params, keep_mode, reaction_s=0.0, n_lines=n_lines)
         if abs(last.target_speed_mps - target) < params.speak_change_mps and np.any(np.abs(still - last.target_speed_mps) < 1e-9):
             target, mode = last.target_speed_mps, keep_mode
     if mode == "brake_coast":
@@ -472,10 +488,12 @@ def advise(
     """
     memory = memory or AdvisorMemory()
     params = params or AdvisorParams()
-    advice = _decide(obs, memory, params, tables)
-    advice = replace(advice, current_speed_mps=obs.speed_mps) if advice.current_speed_mps != obs.speed_mps else advice
+    a = _decide(obs, memory, params, tables)
+    # (constructor calls, not dataclasses.replace: this runs once a second per car)
+    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, source=a.source, current_speed_mps=obs.speed_mps)
     message = phrase(advice, params.units)
-    advice = replace(advice, message=message, speak=bool(message) and _meaningful_change(advice, memory.spoken, params))
+    speak = bool(message) and _meaningful_change(advice, memory.spoken, params)
+    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps)
     spoken = advice if advice.speak else memory.spoken
     if advice.action == "none" and advice.reason in ("too_close", "short_wait"):
         spoken = memory.spoken  # silence keeps the last spoken advice as the reference

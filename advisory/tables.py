@@ -24,6 +24,7 @@ Saved as ``.npz`` with the grid, the parameters and the code version.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -98,10 +99,11 @@ def _periodic_backward(speed, band_lo, step_dt, step_usd, is_stop, red_start, re
 
 
 @njit(cache=True)
-def _follow(policy, speed, step_dt, band_lo, k0, i0, tau0, k_stop, tau_step, cycle):
-    """Speed index the optimal plan has on reaching stage ``k_stop`` from (k0, i0, tau0); -1 if none."""
+def _follow(policy, speed, step_dt, band_lo, k0, v0, tau0, k_stop, tau_step, cycle):
+    """Speed index the optimal plan has on reaching stage ``k_stop`` from stage ``k0`` at the grid speed
+    nearest ``v0`` and phase ``tau0``; -1 if none."""
     n_tau = policy.shape[2]
-    i, tau = i0, tau0
+    i, tau = int(np.argmin(np.abs(speed - v0))), tau0
     for k in range(k0, k_stop):
         nxt = -1
         for _ in range(4 * n_tau):  # waits at standstill
@@ -213,8 +215,9 @@ class AdviceTables:
         for light in obs.lights:
             if not light.fresh:
                 return None
-            idx = np.flatnonzero(np.abs(self.light_positions_m - (obs.position_m + light.distance_m)) < 5.0)
-            if idx.size != 1:
+            at = obs.position_m + light.distance_m
+            idx = [k for k, x in enumerate(self.light_positions_m.tolist()) if abs(x - at) < 5.0]
+            if len(idx) != 1:
                 return None
             windows = [(s, e) for s, e in light.red_windows_s if e > 0]
             if not windows:
@@ -224,7 +227,7 @@ class AdviceTables:
                 return None  # another red duration, or an uncertain window
             if start <= 0 and end > self.red_s + MATCH_TOL_S:
                 return None
-            seen[int(idx[0])] = (end - self.red_s) % cycle
+            seen[idx[0]] = (end - self.red_s) % cycle
         if not seen:
             return None
         first = min(seen)
@@ -245,15 +248,14 @@ class AdviceTables:
                 continue
             tau = (tau_first + full[first]) % cycle
             ds = self.grid.stage_m
-            k0 = int(np.ceil(obs.position_m / ds - 1e-9))
-            next_light = self.light_positions_m[self.light_positions_m >= obs.position_m - 1e-9]
-            if next_light.size == 0 or k0 >= policy.shape[0]:
+            k0 = math.ceil(obs.position_m / ds - 1e-9)
+            next_light = [x for x in self.light_positions_m.tolist() if x >= obs.position_m - 1e-9]
+            if not next_light or k0 >= policy.shape[0]:
                 return None
-            k_stop = int(round(next_light[0] / ds))
-            i0 = int(np.argmin(np.abs(self.speed_mps - obs.speed_mps)))
+            k_stop = round(next_light[0] / ds)
             # time to reach stage k0 from the current position at the current speed
             tau0 = tau + (k0 * ds - obs.position_m) / max(obs.speed_mps, 0.5)
-            i = _follow(policy, self.speed_mps, self.step_dt, self.band_lo, k0, i0, tau0, k_stop, self.grid.tau_step_s, cycle)
+            i = _follow(policy, self.speed_mps, self.step_dt, self.band_lo, k0, float(obs.speed_mps), tau0, k_stop, self.grid.tau_step_s, cycle)
             return None if i < 0 else float(self.speed_mps[i])
         return None
 

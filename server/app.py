@@ -142,8 +142,14 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     app.state.speech = speech
     metrics = Metrics(lambda: len(app.state.engine.trips) if hasattr(app.state, "engine") else 0)
     app.state.metrics = metrics
-    for module in (health, corridors, trips, audio, stream):
-        app.include_router(module.router)
+    # Routes are tried in order, a regex and some bookkeeping each, so the per-second ones (fixes, stream)
+    # come early and the documentation pages last. The routers' routes go straight into the app's list
+    # (each router carries its own prefix and tags; no include-level options are used): FastAPI's
+    # include_router adds a nested matching level per router. Together ~25 us less per fix (docs/SERVICE.md).
+    for module in (health, trips, stream, corridors, audio):
+        app.router.routes.extend(module.router.routes)
+    docs = [r for r in app.router.routes if getattr(r, "path", None) in (app.openapi_url, app.docs_url, app.redoc_url, app.swagger_ui_oauth2_redirect_url)]
+    app.router.routes[:] = [r for r in app.router.routes if r not in docs] + docs
     install_handlers(app)
     app.add_middleware(GuardMiddleware, max_body_bytes=settings.max_body_bytes, metrics=metrics)
     return app

@@ -22,7 +22,6 @@ from server.gps import RouteMatcher, Track
 from server.ratelimit import TokenBucket
 
 if TYPE_CHECKING:
-    from server.schemas import AdviceOut
     from server.spat import TripSpat
 
 
@@ -51,7 +50,7 @@ class Trip:
         self.bucket = bucket
         self.track = Track(dropout_s)
         self.memory: AdvisorMemory | None = None
-        self.last: AdviceOut | None = None
+        self.last: dict | None = None  # the latest advisory, fields of server.schemas.AdviceOut
         self.trace_t = array("d")
         self.trace_v = array("d")
         self.trace_x = array("d")

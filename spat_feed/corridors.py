@@ -137,7 +137,8 @@ class Corridor(BaseModel):
         kx = EARTH_M_PER_DEG * np.cos(np.radians(lat[:-1]))
         sx, sy = (lon[1:] - lon[:-1]) * kx, (lat[1:] - lat[:-1]) * EARTH_M_PER_DEG
         seg_az, _, _ = WGS84.inv(lon[:-1], lat[:-1], lon[1:], lat[1:])
-        return _Segments(st, lat, lon, kx, sx, sy, np.maximum(sx * sx + sy * sy, 1e-9), np.asarray(seg_az, dtype=float))
+        packed = np.ascontiguousarray(np.column_stack([lon[:-1], lat[:-1], kx, sx, sy, np.maximum(sx * sx + sy * sy, 1e-9)]))
+        return _Segments(st, lat, lon, packed, np.asarray(seg_az, dtype=float))
 
     def project(self, lat_deg: float, lon_deg: float) -> tuple[float, float]:
         """Project a fix onto the route: (station_m, signed offset_m, + to the right of travel).
@@ -150,12 +151,12 @@ class Corridor(BaseModel):
         distance to that vertex, with the sign of the cross track. :meth:`project_many` is the same for arrays.
         """
         g = self._segments
-        j = int(_nearest_segments(np.array([lon_deg]), np.array([lat_deg]), g.lon, g.lat, g.kx, g.sx, g.sy, g.len2)[0])
+        j = _nearest_segment(float(lon_deg), float(lat_deg), g.packed)
         az, _, dist = WGS84.inv(g.lon[j], g.lat[j], lon_deg, lat_deg)
         d_rad = math.radians(az - g.seg_az[j])
         along, across = dist * math.cos(d_rad), dist * math.sin(d_rad)
         lo = 0.0 if j > 0 else -math.inf
-        hi = g.st[j + 1] - g.st[j] if j < g.sx.size - 1 else math.inf
+        hi = g.st[j + 1] - g.st[j] if j < g.packed.shape[0] - 1 else math.inf
         clipped = min(max(along, lo), hi)
         offset = math.copysign(math.hypot(along - clipped, across), across) if clipped != along else across
         return float(g.st[j] + clipped), float(offset)
@@ -164,12 +165,12 @@ class Corridor(BaseModel):
         """:meth:`project` for arrays of fixes (n,): stations and signed offsets, shape (n,). [m]"""
         lat, lon = np.asarray(lat_deg, dtype=float).ravel(), np.asarray(lon_deg, dtype=float).ravel()
         g = self._segments
-        j = _nearest_segments(lon, lat, g.lon, g.lat, g.kx, g.sx, g.sy, g.len2)
+        j = _nearest_segments(lon, lat, g.packed)
         az, _, dist = WGS84.inv(g.lon[j], g.lat[j], lon, lat)
         d_rad = np.radians(np.asarray(az) - g.seg_az[j])
         along, across = np.asarray(dist) * np.cos(d_rad), np.asarray(dist) * np.sin(d_rad)
         lo = np.where(j == 0, -np.inf, 0.0)
-        hi = np.where(j == g.sx.size - 1, np.inf, g.st[j + 1] - g.st[j])
+        hi = np.where(j == g.packed.shape[0] - 1, np.inf, g.st[j + 1] - g.st[j])
         clipped = np.clip(along, lo, hi)
         offset = np.where(clipped != along, np.copysign(np.hypot(along - clipped, across), across), across)
         return g.st[j] + clipped, offset
@@ -181,37 +182,44 @@ EARTH_M_PER_DEG = 6_371_008.8 * np.pi / 180.0
 
 @dataclass(frozen=True, slots=True)
 class _Segments:
-    """A corridor's polyline for projection: vertices (n+1,), flat-frame segment vectors and geodesic azimuths (n,)."""
+    """A corridor's polyline for projection: vertices (n+1,); per segment (n, 6) its start (lon, lat), the
+    flat frame's metres per degree of longitude kx, its vector (sx, sy) and squared length there; and its
+    geodesic azimuth (n,)."""
 
     st: np.ndarray
     lat: np.ndarray
     lon: np.ndarray
-    kx: np.ndarray
-    sx: np.ndarray
-    sy: np.ndarray
-    len2: np.ndarray
+    packed: np.ndarray
     seg_az: np.ndarray
 
 
 @njit(cache=True)
-def _nearest_segments(lon, lat, vlon, vlat, kx, sx, sy, len2):
-    """Per fix, the index of the nearest polyline segment in each segment's flat frame (ends extended). (n,)"""
-    n_seg = sx.size
+def _nearest_segment(lon, lat, seg):
+    """Index of the polyline segment nearest the fix, in each segment's flat frame (ends extended).
+    ``seg``: per segment (start lon, start lat, kx, sx, sy, len2), shape (n, 6)."""
+    n_seg = seg.shape[0]
+    best, best_d2 = 0, np.inf
+    for j in range(n_seg):
+        px = (lon - seg[j, 0]) * seg[j, 2]
+        py = (lat - seg[j, 1]) * EARTH_M_PER_DEG
+        sx, sy = seg[j, 3], seg[j, 4]
+        u = (px * sx + py * sy) / seg[j, 5]
+        if j > 0:
+            u = max(u, 0.0)
+        if j < n_seg - 1:
+            u = min(u, 1.0)
+        d2 = (px - u * sx) ** 2 + (py - u * sy) ** 2
+        if d2 < best_d2:
+            best, best_d2 = j, d2
+    return best
+
+
+@njit(cache=True)
+def _nearest_segments(lon, lat, seg):
+    """:func:`_nearest_segment` for arrays of fixes. (n,)"""
     out = np.empty(lon.size, dtype=np.int64)
     for i in range(lon.size):
-        best, best_d2 = 0, np.inf
-        for j in range(n_seg):
-            px = (lon[i] - vlon[j]) * kx[j]
-            py = (lat[i] - vlat[j]) * EARTH_M_PER_DEG
-            u = (px * sx[j] + py * sy[j]) / len2[j]
-            if j > 0:
-                u = max(u, 0.0)
-            if j < n_seg - 1:
-                u = min(u, 1.0)
-            d2 = (px - u * sx[j]) ** 2 + (py - u * sy[j]) ** 2
-            if d2 < best_d2:
-                best, best_d2 = j, d2
-        out[i] = best
+        out[i] = _nearest_segment(lon[i], lat[i], seg)
     return out
 
 

@@ -11,6 +11,7 @@ import json
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
+from pydantic_core import to_json
 
 from server.advising import fix_from_schema
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token
@@ -57,7 +58,7 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
                     raise ApiError(422, kind, validation_summary(errors), detail=errors) from None
                 engine.rate_limit(trip)
                 out = engine.on_fix(trip, fix_from_schema(fix))
-                await ws.send_text(out.model_dump_json())
+                await ws.send_text(to_json(out).decode())
             except ApiError as exc:
                 await ws.send_text(_error(exc))
                 if exc.status == 404:

@@ -14,6 +14,7 @@ import httpx
 import pytest
 import websockets
 
+from server.schemas import AdviceOut
 from spat_feed.corridors import WGS84
 
 from tests.server.conftest import new_trip
@@ -25,6 +26,13 @@ MAX_STATUS = 500
 def client(service):
     with httpx.Client(base_url=service.base_url, timeout=10.0) as c:
         yield c
+
+
+def check_advice(a: dict) -> dict:
+    """The advisory is exactly the documented response model (the service builds it as a plain dict)."""
+    assert set(a) == set(AdviceOut.model_fields), set(a) ^ set(AdviceOut.model_fields)
+    AdviceOut.model_validate(a)
+    return a
 
 
 def fix_at(corridor, station_m: float, t: float, speed: float | None = 20.0, **extra) -> dict:
@@ -50,6 +58,8 @@ def test_health_corridors_openapi(client):
 def test_drive_the_corridor_with_noise_dropouts_duplicates(client, s200):
     trip_id, auth, created = new_trip(client, corridor="paper_s200", timing="15_15")
     t0 = created["entry_unix_s"]
+    before = check_advice(client.get(f"/v1/trips/{trip_id}/advice", headers=auth).json())
+    assert before["reason"] == "no_fix" and before["seq"] == 0
     rng = random.Random(7)
     seen = []
     for k in range(20):
@@ -69,7 +79,8 @@ def test_drive_the_corridor_with_noise_dropouts_duplicates(client, s200):
             old = client.post(f"/v1/trips/{trip_id}/fixes", json={**body, "t_unix_s": t0 + 1}, headers=auth).json()
             assert dup["fix_status"] == "duplicate" and old["fix_status"] == "out_of_order"
             assert dup["seq"] == old["seq"] == seen[-1]["seq"]
-    assert all(a["on_route"] for a in seen)
+            check_advice(dup), check_advice(old)
+    assert all(check_advice(a)["on_route"] for a in seen)
     assert [a["seq"] for a in seen] == list(range(1, 19))
     assert seen[1]["speed_source"] == "positions" and seen[1]["speed_mps"] == pytest.approx(20.0, abs=8.0)
     assert seen[0]["action"] in ("cruise", "ease_off", "coast", "slow_down", "brake_to", "accelerate", "stop") and seen[0]["message"]
@@ -77,7 +88,7 @@ def test_drive_the_corridor_with_noise_dropouts_duplicates(client, s200):
         if a["target_speed_mps"] is not None:
             assert a["target_speed_mps"] <= 24.6
     latest = client.get(f"/v1/trips/{trip_id}/advice", headers=auth).json()
-    assert latest["seq"] == 18 and latest["fix_status"] == "none"
+    assert check_advice(latest)["seq"] == 18 and latest["fix_status"] == "none"
     spat = client.get(f"/v1/trips/{trip_id}/spat", headers=auth).json()
     assert [i["id"] for i in spat["intersections"]] == [1, 2]
     score = client.post(f"/v1/trips/{trip_id}/end", headers=auth).json()
@@ -91,10 +102,10 @@ def test_off_route_pauses_and_says_so(client, s200):
     lat, lon = s200.position(50.0)
     lon, lat, _ = WGS84.fwd(lon, lat, 25.5, 300.0)
     a = client.post(f"/v1/trips/{trip_id}/fixes", json={"t_unix_s": time.time(), "lat_deg": lat, "lon_deg": lon, "speed_mps": 10.0}, headers=auth).json()
-    assert a["on_route"] is False and a["action"] == "none" and a["reason"] == "off_route" and "Off the route" in a["message"]
+    assert check_advice(a)["on_route"] is False and a["action"] == "none" and a["reason"] == "off_route" and "Off the route" in a["message"]
     assert a["offset_m"] > 250
     weak = client.post(f"/v1/trips/{trip_id}/fixes", json={**fix_at(s200, 50.0, time.time() + 1), "accuracy_m": 500.0}, headers=auth).json()
-    assert weak["reason"] == "poor_gps" and weak["action"] == "none"
+    assert check_advice(weak)["reason"] == "poor_gps" and weak["action"] == "none"
 
 
 def test_tokens_are_scoped_to_their_trip(client, s200):
@@ -193,7 +204,7 @@ def test_websocket_stream(service, client, s200):
             return out, err, err2, last
 
     out, err, err2, last = asyncio.run(run())
-    assert [a["seq"] for a in out] == [1, 2, 3, 4, 5] and all(a["trip_id"] == trip_id for a in out)
+    assert [a["seq"] for a in out] == [1, 2, 3, 4, 5] and all(check_advice(a)["trip_id"] == trip_id for a in out)
     assert err["error"] == "malformed_json" and err["status"] == 422
     assert err2["error"] == "validation_error" and "lat_deg" in err2["message"]
     assert last["seq"] == 6
