@@ -170,6 +170,10 @@ def coast_decel_mps2(v_mps: float, vehicle: VehicleParams) -> float:
                                    vehicle.drag_coef, vehicle.frontal_area_m2, vehicle.air_density_kg_per_m3)) / vehicle.mass_kg
 
 
+LINE_SPEED_TIE_MPS = 0.2
+"""Targets whose speeds at the next line differ by less than this count as equally close to the tables'
+wanted speed there; the tie goes to the target nearest it. [m/s]"""
+
 MODE_CODES = {"auto": 0, "brake_coast": 1, "brake": 2, "firm": 3}
 """How the speed changes towards a target (see :func:`crossing_time_s`), as kernel codes."""
 
@@ -236,6 +240,54 @@ def _time_to_line_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, accel_
 
 
 @njit(cache=True)
+def _coast_speed_at(x_of_v, xs):
+    """Speed [m/s] at coast-down distance ``xs`` from the top speed (``x_of_v`` decreases with speed)."""
+    if xs >= x_of_v[0]:
+        return 0.0
+    lo, hi = 0, x_of_v.size - 1  # x_of_v[lo] > xs >= x_of_v[hi]
+    if xs <= x_of_v[hi]:
+        return hi * COAST_TABLE_DV_MPS
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if x_of_v[mid] > xs:
+            lo = mid
+        else:
+            hi = mid
+    return (lo + (x_of_v[lo] - xs) / (x_of_v[lo] - x_of_v[hi])) * COAST_TABLE_DV_MPS
+
+
+@njit(cache=True)
+def _line_speeds_mps(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+    """Speed on reaching a line ``d_m`` ahead, per target speed, in the motion of :func:`crossing_time_s`. (n,)"""
+    dv = COAST_TABLE_DV_MPS
+    out = np.empty(vt.size)
+    for i in range(vt.size):
+        d = max(d_m, 0.0) - v0 * reaction_s
+        if d <= 0.0:
+            out[i] = v0
+            continue
+        slower = vt[i] < v0
+        if mode == 1 or (slower and mode == 0):
+            v1 = min(vt[i], v0)
+            d_b = (v0 * v0 - v1 * v1) / (2.0 * brake_mps2) if mode == 1 else 0.0
+            if d <= d_b:
+                out[i] = np.sqrt(max(v0 * v0 - 2.0 * brake_mps2 * d, 0.0))
+                continue
+            x0 = _lerp(x_of_v, dv, v1 if mode == 1 else v0)
+            if mode == 0 and d > _lerp(x_of_v, dv, vt[i]) - x0:
+                out[i] = vt[i]  # reached the target, then held it
+            else:
+                out[i] = _coast_speed_at(x_of_v, x0 + d - d_b)
+            continue
+        rate = (firm_mps2 if mode == 3 else brake_mps2) if slower else accel_mps2
+        if abs(v0 * v0 - vt[i] * vt[i]) / (2.0 * rate) <= d:
+            out[i] = vt[i]
+        else:
+            out[i] = np.sqrt(max(v0 * v0 + 2.0 * (-rate if slower else rate) * d, 0.0))
+    return out
+
+
+@njit(cache=True)
 def _crossing_times_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
     out = np.empty(vt.size)
     for i in range(vt.size):
@@ -298,7 +350,7 @@ def crossing_time_s(
 
 @lru_cache(maxsize=64)
 def _candidates_mps(low_mps: float, limit_mps: float, step_mps: float) -> np.ndarray:
-    speeds = np.unique(np.append(np.arange(low_mps, limit_mps + 1e-9, step_mps), limit_mps))
+    speeds = np.append(np.arange(low_mps, limit_mps - 1e-6, step_mps), limit_mps)  # the limit once, exactly
     speeds.setflags(write=False)
     return speeds
 
@@ -443,8 +495,12 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     target, source = float(feasible.max()), "rules"
     if tables is not None:
         wanted = tables.target_speed_mps(obs)
-        if wanted is not None:  # the DP's speed at the next stop line, snapped to the nearest feasible one
-            target, source = float(feasible[np.argmin(np.abs(feasible - wanted))]), "dp_table"
+        if wanted is not None:  # the DP's speed at the next stop line: the feasible target that reaches the line nearest it
+            speeds, v0, reaction, *rest = _kernel_args(obs, params, None)
+            miss = np.abs(_line_speeds_mps(float(nxt.distance_m), v0, feasible, MODE_CODES[mode], reaction, *rest) - wanted)
+            # targets still being braked to at the line reach it alike: of those, the one nearest the wanted speed
+            close = feasible[miss <= miss.min() + LINE_SPEED_TIE_MPS]
+            target, source = float(close[np.argmin(np.abs(close - wanted))]), "dp_table"
     if last is not None and last.target_speed_mps is not None and last.action in ("cruise", "ease_off", "accelerate", "slow_down", "coast"):
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
         keep_mode = {"slow_down": "brake", "coast": "brake_coast"}.get(last.action, "auto")

@@ -6,6 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from advisory.advisor import (
+    MODE_CODES,
     Advice,
     AdvisorParams,
     LightView,
@@ -15,6 +16,7 @@ from advisory.advisor import (
     crossing_time_s,
     phrase,
 )
+from advisory.advisor import _coast_arrays, _line_speeds_mps
 from advisory.closed_loop import DriverModel, observe, red_light_violations, simulate
 from advisory.params import PAPER_54KWH, SPEED_LIMIT_MPS, model_params
 from advisory.signals import paper_scenario
@@ -178,8 +180,9 @@ def test_randomized_closed_loop_never_runs_a_red_nor_advises_above_the_limit(x, 
     assert run.trajectory.x_m[-1] >= sc.zone_length_m - 1e-6
 
 
-def _simulated_crossing_s(d_m, v0, vt, mode, params=P, dt=1e-3):
-    """Brute force: step the motion crossing_time_s assumes (reaction, then the speed change, then hold or coast)."""
+def _simulated_crossing(d_m, v0, vt, mode, params=P, dt=1e-3):
+    """Brute force: step the motion crossing_time_s assumes (reaction, then the speed change, then hold or
+    coast). Returns (time, speed) at the line; (inf, 0) if the car stops short."""
     from advisory.advisor import coast_decel_mps2
 
     x, v, t = 0.0, v0, 0.0
@@ -200,22 +203,25 @@ def _simulated_crossing_s(d_m, v0, vt, mode, params=P, dt=1e-3):
         if a > 0.0 and v_next > vt:
             v_next = vt
         if v_next <= 0.0:
-            return np.inf
+            return np.inf, 0.0
         x += 0.5 * (v + v_next) * dt
         v, t = v_next, t + dt
-    return t
+    return t, v
 
 
 @pytest.mark.parametrize("mode", ["auto", "brake_coast", "brake", "firm"])
 @pytest.mark.parametrize(("d_m", "v0", "vt"), [(300.0, 24.0, 15.0), (120.0, 20.0, 8.0), (400.0, 10.0, 22.0), (60.0, 24.0, 23.0), (900.0, 24.0, 5.0)])
 def test_crossing_time_matches_a_brute_force_simulation(mode, d_m, v0, vt):
-    """The O(1) coast tables and closed forms against stepping the same motion at 1 ms."""
+    """The O(1) coast tables and closed forms against stepping the same motion at 1 ms: the time to the line,
+    and the speed there (what the DP tables' wanted speed is compared with)."""
     got = crossing_time_s(d_m, v0, np.array([vt]), P, mode)[0]
-    want = _simulated_crossing_s(d_m, v0, vt, mode)
+    want, v_line = _simulated_crossing(d_m, v0, vt, mode)
     if np.isinf(want):
         assert np.isinf(got)
     else:
         assert got == pytest.approx(want, abs=0.02)
+    args = (P.reaction_s, P.comfort_decel_mps2, P.firm_decel_mps2, P.comfort_accel_mps2, *_coast_arrays(P.vehicle))
+    assert _line_speeds_mps(d_m, v0, np.array([vt]), MODE_CODES[mode], *args)[0] == pytest.approx(v_line, abs=0.02)
 
 
 def test_virtual_driver_goes_on_against_a_red_that_ends_before_it_arrives():
