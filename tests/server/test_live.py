@@ -53,6 +53,7 @@ def test_health_corridors_openapi(client):
     assert client.get("/v1/corridors/nowhere").status_code == 404
     spec = client.get("/openapi.json").json()
     assert "/v1/trips/{trip_id}/fixes" in spec["paths"] and "/metrics" in spec["paths"]
+    assert all(client.get(page).status_code == 200 for page in ("/docs", "/redoc"))  # served last, still served
 
 
 def test_drive_the_corridor_with_noise_dropouts_duplicates(client, s200):
