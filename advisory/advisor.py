@@ -365,8 +365,12 @@ class _Lines:
     @classmethod
     def of(cls, lights) -> _Lines:
         k = max(max((len(light.red_windows_s) for light in lights), default=0), 1)
-        pad = ((np.inf, np.inf),) * k
-        windows = np.array([(light.red_windows_s + pad)[:k] for light in lights], dtype=float).reshape(len(lights), k, 2)
+        flat: list[float] = []  # one flat list, one np.array call: the cheapest packing (runs once per fix)
+        for light in lights:
+            for start, end in light.red_windows_s:
+                flat += (start, end)
+            flat += (np.inf,) * (2 * (k - len(light.red_windows_s)))
+        windows = np.array(flat, dtype=float).reshape(len(lights), k, 2)
         return cls(np.array([light.distance_m for light in lights], dtype=float), windows)
 
 
@@ -380,6 +384,16 @@ def _feasible(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str,
     speeds, v0, reaction, *rest = _kernel_args(obs, params, reaction_s)
     n = lines.distances_m.size if n_lines is None else n_lines
     return speeds[_green_mask(speeds, lines.distances_m, lines.windows_s, n, params.green_margin_s, v0, MODE_CODES[mode], reaction, *rest)]
+
+
+def _keeps(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, target_mps: float, n_lines: int | None = None) -> bool:
+    """A driver already following ``target_mps`` in ``mode`` (so no new reaction delay) still makes every green:
+    the target is still a candidate speed and feasible (one speed through the kernel, not all candidates)."""
+    if not params.min_cruise_speed_mps - 1e-9 <= target_mps <= obs.speed_limit_mps + 1e-9:
+        return False
+    _, v0, reaction, *rest = _kernel_args(obs, params, 0.0)
+    n = lines.distances_m.size if n_lines is None else n_lines
+    return bool(_green_mask(np.array([float(target_mps)]), lines.distances_m, lines.windows_s, n, params.green_margin_s, v0, MODE_CODES[mode], reaction, *rest)[0])
 
 
 MODE_NAMES = {code: name for name, code in MODE_CODES.items()}
@@ -475,8 +489,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         keep_target = last.target_speed_mps
         if keep_mode == "brake_coast":
             keep_target = min(keep_target, obs.speed_mps)
-        still = _feasible(both, obs, params, keep_mode, reaction_s=0.0)
-        ok = np.any(np.abs(still - last.target_speed_mps) < 1e-9) or (
+        ok = _keeps(both, obs, params, keep_mode, last.target_speed_mps) or (
             keep_mode == "brake_coast" and all(
                 bool(_green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, keep_target, params, keep_mode, 0.0))) for light in usable
             )
@@ -504,8 +517,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if last is not None and last.target_speed_mps is not None and last.action in ("cruise", "ease_off", "accelerate", "slow_down", "coast"):
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
         keep_mode = {"slow_down": "brake", "coast": "brake_coast"}.get(last.action, "auto")
-        still = _feasible(both, obs, params, keep_mode, reaction_s=0.0, n_lines=n_lines)
-        if abs(last.target_speed_mps - target) < params.speak_change_mps and np.any(np.abs(still - last.target_speed_mps) < 1e-9):
+        if abs(last.target_speed_mps - target) < params.speak_change_mps and _keeps(both, obs, params, keep_mode, last.target_speed_mps, n_lines):
             target, mode = last.target_speed_mps, keep_mode
     if mode == "brake_coast":
         action = "coast"
