@@ -562,7 +562,9 @@ def advise(
     message = phrase(advice, params.units)
     speak = bool(message) and _meaningful_change(advice, memory.spoken, params)
     advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps)
-    spoken = advice if advice.speak else memory.spoken
+    spoken, last = (advice if advice.speak else memory.spoken), advice
     if advice.action == "none" and advice.reason in ("too_close", "short_wait"):
-        spoken = memory.spoken  # silence keeps the last spoken advice as the reference
-    return advice, AdvisorMemory(last=advice, spoken=spoken)
+        # silence: the driver goes on with what it was told, so that stays the plan to re-check (and the
+        # reference for speaking) when the advisor talks again
+        spoken, last = memory.spoken, memory.last
+    return advice, AdvisorMemory(last=last, spoken=spoken)

@@ -273,3 +273,14 @@ def test_where_no_light_is_in_the_way_the_advice_costs_nothing(x, y, s):
     adv = score_in_end_state(run.trajectory, params, V)
     assert run.stops == 0
     assert adv.time_s <= reg.time_s + 1.5 and adv.cost_usd <= reg.cost_usd * 1.01
+
+
+def test_after_a_silence_the_advisor_goes_on_with_the_plan_the_driver_follows():
+    """[-30 0] at s = 200 m: "slow to 11 mph, then coast" for light 2 at entry, silence while too close to light 1
+    (the driver goes on braking as told), then the same plan, unspoken: no fresh plan with a new reaction delay."""
+    run = simulate(paper_scenario(-30, 0, 200))
+    first = run.advice[0][1]
+    silent = [t for t, a in run.advice if a.reason == "too_close" and t < 10.0]
+    after = next(a for t, a in run.advice if silent and t > silent[-1])
+    assert first.action == "coast" and silent
+    assert (after.action, after.target_speed_mps) == (first.action, first.target_speed_mps) and not after.speak
