@@ -12,7 +12,7 @@ the light is still red. Everything else comes from the advice (a "stop" only unt
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -199,24 +199,32 @@ class Evaluation:
     overrides: int
     violations: tuple[str, ...]
     optimum_same_time_usd: float  # the DP allowed the advised driver's own trip time (if longer than the regular's)
+    optimum_margin_usd: float  # the DP held to the advisor's margin: every red ends green_margin_s later
+
+    def _kept(self, optimum_usd: float) -> float | None:
+        saving = self.regular_usd - optimum_usd
+        return None if saving < 1e-6 * self.regular_usd else (self.regular_usd - self.advised_usd) / saving
 
     @property
     def kept_frac(self) -> float | None:
         """Share of the DP's saving over the regular driver that the advised driver keeps (None if nothing to save)."""
-        saving = self.regular_usd - self.optimum_usd
-        return None if saving < 1e-6 * self.regular_usd else (self.regular_usd - self.advised_usd) / saving
+        return self._kept(self.optimum_usd)
 
     @property
     def kept_same_time_frac(self) -> float | None:
         """The same share against the DP given the advised driver's trip time: slowness earns no credit."""
-        saving = self.regular_usd - self.optimum_same_time_usd
-        return None if saving < 1e-6 * self.regular_usd else (self.regular_usd - self.advised_usd) / saving
+        return self._kept(self.optimum_same_time_usd)
+
+    @property
+    def kept_margin_frac(self) -> float | None:
+        """The same share against the DP that, like the advice, crosses no line within the margin after a red."""
+        return self._kept(self.optimum_margin_usd)
 
 
 def evaluate(scenario: Scenario, params, tables=None, advisor: AdvisorParams | None = None, driver: DriverModel | None = None, grid=None) -> Evaluation:
     """Closed-loop run of ``scenario`` scored against the regular driver and the DP optimum (same end state)."""
     from advisory.endstate import score_in_end_state
-    from advisory.optimizer.dp import GridSpec, solve
+    from advisory.optimizer.dp import GridSpec, InfeasibleError, solve, time_limit_s
     from advisory.regular import regular_driver
 
     run = simulate(scenario, advisor, tables, driver)
@@ -228,8 +236,16 @@ def evaluate(scenario: Scenario, params, tables=None, advisor: AdvisorParams | N
     same = opt
     if adv.time_s > reg.time_s + 1e-6:
         same = score_in_end_state(solve(scenario, params, grid, t_max_s=adv.time_s).trajectory, params, v_lim)
+    margin_s = (advisor or AdvisorParams()).green_margin_s
+    held = Scenario(scenario.name, tuple(replace(s, red_s=s.red_s + margin_s, green_s=s.green_s - margin_s) for s in scenario.signals),
+                    scenario.zone_length_m, v_lim, scenario.initial_speed_mps)  # fmt: skip
+    t_max = time_limit_s(regular_driver(scenario), params, scenario, grid)
+    try:
+        margin = score_in_end_state(solve(held, params, grid, t_max_s=t_max).trajectory, params, v_lim)
+    except InfeasibleError:  # the margin makes the regular driver's time unreachable: the advised driver's then
+        margin = score_in_end_state(solve(held, params, grid, t_max_s=max(t_max, adv.time_s) + 1.0).trajectory, params, v_lim)
     return Evaluation(scenario.name, reg.cost_usd, adv.cost_usd, opt.cost_usd, reg.time_s, adv.time_s, opt.time_s,
-                      run.stops, run.overrides, tuple(red_light_violations(run.trajectory, scenario)), same.cost_usd)
+                      run.stops, run.overrides, tuple(red_light_violations(run.trajectory, scenario)), same.cost_usd, margin.cost_usd)
 
 
 def red_light_violations(traj: Trajectory, scenario: Scenario, tol_s: float = 1e-6) -> list[str]:

@@ -17,7 +17,7 @@ from advisory.advisor import (
     phrase,
 )
 from advisory.advisor import _coast_arrays, _line_speeds_mps
-from advisory.closed_loop import DriverModel, observe, red_light_violations, simulate
+from advisory.closed_loop import DriverModel, evaluate, observe, red_light_violations, simulate
 from advisory.params import PAPER_54KWH, SPEED_LIMIT_MPS, model_params
 from advisory.signals import paper_scenario
 from advisory.tables import AdviceTables, TableGrid, paper_offsets_s
@@ -284,3 +284,15 @@ def test_after_a_silence_the_advisor_goes_on_with_the_plan_the_driver_follows():
     after = next(a for t, a in run.advice if silent and t > silent[-1])
     assert first.action == "coast" and silent
     assert (after.action, after.target_speed_mps) == (first.action, first.target_speed_mps) and not after.speak
+
+
+def test_evaluation_against_the_dp_with_and_without_the_margin():
+    """[15 15] at s = 400 m scored three ways. Held to the advisor's margin (reds ending 2 s later) the DP has fewer
+    crossing instants, so it is never cheaper than the plain DP, and with a zero margin it is the plain DP."""
+    sc, params = paper_scenario(15, 15, 400), model_params()
+    ev = evaluate(sc, params)
+    assert ev.violations == () and ev.optimum_usd < ev.advised_usd < ev.regular_usd
+    assert ev.optimum_margin_usd >= ev.optimum_usd - 1e-12
+    assert 0.0 < ev.kept_frac <= ev.kept_margin_frac <= 1.0
+    ev0 = evaluate(sc, params, advisor=AdvisorParams(green_margin_s=0.0))
+    assert ev0.optimum_margin_usd == pytest.approx(ev0.optimum_usd, rel=1e-12)
