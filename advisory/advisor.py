@@ -380,10 +380,16 @@ def _kernel_args(obs: Observation, params: AdvisorParams, reaction_s: float | No
     return speeds, float(obs.speed_mps), float(reaction), params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *_coast_arrays(params.vehicle)
 
 
-def _feasible(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, reaction_s: float | None = None, n_lines: int | None = None) -> np.ndarray:
-    speeds, v0, reaction, *rest = _kernel_args(obs, params, reaction_s)
+def _green(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, speeds: np.ndarray, reaction_s: float | None = None, n_lines: int | None = None) -> np.ndarray:
+    """Which of ``speeds`` reach each of the first ``n_lines`` lines (all by default) on green. bool (n,)"""
+    _, v0, reaction, *rest = _kernel_args(obs, params, reaction_s)
     n = lines.distances_m.size if n_lines is None else n_lines
-    return speeds[_green_mask(speeds, lines.distances_m, lines.windows_s, n, params.green_margin_s, v0, MODE_CODES[mode], reaction, *rest)]
+    return _green_mask(speeds, lines.distances_m, lines.windows_s, n, params.green_margin_s, v0, MODE_CODES[mode], reaction, *rest)
+
+
+def _feasible(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, reaction_s: float | None = None, n_lines: int | None = None) -> np.ndarray:
+    speeds = _candidates_mps(params.min_cruise_speed_mps, obs.speed_limit_mps, params.speed_step_mps)
+    return speeds[_green(lines, obs, params, mode, speeds, reaction_s, n_lines)]
 
 
 def _keeps(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, target_mps: float, n_lines: int | None = None) -> bool:
@@ -391,9 +397,7 @@ def _keeps(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, ta
     the target is still a candidate speed and feasible (one speed through the kernel, not all candidates)."""
     if not params.min_cruise_speed_mps - 1e-9 <= target_mps <= obs.speed_limit_mps + 1e-9:
         return False
-    _, v0, reaction, *rest = _kernel_args(obs, params, 0.0)
-    n = lines.distances_m.size if n_lines is None else n_lines
-    return bool(_green_mask(np.array([float(target_mps)]), lines.distances_m, lines.windows_s, n, params.green_margin_s, v0, MODE_CODES[mode], reaction, *rest)[0])
+    return bool(_green(lines, obs, params, mode, np.array([float(target_mps)]), 0.0, n_lines)[0])
 
 
 MODE_NAMES = {code: name for name, code in MODE_CODES.items()}
@@ -509,7 +513,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if tables is not None:
         wanted = tables.target_speed_mps(obs)
         if wanted is not None:  # the DP's speed at the next stop line: the feasible target that reaches the line nearest it
-            speeds, v0, reaction, *rest = _kernel_args(obs, params, None)
+            _, v0, reaction, *rest = _kernel_args(obs, params, None)
             miss = np.abs(_line_speeds_mps(float(nxt.distance_m), v0, feasible, MODE_CODES[mode], reaction, *rest) - wanted)
             # targets still being braked to at the line reach it alike: of those, the one nearest the wanted speed
             close = feasible[miss <= miss.min() + LINE_SPEED_TIE_MPS]
