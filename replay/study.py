@@ -7,6 +7,7 @@ import csv
 import json
 import os
 import sys
+import textwrap
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -241,7 +242,7 @@ def advisor_figure(res: CaseResult, path: Path) -> Path:
     advised = score_in_end_state(run.trajectory, params, sc.speed_limit_mps, keep_series=True)
     runs = [("advised driver (solid) vs DP optimum (dashed)", advised.zone.series, res.eco.zone.series, sc.signals),
             ("regular driver", res.regular.zone.series, None, ())]
-    spoken = "; ".join(f"{t:.0f} s: {a.message}" for t, a in run.advice if a.speak)
+    spoken = "\n".join(textwrap.wrap("; ".join(f"{t:.0f} s: {a.message}" for t, a in run.advice if a.speak), 130))
     title = (f"[{res.x_s:g} {res.y_s:g}], s = {res.spacing_m:g} m: cost regular {res.regular.cost_usd * 100:.2f} c, "
              f"advised {advised.cost_usd * 100:.2f} c, DP {res.eco.cost_usd * 100:.2f} c\n{spoken}")
     return figures.trajectory_panels(runs, title, path, ("advised / regular", "DP optimum"))
