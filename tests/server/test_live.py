@@ -165,6 +165,12 @@ def test_other_bad_requests(client, s200):
     trip_id, auth, _ = new_trip(client)
     r = client.post(f"/v1/trips/{trip_id}/fixes", content=b"{" + b" " * 40_000 + b"}", headers={**auth, "content-type": "application/json"})
     assert r.status_code == 413 and r.json()["error"] == "payload_too_large"
+    # chunked (no Content-Length): the body is read in pieces, joined, and still cut off at the limit
+    body = json.dumps(fix_at(s200, 10.0, time.time())).encode()
+    r = client.post(f"/v1/trips/{trip_id}/fixes", content=iter([body[:7], body[7:30], body[30:]]), headers={**auth, "content-type": "application/json"})
+    assert r.status_code == 200 and r.json()["seq"] == 1
+    r = client.post(f"/v1/trips/{trip_id}/fixes", content=iter([b"{"] + [b" " * 1000] * 40 + [b"}"]), headers={**auth, "content-type": "application/json"})
+    assert r.status_code == 413 and r.json()["error"] == "payload_too_large"
     r = client.post("/v1/trips/0000/fixes", json=fix_at(s200, 1.0, time.time()), headers=auth)
     assert r.status_code == 404 and r.json()["error"] == "unknown_trip"
     for body, error in (({"corridor": "moon"}, "unknown_corridor"), ({"timing": "9_9"}, "unknown_timing"), ({"vehicle": "tank"}, "unknown_vehicle"),
