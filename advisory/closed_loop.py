@@ -232,17 +232,18 @@ def evaluate(scenario: Scenario, params, tables=None, advisor: AdvisorParams | N
 
     run = simulate(scenario, advisor, tables, driver)
     v_lim = scenario.speed_limit_mps
-    reg = score_in_end_state(regular_driver(scenario), params, v_lim)
+    regular = regular_driver(scenario)
+    reg = score_in_end_state(regular, params, v_lim)
     adv = score_in_end_state(run.trajectory, params, v_lim)
     grid = grid or GridSpec()  # the study's resolution (advisory.study.STUDY_GRID): the optimum it reports
-    opt = score_in_end_state(solve(scenario, params, grid).trajectory, params, v_lim)
+    t_max = time_limit_s(regular, params, scenario, grid)  # the paper's limit: the regular driver's time
+    opt = score_in_end_state(solve(scenario, params, grid, t_max_s=t_max).trajectory, params, v_lim)
     same = opt
     if adv.time_s > reg.time_s + 1e-6:
         same = score_in_end_state(solve(scenario, params, grid, t_max_s=adv.time_s).trajectory, params, v_lim)
     margin_s = (advisor or AdvisorParams()).green_margin_s
     held = Scenario(scenario.name, tuple(replace(s, red_s=s.red_s + margin_s, green_s=s.green_s - margin_s) for s in scenario.signals),
                     scenario.zone_length_m, v_lim, scenario.initial_speed_mps)  # fmt: skip
-    t_max = time_limit_s(regular_driver(scenario), params, scenario, grid)
     try:
         margin = score_in_end_state(solve(held, params, grid, t_max_s=t_max).trajectory, params, v_lim)
     except InfeasibleError:  # the margin makes the regular driver's time unreachable: the advised driver's then
