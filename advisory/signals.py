@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from advisory.params import SPEED_LIMIT_MPS
+from advisory.physics.params import SPEED_LIMIT_MPS
 
 
 @dataclass(frozen=True, slots=True)

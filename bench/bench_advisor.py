@@ -24,13 +24,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from advisory.advisor import AdvisorMemory, AdvisorParams, advise  # noqa: E402
-from advisory.closed_loop import DriverModel, evaluate, observe, red_light_violations, simulate  # noqa: E402
-from advisory.endstate import score_in_end_state  # noqa: E402
-from advisory.params import model_params  # noqa: E402
-from advisory.regular import regular_driver  # noqa: E402
+from advisory.advice.advisor import AdvisorMemory, AdvisorParams, advise  # noqa: E402
+from advisory.drivers.closed_loop import DriverModel, evaluate, observe, red_light_violations, simulate  # noqa: E402
+from advisory.evaluation.endstate import score_in_end_state  # noqa: E402
+from advisory.physics.params import model_params  # noqa: E402
+from advisory.drivers.regular import regular_driver  # noqa: E402
 from advisory.signals import PAPER_SPACINGS_M, PAPER_TIMINGS_S, paper_scenario  # noqa: E402
-from advisory.tables import AdviceTables, TableGrid, paper_offsets_s  # noqa: E402
+from advisory.advice.tables import AdviceTables, TableGrid, paper_offsets_s  # noqa: E402
 
 PARAMS = model_params()
 _TABLES: dict[float, AdviceTables] = {}

@@ -22,10 +22,10 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from advisory.optimizer.dp import GridSpec, build_problem, solve_numpy, solve_problem, time_limit_s  # noqa: E402
-from advisory.params import model_params  # noqa: E402
-from advisory.regular import regular_driver  # noqa: E402
+from advisory.physics.params import model_params  # noqa: E402
+from advisory.drivers.regular import regular_driver  # noqa: E402
 from advisory.signals import paper_scenario  # noqa: E402
-from advisory.study import study_cases  # noqa: E402
+from advisory.evaluation.study import study_cases  # noqa: E402
 from replay.study import run_study  # noqa: E402
 
 BENCH_GRID = GridSpec(stage_m=20.0, time_bin_s=0.5, dwell_s=1.0)

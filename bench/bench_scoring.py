@@ -14,8 +14,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from advisory.params import model_params  # noqa: E402
-from advisory.scoring import score_trace  # noqa: E402
+from advisory.physics.params import model_params  # noqa: E402
+from advisory.evaluation.scoring import score_trace  # noqa: E402
 from tests.test_scoring import numpy_reference  # noqa: E402
 
 

@@ -16,8 +16,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from advisory.params import DEFAULT_VEHICLE, VEHICLE_PRESETS, model_params
-from advisory.scoring import DriveScore, score_trace
+from advisory.physics.params import DEFAULT_VEHICLE, VEHICLE_PRESETS, model_params
+from advisory.evaluation.scoring import DriveScore, score_trace
 from replay.trace_io import GpsTrace, SpeedTrace, TraceError, read_trace
 
 

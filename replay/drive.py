@@ -13,11 +13,11 @@
 4. **The zone**: from the instant the fixes cross station 0 to the instant they cross ``length_m``
    (interpolated between fixes; a trace that starts inside the zone is extrapolated back, as the
    service does), as a trajectory whose positions are integrated from the speeds
-   (``advisory.track.trajectory_from_samples``).
+   (``advisory.evaluation.track.trajectory_from_samples``).
 5. **The lights**: the timing (``--timing`` / ``# timing:``) anchored at ``entry_unix_s`` (``--entry`` /
    ``# entry_unix_s:``, default: the measured zone entry), seen from the measured entry
    (``spat_feed.scenarios.advisory_scenario_at``).
-6. **Scores** (``advisory.endstate.score_in_end_state``: zone + re-acceleration to the limit) of the drive,
+6. **Scores** (``advisory.evaluation.endstate.score_in_end_state``: zone + re-acceleration to the limit) of the drive,
    the paper's regular driver entering at the same instant at the limit, and the DP optimum
    (``advisory.optimizer.dp.solve``, 20 m stages), and the changes against the regular driver.
 """
@@ -28,11 +28,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from advisory.endstate import EndStateScore, score_in_end_state
-from advisory.params import SPEED_LIMIT_MPS, ModelParams
-from advisory.scoring import DriveScore
+from advisory.evaluation.endstate import EndStateScore, score_in_end_state
+from advisory.physics.params import SPEED_LIMIT_MPS, ModelParams
+from advisory.evaluation.scoring import DriveScore
 from advisory.signals import Scenario
-from advisory.track import entry_instant_s, trajectory_from_samples
+from advisory.evaluation.track import entry_instant_s, trajectory_from_samples
 from advisory.trajectory import Trajectory
 from replay.matching import CorridorChoice, MatchedTrace, find_corridor, match
 from replay.trace_io import GpsTrace, TraceError
@@ -287,7 +287,7 @@ def score_drive(
     if not compare:
         return result
     from advisory.optimizer import dp
-    from advisory.regular import regular_driver
+    from advisory.drivers.regular import regular_driver
 
     reg = regular_driver(scenario)
     result.regular = DriverResult(reg, score_in_end_state(reg, params, speed_limit_mps, keep_series=True))

@@ -32,7 +32,7 @@ def trajectory_panels(
     Paper-style four panels: (a) time-distance with red bars, (b) speed, (c) energy, (d) SOH decay.
 
     ``runs``: (label, solid score series, dashed score series or None, lights) per colour; series are
-    ``advisory.scoring.TraceSeries``.
+    ``advisory.evaluation.scoring.TraceSeries``.
     """
     fig, axes = plt.subplots(2, 2, figsize=(12, 8.5))
     ax_td, ax_v, ax_e, ax_d = axes.ravel()

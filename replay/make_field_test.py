@@ -5,9 +5,9 @@ after entry; ``spat_feed`` timing ``field_test``) on the ``paper_s400`` corridor
 light 2 at 500 m, zone end at 600 m; the paper does not give its field test's spacing, 400 m is our
 pick), entering the zone at ``ENTRY_UNIX_S``:
 
-* ``field_test_regular.csv``: the paper's regular driver (``advisory.regular.regular_driver``);
+* ``field_test_regular.csv``: the paper's regular driver (``advisory.drivers.regular.regular_driver``);
 * ``field_test_advised.csv`` (and ``.gpx``): a human following the advisor, simulated in closed loop
-  (``advisory.closed_loop.simulate`` with the DP lookup tables) with human imperfections: 1.5 s reaction,
+  (``advisory.drivers.closed_loop.simulate`` with the DP lookup tables) with human imperfections: 1.5 s reaction,
   tracking error 0.5 m/s (redrawn at every advice), drifting 1 m/s above low advised speeds.
 
 Both get ``APPROACH_S`` of driving at the limit before the zone and ``AFTER_S`` after it (accelerating
@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from advisory.closed_loop import DriverModel, simulate
-from advisory.params import model_params
-from advisory.regular import regular_driver
-from advisory.tables import AdviceTables, TableGrid
+from advisory.drivers.closed_loop import DriverModel, simulate
+from advisory.physics.params import model_params
+from advisory.drivers.regular import regular_driver
+from advisory.advice.tables import AdviceTables, TableGrid
 from advisory.trajectory import Trajectory
 from spat_feed.corridors import WGS84
 from spat_feed.scenarios import make_scenario
@@ -166,7 +166,7 @@ def main(argv=None) -> int:
     common = {"corridor": CORRIDOR, "timing": TIMING, "entry_unix_s": f"{ENTRY_UNIX_S:.0f}", "vehicle": VEHICLE}
     made = []
     for name, traj, driver in (
-        ("field_test_regular", regular, "the paper's regular driver (advisory.regular)"),
+        ("field_test_regular", regular, "the paper's regular driver (advisory.drivers.regular)"),
         ("field_test_advised", advised.trajectory, f"closed-loop advisor follower {HUMAN}"),
     ):
         fixes = gps_fixes(traj, corridor, rng, v_lim_mps=scenario.speed_limit_mps)

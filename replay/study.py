@@ -18,9 +18,9 @@ import warnings
 
 import numpy as np
 
-from advisory.params import VehicleParams
+from advisory.physics.params import VehicleParams
 from advisory.signals import PAPER_SPACINGS_M, PAPER_TIMINGS_S, paper_scenario
-from advisory.study import STUDY_GRID, VARIANTS, CaseResult, run_case, study_cases
+from advisory.evaluation.study import STUDY_GRID, VARIANTS, CaseResult, run_case, study_cases
 from replay import figures, paper_tables
 
 SPACINGS = [int(s) for s in PAPER_SPACINGS_M]
@@ -107,7 +107,7 @@ def render_report(results, grid, elapsed_s: float, overrides: dict | None = None
         "",
         f"Grid: stage {grid.stage_m} m, coasting-chain speeds (split {grid.coast_split}), time bins {grid.time_bin_s} s, "
         f"dwell {grid.dwell_s} s, trip-time buffer {grid.time_buffer_frac:+.0%}. {len(results)} cases in {elapsed_s:.1f} s. "
-        "Both drivers are scored to the common end state (back at the limit, `advisory/endstate.py`)."
+        "Both drivers are scored to the common end state (back at the limit, `advisory/evaluation/endstate.py`)."
         + (f" Overrides: {overrides}." if overrides else ""),
         "",
         "## Table 2: cost reduction (%), ours / paper",
@@ -231,10 +231,10 @@ def make_study_figures(results, out: Path) -> list[Path]:
 
 def advisor_figure(res: CaseResult, path: Path) -> Path:
     """The advisor in closed loop (virtual driver, 1 s reaction) against the DP optimum and the regular driver."""
-    from advisory.closed_loop import simulate
-    from advisory.endstate import score_in_end_state
-    from advisory.params import model_params
-    from advisory.tables import AdviceTables, TableGrid
+    from advisory.drivers.closed_loop import simulate
+    from advisory.evaluation.endstate import score_in_end_state
+    from advisory.physics.params import model_params
+    from advisory.advice.tables import AdviceTables, TableGrid
 
     sc = paper_scenario(res.x_s, res.y_s, res.spacing_m)
     params = model_params()

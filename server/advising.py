@@ -10,7 +10,7 @@ From a fix to an advisory (:meth:`Engine.on_fix`):
 3. **Speed**: the fix's speed over ground, else the least-squares slope of the last seconds' stations.
 4. **SPaT at the fix's own time**: the trip's plans (simulated or from the feed) for the next two lights,
    turned into conservative red windows relative to the fix (``server.observe``).
-5. **Advice**: ``advisory.advisor.advise(observation, memory, params, tables)``; the trip keeps the new memory.
+5. **Advice**: ``advisory.advice.advisor.advise(observation, memory, params, tables)``; the trip keeps the new memory.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import math
 import time
 from collections.abc import Callable
 
-from advisory.advisor import Advice, AdvisorParams, advise
-from advisory.params import VEHICLE_PRESETS
+from advisory.advice.advisor import Advice, AdvisorParams, advise
+from advisory.physics.params import VEHICLE_PRESETS
 from spat_feed.corridors import TIMING_PRESETS, Corridor, timing_for_trip
 from spat_feed.scenarios import FeedScenario, Uncertainty
 

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 from fastapi import FastAPI
 
-from advisory.advisor import AdvisorParams
-from advisory.params import model_params
+from advisory.advice.advisor import AdvisorParams
+from advisory.physics.params import model_params
 from spat_feed.corridors import Corridor, load_corridor
 from spat_feed.scenarios import make_scenario
 
@@ -63,7 +63,7 @@ def build_tables(settings: Settings, corridors: dict[str, Corridor]) -> dict[str
     """
     if not settings.tables:
         return {}
-    from advisory.tables import AdviceTables, paper_offsets_s
+    from advisory.advice.tables import AdviceTables, paper_offsets_s
 
     params = model_params(settings.default_vehicle)
     out: dict[str, object] = {}

@@ -12,7 +12,7 @@ from typing import Annotated
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-from advisory.params import SPEED_LIMIT_MPS
+from advisory.physics.params import SPEED_LIMIT_MPS
 from spat_feed.corridors import PAPER_CORRIDOR_NAMES
 
 
@@ -37,7 +37,7 @@ class Settings(BaseSettings):
     spat_late_s: float = Field(default=0.0, ge=0)
     spat_confidence_frac: float = Field(default=1.0, ge=0, le=1)
 
-    # lookup tables (advisory.tables), built or loaded at start-up
+    # lookup tables (advisory.advice.tables), built or loaded at start-up
     tables: bool = Field(default=True, description="build/load the DP lookup tables at start-up")
     tables_dir: Path | None = Field(default=None, description="cache folder for the tables (.npz); None = build in memory")
 

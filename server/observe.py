@@ -1,4 +1,4 @@
-"""From a matched GPS fix and SPaT plans to the advisor's :class:`~advisory.advisor.Observation`.
+"""From a matched GPS fix and SPaT plans to the advisor's :class:`~advisory.advice.advisor.Observation`.
 
 Pure: the bridge between ``spat_feed`` (plans on the Unix time axis) and ``advisory`` (lights ahead, times
 relative to the fix). No clock, no I/O.
@@ -21,7 +21,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from advisory.advisor import LightView, Observation
+from advisory.advice.advisor import LightView, Observation
 from spat_feed.corridors import Corridor, IntersectionSpec
 from spat_feed.plans import (
     STOP_STATES,

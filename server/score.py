@@ -1,9 +1,9 @@
 """A finished trip's score: the drive as recorded, and the paper's regular driver over the same SPaT.
 
-Both are scored by ``advisory.endstate.score_in_end_state`` (zone energy, wear and cost, plus the
+Both are scored by ``advisory.evaluation.endstate.score_in_end_state`` (zone energy, wear and cost, plus the
 re-acceleration to the speed limit at the zone end), with the trip's vehicle. The recorded drive is the
 trip's on-route fixes inside the zone (speeds from the fixes; positions integrated from them, so the
-trajectory is consistent). The regular driver (``advisory.regular``) enters the zone at the speed limit at
+trajectory is consistent). The regular driver (``advisory.drivers.regular``) enters the zone at the speed limit at
 the instant the car entered it (the first fix, extrapolated back to station 0), facing the trip's plans.
 """
 
@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from advisory.endstate import EndStateScore, score_in_end_state
-from advisory.params import model_params
-from advisory.regular import regular_driver
+from advisory.evaluation.endstate import EndStateScore, score_in_end_state
+from advisory.physics.params import model_params
+from advisory.drivers.regular import regular_driver
 from advisory.signals import Scenario
-from advisory.track import entry_instant_s, trajectory_from_samples
+from advisory.evaluation.track import entry_instant_s, trajectory_from_samples
 from advisory.trajectory import Trajectory
 from spat_feed.scenarios import FeedScenario, advisory_scenario_at
 

@@ -13,7 +13,7 @@ import uuid
 from array import array
 from typing import TYPE_CHECKING
 
-from advisory.advisor import AdvisorMemory
+from advisory.advice.advisor import AdvisorMemory
 from spat_feed.corridors import Corridor
 from spat_feed.scenarios import FeedScenario
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import lru_cache
 
-from advisory.params import SPEED_LIMIT_MPS
+from advisory.physics.params import SPEED_LIMIT_MPS
 from advisory.signals import Scenario
 from spat_feed.corridors import TIMING_PRESETS, Corridor, Timing, load_corridor, timing_for_trip
 from spat_feed.messages import IntersectionState, MovementState, SpatMessage, from_unix_s, movement_events

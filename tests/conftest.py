@@ -3,7 +3,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from advisory.params import model_params
+from advisory.physics.params import model_params
 
 REPO = Path(__file__).resolve().parents[1]
 CYCLES = REPO.parent / "shared" / "data" / "cycles"

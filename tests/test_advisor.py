@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from advisory.advisor import (
+from advisory.advice.advisor import (
     MODE_CODES,
     Advice,
     AdvisorParams,
@@ -16,11 +16,11 @@ from advisory.advisor import (
     crossing_time_s,
     phrase,
 )
-from advisory.advisor import _coast_arrays, _line_speeds_mps
-from advisory.closed_loop import DriverModel, evaluate, observe, red_light_violations, simulate
-from advisory.params import PAPER_54KWH, SPEED_LIMIT_MPS, model_params
+from advisory.advice.advisor import _coast_arrays, _line_speeds_mps
+from advisory.drivers.closed_loop import DriverModel, evaluate, observe, red_light_violations, simulate
+from advisory.physics.params import PAPER_54KWH, SPEED_LIMIT_MPS, model_params
 from advisory.signals import paper_scenario
-from advisory.tables import AdviceTables, TableGrid, paper_offsets_s
+from advisory.advice.tables import AdviceTables, TableGrid, paper_offsets_s
 
 V = SPEED_LIMIT_MPS
 P = AdvisorParams()
@@ -148,8 +148,8 @@ def test_tables_round_trip_through_npz(tables_400, tmp_path):
 
 @pytest.mark.parametrize("case", [(15, 15, 400), (-15, 15, 400), (0, 0, 200), (-30, 0, 600)])
 def test_closed_loop_on_paper_scenarios_is_safe_and_saves(case, tables_400):
-    from advisory.endstate import score_in_end_state
-    from advisory.regular import regular_driver
+    from advisory.evaluation.endstate import score_in_end_state
+    from advisory.drivers.regular import regular_driver
 
     sc = paper_scenario(*case)
     run = simulate(sc, tables=tables_400 if case[2] == 400 else None)
@@ -183,7 +183,7 @@ def test_randomized_closed_loop_never_runs_a_red_nor_advises_above_the_limit(x, 
 def _simulated_crossing(d_m, v0, vt, mode, params=P, dt=1e-3):
     """Brute force: step the motion crossing_time_s assumes (reaction, then the speed change, then hold or
     coast). Returns (time, speed) at the line; (inf, 0) if the car stops short."""
-    from advisory.advisor import coast_decel_mps2
+    from advisory.advice.advisor import coast_decel_mps2
 
     x, v, t = 0.0, v0, 0.0
     while x < d_m:
@@ -238,7 +238,7 @@ def test_virtual_driver_goes_on_against_a_red_that_ends_before_it_arrives():
 
 
 def test_time_to_cover_by_hand():
-    from advisory.closed_loop import _time_to_cover_s
+    from advisory.drivers.closed_loop import _time_to_cover_s
 
     assert _time_to_cover_s(100.0, 20.0, 10.0, 2.0) == pytest.approx(5.0 + 25.0 / 10.0)  # brake 75 m, then hold
     assert _time_to_cover_s(50.0, 20.0, 10.0, 2.0) == pytest.approx((20.0 - np.sqrt(200.0)) / 2.0)  # still braking
@@ -263,8 +263,8 @@ NO_LIGHT_IN_THE_WAY = [(-30, -30, 200), (-30, 15, 200), (15, -30, 200), (15, 15,
 def test_where_no_light_is_in_the_way_the_advice_costs_nothing(x, y, s):
     """The regular driver sails through both greens: the advised driver must not be slower or costlier
     (a margin before red once made it crawl 43 s to the next green at 2.5 times the cost)."""
-    from advisory.endstate import score_in_end_state
-    from advisory.regular import regular_driver
+    from advisory.evaluation.endstate import score_in_end_state
+    from advisory.drivers.regular import regular_driver
 
     sc = paper_scenario(x, y, s)
     params = model_params()

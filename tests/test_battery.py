@@ -3,9 +3,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from advisory.battery import ah_throughput_eol_ah, soh_rate_per_s
-from advisory.model import pack, soh_loss_frac
-from advisory.params import GAS_CONSTANT_J_PER_MOL_K, DegradationParams
+from advisory.physics.battery import ah_throughput_eol_ah, soh_rate_per_s
+from advisory.physics.model import pack, soh_loss_frac
+from advisory.physics.params import GAS_CONSTANT_J_PER_MOL_K, DegradationParams
 
 D = DegradationParams()
 RATES, PREF = np.array(D.m_c_rates), np.array(D.m_prefactor)

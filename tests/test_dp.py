@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from advisory.endstate import reacceleration_penalty, score_in_end_state
-from advisory.model import battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.evaluation.endstate import reacceleration_penalty, score_in_end_state
+from advisory.physics.model import battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
 from advisory.optimizer.dp import (
     GridSpec,
     InfeasibleError,
@@ -19,8 +19,8 @@ from advisory.optimizer.dp import (
     solve_problem,
     time_limit_s,
 )
-from advisory.params import PAPER_54KWH, model_params
-from advisory.regular import regular_driver
+from advisory.physics.params import PAPER_54KWH, model_params
+from advisory.drivers.regular import regular_driver
 from advisory.signals import FixedTimeSignal, Scenario, paper_scenario, paper_scenarios
 from tests.checks import violations
 

@@ -3,8 +3,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from advisory.energy import battery_power_w, motor_braking_power_w, road_load_force_n, wheel_power_w
-from advisory.params import G_MPS2, PAPER_54KWH, SPEED_LIMIT_MPS
+from advisory.physics.energy import battery_power_w, motor_braking_power_w, road_load_force_n, wheel_power_w
+from advisory.physics.params import G_MPS2, PAPER_54KWH, SPEED_LIMIT_MPS
 
 V = PAPER_54KWH
 ARGS = (V.mass_kg, V.rolling_coef, V.rolling_speed_coef_s_per_m, V.drag_coef, V.frontal_area_m2, V.air_density_kg_per_m3)

@@ -3,7 +3,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from advisory.regular import DriverParams, regular_driver
+from advisory.drivers.regular import DriverParams, regular_driver
 from advisory.signals import paper_scenario, paper_scenarios
 from tests.checks import violations
 

@@ -4,10 +4,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from advisory.battery import ah_throughput_eol_ah, soh_rate_per_s
-from advisory.energy import battery_power_w, wheel_power_w
-from advisory.params import GAS_CONSTANT_J_PER_MOL_K, model_params
-from advisory.scoring import score_trace
+from advisory.physics.battery import ah_throughput_eol_ah, soh_rate_per_s
+from advisory.physics.energy import battery_power_w, wheel_power_w
+from advisory.physics.params import GAS_CONSTANT_J_PER_MOL_K, model_params
+from advisory.evaluation.scoring import score_trace
 from tests.conftest import load_cycle
 
 MI_M = 1609.344

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from advisory.optimizer.dp import GridSpec
-from advisory.study import run_case
+from advisory.evaluation.study import run_case
 from replay.commands import main as ecodrive
 from replay.study import TIMINGS, table2
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from advisory.model import I_AUX, battery_power_for_wheel_w, step_cost_usd, step_wheel_power_w
+from advisory.physics.model import I_AUX, battery_power_for_wheel_w, step_cost_usd, step_wheel_power_w
 
 RED_TOL_S = 1e-9
 """A crossing this close after a red ends counts as green (25 nm at 88.5 km/h), never earlier."""

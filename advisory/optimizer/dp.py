@@ -9,12 +9,12 @@ Formulation
   (the convergence table in bench/bench_dp.py shows it); the chain makes coasting exact at any resolution.
 * **Transitions** between nodes at constant acceleration, ``a = (v'² - v²) / (2 ds)`` in
   ``[-brake_max, accel_max]``, ``dt = 2 ds / (v + v')``; cost = paper Eq. 4 on the mid-step battery power
-  (``advisory.model``). At standstill (not on a stop line) the car may wait in steps of ``dwell_s``.
+  (``advisory.physics.model``). At standstill (not on a stop line) the car may wait in steps of ``dwell_s``.
 * **Time** is carried **exactly** on each label; labels are only *binned* by time (``time_bin_s``) to
   decide which of two paths to keep. A stop line may be crossed only at an exact time outside red, and
   the trip-time limit is checked on exact times: no rounding of time can let a path cheat a red light,
   and paths that run along the speed-limit boundary (the regular driver barely brakes) stay representable.
-* **End state**: both drivers are compared back at the speed limit (``advisory.endstate``): the terminal
+* **End state**: both drivers are compared back at the speed limit (``advisory.evaluation.endstate``): the terminal
   cost is the re-acceleration penalty, and its time part counts against the trip-time limit
   ``(T_regular + penalty time of the regular driver) · (1 + time_buffer_frac)``.
 
@@ -29,11 +29,11 @@ from functools import lru_cache
 
 import numpy as np
 
-from advisory.endstate import reacceleration_penalty
-from advisory.model import I_AUX, battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.evaluation.endstate import reacceleration_penalty
+from advisory.physics.model import I_AUX, battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
 from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, forward_pass
-from advisory.params import ModelParams, VehicleParams
-from advisory.regular import time_to_cover_s
+from advisory.physics.params import ModelParams, VehicleParams
+from advisory.drivers.regular import time_to_cover_s
 from advisory.signals import Scenario
 from advisory.trajectory import Trajectory
 
@@ -275,7 +275,7 @@ def solve(scenario: Scenario, params: ModelParams, grid: GridSpec | None = None,
     ``t_max_s`` defaults to the regular driver's time to the common end state (paper: the regular
     driver's trip time is the eco-driver's upper limit), times ``1 + grid.time_buffer_frac``.
     """
-    from advisory.regular import regular_driver
+    from advisory.drivers.regular import regular_driver
 
     grid = grid or GridSpec()
     if t_max_s is None:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from advisory.params import model_params
+from advisory.physics.params import model_params
 from replay.cli import main
 from replay.drive import score_drive, smooth_speed_mps
 from replay.matching import find_corridor, match

@@ -27,8 +27,8 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from advisory.energy import road_load_force_n
-from advisory.params import PAPER_54KWH, VehicleParams
+from advisory.physics.energy import road_load_force_n
+from advisory.physics.params import PAPER_54KWH, VehicleParams
 
 MPH_PER_MPS = 1 / 0.44704
 KMH_PER_MPS = 3.6
@@ -556,7 +556,7 @@ def advise(
 
     Never advises a speed above the limit or one that reaches a stop line during (conservative) red;
     with missing, stale or low-confidence SPaT it gives no speed advice and says so.
-    ``tables``: optional :class:`advisory.tables.AdviceTables` (DP lookup); ``None`` uses the rules alone.
+    ``tables``: optional :class:`advisory.advice.tables.AdviceTables` (DP lookup); ``None`` uses the rules alone.
     """
     memory = memory or AdvisorMemory()
     params = params or AdvisorParams()

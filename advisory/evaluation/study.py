@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from advisory.endstate import EndStateScore, score_in_end_state
+from advisory.evaluation.endstate import EndStateScore, score_in_end_state
 from advisory.optimizer.dp import GridSpec, solve
-from advisory.params import model_params
-from advisory.regular import regular_driver
+from advisory.physics.params import model_params
+from advisory.drivers.regular import regular_driver
 from advisory.signals import PAPER_EXIT_M, PAPER_SPACINGS_M, PAPER_TIMINGS_S, paper_scenario
 from advisory.trajectory import Trajectory
 

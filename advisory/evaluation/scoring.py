@@ -1,7 +1,7 @@
 """Score a speed trace: energy, regen, battery wear and cost, with an energy audit that closes.
 
 ``score_trace(t_s, speed_mps, params)`` runs one fused numba pass over the steps (mid-step form,
-``advisory.model``). In the same pass it keeps an energy audit whose terms come from their own
+``advisory.physics.model``). In the same pass it keeps an energy audit whose terms come from their own
 formulas, not from the battery power: kinetic + potential + aerodynamic + rolling + drivetrain losses
 + regen losses + friction braking + accessories equals the net battery energy to rounding.
 """
@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from advisory.energy import motor_braking_power_w
-from advisory.model import (
+from advisory.physics.energy import motor_braking_power_w
+from advisory.physics.model import (
     I_AREA,
     I_AUX,
     I_CR1,
@@ -31,7 +31,7 @@ from advisory.model import (
     soh_loss_frac,
     step_wheel_power_w,
 )
-from advisory.params import G_MPS2, ModelParams
+from advisory.physics.params import G_MPS2, ModelParams
 
 
 # Slots of the kernel's running totals.

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 from numba.extending import register_jitable
 
-from advisory.battery import ah_throughput_eol_ah, soh_rate_per_s
-from advisory.energy import battery_power_w, wheel_power_w
-from advisory.params import GAS_CONSTANT_J_PER_MOL_K, ModelParams
+from advisory.physics.battery import ah_throughput_eol_ah, soh_rate_per_s
+from advisory.physics.energy import battery_power_w, wheel_power_w
+from advisory.physics.params import GAS_CONSTANT_J_PER_MOL_K, ModelParams
 
 (
     I_MASS,

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from advisory.advisor import Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise, coast_decel_mps2
-from advisory.regular import DriverParams
+from advisory.advice.advisor import Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise, coast_decel_mps2
+from advisory.drivers.regular import DriverParams
 from advisory.signals import Scenario
 from advisory.trajectory import Trajectory
 
@@ -226,16 +226,16 @@ def evaluate(scenario: Scenario, params, tables=None, advisor: AdvisorParams | N
 
     ``grid`` defaults to the study's (10 m stages). A coarser DP is a lenient yardstick: at 20 m the paper
     cases' optimum costs up to 5 % more (it cannot brake as finely), and the shares kept read ~5 points higher."""
-    from advisory.endstate import score_in_end_state
+    from advisory.evaluation.endstate import score_in_end_state
     from advisory.optimizer.dp import GridSpec, InfeasibleError, solve, time_limit_s
-    from advisory.regular import regular_driver
+    from advisory.drivers.regular import regular_driver
 
     run = simulate(scenario, advisor, tables, driver)
     v_lim = scenario.speed_limit_mps
     regular = regular_driver(scenario)
     reg = score_in_end_state(regular, params, v_lim)
     adv = score_in_end_state(run.trajectory, params, v_lim)
-    grid = grid or GridSpec()  # the study's resolution (advisory.study.STUDY_GRID): the optimum it reports
+    grid = grid or GridSpec()  # the study's resolution (advisory.evaluation.study.STUDY_GRID): the optimum it reports
     t_max = time_limit_s(regular, params, scenario, grid)  # the paper's limit: the regular driver's time
     opt = score_in_end_state(solve(scenario, params, grid, t_max_s=t_max).trajectory, params, v_lim)
     same = opt

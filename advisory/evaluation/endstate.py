@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from advisory.model import J_PER_KWH, battery_power_for_wheel_w, pack, soh_loss_frac, step_wheel_power_w
-from advisory.params import ModelParams
-from advisory.scoring import DriveScore, score_trace
+from advisory.physics.model import J_PER_KWH, battery_power_for_wheel_w, pack, soh_loss_frac, step_wheel_power_w
+from advisory.physics.params import ModelParams
+from advisory.evaluation.scoring import DriveScore, score_trace
 from advisory.trajectory import Trajectory
 
 

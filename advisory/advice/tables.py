@@ -5,11 +5,11 @@ time in the cycle, tau. A backward DP over (stage, speed, tau) with tau periodic
 position, speed and phase, the optimal next speed; following it to the next stop line gives the speed
 the optimal driver crosses it with, which is what the advisor asks the driver to ease off (or speed up) to.
 
-* Cost per transition: paper Eq. 4 (``advisory.model``) plus a value of time ``time_value_usd_per_s``.
+* Cost per transition: paper Eq. 4 (``advisory.physics.model``) plus a value of time ``time_value_usd_per_s``.
   Without a price on time the optimum crawls (air drag falls with speed); the default 4.5e-4 $/s is the
   value at which, with no lights, cruising at the limit is the cheapest steady speed for the paper car
   (d(cost/m)/dv = lambda / v² at 24.6 m/s), so the tables never advise dawdling for its own sake.
-* Terminal cost at the zone end: the re-acceleration penalty (``advisory.endstate``), priced the same way.
+* Terminal cost at the zone end: the re-acceleration penalty (``advisory.evaluation.endstate``), priced the same way.
 * Red: a transition into a stop-line stage at a red instant is forbidden (checked at the exact arrival
   time of the grid state); values are interpolated in tau, and an infeasible neighbour poisons the value.
 * Waiting at standstill (not on a stop line) in steps of the tau grid.
@@ -31,11 +31,11 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from advisory.endstate import reacceleration_penalty
-from advisory.model import I_AUX, battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.evaluation.endstate import reacceleration_penalty
+from advisory.physics.model import I_AUX, battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
 from advisory.optimizer._kernels import is_red
 from advisory.optimizer.dp import coast_chain_mps
-from advisory.params import ModelParams
+from advisory.physics.params import ModelParams
 from advisory.signals import Scenario
 
 TABLES_VERSION = "1"

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba.extending import register_jitable
 
-from advisory.params import G_MPS2
+from advisory.physics.params import G_MPS2
 
 
 @register_jitable

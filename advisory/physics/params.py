@@ -90,7 +90,7 @@ class DegradationParams:
 
     ``m_c_rates`` / ``m_prefactor`` are the measured pre-exponential factors M(c); between them M is
     interpolated linearly in C-rate. The whole model (M and Ea) is evaluated at C-rates clamped to
-    [c_rate_min, c_rate_max], the range the fit was measured on (see ``advisory.battery``).
+    [c_rate_min, c_rate_max], the range the fit was measured on (see ``advisory.physics.battery``).
     ``decay_multiplier`` scales the SOH decay rate (the paper's 10x for NCA).
     """
 

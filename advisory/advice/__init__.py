@@ -1,0 +1,1 @@
+"""The advisor: feasible speeds, the DP lookup tables, the spoken wording."""
