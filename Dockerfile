@@ -7,6 +7,7 @@ COPY advisory advisory
 COPY spat_feed spat_feed
 COPY server server
 COPY replay replay
+COPY ecodrive ecodrive
 RUN pip install --no-cache-dir .
 RUN useradd --create-home ecodrive && mkdir -p /app/cache && chown ecodrive /app/cache
 USER ecodrive

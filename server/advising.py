@@ -9,7 +9,7 @@ From a fix to an advisory (:meth:`Engine.on_fix`):
    ``max_accuracy_m``): the advice pauses and says so.
 3. **Speed**: the fix's speed over ground, else the least-squares slope of the last seconds' stations.
 4. **SPaT at the fix's own time**: the trip's plans (simulated or from the feed) for the next two lights,
-   turned into conservative red windows relative to the fix (``server.observe``).
+   turned into conservative red windows relative to the fix (``spat_feed.observe``).
 5. **Advice**: ``advisory.advice.advisor.advise(observation, memory, params, tables)``; the trip keeps the new memory.
 """
 
@@ -27,7 +27,7 @@ from spat_feed.scenarios import FeedScenario, Uncertainty
 from server.config import Settings
 from server.errors import ApiError
 from server.gps import Fix, RouteMatcher
-from server.observe import observation
+from spat_feed.observe import observation
 from server.ratelimit import TokenBucket
 from server.schemas import TripCreate
 from server.spat import RemoteFeed, SimulatedSpat, TripSpat

@@ -1,6 +1,6 @@
 """Where each trip's SPaT comes from: the in-process simulation (default) or a remote feed.
 
-Both give, for a fix time, one :class:`~server.observe.PlanReading` per intersection, and the current
+Both give, for a fix time, one :class:`~spat_feed.observe.PlanReading` per intersection, and the current
 SPaT message for ``GET .../spat``. For the simulation the trip's scenario (corridor, timing, zone entry)
 gives the plans directly (``FeedScenario.plans_at``), the same plans that ``InProcessSpatSource`` turns
 into messages. For a remote feed one :class:`spat_feed.client.SpatClient` per scenario subscribes to
@@ -18,7 +18,7 @@ from spat_feed.plans import Plan
 from spat_feed.scenarios import FeedScenario
 from spat_feed.source import Clock, InProcessSpatSource
 
-from server.observe import PlanReading
+from spat_feed.observe import PlanReading
 
 
 class TripSpat(Protocol):

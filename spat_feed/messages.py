@@ -163,8 +163,16 @@ def movement_events(plan: Plan, now_unix_s: float, n_events: int = 3) -> list[Mo
     return events
 
 
-def plan_from_movement(movement: MovementState) -> UncertainPlan:
+UNKNOWN_MAX_END_S = 3540.0
+"""A ``maxEndTime`` this far (59 min) or more after the message's timestamp means "unknown": controllers
+write "an hour from now" (J2735 TimeMark 36000, "more than an hour") when they cannot bound the change. [s]"""
+
+
+def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None = None) -> UncertainPlan:
     """An :class:`~spat_feed.plans.UncertainPlan` on the Unix axis from a received movement state.
+
+    ``timestamp_unix_s`` is the intersection's timestamp: a ``maxEndTime`` :data:`UNKNOWN_MAX_END_S` or
+    more after it is read as absent (unbounded), as J2735's 36000 is.
 
     Event ``i``'s state holds until its ``timing`` window, then event ``i + 1``'s; after the last
     event (or an event without timing) nothing is known (``UNAVAILABLE``). A missing ``likelyTime`` is
@@ -182,8 +190,11 @@ def plan_from_movement(movement: MovementState) -> UncertainPlan:
         min_s = to_unix_s(ev.timing.min_end_time)
         if changes:
             min_s = max(min_s, changes[-1].max_end_s)
-        if ev.timing.max_end_time is not None:
-            max_s = max(to_unix_s(ev.timing.max_end_time), min_s)
+        max_end_s = None if ev.timing.max_end_time is None else to_unix_s(ev.timing.max_end_time)
+        if max_end_s is not None and timestamp_unix_s is not None and max_end_s - timestamp_unix_s >= UNKNOWN_MAX_END_S:
+            max_end_s = None
+        if max_end_s is not None:
+            max_s = max(max_end_s, min_s)
         elif i + 1 < len(events) and events[i + 1].timing is not None:
             max_s = max(to_unix_s(events[i + 1].timing.min_end_time), min_s)
         else:

@@ -52,15 +52,60 @@ class MovementPhaseState(str, Enum):
     CAUTION_CONFLICTING_TRAFFIC = "caution-Conflicting-Traffic"  # flashing amber
 
 
+class PhaseClass(str, Enum):
+    """What a J2735 movement phase means for a car approaching the stop line."""
+
+    RED = "red"  # must stop at the line (also red + amber, and flashing red: stop, then proceed)
+    AMBER = "amber"  # clearance: enter only if unable to stop safely (also flashing amber: caution)
+    GREEN = "green"  # may enter (permissive or protected)
+    UNKNOWN = "unknown"  # no information: the light is unavailable or dark; never a basis for speed advice
+
+
+PHASE_CLASS: dict[MovementPhaseState, PhaseClass] = {
+    MovementPhaseState.UNAVAILABLE: PhaseClass.UNKNOWN,  # 0
+    MovementPhaseState.DARK: PhaseClass.UNKNOWN,  # 1: signal off
+    MovementPhaseState.STOP_THEN_PROCEED: PhaseClass.RED,  # 2: flashing red, a stop sign
+    MovementPhaseState.STOP_AND_REMAIN: PhaseClass.RED,  # 3
+    MovementPhaseState.PRE_MOVEMENT: PhaseClass.RED,  # 4: red + amber before green (Europe); still no entry
+    MovementPhaseState.PERMISSIVE_MOVEMENT_ALLOWED: PhaseClass.GREEN,  # 5
+    MovementPhaseState.PROTECTED_MOVEMENT_ALLOWED: PhaseClass.GREEN,  # 6
+    MovementPhaseState.PERMISSIVE_CLEARANCE: PhaseClass.AMBER,  # 7
+    MovementPhaseState.PROTECTED_CLEARANCE: PhaseClass.AMBER,  # 8
+    MovementPhaseState.CAUTION_CONFLICTING_TRAFFIC: PhaseClass.AMBER,  # 9: flashing amber
+}
+"""Every J2735 MovementPhaseState by its meaning (SAE J2735 DE_MovementPhaseState; docs/SPAT.md table)."""
+
+J2735_STATE_NUMBERS: tuple[MovementPhaseState, ...] = tuple(MovementPhaseState)
+"""The states in J2735's enumeration order: ``J2735_STATE_NUMBERS[3]`` is stop-And-Remain."""
+
+
+def phase_class(state: MovementPhaseState) -> PhaseClass:
+    """The meaning of a J2735 phase state for an approaching car.
+
+    Examples
+    --------
+    >>> phase_class(MovementPhaseState.PERMISSIVE_MOVEMENT_ALLOWED).value, phase_class(J2735_STATE_NUMBERS[0]).value
+    ('green', 'unknown')
+    """
+    return PHASE_CLASS[state]
+
+
+def _states_of(cls: PhaseClass) -> frozenset[MovementPhaseState]:
+    return frozenset(s for s, c in PHASE_CLASS.items() if c is cls)
+
+
 RED = MovementPhaseState.STOP_AND_REMAIN
 GREEN = MovementPhaseState.PROTECTED_MOVEMENT_ALLOWED
 AMBER = MovementPhaseState.PROTECTED_CLEARANCE
 
-GO_STATES = frozenset({MovementPhaseState.PERMISSIVE_MOVEMENT_ALLOWED, MovementPhaseState.PROTECTED_MOVEMENT_ALLOWED})
+GO_STATES = _states_of(PhaseClass.GREEN)
 """States in which a car may enter the intersection: the 'green' of :func:`seconds_to_next_green`."""
 
-STOP_STATES = frozenset({MovementPhaseState.STOP_AND_REMAIN, MovementPhaseState.STOP_THEN_PROCEED})
+STOP_STATES = _states_of(PhaseClass.RED)
 """States in which a car must stop at the line: the 'red' of :func:`seconds_to_next_red`."""
+
+UNKNOWN_STATES = _states_of(PhaseClass.UNKNOWN)
+"""States that say nothing about the light: unavailable and dark."""
 
 
 @dataclass(frozen=True, slots=True)

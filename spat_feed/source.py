@@ -42,7 +42,7 @@ class SpatReading:
     def plan(self, signal_group: int) -> UncertainPlan | None:
         """The signal group's plan on the Unix axis (see :func:`spat_feed.messages.plan_from_movement`)."""
         movement = self.intersection.movement(signal_group)
-        return None if movement is None else plan_from_movement(movement)
+        return None if movement is None else plan_from_movement(movement, self.timestamp_unix_s)
 
 
 class SpatSource(Protocol):

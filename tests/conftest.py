@@ -6,7 +6,9 @@ import pytest
 from advisory.physics.params import model_params
 
 REPO = Path(__file__).resolve().parents[1]
-CYCLES = REPO.parent / "shared" / "data" / "cycles"
+SHARED_DATA = REPO.parent / "shared" / "data"
+"""Real data made by others (``../shared/data``: cycles/, spat/, osm/); tests skip what is absent."""
+CYCLES = SHARED_DATA / "cycles"
 
 
 @pytest.fixture(scope="session")

@@ -7,7 +7,7 @@ import pytest
 
 from advisory.optimizer.dp import GridSpec
 from advisory.evaluation.study import run_case
-from replay.commands import main as ecodrive
+from ecodrive.cli import main as ecodrive
 from replay.study import TIMINGS, table2
 
 

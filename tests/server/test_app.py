@@ -7,7 +7,7 @@ import time
 import pytest
 from fastapi.testclient import TestClient
 
-from replay.commands import COMMANDS
+from ecodrive.cli import COMMANDS
 from server.app import create_app
 from server.config import Settings
 from server.main import main

@@ -1,4 +1,4 @@
-"""server.observe (SPaT plans -> LightView/Observation) and server.gps (map matching, ordering, speed): pure."""
+"""spat_feed.observe (SPaT plans -> LightView/Observation) and server.gps (map matching, ordering, speed): pure."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from spat_feed.scenarios import Uncertainty, make_scenario
 from spat_feed.source import InProcessSpatSource
 
 from server.gps import RouteMatcher, Track
-from server.observe import PlanReading, confidence_frac, intersections_ahead, light_view, observation, red_windows_s
+from spat_feed.observe import PlanReading, confidence_frac, intersections_ahead, light_view, observation, red_windows_s
 from server.spat import SimulatedSpat
 
 T0 = 1_700_000_000.0
@@ -131,8 +131,8 @@ def test_speed_from_noisy_positions_is_close():
 def test_server_doctests():
     import doctest
 
-    import server.observe
+    import spat_feed.observe
     import server.ratelimit
 
-    for module in (server.observe, server.ratelimit):
+    for module in (spat_feed.observe, server.ratelimit):
         assert doctest.testmod(module).failed == 0

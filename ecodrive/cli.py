@@ -1,4 +1,4 @@
-"""`ecodrive <command>`: one entry point for the project's commands.
+"""`ecodrive <command>`: the project's commands by name, each dispatched to the module that implements it.
 
 Commands: ``study`` (the paper's study), ``score`` (same as ``replay``: score a trace).
 """

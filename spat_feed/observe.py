@@ -25,6 +25,7 @@ from advisory.advice.advisor import LightView, Observation
 from spat_feed.corridors import Corridor, IntersectionSpec
 from spat_feed.plans import (
     STOP_STATES,
+    UNKNOWN_STATES,
     FixedTimePlan,
     MovementPhaseState,
     Plan,
@@ -36,7 +37,6 @@ from spat_feed.plans import (
 HORIZON_S = 150.0
 """Red windows are reported this far ahead of the fix. [s]"""
 
-UNKNOWN_STATES = frozenset({MovementPhaseState.UNAVAILABLE, MovementPhaseState.DARK})
 BLOCKING_STATES = STOP_STATES | UNKNOWN_STATES
 """States a car must not plan to cross in: red, and anything the plan does not know."""
 
