@@ -73,6 +73,9 @@ def render_drive(result, title: str) -> str:
         for key, name in (("driven", "recorded"), ("dp_optimum", "DP optimum")):
             if key in ch:
                 c = ch[key]
+                if c is None:
+                    lines.append(f"  {name} vs regular: not compared: the drive crossed a red light (Notes)")
+                    continue
                 lines.append(f"  {name} vs regular: energy {c['energy']:+.1f} %, decay {c['decay']:+.1f} %, cost {c['cost']:+.1f} %")
         head += lines
     notes = result.trace.notes + result.notes
@@ -168,7 +171,7 @@ def _gps_main(trace: GpsTrace, args) -> int:
         base = score_drive(other, params, corridor=args.corridor or result.matched.corridor.name, timing=args.timing,
                            smooth_s=args.smooth_s, compare=False)  # fmt: skip
         baseline = {"trace": other.source, "complete": base.complete, "driven": base.driven.as_dict(),
-                    "change_pct": change_pct(result.driven.score, base.driven.score)}  # fmt: skip
+                    "change_pct": None if result.red_crossings else change_pct(result.driven.score, base.driven.score)}  # fmt: skip
     timeline = None
     if args.server:
         from replay.live import replay_live
@@ -188,8 +191,9 @@ def _gps_main(trace: GpsTrace, args) -> int:
         print(render_drive(result, f"{trace.source} ({vehicle}, decay x{args.decay_multiplier:g})"))
         if baseline is not None:
             c, b = baseline["change_pct"], baseline["driven"]
+            change = "  not compared: this drive crossed a red light (Notes)" if c is None else f"  energy {c['energy']:+.1f} %, decay {c['decay']:+.1f} %, cost {c['cost']:+.1f} %"
             print(f"\nAgainst the baseline trace {other.source} (energy {b['energy_kwh'] * 1000:.1f} Wh, SOH {b['soh_lost_frac'] * 1e6:.3f}e-6, "
-                  f"cost ${b['cost_usd']:.5f}):\n  energy {c['energy']:+.1f} %, decay {c['decay']:+.1f} %, cost {c['cost']:+.1f} %")  # fmt: skip
+                  f"cost ${b['cost_usd']:.5f}):\n{change}")  # fmt: skip
         if timeline is not None:
             print()
             print(timeline.render(events=False))

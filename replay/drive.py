@@ -24,7 +24,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -32,7 +32,14 @@ from advisory.evaluation.endstate import EndStateScore, score_in_end_state
 from advisory.physics.params import SPEED_LIMIT_MPS, ModelParams
 from advisory.evaluation.scoring import DriveScore
 from advisory.signals import Scenario
-from advisory.evaluation.track import entry_instant_s, trajectory_from_samples
+from advisory.evaluation.track import (  # noqa: F401  (smooth_speed_mps, STANDSTILL_MPS: re-exported, used by tests)
+    STANDSTILL_MPS,
+    RedCrossing,
+    cut_to_zone,
+    red_light_crossings,
+    smooth_speed_mps,
+    trajectory_from_samples,
+)
 from advisory.trajectory import Trajectory
 from replay.matching import CorridorChoice, MatchedTrace, find_corridor, match
 from replay.trace_io import GpsTrace, TraceError
@@ -43,34 +50,9 @@ SMOOTH_POSITIONS_S = 1.0
 """Default Gaussian smoothing (standard deviation) of speeds derived from positions. [s]
 GPS (Doppler) speeds are not smoothed by default: at 1 Hz the sampling already rounds off the braking
 peaks, and smoothing them further lowers the energy more than the noise raises it (docs/REPLAY.md)."""
-STANDSTILL_MPS = 0.2
-"""Smoothed speeds below this are taken as a standstill. [m/s]"""
 EDGE_M = 25.0
 """The fixes must reach within this of the zone entry and exit for the drive to be complete. [m]"""
 DP_STAGE_M = 20.0
-
-
-def smooth_speed_mps(t_s: np.ndarray, v_mps: np.ndarray, sigma_s: float) -> np.ndarray:
-    """Gaussian-weighted average of the speeds within ±3 ``sigma_s`` of each sample (uneven times allowed).
-
-    Examples
-    --------
-    >>> smooth_speed_mps(np.arange(5.0), np.full(5, 3.0), 1.0).tolist()
-    [3.0, 3.0, 3.0, 3.0, 3.0]
-    """
-    if sigma_s <= 0 or v_mps.size < 3:
-        return v_mps.copy()
-    min_dt = max(float(np.min(np.diff(t_s))), 0.05)
-    half = int(min(np.ceil(3.0 * sigma_s / min_dt), v_mps.size - 1))
-    num = np.zeros_like(v_mps)
-    den = np.zeros_like(v_mps)
-    n = v_mps.size
-    for k in range(-half, half + 1):
-        lo, hi = max(0, -k), min(n, n - k)
-        w = np.exp(-0.5 * ((t_s[lo + k : hi + k] - t_s[lo:hi]) / sigma_s) ** 2)
-        num[lo:hi] += w * v_mps[lo + k : hi + k]
-        den[lo:hi] += w
-    return num / den
 
 
 def speed_from_stations_mps(t_s: np.ndarray, station_m: np.ndarray) -> np.ndarray:
@@ -128,6 +110,7 @@ class DriveResult:
     regular: DriverResult | None = None
     dp: DriverResult | None = None
     notes: list[str] = field(default_factory=list)
+    red_crossings: list[RedCrossing] = field(default_factory=list)
 
     @property
     def zone(self) -> DriveScore:
@@ -136,7 +119,7 @@ class DriveResult:
     def changes(self) -> dict[str, dict[str, float]]:
         if self.regular is None:
             return {}
-        out = {"driven": change_pct(self.driven.score, self.regular.score)}
+        out = {"driven": None if self.red_crossings else change_pct(self.driven.score, self.regular.score)}
         if self.dp is not None:
             out["dp_optimum"] = change_pct(self.dp.score, self.regular.score)
         return out
@@ -171,20 +154,10 @@ class DriveResult:
                 "dp_optimum": self.dp.as_dict() if self.dp else None,
                 "change_vs_regular_pct": self.changes(),
             },
+            "red_light_crossings": [{"light": c.light, "position_m": c.position_m, "t_unix_s": self.zone_entry_unix_s + c.t_s,
+                                     "into_red_s": c.into_red_s, "speed_mps": c.speed_mps} for c in self.red_crossings],
             "notes": self.trace.notes + self.notes,
         }
-
-
-def _crossing(t: np.ndarray, s: np.ndarray, level: float, start: int = 0) -> tuple[int, float] | None:
-    """(index k, instant) of the first crossing of ``level`` by the stations between samples k-1 and k."""
-    above = np.flatnonzero(s[start:] >= level)
-    if above.size == 0:
-        return None
-    k = start + int(above[0])
-    if k == 0:
-        return 0, float(t[0])
-    frac = (level - s[k - 1]) / (s[k] - s[k - 1])
-    return k, float(t[k - 1] + frac * (t[k] - t[k - 1]))
 
 
 def score_drive(
@@ -244,29 +217,14 @@ def score_drive(
     v = smooth_speed_mps(t, v, smooth_s)
     v[v < STANDSTILL_MPS] = 0.0
 
-    # the zone: from the entry crossing to the exit crossing
-    entry = _crossing(t, st, 0.0)
-    if entry is None:
+    # the zone: from the entry crossing to the exit crossing (advisory.evaluation.track.cut_to_zone)
+    zone = cut_to_zone(t, st, v, length_m)
+    if zone is None:
         raise TraceError(f"{trace.source}: the fixes never reach the zone of {m.corridor.name} (station 0)")
-    k0, t_in = entry
-    if k0 == 0 and st[0] > 0.0:
-        t_in = entry_instant_s(t[0], st[0], v[0])
+    zt, zv, t_in = zone.t_s, zone.v_mps, zone.t_in_s
+    if not zone.entry_seen:
         notes.append(f"the trace starts {st[0]:.0f} m inside the zone: entry extrapolated back to {t_in - t[0]:+.1f} s")
-    exit_ = _crossing(t, st, length_m, start=k0)
-    if exit_ is None:
-        k1, t_out = t.size, float(t[-1])
-    else:
-        k1, t_out = exit_
-    v_in = float(np.interp(t_in, t, v))
-    v_out = float(np.interp(t_out, t, v))
-    inner = slice(k0, k1)
-    zt = np.concatenate([[t_in], t[inner], [t_out]])
-    zv = np.concatenate([[v_in], v[inner], [v_out]])
-    keep = np.concatenate([[True], np.diff(zt) > 1e-6])  # a fix exactly on a crossing
-    zt, zv = zt[keep], zv[keep]
-    if zt.size < 2:
-        raise TraceError(f"{trace.source}: no fixes inside the zone of {m.corridor.name}")
-    complete = bool(st[0] <= EDGE_M and st[-1] >= length_m - EDGE_M) and exit_ is not None
+    complete = bool(st[0] <= EDGE_M and st[-1] >= length_m - EDGE_M) and zone.exit_seen
     if not complete:
         notes.append(f"the fixes cover stations {max(st.min(), 0):.0f}-{min(st.max(), length_m):.0f} m of 0-{length_m:.0f} m: the drive is incomplete, comparisons are indicative")
     traj = trajectory_from_samples(zt, zv, x0_m=0.0, t0_s=t_in)
@@ -282,8 +240,13 @@ def score_drive(
         feed: FeedScenario = make_scenario(m.corridor, timing, anchor)
     except ValueError as exc:
         raise TraceError(str(exc)) from None
-    scenario = advisory_scenario_at(feed, t_in, speed_limit_mps)
+    # the regular driver and the DP optimum enter when and as fast as the recorded drive did
+    scenario = replace(advisory_scenario_at(feed, t_in, speed_limit_mps), initial_speed_mps=float(min(max(zv[0], 0.0), speed_limit_mps)))
     result.scenario = scenario
+    result.red_crossings = red_light_crossings(traj, scenario.signals, t - t_in, st)
+    for c in result.red_crossings:
+        notes.append(f"crossed light {c.light} ({c.position_m:.0f} m) at {t_in + c.t_s:.1f} (Unix s), {c.into_red_s:.1f} s into red, at {c.speed_mps * 3.6:.0f} km/h: "
+                     "this drive is not reported as a saving")
     if not compare:
         return result
     from advisory.optimizer import dp

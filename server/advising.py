@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, advise
 from advisory.physics.params import VEHICLE_PRESETS
@@ -28,10 +29,20 @@ from server.config import Settings
 from server.errors import ApiError
 from server.gps import Fix, RouteMatcher
 from spat_feed.observe import observation
-from server.ratelimit import TokenBucket
-from server.schemas import TripCreate
+from server.ratelimit import KeyedBuckets, TokenBucket
+from server.schemas import MS_TIMESTAMP_MIN, TripCreate
 from server.spat import RemoteFeed, SimulatedSpat, TripSpat
 from server.trips import Trip, TripStore
+
+ADVISOR_UNITS = {"metric": "kmh", "imperial": "mph"}
+"""A trip's ``units`` -> the advisor's spoken speed unit (``AdvisorParams.units``)."""
+
+
+def retry_after(wait_s: float) -> tuple[int, dict[str, str]]:
+    """Whole seconds to wait (HTTP's Retry-After is an integer, never 0) and the header saying so."""
+    seconds = max(1, math.ceil(wait_s))
+    return seconds, {"Retry-After": str(seconds)}
+
 
 SERVER_PHRASES = {
     "poor_gps": "GPS signal weak. Advice paused.",
@@ -60,25 +71,34 @@ class Engine:
         self.params = params or AdvisorParams()
         self.remote = remote
         self.clock = clock
-        self.trips = TripStore(settings.max_trips)
+        self.trips = TripStore(settings.max_trips, settings.max_trips_per_client)
         self.create_bucket = TokenBucket(settings.create_rate_per_s, settings.create_burst)
+        self.client_buckets = KeyedBuckets(settings.create_rate_per_client_per_s, settings.create_burst_per_client)
+        self._params = {units: replace(self.params, units=ADVISOR_UNITS[units]) for units in ADVISOR_UNITS}
         self.on_advice: Callable[[Trip, Advice, str, float], None] | None = None  # metrics hooks
         self.on_ignored_fix: Callable[[str], None] | None = None
         self.on_rate_limited: Callable[[], None] | None = None
 
     # -- trips ----------------------------------------------------------------------------------------
-    def check_time(self, t_unix_s: float, what: str) -> None:
+    def check_time(self, t_unix_s: float, what: str, future_s: float | None = None) -> None:
         now = self.clock()
         s = self.settings
-        if t_unix_s > now + s.max_fix_future_s:
-            raise ApiError(422, "time_out_of_range", f"{what} = {t_unix_s:.3f} is {t_unix_s - now:.1f} s ahead of server time (limit {s.max_fix_future_s:g} s); check the device clock")
+        ahead_s = s.max_fix_future_s if future_s is None else future_s
+        if t_unix_s > now + ahead_s:
+            hint = " It looks like milliseconds: divide by 1000, or send it as 'timestamp' (W3C Geolocation, ms)." if t_unix_s >= MS_TIMESTAMP_MIN else ""
+            raise ApiError(422, "time_out_of_range", f"{what} = {t_unix_s:.3f} is {t_unix_s - now:.1f} s ahead of server time (limit {ahead_s:g} s); check the device clock.{hint}")
         if t_unix_s < now - s.max_fix_past_s:
             raise ApiError(422, "time_out_of_range", f"{what} = {t_unix_s:.3f} is {now - t_unix_s:.1f} s behind server time (limit {s.max_fix_past_s:g} s)")
 
-    async def create_trip(self, body: TripCreate) -> Trip:
+    async def create_trip(self, body: TripCreate, client: str = "") -> Trip:
         s = self.settings
+        if wait_s := self.client_buckets.take(client):
+            seconds, headers = retry_after(wait_s)
+            raise ApiError(429, "rate_limited", f"this client creates trips too fast (limit {s.create_rate_per_client_per_s:g}/s, burst {s.create_burst_per_client:g}); retry in {seconds} s", headers=headers)
+        self.trips.check_capacity(client)
         if wait_s := self.create_bucket.take():
-            raise ApiError(429, "rate_limited", "too many trips created; retry later", headers={"Retry-After": str(max(1, math.ceil(wait_s)))})
+            seconds, headers = retry_after(wait_s)
+            raise ApiError(429, "rate_limited", f"too many trips created service-wide; retry in {seconds} s", headers=headers)
         corridor_name = body.corridor or s.default_corridor
         corridor = self.corridors.get(corridor_name)
         if corridor is None:
@@ -89,7 +109,7 @@ class Engine:
         now = self.clock()
         entry = now if body.entry_unix_s is None else body.entry_unix_s
         if body.entry_unix_s is not None:
-            self.check_time(entry, "entry_unix_s")
+            self.check_time(entry, "entry_unix_s", s.max_entry_future_s)
         if body.timing is None or body.timing == "trip":
             timing = timing_for_trip(entry)
         elif body.timing in TIMING_PRESETS:
@@ -100,12 +120,15 @@ class Engine:
             raise ApiError(422, "timing_mismatch", f"timing {timing.name!r} has {len(timing.red_starts_s)} lights, corridor {corridor.name!r} has {len(corridor.intersections)}")
         uncertainty = Uncertainty(s.spat_early_s, s.spat_late_s, s.spat_confidence_frac)
         scenario = FeedScenario(corridor, timing, float(entry), uncertainty)
-        self.trips.check_capacity()
+        units = body.units or corridor_units(corridor)
+        self.trips.check_capacity(client)
         spat: TripSpat = await self.remote.subscribe(scenario) if self.remote is not None else SimulatedSpat(scenario, self.clock)
         trip = Trip(
             corridor, self.matchers[corridor_name], scenario, spat, vehicle, now,
             TokenBucket(s.rate_per_s, s.rate_burst), s.dropout_s,
             tables=self.tables.get(corridor_name) if vehicle == s.default_vehicle else None,
+            client=client, units=units, params=self._params[units], observe_spat=not isinstance(spat, SimulatedSpat),
+            max_speed_mps=s.max_speed_mps,
         )  # fmt: skip
         try:
             self.trips.add(trip)
@@ -123,8 +146,9 @@ class Engine:
         if wait_s := trip.bucket.take():
             if self.on_rate_limited is not None:
                 self.on_rate_limited()
-            raise ApiError(429, "rate_limited", f"too many requests for this trip (limit {self.settings.rate_per_s:g}/s, burst {self.settings.rate_burst:g}); retry in {wait_s:.1f} s",
-                           headers={"Retry-After": str(max(1, math.ceil(wait_s)))})  # fmt: skip
+            seconds, headers = retry_after(wait_s)
+            raise ApiError(429, "rate_limited", f"too many requests for this trip (limit {self.settings.rate_per_s:g}/s, burst {self.settings.rate_burst:g}); retry in {seconds} s",
+                           headers=headers)  # fmt: skip
 
     # -- fixes ----------------------------------------------------------------------------------------
     def latest(self, trip: Trip, fix_status: str = "none") -> dict:
@@ -138,7 +162,7 @@ class Engine:
                 trip_id=trip.id, seq=0, t_unix_s=None, fix_status=fix_status, on_route=False, station_m=None, cross_track_m=None,
                 offset_m=None, speed_mps=None, speed_source="none", next_intersection_id=None, distance_to_line_m=None,
                 spat_fresh=None, action="none", reason="no_fix", target_speed_mps=None, light_red=None, seconds_to_change_s=None,
-                message=SERVER_PHRASES["no_fix"], speak=False, source="service",
+                message=SERVER_PHRASES["no_fix"], speak=False, source="service", fix_note=None,
             )  # fmt: skip
         return trip.last if trip.last["fix_status"] == fix_status else {**trip.last, "fix_status": fix_status}
 
@@ -155,7 +179,12 @@ class Engine:
         m = trip.matcher.match(fix.lat_deg, fix.lon_deg)
         poor = fix.accuracy_m is not None and fix.accuracy_m > s.max_accuracy_m
         on_route = m.offset_m <= s.off_route_m and not poor
-        point = trip.track.add(fix.t_unix_s, m.station_m if on_route else None, fix.speed_mps)
+        if on_route and (why := trip.track.implausible(fix.t_unix_s, m.route_m)) is not None:
+            trip.n_rejected += 1
+            if self.on_ignored_fix is not None:
+                self.on_ignored_fix("implausible")
+            return {**self.latest(trip, "implausible"), "fix_note": why}
+        point = trip.track.add(fix.t_unix_s, m.route_m if on_route else None, fix.speed_mps)
         speed = point.speed_mps if point is not None else fix.speed_mps
         lights = ()
         spat_fresh = None
@@ -165,25 +194,29 @@ class Engine:
             advice, memory = Advice("none", "no_speed", message=SERVER_PHRASES["no_speed"]), trip.memory
         else:
             readings = trip.spat.readings(fix.t_unix_s) if on_route else {}
+            if trip.observed is not None and readings:
+                trip.observed.add(fix.t_unix_s, readings)
             obs = observation(trip.corridor, m.station_m, speed or 0.0, fix.t_unix_s, readings, s.speed_limit_mps, on_route=on_route)
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
-            advice, memory = advise(obs, trip.memory, self.params, trip.tables)
+            advice, memory = advise(obs, trip.memory, trip.params, trip.tables)
         trip.memory = memory
         trip.n_fixes += 1
         if on_route and speed is not None and len(trip.trace_t) < s.max_trace_fixes:
             trip.trace_t.append(fix.t_unix_s)
             trip.trace_v.append(speed)
-            trip.trace_x.append(m.station_m)
+            trip.trace_x.append(m.route_m)
         nxt = lights[0] if lights else None
         out = dict(
-            trip_id=trip.id, seq=trip.n_fixes, t_unix_s=fix.t_unix_s, fix_status="ok", on_route=on_route,
+            trip_id=trip.id, seq=trip.n_fixes, t_unix_s=round(fix.t_unix_s, 3), fix_status="ok", on_route=on_route,
             station_m=round(m.station_m, 2), cross_track_m=round(m.cross_track_m, 2), offset_m=round(m.offset_m, 2),
-            speed_mps=speed, speed_source=point.speed_source if point is not None else ("gps" if fix.speed_mps is not None else "none"),
+            speed_mps=None if speed is None else round(speed, 2),
+            speed_source=point.speed_source if point is not None else ("gps" if fix.speed_mps is not None else "none"),
             next_intersection_id=nxt.intersection_id if nxt else None, distance_to_line_m=round(nxt.distance_m, 2) if nxt else None,
-            spat_fresh=spat_fresh, action=advice.action, reason=advice.reason, target_speed_mps=advice.target_speed_mps,
+            spat_fresh=spat_fresh, action=advice.action, reason=advice.reason,
+            target_speed_mps=None if advice.target_speed_mps is None else round(advice.target_speed_mps, 2),
             light_red=advice.light_red, seconds_to_change_s=_finite(advice.seconds_to_change_s), message=advice.message,
-            speak=advice.speak, source=advice.source,
+            speak=advice.speak, source=advice.source, fix_note=None,
         )  # fmt: skip
         trip.last = out
         if self.on_advice is not None:
@@ -191,9 +224,16 @@ class Engine:
         return out
 
 
+def corridor_units(corridor: Corridor) -> str:
+    """The corridor's ``units`` ('metric' or 'imperial'; 'kmh'/'mph' read as those), metric when it has none."""
+    units = str(getattr(corridor, "units", None) or "metric").lower()
+    return {"kmh": "metric", "km/h": "metric", "mph": "imperial"}.get(units, units if units in ADVISOR_UNITS else "metric")
+
+
 def _finite(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
+    """Seconds rounded to 0.1, None when unknown or infinite."""
+    return None if x is None or not math.isfinite(x) else round(float(x), 1)
 
 
 def fix_from_schema(body) -> Fix:
-    return Fix(body.t_unix_s, body.lat_deg, body.lon_deg, body.speed_mps, body.heading_deg, body.accuracy_m)
+    return Fix(body.time_unix_s, body.lat_deg, body.lon_deg, body.speed_mps, body.heading_deg, body.accuracy_m)

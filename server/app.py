@@ -142,6 +142,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     app.state.speech = speech
     metrics = Metrics(lambda: len(app.state.engine.trips) if hasattr(app.state, "engine") else 0)
     app.state.metrics = metrics
+    app.state.streams = stream.StreamCounts()
     # Routes are tried in order, a regex and some bookkeeping each, so the per-second ones (fixes, stream)
     # come early and the documentation pages last. The routers' routes go straight into the app's list
     # (each router carries its own prefix and tags; no include-level options are used): FastAPI's

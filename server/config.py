@@ -7,7 +7,7 @@ Only ``server/`` reads the environment. Algorithm settings (advisor hysteresis, 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
@@ -45,8 +45,11 @@ class Settings(BaseSettings):
     speech: bool = True
     audio_cache_size: int = Field(default=256, ge=0)
 
-    # auth: keys allowed to create trips ("Authorization: Bearer <key>"); empty = open creation (development)
+    # auth: keys allowed to create trips ("X-API-Key: <key>" or "Authorization: Bearer <key>"); empty = open creation (development)
     api_keys: Annotated[tuple[str, ...], NoDecode] = ()
+    metrics_access: Literal["public", "api_key", "off"] = Field(default="api_key", description="/metrics: open, an API key needed (when keys are set), or not served")
+    docs_access: Literal["public", "api_key", "off"] = Field(default="public", description="/docs, /redoc, /openapi.json: same choices")
+    cors_origins: Annotated[tuple[str, ...], NoDecode] = Field(default=(), description="browser origins allowed to call the API (CORS); '*' = any; empty = CORS off")
 
     # limits
     max_trips: int = Field(default=20_000, ge=1)
@@ -58,15 +61,30 @@ class Settings(BaseSettings):
     create_rate_per_s: float = Field(default=500.0, gt=0, description="trip creation, whole service [1/s]")
     create_burst: float = Field(default=2_500.0, ge=1)
     max_fix_past_s: float = Field(default=300.0, gt=0, description="reject fixes older than this vs server time [s]")
-    max_fix_future_s: float = Field(default=30.0, gt=0, description="reject fixes this far ahead of server time [s]")
+    max_fix_future_s: float = Field(
+        default=2.0, gt=0, description="reject fixes this far ahead of server time: an accepted fix from the future would make the honest ones look late [s]"
+    )
+    max_entry_future_s: float = Field(default=300.0, gt=0, description="a trip's entry_unix_s may lie this far ahead [s]")
+    max_trips_per_client: int = Field(default=200, ge=0, description="open trips per client (API key, else address); 0 = no limit")
+    create_rate_per_client_per_s: float = Field(default=1.0, gt=0, description="trip creation per client: token bucket rate [1/s]")
+    create_burst_per_client: float = Field(default=20.0, ge=1)
+
+    # connections (enforced by server.protocol in the uvicorn process)
+    read_timeout_s: float = Field(default=10.0, gt=0, description="a request's headers and body must arrive within this, else 408 and close [s]")
+    keep_alive_s: float = Field(default=5.0, gt=0, description="idle keep-alive connections are closed after this [s]")
+    max_connections: int = Field(default=0, ge=0, description="open connections in all; 0 = the process's file limit less a reserve")
+    max_connections_per_client: int = Field(default=256, ge=0, description="open connections per client address; 0 = no limit (behind a proxy)")
+    ws_max_per_trip: int = Field(default=2, ge=1, description="open WebSocket streams per trip")
+    ws_max_per_client: int = Field(default=256, ge=0, description="open WebSocket streams per client address; 0 = no limit")
 
     # GPS
     off_route_m: float = Field(default=30.0, gt=0, description="farther than this from the route: advice paused [m]")
     max_accuracy_m: float = Field(default=50.0, gt=0, description="fixes less accurate than this are not used [m]")
     dropout_s: float = Field(default=5.0, gt=0, description="longer gaps reset the position-derived speed [s]")
+    max_speed_mps: float = Field(default=50.0, gt=0, description="a fix implying a faster jump along the route is ignored as a GPS glitch [m/s]")
     max_trace_fixes: int = Field(default=7_200, ge=10, description="fixes kept per trip for its score")
 
-    @field_validator("corridors", "api_keys", mode="before")
+    @field_validator("corridors", "api_keys", "cors_origins", mode="before")
     @classmethod
     def _split_commas(cls, value: object) -> object:
         if isinstance(value, str):

@@ -1,10 +1,13 @@
 """Dependencies as ``Annotated`` aliases; they work for HTTP routes and WebSockets (``HTTPConnection``).
 
 All are ``async def``: they never block, and a sync dependency would cost a thread-pool hop per request.
+Tokens come from headers only (``Authorization: Bearer``, or ``X-API-Key`` for an API key); the WebSocket
+handshake alone may carry the trip token as ``?token=`` (browsers cannot set headers there).
 """
 
 from __future__ import annotations
 
+import hashlib
 import hmac
 from typing import Annotated
 
@@ -17,6 +20,8 @@ from server.config import Settings
 from server.errors import ApiError
 from server.metrics import Metrics
 from server.trips import Trip
+
+API_KEY_HEADER = "x-api-key"
 
 
 async def get_engine(conn: HTTPConnection) -> Engine:
@@ -42,15 +47,23 @@ SpeechDep = Annotated[Speech, Depends(get_speech)]
 TripId = Annotated[str, Path(min_length=1, max_length=64, description="trip id from POST /v1/trips")]
 
 
-def bearer_token(conn: HTTPConnection) -> str | None:
-    """The bearer token from ``Authorization``, else (WebSocket clients that cannot set headers) ``?token=``."""
+def bearer_token(conn: HTTPConnection, *, allow_query: bool = False) -> str | None:
+    """The bearer token from ``Authorization``; with ``allow_query`` (the WebSocket handshake) also ``?token=``.
+
+    A REST request carrying ``?token=`` is refused (401) rather than ignored, so the client learns why: a
+    token in a URL lands in proxies' and servers' logs."""
     auth = conn.headers.get("authorization")
     if auth:
         scheme, _, value = auth.partition(" ")
         if scheme.lower() == "bearer" and value.strip():
             return value.strip()
         return None
-    return conn.query_params.get("token") or None
+    if b"token" in conn.scope.get("query_string", b"") and "token" in conn.query_params:
+        if allow_query:
+            return conn.query_params.get("token") or None
+        raise ApiError(401, "token_in_query", "send the token in the 'Authorization: Bearer <token>' header; ?token= is accepted only on the WebSocket handshake",
+                       headers={"WWW-Authenticate": "Bearer"})  # fmt: skip
+    return None
 
 
 async def get_trip(conn: HTTPConnection, trip_id: TripId) -> Trip:
@@ -61,16 +74,33 @@ async def get_trip(conn: HTTPConnection, trip_id: TripId) -> Trip:
 TripDep = Annotated[Trip, Depends(get_trip)]
 
 
-async def require_api_key(conn: HTTPConnection) -> None:
-    """Creating trips needs one of ``ECO_API_KEYS`` as bearer token, when keys are configured."""
+def api_key_of(conn: HTTPConnection) -> str | None:
+    """The API key a request carries: ``X-API-Key``, else ``Authorization: Bearer``."""
+    return conn.headers.get(API_KEY_HEADER) or bearer_token(conn)
+
+
+def check_api_key(conn: HTTPConnection, what: str) -> str | None:
+    """None when no keys are configured; else the matching key's id (``key-<8 hex of its SHA-256>``), or 401/403."""
     keys = conn.app.state.settings.api_keys
     if not keys:
-        return
-    token = bearer_token(conn)
+        return None
+    token = api_key_of(conn)
     if token is None:
-        raise ApiError(401, "unauthorized", "creating a trip needs an API key: 'Authorization: Bearer <key>'", headers={"WWW-Authenticate": "Bearer"})
-    if not any(hmac.compare_digest(token.encode(), key.encode()) for key in keys):
-        raise ApiError(403, "forbidden", "this API key is not accepted")
+        raise ApiError(401, "unauthorized", f"{what} needs an API key: 'X-API-Key: <key>' or 'Authorization: Bearer <key>'", headers={"WWW-Authenticate": "Bearer"})
+    for key in keys:
+        if hmac.compare_digest(token.encode(), key.encode()):
+            return "key-" + hashlib.sha256(key.encode()).hexdigest()[:8]
+    raise ApiError(403, "forbidden", "this API key is not accepted")
 
 
-ApiKeyDep = Annotated[None, Depends(require_api_key)]
+def client_address(conn: HTTPConnection) -> str:
+    return conn.client.host if conn.client else "unknown"
+
+
+async def require_api_key(conn: HTTPConnection) -> str:
+    """Creating trips needs one of ``ECO_API_KEYS`` when keys are configured. Returns the client the trip is
+    counted against for quotas: the key's id, else (open creation) the client's address."""
+    return check_api_key(conn, "creating a trip") or f"addr-{client_address(conn)}"
+
+
+ApiKeyDep = Annotated[str, Depends(require_api_key)]

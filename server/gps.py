@@ -17,6 +17,11 @@ from spat_feed.corridors import WGS84, Corridor
 
 SPEED_WINDOW_S = 4.0
 """Positions of the last this many seconds give the speed when the fix has none. [s]"""
+JUMP_SLACK_M = 25.0
+"""A step along the route longer than ``max_speed_mps * dt`` plus this (two fixes' position errors) is a jump. [m]"""
+REANCHOR_FIXES = 5
+"""This many consecutive jumped fixes that agree with each other re-anchor the track: the track was the outlier
+(a bad first fix, a tunnel exit). Fewer are a glitch and stay rejected. [-]"""
 
 
 @dataclass(frozen=True, slots=True)
@@ -33,11 +38,13 @@ class Fix:
 
 @dataclass(frozen=True, slots=True)
 class Match:
-    """A fix placed on the route. ``offset_m``: geodesic distance from the fix to the route. [m]"""
+    """A fix placed on the route. ``station_m`` within [0, length]; ``route_m`` the same along the route extended
+    beyond its ends (negative before the entry); ``offset_m``: geodesic distance from the fix to the route. [m]"""
 
     station_m: float
     cross_track_m: float
     offset_m: float
+    route_m: float
 
 
 class RouteMatcher:
@@ -47,13 +54,13 @@ class RouteMatcher:
         self.corridor = corridor
 
     def match(self, lat_deg: float, lon_deg: float) -> Match:
-        station_m, cross_m = self.corridor.project(lat_deg, lon_deg)
-        offset_m = abs(cross_m)
+        route_m, cross_m = self.corridor.project(lat_deg, lon_deg)
+        station_m, offset_m = route_m, abs(cross_m)
         if station_m < 0.0 or station_m > self.corridor.length_m:  # beyond an end: distance to that end
             end = self.corridor.polyline[0 if station_m < 0.0 else -1]
             _, _, offset_m = WGS84.inv(end.lon_deg, end.lat_deg, lon_deg, lat_deg)
             station_m = min(max(station_m, 0.0), self.corridor.length_m)
-        return Match(float(station_m), float(cross_m), float(offset_m))
+        return Match(float(station_m), float(cross_m), float(offset_m), float(route_m))
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,12 +76,41 @@ class TrackPoint:
 class Track:
     """One trip's recent fixes: ordering, duplicates, speed from positions. Bounded memory."""
 
-    __slots__ = ("last_t_unix_s", "_recent", "dropout_s")
+    __slots__ = ("last_t_unix_s", "_recent", "dropout_s", "max_speed_mps", "_jumped", "reanchors")
 
-    def __init__(self, dropout_s: float = 5.0, keep: int = 8) -> None:
+    def __init__(self, dropout_s: float = 5.0, keep: int = 8, max_speed_mps: float = 50.0) -> None:
         self.last_t_unix_s: float | None = None
         self._recent: deque[tuple[float, float]] = deque(maxlen=keep)  # (t, station) of on-route fixes
         self.dropout_s = dropout_s
+        self.max_speed_mps = max_speed_mps
+        self._jumped: list[tuple[float, float]] = []  # consecutive rejected (t, station), bounded by REANCHOR_FIXES
+        self.reanchors = 0
+
+    def implausible(self, t_unix_s: float, station_m: float) -> str | None:
+        """Why an on-route fix at ``station_m`` cannot follow the track (a teleport), or None if it can.
+
+        Call after :meth:`order` said "ok". A rejected fix changes nothing but the jump memory: after
+        ``REANCHOR_FIXES`` consecutive ones that agree with each other, the next is accepted (re-anchor).
+        """
+        if not self._recent:
+            return None
+        t0, s0 = self._recent[-1]
+        dt = t_unix_s - t0
+        if abs(station_m - s0) <= self.max_speed_mps * dt + JUMP_SLACK_M:
+            self._jumped.clear()
+            return None
+        if self._jumped:
+            tj, sj = self._jumped[-1]
+            if abs(station_m - sj) > self.max_speed_mps * (t_unix_s - tj) + JUMP_SLACK_M:
+                self._jumped.clear()
+        if len(self._jumped) >= REANCHOR_FIXES:
+            self._jumped.clear()
+            self._recent.clear()
+            self.reanchors += 1
+            return None
+        self._jumped.append((t_unix_s, station_m))
+        return (f"a jump of {station_m - s0:+.0f} m along the route in {dt:.1f} s ({abs(station_m - s0) / max(dt, 1e-3):.0f} m/s, "
+                f"limit {self.max_speed_mps:g} m/s): ignored as a GPS glitch")  # fmt: skip
 
     def order(self, t_unix_s: float) -> str:
         """``"ok"`` for a fix newer than every fix so far, ``"duplicate"`` (same time) or ``"out_of_order"``."""

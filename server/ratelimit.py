@@ -28,3 +28,33 @@ class TokenBucket:
             self.tokens -= 1.0
             return 0.0
         return (1.0 - self.tokens) / self.rate_per_s
+
+
+class KeyedBuckets:
+    """One :class:`TokenBucket` per key (a client), at most ``max_keys`` of them: when full, the buckets that
+    have refilled (their owners idle) are dropped, else the oldest half. Bounded memory under many clients."""
+
+    __slots__ = ("rate_per_s", "burst", "max_keys", "_buckets")
+
+    def __init__(self, rate_per_s: float, burst: float, max_keys: int = 10_000) -> None:
+        self.rate_per_s, self.burst, self.max_keys = rate_per_s, burst, max_keys
+        self._buckets: dict[str, TokenBucket] = {}
+
+    def take(self, key: str, now_s: float | None = None) -> float:
+        """:meth:`TokenBucket.take` on ``key``'s bucket.
+
+        >>> b = KeyedBuckets(1.0, 1.0)
+        >>> b.take("a", 0.0), b.take("a", 0.0), b.take("b", 0.0)
+        (0.0, 1.0, 0.0)
+        """
+        bucket = self._buckets.get(key)
+        if bucket is None:
+            if len(self._buckets) >= self.max_keys:
+                self._evict(time.monotonic() if now_s is None else now_s)
+            bucket = self._buckets[key] = TokenBucket(self.rate_per_s, self.burst, now_s)
+        return bucket.take(now_s)
+
+    def _evict(self, now_s: float) -> None:
+        full = [k for k, b in self._buckets.items() if b.tokens + (now_s - b.stamp_s) * b.rate_per_s >= b.burst]
+        for k in full or list(self._buckets)[: len(self._buckets) // 2]:
+            del self._buckets[k]

@@ -1,14 +1,30 @@
-"""Request and response bodies of the API (pydantic). Units in field names; every float must be finite."""
+"""Request and response bodies of the API (pydantic). Units in field names; every float must be finite.
+
+Numbers are strict: a JSON number, never a string or ``true``. Output floats are rounded; each field's
+description gives its unit and precision (e.g. ``[m/s, 0.01]``). Times are Unix seconds (``*_unix_s``).
+"""
 
 from __future__ import annotations
 
+from enum import Enum
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
+
+from advisory.advice.advisor import ACTIONS, REASONS
+
+SERVER_REASONS = ("poor_gps", "no_speed", "no_fix")
+"""Pauses the service decides itself (``server.advising.SERVER_PHRASES``)."""
+Action = Enum("Action", {a: a for a in ACTIONS}, type=str)
+Action.__doc__ = "What the driver is advised to do; `none`: no speed advice (`reason` says why)."
+Reason = Enum("Reason", {r: r for r in (*REASONS, *SERVER_REASONS)}, type=str)
+Reason.__doc__ = "Why this advice (or why none)."
+MS_TIMESTAMP_MIN = 1e11
+"""A Unix time at or above this is milliseconds (1973 in ms; the year 5138 in seconds)."""
 
 
 class _In(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, strict=True)
 
 
 class _Out(BaseModel):
@@ -33,11 +49,15 @@ class TripCreate(_In):
     vehicle: str | None = Field(default=None, description="vehicle preset (paper_54kwh, paper_75kwh, calibrated)", max_length=50)
     entry_unix_s: float | None = Field(
         default=None,
-        description="zone-entry instant the simulated timing is relative to; default: the creation instant. Within the fix time limits of server time.",
+        description="zone-entry instant the simulated timing is relative to [Unix s]; default: the creation instant. At most 300 s from server time.",
+    )
+    units: Literal["metric", "imperial"] | None = Field(
+        default=None, description="speeds in the spoken messages: km/h (metric) or mph (imperial); default: the corridor's (metric if it has none)"
     )
 
 
 class TripLinks(_Out):
+    trip: str
     fixes: str
     advice: str
     stream: str
@@ -46,28 +66,61 @@ class TripLinks(_Out):
     end: str
 
 
-class TripCreated(_Out):
+class TripOut(_Out):
+    """A trip: its settings and where it stands."""
+
     trip_id: str
-    token: str = Field(description="bearer token for this trip only: 'Authorization: Bearer <token>' (WebSocket: also ?token=)")
-    token_type: Literal["bearer"] = "bearer"
     corridor: str
     timing: str
     vehicle: str
-    entry_unix_s: float = Field(description="the car is taken to enter the zone (station 0) at this instant: the trip's creation unless given")
-    created_unix_s: float
-    idle_ttl_s: float
+    units: Literal["metric", "imperial"]
+    entry_unix_s: float = Field(description="the car is taken to enter the zone (station 0) at this instant: the trip's creation unless given [Unix s, 0.001]")
+    created_unix_s: float = Field(description="[Unix s, 0.001]")
+    idle_ttl_s: float = Field(description="the trip is closed after this long without a request or stream message [s]")
+    n_fixes: int = Field(description="fixes accepted so far")
     links: TripLinks
 
 
-class GpsFixIn(_In):
-    """One GPS fix. Only time and position are required; speed over ground is used when present."""
+class TripCreated(TripOut):
+    token: str = Field(description="bearer token for this trip only: 'Authorization: Bearer <token>' (WebSocket handshake: also ?token=)")
+    token_type: Literal["bearer"] = "bearer"
 
-    t_unix_s: float = Field(description="fix time, Unix seconds (the advisory is computed at this instant)")
-    lat_deg: float = Field(ge=-90, le=90)
-    lon_deg: float = Field(ge=-180, le=180)
-    speed_mps: float | None = Field(default=None, ge=0, le=70, description="speed over ground; None: derived from positions")
-    heading_deg: float | None = Field(default=None, ge=0, le=360, description="course over ground, clockwise from true north")
-    accuracy_m: float | None = Field(default=None, ge=0, le=100_000, description="horizontal accuracy (1 sigma)")
+
+class GpsFixIn(_In):
+    """One GPS fix. Only time and position are required; speed over ground is used when present.
+
+    W3C Geolocation names are accepted too: `latitude`, `longitude`, `speed`, `heading`, `accuracy`, and
+    `timestamp` in milliseconds instead of `t_unix_s` (give one of the two).
+    """
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"t_unix_s": 1714557600.0, "lat_deg": 48.86675, "lon_deg": 2.31728, "speed_mps": 13.9, "heading_deg": 295.5, "accuracy_m": 4.0}]}
+    )
+
+    t_unix_s: float | None = Field(default=None, description="fix time [Unix s] (the advisory is computed at this instant); or `timestamp` [ms]")
+    timestamp: float | None = Field(default=None, description="fix time [Unix ms], as a W3C GeolocationPosition or JavaScript's Date.now() gives it")
+    lat_deg: float = Field(ge=-90, le=90, validation_alias=AliasChoices("lat_deg", "latitude"), description="WGS 84 [deg] (alias `latitude`)")
+    lon_deg: float = Field(ge=-180, le=180, validation_alias=AliasChoices("lon_deg", "longitude"), description="WGS 84 [deg] (alias `longitude`)")
+    speed_mps: float | None = Field(default=None, ge=0, le=70, validation_alias=AliasChoices("speed_mps", "speed"),
+                                    description="speed over ground [m/s] (alias `speed`); null: derived from positions")  # fmt: skip
+    heading_deg: float | None = Field(default=None, ge=0, le=360, validation_alias=AliasChoices("heading_deg", "heading"),
+                                      description="course over ground, clockwise from true north [deg] (alias `heading`)")  # fmt: skip
+    accuracy_m: float | None = Field(default=None, ge=0, le=100_000, validation_alias=AliasChoices("accuracy_m", "accuracy"),
+                                     description="horizontal accuracy [m] (alias `accuracy`)")  # fmt: skip
+
+    @model_validator(mode="after")
+    def _one_time(self) -> GpsFixIn:
+        if (self.t_unix_s is None) == (self.timestamp is None):
+            raise ValueError("give the fix time as t_unix_s (Unix seconds) or timestamp (Unix milliseconds), exactly one of them")
+        if self.t_unix_s is not None and self.t_unix_s >= MS_TIMESTAMP_MIN:
+            raise ValueError(f"t_unix_s = {self.t_unix_s:.0f} looks like milliseconds (JavaScript's Date.now()): divide by 1000, or send it as timestamp")
+        if self.timestamp is not None and self.timestamp < MS_TIMESTAMP_MIN:
+            raise ValueError(f"timestamp = {self.timestamp:g} looks like seconds: timestamp is in milliseconds (W3C Geolocation); send seconds as t_unix_s")
+        return self
+
+    @property
+    def time_unix_s(self) -> float:
+        return self.t_unix_s if self.t_unix_s is not None else self.timestamp / 1000.0
 
 
 class AdviceOut(_Out):
@@ -75,49 +128,70 @@ class AdviceOut(_Out):
 
     trip_id: str
     seq: int = Field(description="fixes accepted so far")
-    t_unix_s: float | None = Field(description="time of the fix the advice was computed for")
-    fix_status: Literal["ok", "duplicate", "out_of_order", "none"] = Field(
-        description="what happened to the fix just sent: used, or ignored as a duplicate / older than the last one (the latest advice is returned)"
+    t_unix_s: float | None = Field(description="time of the fix the advice was computed for [Unix s, 0.001]")
+    fix_status: Literal["ok", "duplicate", "out_of_order", "implausible", "none"] = Field(
+        description="what happened to the fix just sent: used; or ignored as a duplicate, as older than the last one, or as an implausible jump (a GPS glitch, `fix_note` says why): then the latest advice is returned"
     )
+    fix_note: str | None = Field(default=None, description="why the fix was ignored, when it was")
     on_route: bool
-    station_m: float | None = None
-    cross_track_m: float | None = None
-    offset_m: float | None = Field(default=None, description="distance from the fix to the route")
-    speed_mps: float | None = None
+    station_m: float | None = Field(default=None, description="distance along the corridor from the zone entry [m, 0.01]")
+    cross_track_m: float | None = Field(default=None, description="signed distance from the route, + to the right of travel [m, 0.01]")
+    offset_m: float | None = Field(default=None, description="distance from the fix to the route [m, 0.01]")
+    speed_mps: float | None = Field(default=None, description="speed used [m/s, 0.01]")
     speed_source: Literal["gps", "positions", "none"] = "none"
     next_intersection_id: int | None = None
-    distance_to_line_m: float | None = None
+    distance_to_line_m: float | None = Field(default=None, description="to the next stop line [m, 0.01]")
     spat_fresh: bool | None = None
-    action: str = Field(description="cruise, ease_off, accelerate, stop, resume or none (no speed advice)")
-    reason: str
-    target_speed_mps: float | None = None
-    light_red: bool | None = None
-    seconds_to_change_s: float | None = None
-    message: str = Field(description="what the driver hears")
-    speak: bool = False
-    source: str = "rules"
+    action: Action
+    reason: Reason
+    target_speed_mps: float | None = Field(default=None, description="advised speed [m/s, 0.01]")
+    light_red: bool | None = Field(default=None, description="the next light is red now")
+    seconds_to_change_s: float | None = Field(default=None, description="until the next light changes (to green when red, else to red) [s, 0.1]")
+    message: str = Field(description="what the driver hears, in the trip's units")
+    speak: bool = Field(default=False, description="say the message now (it changed meaningfully)")
+    source: Literal["rules", "dp_table", "service"] = Field(default="rules", description="rules, the DP lookup tables, or the service itself (pauses)")
 
 
 class DriverScoreOut(_Out):
-    distance_m: float
-    duration_s: float
-    exit_speed_mps: float
-    energy_kwh: float = Field(description="net battery energy in the zone plus re-acceleration to the limit")
-    soh_lost_frac: float
-    electricity_usd: float
-    wear_usd: float
-    cost_usd: float
+    """One driver over the zone, in the common end state (zone plus re-acceleration to the speed limit)."""
+
+    distance_m: float = Field(description="distance driven in the zone [m, 0.1]")
+    duration_s: float = Field(description="time from zone entry to exit [s, 0.01]")
+    exit_speed_mps: float = Field(description="speed at the zone exit [m/s, 0.01]")
+    energy_kwh: float = Field(description="net battery energy in the zone plus re-acceleration to the limit [kWh, 1e-6]")
+    soh_lost_frac: float = Field(description="battery state of health lost [fraction of life, 4 significant digits]")
+    electricity_usd: float = Field(description="[USD, 1e-6]")
+    wear_usd: float = Field(description="battery wear [USD, 1e-6]")
+    cost_usd: float = Field(description="electricity + wear [USD, 1e-6]")
+
+
+class RedLightCrossingOut(_Out):
+    """A stop line crossed while its light was red (beyond what GPS noise can explain)."""
+
+    light: int = Field(description="1 = the first light along the corridor")
+    intersection_id: int
+    t_unix_s: float = Field(description="when the car crossed the stop line [Unix s, 0.001]")
+    into_red_s: float = Field(description="how long the light had been red then [s, 0.1]")
+    speed_mps: float = Field(description="[m/s, 0.01]")
 
 
 class TripScoreOut(_Out):
+    """The trip's drive against the paper's regular driver entering when and as fast as the car did, through
+    the same signal timing; both sampled and smoothed alike (docs/SERVICE.md, Score)."""
+
     trip_id: str
     complete: bool = Field(description="the fixes cover the zone from entry to exit (else the comparison is indicative)")
-    n_fixes: int
-    coverage_frac: float
+    n_fixes: int = Field(description="on-route fixes inside the zone")
+    coverage_frac: float = Field(description="share of the zone covered by the fixes [0.0001]")
     vehicle: str
+    entry_unix_s: float = Field(description="when the car entered the zone (interpolated between fixes) [Unix s, 0.001]")
+    entry_speed_mps: float = Field(description="the car's speed then, the regular driver's entry speed [m/s, 0.01]")
     driven: DriverScoreOut | None
     regular: DriverScoreOut
-    savings_frac: dict[str, float] | None = Field(default=None, description="1 - driven / regular for energy, wear and cost")
+    savings_frac: dict[str, float] | None = Field(
+        default=None, description="1 - driven / regular for energy, wear and cost [0.0001]; null when there is no drive to compare or it crossed a red light"
+    )
+    red_light_crossings: list[RedLightCrossingOut] = Field(default_factory=list)
     note: str = ""
 
 

@@ -91,6 +91,12 @@ class Observation:
     on_route: bool = True
 
 
+ACTIONS = ("cruise", "ease_off", "coast", "slow_down", "brake_to", "accelerate", "stop", "resume", "none")
+"""Every ``Advice.action`` the advisor gives (the service's API enumerates these: keep them in step)."""
+REASONS = ("green_wave", "red_ahead", "past_lights", "off_route", "no_spat", "stale_spat", "low_confidence", "too_close", "short_wait")
+"""Every ``Advice.reason`` the advisor gives (the service's API enumerates these: keep them in step)."""
+
+
 @dataclass(frozen=True, slots=True)
 class Advice:
     """One advisory. ``action``: cruise, ease_off (lift off and coast down to the target, then hold it),

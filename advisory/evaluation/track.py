@@ -7,6 +7,8 @@ trajectory is consistent with its own speeds: map-matched stations are noisy, sp
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from advisory.trajectory import Trajectory
@@ -56,3 +58,167 @@ def trajectory_from_samples(t_s, speed_mps, x0_m: float = 0.0, t0_s: float | Non
     v = np.asarray(speed_mps, dtype=float)
     x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
     return Trajectory(t - (t[0] if t0_s is None else t0_s), x + x0_m, v)
+
+
+STANDSTILL_MPS = 0.2
+"""Smoothed speeds below this are taken as a standstill (receivers report small speeds at rest). [m/s]"""
+
+
+def smooth_speed_mps(t_s: np.ndarray, v_mps: np.ndarray, sigma_s: float) -> np.ndarray:
+    """Gaussian-weighted average of the speeds within ±3 ``sigma_s`` of each sample (uneven times allowed).
+
+    Examples
+    --------
+    >>> smooth_speed_mps(np.arange(5.0), np.array([0.0, 0.0, 3.0, 0.0, 0.0]), 1.0).round(3).tolist()
+    [0.232, 0.771, 1.208, 0.771, 0.232]
+    """
+    if sigma_s <= 0 or v_mps.size < 3:
+        return v_mps.copy()
+    min_dt = max(float(np.min(np.diff(t_s))), 0.05)
+    half = int(min(np.ceil(3.0 * sigma_s / min_dt), v_mps.size - 1))
+    num = np.zeros_like(v_mps)
+    den = np.zeros_like(v_mps)
+    n = v_mps.size
+    for k in range(-half, half + 1):
+        lo, hi = max(0, -k), min(n, n - k)
+        w = np.exp(-0.5 * ((t_s[lo + k : hi + k] - t_s[lo:hi]) / sigma_s) ** 2)
+        num[lo:hi] += w * v_mps[lo + k : hi + k]
+        den[lo:hi] += w
+    return num / den
+
+
+def level_crossing(t_s: np.ndarray, station_m: np.ndarray, level_m: float, start: int = 0) -> tuple[int, float] | None:
+    """(index k, instant) of the first sample at or past ``level_m`` (from ``start``), interpolated between samples k-1 and k.
+
+    ``None`` if the stations never reach it; ``k == start`` means the first sample is already past it.
+
+    Examples
+    --------
+    >>> level_crossing(np.array([0.0, 1.0, 2.0]), np.array([-10.0, 10.0, 30.0]), 0.0)
+    (1, 0.5)
+    """
+    above = np.flatnonzero(station_m[start:] >= level_m)
+    if above.size == 0:
+        return None
+    k = start + int(above[0])
+    if k == start:
+        return k, float(t_s[k])
+    frac = (level_m - station_m[k - 1]) / (station_m[k] - station_m[k - 1])
+    return k, float(t_s[k - 1] + frac * (t_s[k] - t_s[k - 1]))
+
+
+@dataclass(frozen=True, slots=True)
+class ZoneCut:
+    """A drive cut to the zone ``[0, length]``: samples ``(t, v)`` from the entry instant to the exit instant.
+
+    ``entry_seen`` / ``exit_seen``: the fixes bracket that edge (interpolated); otherwise the entry is
+    extrapolated back from the first fix inside, and the exit is the last fix (the drive is incomplete).
+    """
+
+    t_s: np.ndarray
+    v_mps: np.ndarray
+    t_in_s: float
+    t_out_s: float
+    entry_seen: bool
+    exit_seen: bool
+    first_station_m: float
+    last_station_m: float
+
+
+def cut_to_zone(t_s: np.ndarray, station_m: np.ndarray, v_mps: np.ndarray, length_m: float) -> ZoneCut | None:
+    """The part of a drive inside the zone, interpolated at its edges; ``None`` if it never reaches it.
+
+    Fixes outside ``[0, length_m]`` only serve to interpolate the entry and exit instants and speeds: they
+    are never moved onto the zone's ends. Stations are the fixes' (map-matched, extended beyond the ends).
+
+    Examples
+    --------
+    >>> z = cut_to_zone(np.arange(5.0), np.array([-15.0, 5.0, 25.0, 45.0, 65.0]), np.full(5, 20.0), 50.0)
+    >>> z.t_s.tolist(), (z.t_in_s, z.t_out_s, z.entry_seen, z.exit_seen)
+    ([0.75, 1.0, 2.0, 3.0, 3.25], (0.75, 3.25, True, True))
+    """
+    inside = np.flatnonzero(station_m <= length_m)
+    entry = level_crossing(t_s, station_m, 0.0)
+    if entry is None or inside.size == 0:
+        return None
+    k0, t_in = entry
+    entry_seen = not (k0 == 0 and station_m[0] > 0.0)
+    if not entry_seen:
+        t_in = entry_instant_s(t_s[0], station_m[0], v_mps[0])
+    exit_ = level_crossing(t_s, station_m, length_m, start=k0)
+    k1, t_out = (t_s.size, float(t_s[-1])) if exit_ is None else exit_
+    v_in = float(np.interp(t_in, t_s, v_mps))
+    v_out = float(np.interp(t_out, t_s, v_mps))
+    zt = np.concatenate([[t_in], t_s[k0:k1], [t_out]])
+    zv = np.concatenate([[v_in], v_mps[k0:k1], [v_out]])
+    keep = np.concatenate([[True], np.diff(zt) > 1e-6])  # a fix exactly on a crossing
+    zt, zv = zt[keep], zv[keep]
+    if zt.size < 2:
+        return None
+    inner = station_m[k0:k1] if k1 > k0 else station_m[k0 : k0 + 1]
+    return ZoneCut(zt, zv, float(t_in), float(t_out), entry_seen, exit_ is not None,
+                   max(float(station_m[k0]), 0.0) if entry_seen else float(station_m[0]), float(min(inner.max(), length_m)))  # fmt: skip
+
+
+RED_TOLERANCE_M = 3.0
+"""How far the recorded position at a stop line may be off (1 Hz GPS, map matching). A crossing counts as a
+red-light crossing only if the light is red for the time the car needs to cover this much on either side. [m]"""
+RED_TOLERANCE_S = 0.5
+"""Least time tolerance of that test (timestamps, 1 Hz interpolation). [s]"""
+ANCHOR_WINDOW_M = 60.0
+"""Fixes within this of a stop line anchor the integrated positions to the matched stations there. [m]"""
+
+
+@dataclass(frozen=True, slots=True)
+class RedCrossing:
+    """A stop line crossed while its light was red: which light (1-based along the route), when (on the
+    drive's time axis), how long after the red began, and the speed then. [-], [s], [s], [m/s]"""
+
+    light: int
+    position_m: float
+    t_s: float
+    into_red_s: float
+    speed_mps: float
+
+
+def red_light_crossings(traj: Trajectory, signals, t_station_s=None, station_m=None) -> list[RedCrossing]:
+    """
+    Stop lines the drive crossed while red, with measurement tolerance.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        The drive over the zone (positions integrated from speeds), on the signals' time axis.
+    signals : sequence
+        Lights with ``position_m``, ``is_red(t)`` and ``red_intervals(t0, t1)`` (``advisory.signals.FixedTimeSignal``
+        or an observed light with the same methods).
+    t_station_s, station_m : arrays (n,), optional
+        The fixes' times (same axis) and map-matched stations: near each line, the integrated positions are
+        shifted by the median of (station - integrated position) over the fixes within ``ANCHOR_WINDOW_M``,
+        so slow drift of the integration does not move the crossing, and GPS noise at a standstill (speed 0)
+        cannot fake one.
+
+    Returns
+    -------
+    list of RedCrossing
+        Crossings at an instant ``t`` such that the light is red from ``t - tol`` to ``t + tol``, ``tol`` =
+        max(``RED_TOLERANCE_S``, ``RED_TOLERANCE_M`` / speed): a crossing right at a red's start or end is
+        within what a recording can tell apart.
+    """
+    out = []
+    for n, light in enumerate(signals, start=1):
+        p = float(light.position_m)
+        shift = 0.0
+        if station_m is not None and len(station_m):
+            near = np.abs(np.asarray(station_m) - p) <= ANCHOR_WINDOW_M
+            if near.any():
+                shift = float(np.median(np.asarray(station_m)[near] - traj.position_at(np.asarray(t_station_s)[near])))
+        t_c = traj.crossing_time_s(p - shift)
+        if not np.isfinite(t_c):
+            continue
+        v_c = float(traj.speed_at(t_c))
+        tol = max(RED_TOLERANCE_S, RED_TOLERANCE_M / max(v_c, 0.1))
+        if bool(light.is_red(t_c - tol)) and bool(light.is_red(t_c)) and bool(light.is_red(t_c + tol)):
+            start = max((s for s, e in light.red_intervals(t_c - 3600.0, t_c) if s <= t_c < e), default=t_c)
+            out.append(RedCrossing(n, p, float(t_c), float(t_c - start), v_c))
+    return out

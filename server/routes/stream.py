@@ -1,8 +1,11 @@
 """WebSocket stream: GPS fixes in, advisories out (one advisory per fix), for the trip's lifetime.
 
-Authenticate with ``Authorization: Bearer <trip token>`` or ``?token=<trip token>``. A refused connection is
-accepted, told why (``{"error": ..., "status": 401|403|404}``) and closed with code 4000 + HTTP status. A bad
-message gets an error object and the stream goes on; nothing about the trip changes.
+Authenticate with ``Authorization: Bearer <trip token>`` or ``?token=<trip token>`` (the handshake is the
+one place a token may ride in the URL: browsers cannot set headers there). A refused connection is
+accepted, told why (``{"error": ..., "status": 401|403|404|429}``) and closed with code 4000 + HTTP
+status. A bad message gets an error object and the stream goes on; nothing about the trip changes. Every
+message keeps the trip alive (``last_seen``). At most ``ws_max_per_trip`` streams per trip and
+``ws_max_per_client`` per client address are open at once (4429 beyond).
 """
 
 from __future__ import annotations
@@ -14,11 +17,35 @@ from pydantic import ValidationError
 from pydantic_core import to_json
 
 from server.advising import fix_from_schema
-from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token
+from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
 from server.errors import ApiError, clean_errors, validation_summary
 from server.schemas import GpsFixIn
 
 router = APIRouter(prefix="/v1/trips", tags=["stream"])
+
+
+class StreamCounts:
+    """Open streams per trip and per client address (bounded: entries leave at zero)."""
+
+    def __init__(self) -> None:
+        self.by_trip: dict[str, int] = {}
+        self.by_client: dict[str, int] = {}
+
+    def open(self, trip_id: str, client: str, per_trip: int, per_client: int) -> None:
+        if self.by_trip.get(trip_id, 0) >= per_trip:
+            raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
+        if per_client and self.by_client.get(client, 0) >= per_client:
+            raise ApiError(429, "too_many_streams", f"this client address already has {per_client} open streams")
+        self.by_trip[trip_id] = self.by_trip.get(trip_id, 0) + 1
+        self.by_client[client] = self.by_client.get(client, 0) + 1
+
+    def close(self, trip_id: str, client: str) -> None:
+        for table, key in ((self.by_trip, trip_id), (self.by_client, client)):
+            left = table.get(key, 1) - 1
+            if left > 0:
+                table[key] = left
+            else:
+                table.pop(key, None)
 
 
 def _error(exc: ApiError) -> str:
@@ -28,8 +55,11 @@ def _error(exc: ApiError) -> str:
 @router.websocket("/{trip_id}/stream")
 async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: MetricsDep, settings: SettingsDep) -> None:
     await ws.accept()
+    counts: StreamCounts = ws.app.state.streams
+    client = client_address(ws)
     try:
-        trip = engine.trips.authorize(trip_id, bearer_token(ws))
+        trip = engine.trips.authorize(trip_id, bearer_token(ws, allow_query=True))
+        counts.open(trip.id, client, settings.ws_max_per_trip, settings.ws_max_per_client)
     except ApiError as exc:
         await ws.send_text(_error(exc))
         await ws.close(code=4000 + exc.status, reason=exc.error)
@@ -41,6 +71,7 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
             message = await ws.receive()
             if message["type"] == "websocket.disconnect":
                 break
+            engine.trips.touch(trip)
             text = message.get("text")
             if text is None:
                 data = message.get("bytes") or b""
@@ -67,4 +98,5 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
     except WebSocketDisconnect:
         pass
     finally:
+        counts.close(trip.id, client)
         metrics.ws_open.dec()

@@ -13,7 +13,8 @@ from fastapi.concurrency import run_in_threadpool
 
 from server.advising import Engine, fix_from_schema
 from server.deps import ApiKeyDep, EngineDep, MetricsDep, TripDep, TripId, bearer_token
-from server.schemas import AdviceOut, ErrorOut, GpsFixIn, TripCreate, TripCreated, TripLinks, TripScoreOut
+from server.schemas import AdviceOut, ErrorOut, GpsFixIn, TripCreate, TripCreated, TripLinks, TripOut, TripScoreOut
+from server.trips import Trip
 from server.score import trip_score
 
 router = APIRouter(prefix="/v1/trips", tags=["trips"])
@@ -21,27 +22,41 @@ router = APIRouter(prefix="/v1/trips", tags=["trips"])
 ERRORS = {code: {"model": ErrorOut} for code in (401, 403, 404, 422, 429)}
 
 
-@router.post("", response_model=TripCreated, status_code=201, responses={401: {"model": ErrorOut}, 403: {"model": ErrorOut}, 422: {"model": ErrorOut}, 429: {"model": ErrorOut}, 503: {"model": ErrorOut}})
-async def create_trip(body: TripCreate, engine: EngineDep, metrics: MetricsDep, _: ApiKeyDep) -> TripCreated:
-    """Start a trip: a car on a corridor. Returns its id and a bearer token valid for this trip only.
-
-    With the simulated SPaT feed, the lights' timing is relative to the trip's **creation** instant (or
-    ``entry_unix_s``): the car is taken to enter the zone (station 0) then.
-    """
-    trip = await engine.create_trip(body)
-    metrics.trips_created.inc()
+def _trip_out(trip: Trip, engine: Engine) -> dict:
     base = f"/v1/trips/{trip.id}"
-    return TripCreated(
+    return dict(
         trip_id=trip.id,
-        token=trip.token,
         corridor=trip.corridor.name,
         timing=trip.timing,
         vehicle=trip.vehicle,
-        entry_unix_s=trip.entry_unix_s,
-        created_unix_s=trip.created_unix_s,
+        units=trip.units,
+        entry_unix_s=round(trip.entry_unix_s, 3),
+        created_unix_s=round(trip.created_unix_s, 3),
         idle_ttl_s=engine.settings.trip_idle_ttl_s,
-        links=TripLinks(fixes=f"{base}/fixes", advice=f"{base}/advice", stream=f"{base}/stream", audio=f"{base}/advice.wav", spat=f"{base}/spat", end=f"{base}/end"),
+        n_fixes=trip.n_fixes,
+        links=TripLinks(trip=base, fixes=f"{base}/fixes", advice=f"{base}/advice", stream=f"{base}/stream", audio=f"{base}/advice.wav", spat=f"{base}/spat", end=f"{base}/end"),
     )
+
+
+@router.post("", response_model=TripCreated, status_code=201, responses={401: {"model": ErrorOut}, 403: {"model": ErrorOut}, 422: {"model": ErrorOut}, 429: {"model": ErrorOut}, 503: {"model": ErrorOut}})
+async def create_trip(body: TripCreate, engine: EngineDep, metrics: MetricsDep, client: ApiKeyDep, response: Response) -> TripCreated:
+    """Start a trip: a car on a corridor. Returns its id and a bearer token valid for this trip only
+    (`Location` gives the trip's URL).
+
+    With the simulated SPaT feed, the lights' timing is relative to the trip's **creation** instant (or
+    `entry_unix_s`): the car is taken to enter the zone (station 0) then.
+    """
+    trip = await engine.create_trip(body, client)
+    metrics.trips_created.inc()
+    response.headers["Location"] = f"/v1/trips/{trip.id}"
+    return TripCreated(**_trip_out(trip, engine), token=trip.token)
+
+
+@router.get("/{trip_id}", response_model=TripOut, responses=ERRORS)
+async def get_trip(trip: TripDep, engine: EngineDep) -> TripOut:
+    """The trip: its corridor, timing, vehicle, units, entry and fixes so far."""
+    engine.rate_limit(trip)
+    return TripOut(**_trip_out(trip, engine))
 
 
 _FIX_BODY = {"required": True, "content": {"application/json": {"schema": GpsFixIn.model_json_schema()}}}
@@ -65,10 +80,12 @@ class DirectRoute(APIRoute):
 async def post_fix(trip_id: TripId, request: Request) -> Response:
     """Send one GPS fix; get the advisory computed at the fix's time.
 
-    Duplicate or older fixes are ignored (``fix_status``), the latest advisory is returned. This is the hot
-    path (a :class:`DirectRoute`): the token is checked first (401 / 403 / 404, as for every trip route),
-    then the body is validated by pydantic straight from the raw bytes (422 with the same error shape as
-    FastAPI's), then the fix goes inline on the event loop (well under a millisecond of pure computation,
+    Duplicate, older and implausible fixes (a jump along the route no car makes) are ignored: `fix_status`
+    says so and the latest advisory is returned.
+    \f
+    The hot path (a :class:`DirectRoute`): the token is checked first (401 / 403 / 404, as for every trip
+    route), then the body is validated by pydantic straight from the raw bytes (422 with the same error shape
+    as FastAPI's), then the fix goes inline on the event loop (well under a millisecond of pure computation,
     cheaper than a thread hop).
     """
     engine: Engine = request.app.state.engine
@@ -120,5 +137,16 @@ async def end_trip(trip: TripDep, engine: EngineDep, metrics: MetricsDep) -> Tri
     """End the trip (its token stops working) and score it: energy, wear and cost, against the regular driver."""
     trip = await engine.end_trip(trip.id)
     metrics.trips_closed.labels("ended").inc()
+    return await run_in_threadpool(score_of, trip, engine.settings.speed_limit_mps)
+
+
+def score_of(trip: Trip, speed_limit_mps: float) -> TripScoreOut:
+    """The ended trip's score (``server.score.trip_score``) from what it recorded."""
     t, v, x = (np.frombuffer(a, dtype=np.float64).copy() for a in (trip.trace_t, trip.trace_v, trip.trace_x))
-    return await run_in_threadpool(trip_score, trip.id, trip.scenario, trip.vehicle, t, v, x, engine.settings.speed_limit_mps)
+    notes = []
+    if trip.n_rejected:
+        notes.append(f"{trip.n_rejected} fix(es) ignored as implausible jumps")
+    if trip.track.reanchors:
+        notes.append(f"the track was re-anchored {trip.track.reanchors} time(s) after consistent jumps: the comparison is indicative")
+    observed = None if trip.observed is None else trip.observed.runs
+    return trip_score(trip.id, trip.scenario, trip.vehicle, t, v, x, speed_limit_mps, observed=observed, notes=notes)

@@ -21,6 +21,9 @@ SERVICE_ENV = {
     "ECO_DEFAULT_CORRIDOR": "paper_s200",
     "ECO_RATE_PER_S": "50",
     "ECO_RATE_BURST": "60",
+    "ECO_CREATE_RATE_PER_CLIENT_PER_S": "100",  # the tests create many trips from one address
+    "ECO_CREATE_BURST_PER_CLIENT": "500",
+    "ECO_MAX_TRIPS_PER_CLIENT": "5000",
 }
 
 

@@ -57,7 +57,7 @@ def test_health_corridors_openapi(client):
 
 
 def test_drive_the_corridor_with_noise_dropouts_duplicates(client, s200):
-    trip_id, auth, created = new_trip(client, corridor="paper_s200", timing="15_15")
+    trip_id, auth, created = new_trip(client, corridor="paper_s200", timing="15_15", entry_unix_s=time.time() - 30)  # fixes in the past: none ahead of the server's clock
     t0 = created["entry_unix_s"]
     before = check_advice(client.get(f"/v1/trips/{trip_id}/advice", headers=auth).json())
     assert before["reason"] == "no_fix" and before["seq"] == 0
@@ -93,7 +93,7 @@ def test_drive_the_corridor_with_noise_dropouts_duplicates(client, s200):
     spat = client.get(f"/v1/trips/{trip_id}/spat", headers=auth).json()
     assert [i["id"] for i in spat["intersections"]] == [1, 2]
     score = client.post(f"/v1/trips/{trip_id}/end", headers=auth).json()
-    assert score["regular"]["energy_kwh"] > 0 and score["driven"]["energy_kwh"] > 0 and score["n_fixes"] == 18
+    assert score["regular"]["energy_kwh"] > 0 and score["driven"]["energy_kwh"] > 0 and score["n_fixes"] in (17, 18)  # inside the zone (the first at ~0 m +- noise)
     assert set(score["savings_frac"]) == {"energy", "wear", "cost"}
     assert client.get(f"/v1/trips/{trip_id}/advice", headers=auth).status_code == 404  # ended
 
@@ -197,7 +197,7 @@ def test_websocket_stream(service, client, s200):
 
     async def run():
         async with websockets.connect(url + f"?token={auth['Authorization'][7:]}", open_timeout=10) as ws:
-            t0 = time.time()
+            t0 = time.time() - 20
             out = []
             for k in range(5):
                 await ws.send(json.dumps(fix_at(s200, 20.0 * k, t0 + k)))
