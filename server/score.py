@@ -40,8 +40,8 @@ EDGE_M = 25.0
 """A drive counts as complete if its fixes start within this of the zone entry and cross the exit. [m]"""
 SMOOTH_S = 1.0
 """Gaussian smoothing (standard deviation) of both drivers' speeds. With 0.2 m/s of white speed noise at 1 Hz it
-leaves ~0.1 m/s; measured on the 16 paper timings, the regular driver's own noisy drive then scores -0.6 % on
-average (±1.8 % sd) instead of -4.7 % (±5.9 %) unsmoothed (tests/server/test_score.py). [s]"""
+leaves ~0.1 m/s: on the 16 paper timings the regular driver's own noisy drive scores -0.1 % energy on average
+(sd 0.9 %, worst 2.1 %; tests/server/test_score.py); unsmoothed -4.7 % (sd 5.9 %, worst 21 %). [s]"""
 
 
 class ObservedSignal:
@@ -88,26 +88,6 @@ def _out(score: EndStateScore, traj: Trajectory) -> DriverScoreOut:
         wear_usd=round(score.wear_usd, 6),
         cost_usd=round(score.cost_usd, 6),
     )
-
-
-ENTRY_FIT_S = 2.0
-"""The entry speed is the least-squares line through the raw speeds within this of the entry instant (unbiased
-under constant acceleration, unlike the smoothed speed; noise shrinks with the number of fixes). [s]"""
-
-
-def entry_speed_mps(t_s: np.ndarray, v_mps: np.ndarray, t_in_s: float) -> float:
-    """The car's speed at ``t_in_s`` from the raw speeds around it (a line through those within ``ENTRY_FIT_S``).
-
-    Examples
-    --------
-    >>> entry_speed_mps(np.arange(6.0), np.array([10.0, 12.0, 14.0, 16.0, 18.0, 20.0]), 2.5)
-    15.0
-    """
-    near = np.abs(t_s - t_in_s) <= ENTRY_FIT_S
-    if np.count_nonzero(near) < 2:
-        return float(np.interp(t_in_s, t_s, v_mps))
-    slope, icpt = np.polyfit(t_s[near] - t_in_s, v_mps[near], 1)
-    return round(float(icpt), 9)
 
 
 def _pipeline(t_s: np.ndarray, v_mps: np.ndarray) -> np.ndarray:
@@ -167,7 +147,8 @@ def trip_score(
         notes.append("fewer than two on-route fixes reaching the zone: nothing to score for the drive; the regular driver enters at the trip's entry instant at the limit")
     else:
         entry_s = zone.t_in_s
-        v_in = float(min(max(entry_speed_mps(t, raw_v, entry_s), 0.0), speed_limit_mps))
+        v_in = float(min(max(zone.v_mps[0], 0.0), speed_limit_mps))
+    v_seen = v_in if zone is None else float(np.interp(entry_s, t, raw_v))  # as recorded: between the fixes around the entry
     lights = advisory_scenario_at(scenario, entry_s, speed_limit_mps)
     if observed is not None:
         signals = tuple(ObservedSignal(ix.stop_line_m, observed.get(ix.id, ()), entry_s) for ix in scenario.corridor.intersections)
@@ -184,12 +165,19 @@ def trip_score(
     else:
         fix_t = zone.t_s[1:-1] - entry_s if zone.t_s.size > 2 else zone.t_s - entry_s
         regular_traj = sampled_like(exact_regular, fix_t, length_m)
+        # measured alike, the regular driver must enter exactly as fast as the trip was measured to: one
+        # correction of its entry speed by the difference its own measurement makes (1 Hz across a kink)
+        v_fix = float(min(max(v_in + (zone.v_mps[0] - regular_traj.v_mps[0]), 0.0), speed_limit_mps))
+        if abs(v_fix - v_in) > 1e-6:
+            lights = replace(lights, initial_speed_mps=v_fix)
+            regular_traj = sampled_like(regular_driver(lights), fix_t, length_m)
         traj = trajectory_from_samples(zone.t_s, zone.v_mps, 0.0, t0_s=entry_s)
         driven = score_in_end_state(traj, params, speed_limit_mps)
         regular = score_in_end_state(regular_traj, params, speed_limit_mps)
         driven_out = _out(driven, traj)
         complete = zone.first_station_m <= EDGE_M and zone.exit_seen
-        coverage = max(0.0, min(zone.last_station_m, length_m) - max(zone.first_station_m, 0.0)) / length_m
+        covered = (length_m if zone.exit_seen else zone.last_station_m) - (0.0 if zone.entry_seen else zone.first_station_m)
+        coverage = max(0.0, covered) / length_m
         crossings = red_light_crossings(traj, lights.signals, t - entry_s, x)
         if crossings:
             notes.append("crossed a red light: this drive is not reported as a saving")
@@ -212,7 +200,7 @@ def trip_score(
         coverage_frac=round(min(coverage, 1.0), 4),
         vehicle=vehicle,
         entry_unix_s=round(entry_s, 3),
-        entry_speed_mps=round(v_in, 2),
+        entry_speed_mps=round(v_seen, 2),
         driven=driven_out,
         regular=_out(regular_score, regular_traj),
         savings_frac=savings,
