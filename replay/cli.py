@@ -39,6 +39,9 @@ def render_score(score: DriveScore, title: str) -> str:
     return "\n".join([title] + [f"  {k:<{width}}  {v}" for k, v in rows])
 
 
+COLUMN_WORDS = {"t_s": "time", "lat_deg": "latitude", "lon_deg": "longitude", "speed_mps": "speed", "heading_deg": "heading", "accuracy_m": "accuracy"}
+
+
 def render_drive(result, title: str) -> str:
     """The GPS report: trace and corridor, the zone score, the comparison table, notes."""
     m = result.matched
@@ -50,6 +53,8 @@ def render_drive(result, title: str) -> str:
         f"  timing     {result.timing or '-'}" + (f", anchored at entry_unix_s {result.entry_unix_s:.3f}" if result.entry_unix_s is not None else ""),
         f"  fixes      {fx['n']} ({fx['on_route']} on route, median cross-track {fx['median_cross_track_m'] or 0:.1f} m), "
         f"speed from {fx['speed_source']}, smoothed {result.smooth_s:g} s",
+        f"  read       {result.trace.columns.get('file', '?')}: " + "; ".join(
+            f"{COLUMN_WORDS.get(k, k)} from {v}" for k, v in result.trace.columns.items() if k != "file"),
         f"  zone entry {result.zone_entry_unix_s:.2f} (Unix s); {'complete' if result.complete else 'INCOMPLETE'}",
         "",
         render_score(result.zone, "Recorded drive over the zone"),

@@ -146,6 +146,7 @@ class DriveResult:
                 "median_cross_track_m": float(np.median(np.abs(m.cross_track_m[on]))) if on.any() else None,
                 "speed_source": self.speed_source,
                 "smooth_s": self.smooth_s,
+                "columns": self.trace.columns,
             },
             **self.zone.as_dict(),
             "comparison": {
