@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 
 from advisory.advice.advisor import AdvisorParams
 from advisory.physics.params import model_params
@@ -30,6 +31,7 @@ from server.config import Settings
 from server.errors import install_handlers
 from server.metrics import Metrics
 from server.middleware import GuardMiddleware
+from server.openapi import install_docs
 from server.routes import audio, corridors, health, stream, trips
 from server.score import trip_score
 from server.spat import RemoteFeed
@@ -136,7 +138,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
             if remote is not None:
                 await remote.close()
 
-    app = FastAPI(title="ecodrive advisory service", version="1.0.0", description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(title="ecodrive advisory service", version="1.0.0", description=DESCRIPTION, lifespan=lifespan, docs_url=None, redoc_url=None, openapi_url=None)
     app.state.settings = settings
     speech = Speech(settings.speech, settings.audio_cache_size)
     app.state.speech = speech
@@ -148,9 +150,12 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     # (each router carries its own prefix and tags; no include-level options are used): FastAPI's
     # include_router adds a nested matching level per router. Together ~25 us less per fix (docs/SERVICE.md).
     for module in (health, trips, stream, corridors, audio):
-        app.router.routes.extend(module.router.routes)
-    docs = [r for r in app.router.routes if getattr(r, "path", None) in (app.openapi_url, app.docs_url, app.redoc_url, app.swagger_ui_oauth2_redirect_url)]
-    app.router.routes[:] = [r for r in app.router.routes if r not in docs] + docs
+        app.router.routes.extend(r for r in module.router.routes if not (getattr(r, "path", "") == "/metrics" and settings.metrics_access == "off"))
+    default = corridors_[settings.default_corridor]
+    install_docs(app, default.position(min(50.0, default.length_m / 2)), default.name)  # last: the documentation pages
     install_handlers(app)
     app.add_middleware(GuardMiddleware, max_body_bytes=settings.max_body_bytes, metrics=metrics)
+    if settings.cors_origins:  # outermost: answers browsers' preflight requests (docs/SERVICE.md, CORS)
+        app.add_middleware(CORSMiddleware, allow_origins=list(settings.cors_origins), allow_methods=["GET", "POST"],
+                           allow_headers=["Authorization", "Content-Type", "X-API-Key"], expose_headers=["Location", "Retry-After"], max_age=600)  # fmt: skip
     return app

@@ -104,3 +104,12 @@ async def require_api_key(conn: HTTPConnection) -> str:
 
 
 ApiKeyDep = Annotated[str, Depends(require_api_key)]
+
+
+async def metrics_access(conn: HTTPConnection) -> None:
+    """``/metrics`` needs an API key when ``ECO_METRICS_ACCESS=api_key`` (the default) and keys are set."""
+    if conn.app.state.settings.metrics_access == "api_key":
+        check_api_key(conn, "reading metrics")
+
+
+MetricsAccessDep = Annotated[None, Depends(metrics_access)]

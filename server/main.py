@@ -4,12 +4,57 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 from collections.abc import Sequence
 
 import uvicorn
 
 from server.app import create_app
 from server.config import Settings
+from server.protocol import protocol_class
+
+log = logging.getLogger("server")
+
+SECRET_IN_URL = re.compile(r"((?:^|[?&])(?:token|api_key|apikey|key|access_token)=)[^&\s\"]*", re.IGNORECASE)
+"""Query parameters that carry a credential: their values never reach a log line."""
+
+
+def redact(text: str) -> str:
+    """A URL or log line with credential values in its query replaced by ``***``.
+
+    >>> redact("/v1/trips/abc/stream?token=abc.def&x=1")
+    '/v1/trips/abc/stream?token=***&x=1'
+    """
+    return SECRET_IN_URL.sub(r"\1***", text)
+
+
+class RedactSecrets(logging.Filter):
+    """Rewrites a record's message and arguments with :func:`redact` (uvicorn's access and WebSocket lines
+    carry the full path with its query)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.msg, str) and "=" in record.msg:
+            record.msg = redact(record.msg)
+        if isinstance(record.args, tuple):
+            record.args = tuple(redact(a) if isinstance(a, str) and "=" in a else a for a in record.args)
+        return True
+
+
+def install_log_redaction() -> None:
+    for name in ("uvicorn.access", "uvicorn.error", "uvicorn"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, RedactSecrets) for f in logger.filters):
+            logger.addFilter(RedactSecrets())
+
+
+def warn_if_open(settings: Settings) -> None:
+    if not settings.api_keys:
+        log.warning(
+            "\n" + "!" * 100 + "\nTRIP CREATION IS OPEN: no ECO_API_KEYS set, so anyone who reaches this service can create trips "
+            "(up to %d per client address, %d in all).\nSet ECO_API_KEYS=<key1,key2> to require 'X-API-Key' (or 'Authorization: Bearer <key>') on POST /v1/trips.\n"
+            + "!" * 100,
+            settings.max_trips_per_client, settings.max_trips,
+        )  # fmt: skip
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -25,18 +70,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
     settings = Settings()
+    warn_if_open(settings)
     app = create_app(settings)
-    uvicorn.run(
+    config = uvicorn.Config(
         app,
         host=args.host,
         port=args.port,
         log_level=args.log_level,
         access_log=not args.no_access_log,
+        http=protocol_class(settings.read_timeout_s, settings.max_connections, settings.max_connections_per_client),
         ws=args.ws,
         ws_max_size=settings.ws_max_message_bytes,
         ws_per_message_deflate=False,
+        timeout_keep_alive=settings.keep_alive_s,
         timeout_graceful_shutdown=5,
     )
+    install_log_redaction()  # after uvicorn's Config has set up its loggers
+    uvicorn.Server(config).run()
     return 0
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, ProcessCollector, generate_latest
 from prometheus_client.exposition import CONTENT_TYPE_LATEST
 
 __all__ = ["Metrics", "CONTENT_TYPE_LATEST"]
@@ -27,6 +27,7 @@ class Metrics:
         self.ws_open = Gauge("ecodrive_ws_connections", "open WebSocket streams", registry=r)
         self.trips_open = Gauge("ecodrive_trips_open", "open trips", registry=r)
         self.trips_open.set_function(open_trips)
+        ProcessCollector(registry=r)  # process_resident_memory_bytes, process_open_fds, process_max_fds, CPU seconds (Linux /proc)
 
     def observe_advice(self, trip, advice, outcome: str, seconds: float) -> None:
         self.child(self.fixes, outcome).inc()

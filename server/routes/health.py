@@ -6,7 +6,7 @@ import time
 
 from fastapi import APIRouter, Response
 
-from server.deps import EngineDep, MetricsDep, SettingsDep, SpeechDep
+from server.deps import EngineDep, MetricsAccessDep, MetricsDep, SettingsDep, SpeechDep
 from server.metrics import CONTENT_TYPE_LATEST
 from server.schemas import HealthOut
 
@@ -27,6 +27,6 @@ async def health(engine: EngineDep, settings: SettingsDep, speech: SpeechDep) ->
 
 
 @router.get("/metrics", response_class=Response, responses={200: {"content": {CONTENT_TYPE_LATEST: {}}, "description": "Prometheus metrics"}})
-async def metrics(metrics: MetricsDep) -> Response:
-    """Prometheus metrics: requests, fixes, advisories, trips, WebSocket streams."""
+async def metrics(metrics: MetricsDep, _: MetricsAccessDep) -> Response:
+    """Prometheus metrics: requests, fixes, advisories, trips, WebSocket streams, process memory and open files."""
     return Response(metrics.render(), media_type=CONTENT_TYPE_LATEST)
