@@ -47,14 +47,17 @@ class GuardMiddleware:
                     return
                 break
         seen = 0
+        gone = False  # the client went away before it was answered
 
         async def limited_receive():
-            nonlocal seen
+            nonlocal seen, gone
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > limit:
                     raise _too_large(limit)
+            elif message["type"] == "http.disconnect" and status == 500:
+                gone = True
             return message
 
         status = 500
@@ -69,10 +72,12 @@ class GuardMiddleware:
         try:
             await self.app(scope, limited_receive, counting_send)
         except ClientDisconnect:
-            status = CLIENT_CLOSED
-            client = scope.get("client") or ("?",)
-            log.info("%s: client disconnected before its %s %s request was complete", client[0], scope.get("method", ""), scope.get("path", ""))
+            gone = True
         finally:
+            if gone:  # whatever the app made of it (FastAPI answers a body it could not read with 400), nobody heard it
+                status = CLIENT_CLOSED
+                client = scope.get("client") or ("?",)
+                log.info("%s: client disconnected before its %s %s request was complete", client[0], scope.get("method", ""), scope.get("path", ""))
             self._count(scope, status, time.perf_counter() - started)
 
     def _count(self, scope, status: int, seconds: float) -> None:

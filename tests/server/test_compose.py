@@ -20,6 +20,7 @@ def test_compose_wiring():
     assert svc["environment"]["ECO_SPAT_FEED_URL"] == "http://spat-feed:8765"
     assert svc["depends_on"]["spat-feed"]["condition"] == "service_healthy"
     assert svc["command"][:2] == ["ecodrive", "serve"] and "0.0.0.0" in svc["command"]
+    assert svc["environment"]["ECO_API_KEYS"].startswith("${ECO_API_KEYS:?")  # creation is never open in a deployment
 
 
 def test_compose_file_validates_with_the_client():
@@ -29,5 +30,7 @@ def test_compose_file_validates_with_the_client():
         cmd = ["docker", "compose", "-f", "docker-compose.yml", "config", "-q"]
     else:
         pytest.skip("no docker compose client installed")
-    r = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=60)
+    import os
+
+    r = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=60, env={**os.environ, "ECO_API_KEYS": "test-key"})
     assert r.returncode == 0, r.stderr

@@ -1,0 +1,127 @@
+"""Hardening probed as an attacker would, against real ``python -m server`` processes on loopback (issue 15).
+
+Every wait is bounded; nothing asserts on speed. The "attacker" connects from 127.0.0.2 (Linux routes all
+of 127/8 to loopback), honest clients from 127.0.0.1, so per-address caps can be told apart.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import time
+
+import httpx
+import pytest
+import websockets
+
+from tests.server.conftest import SERVICE_ENV, Proc
+
+ATTACKER = "127.0.0.2"
+
+
+def _proc(tmp_path, *, access_log: bool = False, **env) -> Proc:
+    args = ["-m", "server", "--log-level", "info"] + ([] if access_log else ["--no-access-log"])
+    return Proc(args, tmp_path / "service.log", {**SERVICE_ENV, "ECO_CORRIDORS": "paper_s200", "ECO_DEFAULT_CORRIDOR": "paper_s200",
+                                                 "ECO_TABLES": "false", "ECO_SPEECH": "false", **env})  # fmt: skip
+
+
+def _sock(port: int, source: str = ATTACKER) -> socket.socket:
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.bind((source, 0))
+    s.settimeout(15)
+    s.connect(("127.0.0.1", port))
+    return s
+
+
+def _read_all(s: socket.socket, limit_s: float = 15.0) -> bytes:
+    """Everything the server sends until it closes (bounded)."""
+    s.settimeout(limit_s)
+    out = b""
+    try:
+        while chunk := s.recv(65536):
+            out += chunk
+    except (TimeoutError, ConnectionResetError):
+        pass
+    return out
+
+
+def test_half_sent_requests_are_timed_out_and_capped(start_proc, tmp_path):
+    """Finding: 1,000 half-sent requests stayed open 40 s; with a 1,024-file limit /health failed 20 of 20."""
+    svc = start_proc(_proc(tmp_path, ECO_READ_TIMEOUT_S="2", ECO_MAX_CONNECTIONS_PER_CLIENT="50"))
+    half_header = [_sock(svc.port) for _ in range(30)]
+    for s in half_header:
+        s.sendall(b"GET /health HTTP/1.1\r\nHost: x\r\n")  # never finished
+    silent = [_sock(svc.port) for _ in range(10)]  # never sends a byte
+    trip = httpx.post(svc.base_url + "/v1/trips", json={}, timeout=10).json()
+    half_body = _sock(svc.port)
+    half_body.sendall(f"POST /v1/trips/{trip['trip_id']}/fixes HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {trip['token']}\r\n"
+                      "Content-Type: application/json\r\nContent-Length: 200\r\n\r\n{\"t_unix_s\": 1".encode())  # fmt: skip
+    # over the per-address cap: answered 503 at once and closed
+    extra = [_sock(svc.port) for _ in range(15)]
+    refused = [_read_all(s, 10) for s in extra]
+    assert sum(r.startswith(b"HTTP/1.1 503") for r in refused) >= 5
+    # honest clients from another address are served throughout
+    assert all(httpx.get(svc.base_url + "/health", timeout=10).status_code == 200 for _ in range(20))
+    # the read deadline closes every half-sent request, with a 408 where nothing was answered
+    answers = [_read_all(s) for s in half_header + silent + [half_body]]
+    assert all(a.startswith(b"HTTP/1.1 408") for a in answers[:40]), set(a[:20] for a in answers)
+    assert answers[-1].startswith(b"HTTP/1.1 408")
+    for s in half_header + silent + extra + [half_body]:
+        s.close()
+    # the caps are released: the attacker's address may connect again, a keep-alive client works
+    s = _sock(svc.port)
+    s.sendall(b"GET /health HTTP/1.1\r\nHost: x\r\n\r\n")
+    assert _read_all(s, 10).startswith(b"HTTP/1.1 200")
+    metrics = httpx.get(svc.base_url + "/metrics", timeout=10).text
+    assert 'status="500"' not in metrics and "process_open_fds" in metrics
+
+
+def test_client_disconnects_mid_body_are_not_server_errors(start_proc, tmp_path):
+    """Finding: a body cut off mid-request counted as a 500 and wrote ~100 log lines."""
+    svc = start_proc(_proc(tmp_path))
+    trip = httpx.post(svc.base_url + "/v1/trips", json={}, timeout=10).json()
+    for path, auth in ((f"/v1/trips/{trip['trip_id']}/fixes", f"Authorization: Bearer {trip['token']}\r\n"), ("/v1/trips", "")):
+        s = _sock(svc.port, "127.0.0.1")
+        s.sendall(f"POST {path} HTTP/1.1\r\nHost: x\r\n{auth}Content-Type: application/json\r\nContent-Length: 300\r\n\r\n{{\"a\": ".encode())
+        time.sleep(0.3)
+        s.close()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and svc.log_path.read_text().count("client disconnected") < 2:
+        time.sleep(0.1)
+    log = svc.log_path.read_text()
+    assert log.count("client disconnected") == 2 and "Traceback" not in log and "ERROR" not in log, log[-3000:]
+    metrics = httpx.get(svc.base_url + "/metrics", timeout=10).text
+    assert 'status="499"' in metrics and 'status="500"' not in metrics
+
+
+def test_tokens_never_reach_the_log_and_open_creation_is_announced(start_proc, tmp_path):
+    """Finding: the trip token and the operator key landed in the access log (?token= on any route)."""
+    svc = start_proc(_proc(tmp_path, access_log=True))
+    trip = httpx.post(svc.base_url + "/v1/trips", json={}, timeout=10).json()
+    token = trip["token"]
+    assert httpx.get(f"{svc.base_url}/v1/trips/{trip['trip_id']}/advice?token={token}", timeout=10).status_code == 401
+    assert httpx.get(f"{svc.base_url}/v1/trips/{trip['trip_id']}/advice", headers={"Authorization": f"Bearer {token}"}, timeout=10).status_code == 200
+    httpx.get(f"{svc.base_url}/health?api_key=operator-secret", timeout=10)
+
+    async def stream():
+        url = svc.base_url.replace("http", "ws") + f"/v1/trips/{trip['trip_id']}/stream?token={token}"
+        async with websockets.connect(url, open_timeout=10) as ws:
+            await ws.send(json.dumps({"t_unix_s": time.time(), "lat_deg": 0.0, "lon_deg": 0.0}))
+            return json.loads(await asyncio.wait_for(ws.recv(), 10))
+
+    assert asyncio.run(stream())["trip_id"] == trip["trip_id"]
+    time.sleep(0.5)
+    log = svc.log_path.read_text()
+    assert "/advice" in log and "stream" in log  # the lines are there, redacted
+    assert token not in log and token.split(".")[1] not in log and "operator-secret" not in log and "token=***" in log
+    assert "TRIP CREATION IS OPEN" in log and "WARNING" in log
+
+
+@pytest.mark.parametrize("keys", ["k-one"])
+def test_creation_needs_a_key_when_keys_are_set_and_quotas_hold_per_client(start_proc, tmp_path, keys):
+    svc = start_proc(_proc(tmp_path, ECO_API_KEYS=keys, ECO_MAX_TRIPS_PER_CLIENT="2", ECO_MAX_CONNECTIONS_PER_CLIENT="0"))
+    assert httpx.post(svc.base_url + "/v1/trips", json={}, timeout=10).status_code == 401
+    codes = [httpx.post(svc.base_url + "/v1/trips", json={}, headers={"X-API-Key": keys}, timeout=10).status_code for _ in range(3)]
+    assert codes == [201, 201, 429]
+    assert "TRIP CREATION IS OPEN" not in svc.log_path.read_text()
