@@ -18,7 +18,7 @@ from advisory.advice import advisor
 from advisory.advice.advisor import AdvisorMemory, LightView, Observation, advise
 from server.app import create_app
 from server.config import Settings
-from server.schemas import Action, AdviceOut, Reason
+from server.schemas import AdviceOut
 from spat_feed.corridors import load_corridor
 
 NOW = 1_800_000_000.0
@@ -76,6 +76,8 @@ def _advice_literals() -> tuple[set[str], set[str]]:
 
 def test_every_action_and_reason_the_advisor_writes_is_in_the_schema():
     """Finding: `action` took values the schema did not list (coast, slow_down, brake_to)."""
+    from server.schemas import Action, Reason
+
     actions, reasons = _advice_literals()
     assert {"coast", "slow_down", "brake_to", "stop", "none"} <= actions  # the scan finds them
     assert actions <= {a.value for a in Action} and reasons - {"last"} <= {r.value for r in Reason}, (actions, reasons)
@@ -89,6 +91,8 @@ def test_every_action_and_reason_the_advisor_writes_is_in_the_schema():
     st.booleans(), st.floats(0.0, 1.0), st.integers(1, 4),
 )
 def test_whatever_the_advisor_answers_validates(v, d1, d2, r1, r2, fresh, conf, steps):
+    from server.schemas import Action, Reason
+
     memory = AdvisorMemory()
     for k in range(steps):
         lights = (

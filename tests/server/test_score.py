@@ -21,7 +21,6 @@ from advisory.trajectory import Trajectory
 from server.app import create_app
 from server.config import Settings
 from server.score import trip_score
-from server.trips import ObservedLights
 from spat_feed.corridors import load_corridor
 from spat_feed.observe import PlanReading
 from spat_feed.scenarios import advisory_scenario_at, make_scenario
@@ -175,6 +174,8 @@ def test_a_red_light_crossing_is_flagged_and_never_a_saving(service):
 
 def test_observed_phases_give_the_same_score_as_the_plans():
     """A trip on live SPaT is scored against the phases it observed; observed from the plans, they are the plans."""
+    from server.trips import ObservedLights
+
     fs = make_scenario("paper_s400", "15_15", E)
     reg = regular_driver(advisory_scenario_at(fs, E))
     t, v, x = fixes_of(reg)
