@@ -44,7 +44,10 @@ CORRIDOR = "paper_s400"
 def start_service(port: int, log_path: Path) -> subprocess.Popen:
     env = {**os.environ, "ECO_CORRIDORS": CORRIDOR, "ECO_DEFAULT_CORRIDOR": CORRIDOR, "ECO_SPEECH": "false",
            "ECO_RATE_PER_S": "1000000", "ECO_RATE_BURST": "1000000", "ECO_CREATE_RATE_PER_S": "1000000",
-           "ECO_CREATE_BURST": "1000000", "ECO_TABLES_DIR": "/tmp/ecodrive-bench-tables"}  # fmt: skip
+           "ECO_CREATE_BURST": "1000000", "ECO_TABLES_DIR": "/tmp/ecodrive-bench-tables",
+           # one client address opens every connection here: the per-client caps and quotas are off
+           "ECO_MAX_CONNECTIONS_PER_CLIENT": "0", "ECO_WS_MAX_PER_CLIENT": "0", "ECO_MAX_TRIPS_PER_CLIENT": "0",
+           "ECO_CREATE_RATE_PER_CLIENT_PER_S": "1000000", "ECO_CREATE_BURST_PER_CLIENT": "1000000"}  # fmt: skip
     cpus = sorted(os.sched_getaffinity(0))
     pre = (lambda: os.sched_setaffinity(0, {cpus[0]})) if len(cpus) >= 2 else None
     cmd = [sys.executable, "-m", "server", "--port", str(port), "--log-level", "warning", "--no-access-log"]
@@ -218,6 +221,7 @@ def main() -> int:
         os.sched_setaffinity(0, {cpus[1]})
     corridor = load_corridor(CORRIDOR)
     positions = [corridor.position(s) for s in np.arange(0.0, corridor.length_m, 9.0)]
+    positions += positions[::-1]  # there and back in 9 m steps: no fix is an implausible jump (those skip the advisor)
     try:
         rss0 = rss_mib(proc.pid)
 

@@ -162,7 +162,8 @@ def cut_to_zone(t_s: np.ndarray, station_m: np.ndarray, v_mps: np.ndarray, lengt
 
 RED_TOLERANCE_M = 3.0
 """How far the recorded position at a stop line may be off (1 Hz GPS, map matching). A crossing counts as a
-red-light crossing only if the light is red for the time the car needs to cover this much on either side. [m]"""
+red-light crossing only if the car is still in the red this far past the line (a car waiting just short of
+the line cannot be told from one just past it). [m]"""
 RED_TOLERANCE_S = 0.5
 """Least time tolerance of that test (timestamps, 1 Hz interpolation). [s]"""
 ANCHOR_WINDOW_M = 60.0
@@ -201,9 +202,10 @@ def red_light_crossings(traj: Trajectory, signals, t_station_s=None, station_m=N
     Returns
     -------
     list of RedCrossing
-        Crossings at an instant ``t`` such that the light is red from ``t - tol`` to ``t + tol``, ``tol`` =
-        max(``RED_TOLERANCE_S``, ``RED_TOLERANCE_M`` / speed): a crossing right at a red's start or end is
-        within what a recording can tell apart.
+        Crossings at an instant ``t`` such that the light is red from ``t - tol`` (``tol`` =
+        max(``RED_TOLERANCE_S``, ``RED_TOLERANCE_M`` / speed)) until the car is ``RED_TOLERANCE_M`` past the
+        line: a crossing right at a red's start or end, or a car stopped at the line, is within what a
+        recording can tell apart.
     """
     out = []
     for n, light in enumerate(signals, start=1):
@@ -216,9 +218,12 @@ def red_light_crossings(traj: Trajectory, signals, t_station_s=None, station_m=N
         t_c = traj.crossing_time_s(p - shift)
         if not np.isfinite(t_c):
             continue
+        t_past = traj.crossing_time_s(p + RED_TOLERANCE_M - shift)
+        if not np.isfinite(t_past):
+            continue
         v_c = float(traj.speed_at(t_c))
         tol = max(RED_TOLERANCE_S, RED_TOLERANCE_M / max(v_c, 0.1))
-        if bool(light.is_red(t_c - tol)) and bool(light.is_red(t_c)) and bool(light.is_red(t_c + tol)):
+        if bool(light.is_red(t_c - tol)) and bool(light.is_red(t_c)) and bool(light.is_red(t_past)) and bool(light.is_red(t_past - tol)):
             start = max((s for s, e in light.red_intervals(t_c - 3600.0, t_c) if s <= t_c < e), default=t_c)
             out.append(RedCrossing(n, p, float(t_c), float(t_c - start), v_c))
     return out

@@ -88,3 +88,26 @@ def test_missing_columns_say_which_names_are_accepted(tmp_path, capsys):
     assert main([str(f)]) == 2
     err = capsys.readouterr().err
     assert "read as semicolon-separated, decimal comma" in err and "Rename the header" in err and "velocity" not in err
+
+
+def test_a_red_light_crossing_is_flagged_and_not_a_saving(tmp_path, capsys):
+    """Finding: a trace crossing a stop line during red was scored as a saving with `notes: []`."""
+    from spat_feed.corridors import load_corridor
+
+    cor = load_corridor("paper_s400")
+    v = 50 / 3.6  # field_test: light 1 (100 m) is red until 15 s after entry; at 50 km/h it is reached at 7.2 s
+    rows = ["# corridor: paper_s400", "# timing: field_test", "# entry_unix_s: 1714557600", "t_unix_s,lat,lon,speed_mps"]
+    for k in range(-3, 48):
+        lat, lon = cor.position(v * k)
+        rows.append(f"{1714557600 + k},{lat:.7f},{lon:.7f},{v:.2f}")
+    f = tmp_path / "red.csv"
+    f.write_text("\n".join(rows) + "\n")
+    rc, d = run_json(capsys, f, "--json", "--baseline", OURS)
+    assert rc == 0 and d["comparison"]["change_vs_regular_pct"]["driven"] is None and d["baseline"]["change_pct"] is None
+    first = d["red_light_crossings"][0]
+    assert first["light"] == 1 and first["into_red_s"] == pytest.approx(15 + 100 / v, abs=0.5)
+    assert any("not reported as a saving" in n for n in d["notes"])
+    # the shipped regular and advised drives run no red light
+    for trace in (OURS, OURS.with_name("field_test_regular.csv")):
+        _, d = run_json(capsys, trace, "--json")
+        assert d["red_light_crossings"] == [] and d["comparison"]["change_vs_regular_pct"]["driven"] is not None
