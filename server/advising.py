@@ -21,8 +21,8 @@ from collections.abc import Callable
 
 from advisory.advice.advisor import Advice, AdvisorParams, advise
 from advisory.physics.params import VEHICLE_PRESETS
-from spat_feed.corridors import TIMING_PRESETS, Corridor, timing_for_trip
-from spat_feed.scenarios import FeedScenario, Uncertainty
+from spat_feed.corridors import Corridor
+from spat_feed.scenarios import FeedScenario, Uncertainty, resolve_timing
 
 from server.config import Settings
 from server.errors import ApiError
@@ -90,14 +90,12 @@ class Engine:
         entry = now if body.entry_unix_s is None else body.entry_unix_s
         if body.entry_unix_s is not None:
             self.check_time(entry, "entry_unix_s")
-        if body.timing is None or body.timing == "trip":
-            timing = timing_for_trip(entry)
-        elif body.timing in TIMING_PRESETS:
-            timing = TIMING_PRESETS[body.timing]
-        else:
-            raise ApiError(422, "unknown_timing", f"unknown timing {body.timing!r}; choose from {sorted(TIMING_PRESETS)} or 'trip'")
-        if len(timing.red_starts_s) != len(corridor.intersections):
-            raise ApiError(422, "timing_mismatch", f"timing {timing.name!r} has {len(timing.red_starts_s)} lights, corridor {corridor.name!r} has {len(corridor.intersections)}")
+        try:  # the corridor's plans by name, a paper preset, or "trip" (never a path from a request)
+            timing = resolve_timing(corridor, body.timing, entry, allow_files=False)
+        except KeyError as exc:
+            raise ApiError(422, "unknown_timing", str(exc.args[0])) from None
+        except ValueError as exc:
+            raise ApiError(422, "timing_mismatch", str(exc)) from None
         uncertainty = Uncertainty(s.spat_early_s, s.spat_late_s, s.spat_confidence_frac)
         scenario = FeedScenario(corridor, timing, float(entry), uncertainty)
         self.trips.check_capacity()
@@ -165,7 +163,7 @@ class Engine:
             advice, memory = Advice("none", "no_speed", message=SERVER_PHRASES["no_speed"]), trip.memory
         else:
             readings = trip.spat.readings(fix.t_unix_s) if on_route else {}
-            obs = observation(trip.corridor, m.station_m, speed or 0.0, fix.t_unix_s, readings, s.speed_limit_mps, on_route=on_route)
+            obs = observation(trip.corridor, m.station_m, speed or 0.0, fix.t_unix_s, readings, trip.corridor.advisory_limit_mps(m.station_m, s.speed_limit_mps), on_route=on_route)
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
             advice, memory = advise(obs, trip.memory, self.params, trip.tables)

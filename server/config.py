@@ -13,7 +13,7 @@ from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from advisory.physics.params import SPEED_LIMIT_MPS
-from spat_feed.corridors import PAPER_CORRIDOR_NAMES
+from spat_feed.corridors import preset_names
 
 
 class Settings(BaseSettings):
@@ -23,8 +23,9 @@ class Settings(BaseSettings):
 
     # corridors and vehicles
     corridors: Annotated[tuple[str, ...], NoDecode] = Field(
-        default=PAPER_CORRIDOR_NAMES, description="corridor presets served (comma-separated in the environment)"
+        default_factory=lambda: tuple(preset_names()), description="corridor presets served (comma-separated in the environment); default: all shipped"
     )
+    corridor_dir: Path | None = Field(default=None, description="a folder of corridor and plan files (JSON/TOML) to serve besides the presets")
     corridor_file: Path | None = Field(default=None, description="an extra corridor JSON file to serve")
     default_corridor: str = "paper_s400"
     default_vehicle: str = "paper_54kwh"

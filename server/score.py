@@ -58,7 +58,9 @@ def trip_score(
     else:
         entry_s = scenario.entry_unix_s
         notes.append("no fix near the zone entry: the regular driver enters at the trip's entry instant")
-    regular_traj = regular_driver(scenario_from(scenario, entry_s, speed_limit_mps))
+    sc = scenario_from(scenario, entry_s, speed_limit_mps)
+    speed_limit_mps = sc.speed_limit_mps  # the corridor's own limit where its file states one
+    regular_traj = regular_driver(sc)
     regular = score_in_end_state(regular_traj, params, speed_limit_mps)
     driven_out = None
     savings = None

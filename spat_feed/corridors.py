@@ -176,17 +176,21 @@ class Corridor(BaseModel):
         return self
 
     # -- speed limits and grades ------------------------------------------------------------------------
+    @cached_property
+    def _profile(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if not self.segments:
+            return np.array([0.0]), np.array([np.nan]), np.array([0.0])
+        return (
+            np.array([seg.start_m for seg in self.segments]),
+            np.array([np.nan if seg.speed_limit_mps is None else seg.speed_limit_mps for seg in self.segments]),
+            np.array([seg.grade_frac for seg in self.segments]),
+        )
+
     def limit_profile(self, default_mps: float = SPEED_LIMIT_MPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(start stations, speed limits, grades) of the route's stretches, shape (n,) each; the last
         stretch runs to ``length_m``. A stretch without a limit gets ``speed_limit_mps`` or ``default_mps``."""
-        fallback = self.speed_limit_mps or default_mps
-        if not self.segments:
-            return np.array([0.0]), np.array([fallback]), np.array([0.0])
-        return (
-            np.array([seg.start_m for seg in self.segments]),
-            np.array([seg.speed_limit_mps or fallback for seg in self.segments]),
-            np.array([seg.grade_frac for seg in self.segments]),
-        )
+        starts, limits, grades = self._profile
+        return starts, np.where(np.isnan(limits), self.speed_limit_mps or default_mps, limits), grades
 
     def speed_limit_mps_over(self, from_m: float, to_m: float, default_mps: float = SPEED_LIMIT_MPS) -> float:
         """Lowest speed limit on ``[from_m, to_m]`` (clipped to the route). [m/s]
@@ -196,14 +200,23 @@ class Corridor(BaseModel):
         >>> paper_corridor(400.0).speed_limit_mps_over(0.0, 600.0)
         24.5872
         """
-        starts, limits, _ = self.limit_profile(default_mps)
-        lo = int(np.searchsorted(starts, max(from_m, 0.0), side="right")) - 1
-        hi = int(np.searchsorted(starts, min(max(to_m, from_m), self.length_m), side="left"))
-        return float(limits[max(lo, 0) : max(hi, lo + 1, 1)].min())
+        starts, limits, _ = self._profile
+        lo = max(int(np.searchsorted(starts, max(from_m, 0.0), side="right")) - 1, 0)
+        hi = max(int(np.searchsorted(starts, min(max(to_m, from_m), self.length_m), side="left")), lo + 1)
+        fallback = self.speed_limit_mps or default_mps
+        return float(min(fallback if math.isnan(x) else x for x in limits[lo:hi].tolist()))
 
     def zone_speed_limit_mps(self, default_mps: float = SPEED_LIMIT_MPS) -> float:
         """Lowest speed limit over the whole zone: the one the DP and the regular driver use. [m/s]"""
         return self.speed_limit_mps_over(0.0, self.length_m, default_mps)
+
+    def advisory_limit_mps(self, station_m: float, default_mps: float = SPEED_LIMIT_MPS, n_lights: int = 2) -> float:
+        """The limit for advice at ``station_m``: the lowest from there to the ``n_lights``-th stop line ahead
+        (or the zone end), so an advised speed held to the lights never exceeds a limit on the way. [m/s]"""
+        if not self.segments:
+            return self.speed_limit_mps or default_mps
+        ahead = [ix.stop_line_m for ix in self.intersections if ix.stop_line_m > station_m][:n_lights]
+        return self.speed_limit_mps_over(station_m, ahead[-1] if len(ahead) == n_lights else self.length_m, default_mps)
 
     # -- plans ------------------------------------------------------------------------------------------
     def plan(self, name: str | None = None) -> SignalPlan | None:
@@ -374,23 +387,42 @@ def load_plan(path: str | Path) -> SignalPlan:
 def load_corridor(name_or_path: str | Path, plans: tuple[str | Path, ...] = ()) -> Corridor:
     """A shipped preset by name (``"paper_s400"``), or a corridor file (JSON or TOML) by path.
 
-    ``plans``: plan files to attach (each checked against the corridor; errors name the file). Unknown
-    names raise ``KeyError``; bad files :class:`FileFormatError` (a ``ValueError``).
+    A preset comes with the shipped plan files naming it (``presets/plans/``). ``plans``: plan files to
+    attach (each checked against the corridor; errors name the file). Unknown names raise ``KeyError``;
+    bad files :class:`FileFormatError` (a ``ValueError``).
     """
     path = Path(name_or_path)
     if path.suffix.lower() in (".json", ".toml") or path.exists():
         data, source = read_document(path), str(path)
+        preset_plans: list[tuple[str, SignalPlan]] = []
     else:
         resource = resources.files("spat_feed") / PRESET_DIR / f"{name_or_path}.json"
         if not resource.is_file():
             raise KeyError(f"no corridor preset {name_or_path!r}; presets: {preset_names()}")
         from spat_feed.files import parse_text
 
-        data, source = parse_text(resource.read_text(encoding="utf-8"), f"preset {name_or_path}"), f"preset {name_or_path}"
+        source = f"preset {name_or_path}"
+        data = parse_text(resource.read_text(encoding="utf-8"), source)
+        preset_plans = [(src, p) for src, p in _preset_plans() if p.corridor == name_or_path]
     if is_plan_document(data):
         raise FileFormatError(source, ["(file): this is a signal-plan file (kind: signal_plan), not a corridor; give it as the timing"])
     corridor = validate(Corridor, data, source)
-    return attach_plans(corridor, [(str(p), load_plan(p)) for p in plans])
+    return attach_plans(corridor, preset_plans + [(str(p), load_plan(p)) for p in plans])
+
+
+def _preset_plans() -> list[tuple[str, SignalPlan]]:
+    """The shipped plan files (``presets/plans/*.json``) as (source, plan)."""
+    from spat_feed.files import parse_text
+
+    folder = resources.files("spat_feed") / PRESET_DIR / "plans"
+    if not folder.is_dir():
+        return []
+    out = []
+    for entry in sorted(folder.iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".json"):
+            source = f"preset plan {entry.name}"
+            out.append((source, validate(SignalPlan, parse_text(entry.read_text(encoding="utf-8"), source), source)))
+    return out
 
 
 def attach_plans(corridor: Corridor, plans: list[tuple[str, SignalPlan]]) -> Corridor:

@@ -116,13 +116,14 @@ def _cached_corridor(name_or_path: str) -> Corridor:
     return load_corridor(name_or_path)
 
 
-def resolve_timing(corridor: Corridor, timing: str | TimingLike | None, entry_unix_s: float = 0.0) -> TimingLike:
+def resolve_timing(corridor: Corridor, timing: str | TimingLike | None, entry_unix_s: float = 0.0, *, allow_files: bool = True) -> TimingLike:
     """The timing a trip on ``corridor`` runs under.
 
     ``timing``: a plan of the corridor by name, a paper preset by name (``"15_15"``, ``"field_test"``), a
     plan file by path (``.json``/``.toml``), or ``None`` / ``"trip"``: the corridor's default plan if it has
     one, else one of the paper's 16 picked from ``entry_unix_s`` (:func:`timing_for_trip`). ``KeyError``
     for an unknown name; ``ValueError`` (naming the file) for a plan that does not fit the corridor.
+    ``allow_files=False`` (names from a network request): paths are unknown names.
     """
     if isinstance(timing, (Timing, SignalPlan)):
         out = timing
@@ -132,7 +133,7 @@ def resolve_timing(corridor: Corridor, timing: str | TimingLike | None, entry_un
         out = corridor.plan(timing)
     elif timing in TIMING_PRESETS:
         out = TIMING_PRESETS[timing]
-    elif timing.lower().endswith((".json", ".toml")):
+    elif allow_files and timing.lower().endswith((".json", ".toml")):
         out = load_plan(timing)
         try:
             out.check(corridor)
@@ -140,7 +141,8 @@ def resolve_timing(corridor: Corridor, timing: str | TimingLike | None, entry_un
             raise ValueError(f"{timing}: {exc}") from None
     else:
         plans = [p.name for p in corridor.plans]
-        raise KeyError(f"unknown timing {timing!r}; choose from {plans + sorted(TIMING_PRESETS)}, 'trip', or a plan file (.json/.toml)")
+        files = ", or a plan file (.json/.toml)" if allow_files else ""
+        raise KeyError(f"unknown timing {timing!r}; choose from {plans + sorted(TIMING_PRESETS)} or 'trip'{files}")
     out.check(corridor)
     return out
 
