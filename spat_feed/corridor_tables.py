@@ -121,11 +121,13 @@ class BuildReport:
     path: Path | None
     peak_traced_bytes: int | None = None
     max_rss_bytes: int | None = None
+    rss_before_bytes: int | None = None
 
     def line(self) -> str:
         how = f"loaded from {self.path}" if self.loaded else f"built in {self.seconds:.1f} s"
         peak = f", peak {self.peak_traced_bytes / 1e6:.1f} MB traced" if self.peak_traced_bytes is not None else ""
-        rss = f", process max RSS {self.max_rss_bytes / 1e6:.0f} MB" if self.max_rss_bytes is not None else ""
+        rss = (f", process max RSS {self.max_rss_bytes / 1e6:.0f} MB ({self.rss_before_bytes / 1e6:.0f} MB before the build)"
+               if self.max_rss_bytes is not None and self.rss_before_bytes is not None else "")  # fmt: skip
         saved = f"; saved to {self.path}" if self.path is not None and not self.loaded else ""
         return f"{self.corridor}: {self.n_tables} tables for {self.n_lights} lights, {self.nbytes / 1e6:.1f} MB, {how}{peak}{rss}{saved}"
 
@@ -162,6 +164,7 @@ def corridor_tables(
             log.warning("tables %s unreadable (%s): rebuilding", path, exc)
         else:
             return tables, BuildReport(corridor.name, len(corridor.intersections), tables.n_tables, tables.nbytes, time.perf_counter() - t0, True, path)
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 if measure else None
     if measure:
         tracemalloc.start()
     t0 = time.perf_counter()
@@ -176,5 +179,5 @@ def corridor_tables(
         path.parent.mkdir(parents=True, exist_ok=True)
         tables.save(path)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 if measure else None
-    report = BuildReport(corridor.name, len(corridor.intersections), tables.n_tables, tables.nbytes, seconds, False, path, peak, rss)
+    report = BuildReport(corridor.name, len(corridor.intersections), tables.n_tables, tables.nbytes, seconds, False, path, peak, rss, rss0)
     return tables, report
