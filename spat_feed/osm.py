@@ -551,13 +551,14 @@ def corridors_from_osm(path: str | Path, street: str, *, name: str | None = None
             refs, tags = ways[e.way]
             key = "maxspeed:forward" if e.forward else "maxspeed:backward"
             limit, source = parse_maxspeed(tags.get(key) or tags.get("maxspeed"), tags.get("highway", "road"), imperial)
+            limit = round(limit, 4)
             grade = _incline_frac(tags.get("incline")) * (1 if e.forward else -1)
             grade = max(-0.3, min(0.3, grade))
             label = tags.get("name", "")
             if segments and segments[-1].speed_limit_mps == limit and segments[-1].grade_frac == grade and segments[-1].source == source:
                 segments[-1] = segments[-1].model_copy(update={"end_m": round(s1, 3)})
             else:
-                segments.append(Segment(start_m=round(s0, 3), end_m=round(s1, 3), speed_limit_mps=round(limit, 4), grade_frac=grade, name=label, source=source))
+                segments.append(Segment(start_m=round(s0, 3), end_m=round(s1, 3), speed_limit_mps=limit, grade_frac=grade, name=label, source=source))
         segments[-1] = segments[-1].model_copy(update={"end_m": length_m})
         intersections = []
         for light, k in zip(lights, row):
