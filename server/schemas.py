@@ -27,7 +27,8 @@ class TripCreate(_In):
     corridor: str | None = Field(default=None, description="corridor name (GET /v1/corridors); default: the service's", max_length=200)
     timing: str | None = Field(
         default=None,
-        description="simulated signal timing preset (e.g. '15_15', 'field_test'); default: one of the paper's 16 picked from the entry time",
+        description="signal timing: one of the corridor's plans (GET /v1/corridors), or a paper preset (e.g. '15_15', 'field_test'); "
+        "default: the corridor's own plan, else one of the paper's 16 picked from the entry time",
         max_length=50,
     )
     vehicle: str | None = Field(default=None, description="vehicle preset (paper_54kwh, paper_75kwh, calibrated)", max_length=50)
@@ -126,6 +127,9 @@ class CorridorSummary(_Out):
     description: str
     length_m: float
     intersection_ids: list[int]
+    units: Literal["metric", "imperial"] = Field(default="metric", description="the corridor's default units for spoken speeds")
+    plans: list[str] = Field(default_factory=list, description="signal plans known for the corridor (trip 'timing')")
+    default_plan: str | None = None
 
 
 class HealthOut(_Out):
