@@ -67,13 +67,14 @@ def _rollout(tables: AdviceTables, sc: Scenario, grid: TableGrid) -> Trajectory:
     t, knots = 0.0, [(0.0, 0.0, sp[i])]
     for a in range(len(sc.signals)):
         table = next(tb for tb in tables.tables[a] if tb.is_pair or a == len(sc.signals) - 1)
+        none, wait = table.codes
         for k in range(table.policy.shape[0]):
-            while (nxt := table.policy[k, i, int(round(_phase(table, sc, a, t) / table.tau_step_s)) % table.policy.shape[2]]) == -2:
+            while (nxt := table.policy[k, i, int(round(_phase(table, sc, a, t) / table.tau_step_s)) % table.policy.shape[2]]) == wait:
                 t += table.tau_step_s
                 knots.append((t, knots[-1][1], 0.0))
-            assert nxt >= 0
+            assert nxt != none
             c = table.stage_cls[k]
-            t += tables.step_dt[c, i, nxt - tables.band_lo[c, i]]
+            t += tables.step_dt[c, i, int(nxt) - tables.band_lo[c, i]]
             i = int(nxt)
             knots.append((t, table.x0_m + (k + 1) * table.stage_m, sp[i]))
     band, step_dt, step_usd = _transitions(sp, grid.stage_m, 0.0, P, grid)

@@ -101,13 +101,14 @@ class LightTiming:
 
 @njit(cache=True, nogil=True)
 def _periodic_backward(speed, stage_cls, band_lo, step_dt, step_usd, cap, is_stop, red_start, red_s, cycle, period, tau_step,
-                       lam, idle_usd, terminal, policy):  # fmt: skip
+                       lam, idle_usd, terminal, policy, none_code, wait_code):  # fmt: skip
     """Backward DP over one part of a stretch; returns the value at its first stage (n_v, n_tau) [$].
 
     Shapes: ``stage_cls``, ``cap`` (K,): transition class and highest allowed speed index of stage k -> k+1;
     ``band_lo`` (n_cls, n_v), ``step_dt``/``step_usd`` (n_cls, n_v, width); ``is_stop``, ``red_start``,
     ``red_s``, ``cycle`` (K + 1,); ``terminal`` (n_v, n_term) periodic in the phase with ``n_term`` dividing
-    ``n_tau = period / tau_step``; ``policy`` (K, n_v, n_tau) is written: next-speed index, -2 = wait, -1 = none.
+    ``n_tau = period / tau_step``; ``policy`` (K, n_v, n_tau) is written: next-speed index, ``wait_code`` = wait
+    at standstill, ``none_code`` = no feasible move.
     Only two value layers are kept. The phase after a transition is ``j + dt / tau_step`` cells, so the
     interpolation weights depend on the transition only; the red check uses the exact arrival time.
     """
@@ -127,7 +128,7 @@ def _periodic_backward(speed, stage_cls, band_lo, step_dt, step_usd, cap, is_sto
         for i in range(n_v):
             for j in range(n_tau):
                 cur[i, j] = np.inf
-                policy[k, i, j] = -1
+                policy[k, i, j] = none_code
             if i > cap[k]:
                 continue
             for jj in range(width):  # next speeds ascending: on ties the lowest wins
@@ -165,13 +166,13 @@ def _periodic_backward(speed, stage_cls, band_lo, step_dt, step_usd, cap, is_sto
                     cost = cur[0, (j + 1) % n_tau] + wait
                     if cost < cur[0, j]:
                         cur[0, j] = cost
-                        policy[k, 0, j] = -2
+                        policy[k, 0, j] = wait_code
         nxt, cur = cur, nxt
     return nxt
 
 
 @njit(cache=True)
-def _follow(policy, stage_cls, step_dt, band_lo, cap, k0, v0, tau0, tau_step, period, speed):
+def _follow(policy, stage_cls, step_dt, band_lo, cap, k0, v0, tau0, tau_step, period, speed, none_code, wait_code):
     """Speed index the optimal plan has on reaching the table's stop line (its last stage) from stage
     ``k0`` at the grid speed nearest ``v0`` (at most the stage's limit) and phase ``tau0``; -1 if none."""
     n_tau = policy.shape[2]
@@ -179,17 +180,18 @@ def _follow(policy, stage_cls, step_dt, band_lo, cap, k0, v0, tau0, tau_step, pe
     if k0 < policy.shape[0] and i > cap[k0]:
         i = cap[k0]
     for k in range(k0, policy.shape[0]):
-        nxt = -1
+        nxt = none_code
         for _ in range(4 * n_tau):  # waits at standstill
             j = int(round((tau % period) / tau_step)) % n_tau
             nxt = policy[k, i, j]
-            if nxt != -2:
+            if nxt != wait_code:
                 break
             tau += tau_step
-        if nxt < 0:
+        if nxt == none_code or nxt == wait_code:
             return -1
-        tau += step_dt[stage_cls[k], i, nxt - band_lo[stage_cls[k], i]]
-        i = nxt
+        c = stage_cls[k]
+        tau += step_dt[c, i, int(nxt) - band_lo[c, i]]
+        i = int(nxt)
     return i
 
 
@@ -264,6 +266,11 @@ class LightTable:
     @property
     def is_pair(self) -> bool:
         return len(self.timing) == 2
+
+    @property
+    def codes(self) -> tuple[int, int]:
+        """(no feasible move, wait at standstill) as stored in ``policy``."""
+        return _codes(self.policy.dtype)
 
     @property
     def nbytes(self) -> int:
@@ -433,7 +440,7 @@ class AdviceTables:
             # time to reach stage k0 from the current position at the current speed
             tau0 = tau + (table.x0_m + k0 * table.stage_m - obs.position_m) / max(obs.speed_mps, 0.5)
             i = _follow(table.policy, table.stage_cls, self.step_dt, self.band_lo, table.cap, k0, float(obs.speed_mps), tau0,
-                        table.tau_step_s, table.period_s, self.speed_mps)  # fmt: skip
+                        table.tau_step_s, table.period_s, self.speed_mps, *table.codes)  # fmt: skip
             return None if i < 0 else float(self.speed_mps[i])
         return None
 
@@ -479,6 +486,11 @@ class AdviceTables:
                        data["band_lo"], data["step_dt"], per_light, meta.get("build_s", 0.0))  # fmt: skip
 
 
+def _codes(dtype) -> tuple[int, int]:
+    """Policy codes (no move, wait) for a policy dtype: 255/254 in one byte, -1/-2 in two."""
+    return (255, 254) if np.dtype(dtype) == np.uint8 else (-1, -2)
+
+
 def _key(light: int, timing: tuple[LightTiming, ...]) -> tuple:
     return (light, *((round(t.red_s, 6), round(t.cycle_s, 6), round(t.red_start_s, 6)) for t in timing))
 
@@ -493,6 +505,7 @@ class _Builder:
         self.speed, self.pos, self.zone_m = speed, pos, float(zone_m)
         self.starts, self.limits, self.grades = starts, limits, grades
         self.params, self.grid = params, grid
+        self.dtype = np.dtype(np.uint8) if speed.size <= 254 else np.dtype(np.int16)  # one byte per cell when the speeds fit
         self._classes: dict[tuple[float, float], int] = {}
         self._arrays: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._lock = threading.Lock()
@@ -608,9 +621,9 @@ class _Builder:
                 k_b = at[1]
                 is_stop[k_b], red_start[k_b], red_len[k_b], cyc[k_b] = True, b.red_start_s, b.red_s, b.cycle_s
             band, dt, usd = self._stack()
-            policy = np.empty((xs.size - 1, self.speed.size, n_back), dtype=np.int16)
+            policy = np.empty((xs.size - 1, self.speed.size, n_back), dtype=self.dtype)
             terminal = _periodic_backward(self.speed, s_cls, band, dt, usd, s_cap, is_stop, red_start, red_len, cyc, p_back, step,
-                                          lam, idle, terminal, policy)  # fmt: skip
+                                          lam, idle, terminal, policy, *_codes(self.dtype))  # fmt: skip
         # front part: x0 -> a's line, joint phase; stored
         xs, _ = self._stages([x0, float(self.pos[a])])
         s_cls, s_cap = self._part(xs)
@@ -618,9 +631,9 @@ class _Builder:
         red_start, red_len, cyc = np.zeros(xs.size), np.ones(xs.size), np.full(xs.size, 2.0)
         is_stop[-1], red_start[-1], red_len[-1], cyc[-1] = True, 0.0, timing[0].red_s, timing[0].cycle_s
         band, dt, usd = self._stack()
-        policy = np.empty((xs.size - 1, self.speed.size, n_tau), dtype=np.int16)
+        policy = np.empty((xs.size - 1, self.speed.size, n_tau), dtype=self.dtype)
         value0 = _periodic_backward(self.speed, s_cls, band, dt, usd, s_cap, is_stop, red_start, red_len, cyc, period, step,
-                                    lam, idle, np.ascontiguousarray(terminal), policy)  # fmt: skip
+                                    lam, idle, np.ascontiguousarray(terminal), policy, *_codes(self.dtype))  # fmt: skip
         return LightTable(a, timing, period, step, x0, float(xs[1] - xs[0]), s_cls, s_cap, policy,
                           value0.astype(np.float32) if keep_values else None)  # fmt: skip
 
