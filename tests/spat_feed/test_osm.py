@@ -22,7 +22,7 @@ def osm_xml(nodes: dict[int, tuple[float, float, dict]], ways: list[tuple[int, l
     out = ['<?xml version="1.0" encoding="UTF-8"?>', '<osm version="0.6" generator="test">']
     for nid, (lat, lon, tags) in nodes.items():
         body = "".join(f'<tag k="{k}" v="{v}"/>' for k, v in tags.items())
-        out.append(f'<node id="{nid}" lat="{lat}" lon="{lon}">{body}</node>')
+        out.append(f'<node id="{nid}" lat="{lat:.7f}" lon="{lon:.7f}">{body}</node>')
     for wid, refs, tags in ways:
         body = "".join(f'<nd ref="{r}"/>' for r in refs) + "".join(f'<tag k="{k}" v="{v}"/>' for k, v in tags.items())
         out.append(f'<way id="{wid}">{body}</way>')
@@ -191,3 +191,23 @@ def test_west_oakland_7th_street(tmp_path, capsys):
     assert corridor_cli(["show", "oakland_7th_westbound", "--json"]) == 0
     shown = json.loads(capsys.readouterr().out)
     assert shown["length_m"] == pytest.approx(again.length_m) and len(shown["lights"]) == 2 and shown["default_plan"] == "plausible"
+
+
+def test_pbf_through_the_optional_osmium_package(tmp_path):
+    """The same street from a .pbf (written by osmium from the XML) gives the same corridors; without the
+    package, a clear error says how to get it."""
+    xml = main_street(tmp_path)
+    pbf = tmp_path / "x.osm.pbf"
+    try:
+        import osmium
+    except ImportError:
+        pbf.write_bytes(b"\x00")
+        with pytest.raises(OsmError, match=r"optional 'osmium' package"):
+            corridors_from_osm(pbf, "Main Street")
+        return
+    with osmium.SimpleWriter(str(pbf)) as writer:
+        for obj in osmium.FileProcessor(str(xml)):
+            writer.add_node(obj) if obj.is_node() else writer.add_way(obj) if obj.is_way() else None
+    from_xml = corridors_from_osm(xml, "Main Street").corridors
+    from_pbf = corridors_from_osm(pbf, "Main Street").corridors
+    assert [(c.polyline, c.intersections, c.segments) for c in from_pbf] == [(c.polyline, c.intersections, c.segments) for c in from_xml]
