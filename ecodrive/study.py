@@ -313,6 +313,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--time-buffer", type=float, default=0.0, help="relative trip-time buffer (paper: +-0.03)")
     parser.add_argument("--exit-m", type=float, default=100.0, help="exit zone after light 2 [m] (paper: 100, also says 200)")
     parser.add_argument("--no-figures", action="store_true")
+    parser.add_argument("--corridor", help="study a corridor file or preset instead of the paper's cases (docs/CORRIDORS.md)")
+    parser.add_argument("--timing", help="with --corridor: a plan of the corridor, a plan file or a paper preset (default: its own plan)")
+    parser.add_argument("--entries", type=int, default=16, help="with --corridor: zone entries spread over the lights' common period")
+    parser.add_argument("--start", default=None, help="with --corridor: first entry, ISO 8601 (plan's local time) or Unix s (default 2024-05-01T12:00)")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="override a vehicle parameter in every variant, e.g. --set regen_power_max_w=60000")
     args = parser.parse_args(argv)
@@ -326,6 +330,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             overrides[name] = float(value)
         except ValueError:
             parser.error(f"--set {item!r}: {value!r} is not a number")
+    if args.corridor:  # a user's own arterial: cases over zone-entry instants (ecodrive/corridor_study.py)
+        from ecodrive.corridor_study import DEFAULT_START, run
+        from spat_feed.files import FileFormatError
+
+        args.start = args.start or DEFAULT_START
+        try:
+            return run(args, run_study, grouped_bars)
+        except (FileFormatError, KeyError, ValueError) as exc:
+            parser.error(str(exc.args[0]) if isinstance(exc, KeyError) else str(exc))
     grid = replace(STUDY_GRID, stage_m=args.stage_m, time_buffer_frac=args.time_buffer)
     t0 = time.perf_counter()
     try:
