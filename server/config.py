@@ -29,7 +29,7 @@ class Settings(BaseSettings):
     corridor_file: Path | None = Field(default=None, description="an extra corridor JSON file to serve")
     default_corridor: str = "paper_s400"
     default_vehicle: str = "paper_54kwh"
-    speed_limit_mps: float = Field(default=SPEED_LIMIT_MPS, gt=0, le=70)
+    speed_limit_mps: float = Field(default=SPEED_LIMIT_MPS, gt=0, le=70, description="limit on corridors whose files state none [m/s]")
 
     # SPaT
     spat_feed_url: str | None = Field(default=None, description="remote SPaT feed (http://host:port); None = in-process simulation")
