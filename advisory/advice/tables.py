@@ -225,7 +225,7 @@ def _tau_step(cycles_s: Sequence[float], preferred_s: float) -> float | None:
 def _red_start_now(light, red_s: float, cycle_s: float) -> float | None:
     """When (seconds from now, mod nothing) the red of ``light`` that is current or next began or begins,
     if its live windows fit a fixed plan of ``red_s`` / ``cycle_s``; else None."""
-    if not light.fresh:
+    if not light.fresh or getattr(light, "scenarios_s", ()):  # stale, or timing only known as scenarios (uncertain)
         return None
     windows = [(s, e) for s, e in light.red_windows_s if e > 0]
     if not windows:
