@@ -434,9 +434,7 @@ class AdviceTables:
             tau = table.phase_now(seen)
             if tau is None:
                 continue
-            k0 = max(math.ceil((obs.position_m - table.x0_m) / table.stage_m - 1e-9), 0)
-            if k0 >= table.policy.shape[0]:
-                return None  # at the line
+            k0 = min(max(math.ceil((obs.position_m - table.x0_m) / table.stage_m - 1e-9), 0), table.policy.shape[0])  # at the line: the speed now
             # time to reach stage k0 from the current position at the current speed
             tau0 = tau + (table.x0_m + k0 * table.stage_m - obs.position_m) / max(obs.speed_mps, 0.5)
             i = _follow(table.policy, table.stage_cls, self.step_dt, self.band_lo, table.cap, k0, float(obs.speed_mps), tau0,
