@@ -5,7 +5,7 @@ import { call, clockOffset_s, SERVICE_ROOT, TripLink } from "./lib/api.js";
 import { watchFixes } from "./lib/gps.js";
 import { Speaker } from "./lib/speech.js";
 import { demoTimeline, parseTraceCsv } from "./lib/trace.js";
-import { chooseUnits, distanceText, speedIn, speedUnitLabel } from "./lib/units.js";
+import { chooseUnits, distanceText, normalizeUnits, speedIn, speedUnitLabel, unitsParameter } from "./lib/units.js";
 
 const DEMO_TRACE_URL = "demo/field_test_advised.csv";
 const END_FIXES = 3; // the trip ends by itself this many fixes after the car reaches the corridor's end
@@ -87,6 +87,7 @@ async function start(mode) {
   if (!speaker.muted) speaker.unlock(); // inside the tap: browsers allow speech and sound only after a user gesture
   const awake = keepAwake();
   show("starting");
+  note("");
   setText("setup-error", "");
   try {
     const offset_s = await clockOffset_s().catch(() => 0);
@@ -100,6 +101,12 @@ async function start(mode) {
       timeline = demoTimeline(trace, Date.now() / 1000 + offset_s, pace);
       const { corridor, timing, vehicle } = trace.meta;
       body = { corridor, timing, vehicle, entry_unix_s: timeline.entry_unix_s };
+    }
+    const chosen = normalizeUnits($("units").value);
+    if (chosen) { // the user's units: asked of the service too, where it takes them, so that it speaks them
+      const spec = await call("GET", "/openapi.json").catch(() => null);
+      const units = unitsParameter(spec?.components?.schemas?.TripCreate?.properties?.units, chosen);
+      if (units !== null) body.units = units;
     }
     const key = $("api-key").value.trim();
     let created;
@@ -264,7 +271,7 @@ async function finish(current, why, { scored = true } = {}) {
 // -- the score -------------------------------------------------------------------------------------
 function renderScore(score) {
   const pct = new Intl.NumberFormat(locale, { style: "percent", maximumFractionDigits: 0 });
-  const usd = new Intl.NumberFormat(locale, { style: "currency", currency: "USD", maximumSignificantDigits: 2 });
+  const usd = new Intl.NumberFormat(locale, { style: "currency", currency: "USD", currencyDisplay: "narrowSymbol", maximumSignificantDigits: 2 });
   const wh = new Intl.NumberFormat(locale, { maximumFractionDigits: 0 });
   const you = score?.driven;
   const reg = score?.regular;

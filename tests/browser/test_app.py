@@ -121,10 +121,10 @@ def check_rendering(shown: dict, advice: dict, units: str) -> None:
         assert shown["speed"] == f"{speed_text(advice['speed_mps'], units)} {'mph' if units == 'mph' else 'km/h'}"
 
 
-def expected_units(created: dict, language: str) -> str:
-    """The trip's units when the service says (a later API field), else the locale's."""
-    named = {"mph": "mph", "kmh": "kmh", "km/h": "kmh", "imperial": "mph", "metric": "kmh"}
-    return named.get(str(created.get("units")).lower(), "mph" if language in ("en-US", "en-GB") else "kmh")
+def expected_units(created: dict, language: str, choice: str = "auto") -> str:
+    """The trip's units where the service names them (it speaks in them), else the user's choice, else the locale's."""
+    named = {"mph": "mph", "kmh": "kmh", "imperial": "mph", "metric": "kmh"}
+    return named.get(str(created.get("units")), named.get(choice, "mph" if language in ("en-US", "en-GB") else "kmh"))
 
 
 async def background_rgb(page: Page) -> tuple[int, ...]:
@@ -199,10 +199,14 @@ def test_units_trace_and_demo_timeline_in_the_browser(app_service, tmp_path):
               const timelines = [1, 2, 20].map((pace) => t.demoTimeline(trace, 2000000000, pace));
               return JSON.stringify({
                 locale: ["en-US", "en-GB", "en", "fr-FR", "de", "my-MM", "es-PR", "xx"].map(u.localeUnits),
-                choose: [u.chooseUnits({choice: "auto", trip: {units: "mph"}, locale: "fr-FR"}),
+                choose: [u.chooseUnits({choice: "auto", trip: {units: "imperial"}, locale: "fr-FR"}),
                          u.chooseUnits({choice: "kmh", trip: {units: "mph"}, locale: "en-US"}),
                          u.chooseUnits({choice: "auto", trip: {units: "furlongs"}, locale: "fr-FR"}),
-                         u.chooseUnits({choice: "auto", trip: {}, locale: "en-US"})],
+                         u.chooseUnits({choice: "auto", trip: {}, locale: "en-US"}),
+                         u.chooseUnits({choice: "kmh", trip: {}, locale: "en-US"})],
+                parameter: [u.unitsParameter({anyOf: [{enum: ["metric", "imperial"], type: "string"}, {type: "null"}]}, "kmh"),
+                            u.unitsParameter(undefined, "kmh"), u.unitsParameter({type: "string"}, "mph"),
+                            u.unitsParameter({enum: ["kmh", "mph"]}, "mph"), u.unitsParameter({enum: ["metric"]}, "mph")],
                 speeds: [u.speedIn(24.587, "mph"), u.speedIn(24.587, "kmh"), u.speedIn(null, "kmh")],
                 distances: [u.distanceText(123, "kmh", "en"), u.distanceText(1234, "kmh", "en"), u.distanceText(100, "mph", "en"), u.distanceText(1609.344, "mph", "en")],
                 meta: trace.meta, fixes: trace.fixes, errors, timelines,
@@ -214,7 +218,8 @@ def test_units_trace_and_demo_timeline_in_the_browser(app_service, tmp_path):
 
     out = run(scenario())
     assert out["locale"] == ["mph", "mph", "mph", "kmh", "kmh", "mph", "mph", "kmh"]
-    assert out["choose"] == ["mph", "kmh", "kmh", "mph"]  # user's choice > trip's units > locale
+    assert out["choose"] == ["mph", "mph", "kmh", "mph", "kmh"]  # the trip's units (spoken) > the user's choice > the locale's
+    assert out["parameter"] == ["metric", None, "mph", "mph", None]
     assert out["speeds"] == [55, 89, None]
     assert out["distances"] == ["125 m", "1.2 km", "330 ft", "1.0 mi"]
     assert out["meta"] == {"corridor": "paper_s400", "timing": "field_test", "entry_unix_s": 1714557600, "vehicle": "paper_54kwh",
@@ -246,7 +251,8 @@ def test_units_trace_and_demo_timeline_in_the_browser(app_service, tmp_path):
 @needs_chromium
 def test_gps_drive_shows_and_speaks_the_advice(app_service, tmp_path, shots):
     """Geolocation emulated along paper_s400 at 1 Hz: the page creates a trip, sends each position, shows
-    each advisory (in mph for en-US), speaks those with ``speak``, and shows the score when ended."""
+    each advisory (in km/h, chosen against the en-US locale), speaks those with ``speak``, and shows the
+    score when ended."""
     corridor = load_corridor("paper_s400")
     language = "en-US"
 
@@ -257,7 +263,8 @@ def test_gps_drive_shows_and_speaks_the_advice(app_service, tmp_path, shots):
             await browser.send("Browser.grantPermissions", {"permissions": ["geolocation"], "origin": app_service.base_url, "browserContextId": page.context_id})
             options = await page.evaluate("[...document.querySelectorAll('#corridor option')].map((o) => o.value)")
             assert options == ["", "paper_s200", "paper_s400"]
-            await page.evaluate("document.getElementById('corridor').value = 'paper_s400'")
+            for select, value in (("corridor", "paper_s400"), ("units", "kmh")):  # km/h chosen, against the locale's mph
+                await page.evaluate(f"(() => {{ const s = document.getElementById('{select}'); s.value = '{value}'; s.dispatchEvent(new Event('change')); }})()")
             assert await background_rgb(page) == (255, 255, 255)
             await page.screenshot(shots / "1_setup.png")
 
@@ -290,7 +297,11 @@ def test_gps_drive_shows_and_speaks_the_advice(app_service, tmp_path, shots):
 
     created, trip_id, seen, received, spoken, score, table, summary = run(scenario())
     assert trip_id == created["trip_id"] and created["corridor"] == "paper_s400"
-    units = expected_units(created, language)
+    units = expected_units(created, language, "kmh")
+    assert units == "kmh"
+    if "units" in created:  # a service that takes `units` was asked for the user's, and speaks them
+        assert created["units"] == "metric"
+        assert all("miles" not in a["message"] for a in received)
     by_seq = {a["seq"]: a for a in received}
     assert len(received) >= 12 and sorted(by_seq) == list(range(1, len(received) + 1))
     for shown in seen:  # every screen showed the advisory of its fix
@@ -364,8 +375,8 @@ def test_demo_drive_plays_the_trace_through_the_same_path(app_service, tmp_path,
                     break
                 if state["seq"] and (not seen or state["seq"] != seen[-1]["seq"]):
                     seen.append(state)
-                    if state["target"] not in ("–", "STOP") and not (shots / "2_drive.png").exists() and state["countdown"]:
-                        await page.screenshot(shots / "2_drive.png")
+                    if state["countdown"] and state["action"] in ("Coast", "Ease off", "Slow down") and not (shots / "2_drive.png").exists():
+                        await page.screenshot(shots / "2_drive.png")  # a glide towards a light: the README's middle panel
                 await asyncio.sleep(0.03)
             await page.wait_for("document.body.dataset.state === 'score'", 60, "the score")
             await page.screenshot(shots / "3_score.png")

@@ -108,7 +108,7 @@ export class Speaker {
       this.audio.src = this.objectUrl;
       await this.audio.play();
     } catch (error) {
-      this.onState(`no voice: ${error.message}`);
+      if (error.name !== "AbortError") this.onState(`no voice: ${error.message}`); // AbortError: stopped or replaced
     }
   }
 }

@@ -34,9 +34,32 @@ export function localeUnits(locale) {
   return MPH_REGIONS.has(String(region).toUpperCase()) ? "mph" : "kmh";
 }
 
-/** Which units to show: the user's explicit choice, else the trip's, else the locale's. */
+/**
+ * Which units to show: the trip's (the service speaks in them: the corridor's default, or what the page
+ * asked for at creation), else the user's choice, else the locale's.
+ */
 export function chooseUnits({ choice, trip, locale }) {
-  return normalizeUnits(choice) ?? normalizeUnits(trip?.units) ?? localeUnits(locale);
+  return normalizeUnits(trip?.units) ?? normalizeUnits(choice) ?? localeUnits(locale);
+}
+
+/**
+ * The value to send as `units` at trip creation for `units` ("mph" | "kmh"), given the service's JSON
+ * schema of that field (OpenAPI); null when the service takes no `units` or none of its values fits.
+ */
+export function unitsParameter(schema, units) {
+  if (!schema || typeof schema !== "object") return null;
+  const values = [];
+  const walk = (node) => {
+    if (Array.isArray(node)) node.forEach(walk);
+    else if (node && typeof node === "object") {
+      if (Array.isArray(node.enum)) values.push(...node.enum);
+      if (typeof node.const === "string") values.push(node.const);
+      Object.values(node).forEach(walk);
+    }
+  };
+  walk(schema);
+  if (values.length === 0) return units;
+  return values.find((value) => normalizeUnits(value) === units) ?? null;
 }
 
 /** A speed in whole units (the service rounds the spoken number the same way). */
