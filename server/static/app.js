@@ -293,6 +293,10 @@ function renderScore(score) {
   if (score && you && Number.isFinite(saved.energy)) {
     const frac = Math.abs(saved.energy);
     summary = `You used ${pct.format(frac)} ${saved.energy >= 0 ? "less" : "more"} energy than a regular driver${score.complete ? "." : " (indicative: the drive did not cover the whole road)."}`;
+  } else if (score && you && score.red_light_crossings?.length) {
+    summary = "A red light was crossed: this drive is not scored as a saving.";
+  } else if (score && you) {
+    summary = "Scored, but not compared with the regular driver.";
   } else if (score) {
     summary = "Not enough of the drive to score it.";
   }
