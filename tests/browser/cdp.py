@@ -72,9 +72,10 @@ class Browser:
         args = [executable, *CHROMIUM_FLAGS, f"--user-data-dir={profile_dir}", "--remote-debugging-port=0", "about:blank"]
         if os.geteuid() == 0:
             args.insert(1, "--no-sandbox")  # chromium refuses to run as root with its sandbox
+        port_file = profile_dir / "DevToolsActivePort"
+        port_file.unlink(missing_ok=True)  # a reused profile's is stale
         with log_path.open("ab") as log:
             proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
-        port_file = profile_dir / "DevToolsActivePort"
         deadline = time.monotonic() + START_TIMEOUT_S
         while True:
             lines = port_file.read_text().split() if port_file.exists() else []
@@ -84,7 +85,11 @@ class Browser:
                 _kill(proc)
                 raise CdpError(f"chromium did not open its DevTools port (exit {proc.returncode}):\n{log_path.read_text()[-3000:]}")
             await asyncio.sleep(0.05)
-        ws = await connect(f"ws://127.0.0.1:{lines[0]}{lines[1]}", max_size=None, ping_interval=None)
+        try:
+            ws = await connect(f"ws://127.0.0.1:{lines[0]}{lines[1]}", max_size=None, ping_interval=None, open_timeout=CALL_TIMEOUT_S)
+        except BaseException:
+            _kill(proc)
+            raise
         return cls(proc, ws, log_path)
 
     async def _read(self) -> None:

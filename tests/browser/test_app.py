@@ -128,7 +128,7 @@ def check_rendering(shown: dict, advice: dict, units: str) -> None:
 def expected_units(created: dict, language: str, choice: str = "auto") -> str:
     """The trip's units where the service names them (it speaks in them), else the user's choice, else the locale's."""
     named = {"mph": "mph", "kmh": "kmh", "imperial": "mph", "metric": "kmh"}
-    return named.get(str(created.get("units")), named.get(choice, "mph" if language in ("en-US", "en-GB") else "kmh"))
+    return named.get(str(created.get("units")), named.get(choice, {"en-US": "mph", "fr-FR": "kmh"}[language]))
 
 
 async def background_rgb(page: Page) -> tuple[int, ...]:
@@ -363,9 +363,9 @@ def compose_figure(paths: list[Path], out: Path) -> None:
 @needs_chromium
 def test_demo_drive_plays_the_trace_through_the_same_path(app_service, tmp_path, shots):
     """The demo drive: trace timing and entry at creation, fixes on the service's clock, advice on screen in
-    km/h (fr-FR), spoken with the service's WAV (no Web Speech here), ending by itself with the score the
-    same fixes get when fed to the service directly."""
-    language = "fr-FR"
+    the trip's units (en-US: mph where the trip names none), spoken with the service's WAV (no Web Speech
+    here), ending by itself with the score the same fixes get when fed to the service directly."""
+    language = "en-US"
 
     async def scenario():
         browser = await Browser.launch(CHROMIUM, tmp_path / "profile", tmp_path / "chromium.log")
@@ -441,7 +441,7 @@ def test_muted_demo_over_rest_when_sockets_are_refused(app_service, tmp_path, sh
     async def scenario():
         browser = await Browser.launch(CHROMIUM, tmp_path / "profile", tmp_path / "chromium.log")
         try:
-            page = await open_app(browser, app_service.base_url + f"/app/?pace={DEMO_PACE}", script=PHONE_VOICE + REFUSED_SOCKETS, language="en-GB", scheme="light")
+            page = await open_app(browser, app_service.base_url + f"/app/?pace={DEMO_PACE}", script=PHONE_VOICE + REFUSED_SOCKETS, language="fr-FR", scheme="light")
             await page.click("#mute")
             assert await page.evaluate("document.getElementById('mute').getAttribute('aria-pressed')") == "true"
             await page.click("#demo")
@@ -462,7 +462,7 @@ def test_muted_demo_over_rest_when_sockets_are_refused(app_service, tmp_path, sh
     assert frames == [] and sockets and all(url.endswith("/stream-refused?token=" + url.split("token=")[1]) for url in sockets)  # tried, refused
     assert len(received) >= 20 and shown["link"].startswith("REST")
     assert any(a["speak"] for a in received) and spoken == [] and wav_requests == []
-    check_rendering(shown, next(a for a in received if a["seq"] == shown["seq"]), expected_units(created, "en-GB"))
+    check_rendering(shown, next(a for a in received if a["seq"] == shown["seq"]), expected_units(created, "fr-FR"))
     assert len(score) == 1 and score[0]["driven"] is not None
 
 
