@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 
 COMMANDS = {
-    "study": "replay.study",
+    "study": "ecodrive.study",
     "score": "replay.cli",
     "serve": "server.main",
 }
