@@ -12,6 +12,7 @@ from pathlib import Path
 
 from fastapi import APIRouter, Response
 from fastapi.responses import FileResponse, RedirectResponse
+from starlette.routing import Match, Mount
 from starlette.staticfiles import StaticFiles
 
 STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
@@ -43,4 +44,14 @@ async def demo_trace() -> FileResponse:
     return FileResponse(DEMO_TRACE, media_type="text/csv; charset=utf-8", headers={"Cache-Control": "no-cache"})
 
 
-router.mount("/app", AppFiles(directory=STATIC_DIR, html=True), name="app")
+class AppMount(Mount):
+    """The files' mount, named in the request metrics as ``/app`` (a plain Mount leaves them "unmatched")."""
+
+    def matches(self, scope) -> tuple[Match, dict]:
+        match, child_scope = super().matches(scope)
+        if match is not Match.NONE:
+            child_scope["route"] = self
+        return match, child_scope
+
+
+router.routes.append(AppMount("/app", app=AppFiles(directory=STATIC_DIR, html=True), name="app"))

@@ -156,6 +156,8 @@ def test_app_is_served_from_the_package(app_service):
         assert client.get("/app/nothing.js").status_code == 404
         assert client.get("/app/%2e%2e/app.py").status_code == 404
         assert not any(p.startswith("/app") for p in client.get("/openapi.json").json()["paths"])
+        metrics = client.get("/metrics").text  # the files are counted under their mount, not as "unmatched"
+        assert 'route="/app",status="200"' in metrics and 'route="/app",status="404"' in metrics
 
 
 def test_package_data_ships_every_app_file():
