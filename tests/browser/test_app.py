@@ -265,7 +265,8 @@ def test_gps_drive_shows_and_speaks_the_advice(app_service, tmp_path, shots):
     async def scenario():
         browser = await Browser.launch(CHROMIUM, tmp_path / "profile", tmp_path / "chromium.log")
         try:
-            page = await open_app(browser, app_service.base_url + "/app/", script=PHONE_VOICE, language=language, scheme="light")
+            page = await open_app(browser, app_service.base_url + "/app", script=PHONE_VOICE, language=language, scheme="light")  # redirected to /app/
+            assert await page.evaluate("location.pathname") == "/app/"
             await browser.send("Browser.grantPermissions", {"permissions": ["geolocation"], "origin": app_service.base_url, "browserContextId": page.context_id})
             options = await page.evaluate("[...document.querySelectorAll('#corridor option')].map((o) => o.value)")
             assert options == ["", "paper_s200", "paper_s400"]
