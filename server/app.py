@@ -30,7 +30,7 @@ from server.config import Settings
 from server.errors import install_handlers
 from server.metrics import Metrics
 from server.middleware import GuardMiddleware
-from server.routes import audio, corridors, health, stream, trips
+from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
 from server.spat import RemoteFeed
 
@@ -146,7 +146,8 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     # come early and the documentation pages last. The routers' routes go straight into the app's list
     # (each router carries its own prefix and tags; no include-level options are used): FastAPI's
     # include_router adds a nested matching level per router. Together ~25 us less per fix (docs/SERVICE.md).
-    for module in (health, trips, stream, corridors, audio):
+    # The phone app's static files (/app) come after every API route.
+    for module in (health, trips, stream, corridors, audio, webapp):
         app.router.routes.extend(module.router.routes)
     docs = [r for r in app.router.routes if getattr(r, "path", None) in (app.openapi_url, app.docs_url, app.redoc_url, app.swagger_ui_oauth2_redirect_url)]
     app.router.routes[:] = [r for r in app.router.routes if r not in docs] + docs

@@ -19,6 +19,8 @@ from concurrent.futures import ThreadPoolExecutor
 log = logging.getLogger("server.audio")
 
 MAX_TEXT_CHARS = 500
+WAV_HEADER_BYTES = 44  # a PCM WAV's RIFF + fmt + data headers: a file this long holds no sound
+RENDER_TRIES = 3
 
 
 class SpeechUnavailable(RuntimeError):
@@ -52,6 +54,15 @@ class Speech:
             log.warning("speech unavailable: %s", self.reason)
 
     def _render(self, text: str) -> bytes:
+        """WAV bytes of ``text``. pyttsx3's espeak driver now and then writes a header and no samples (seen
+        under load; pyttsx3 issues #142, #242): such a file is rendered again, and never cached."""
+        for _ in range(RENDER_TRIES):
+            data = self._render_once(text)
+            if len(data) > WAV_HEADER_BYTES:
+                return data
+        raise SpeechUnavailable(f"the speech engine wrote no audio ({RENDER_TRIES} tries)")
+
+    def _render_once(self, text: str) -> bytes:
         path = os.path.join(self._dir, "advice.wav")
         if os.path.exists(path):
             os.remove(path)
