@@ -38,10 +38,11 @@ class Speech:
         self._engine = None
         self._executor: ThreadPoolExecutor | None = None
         self._cache: OrderedDict[str, bytes] = OrderedDict()
-        self._dir = tempfile.mkdtemp(prefix="ecodrive-tts-")
+        self._dir: str | None = None  # made when the engine starts, removed when it stops
 
     def _init_engine(self) -> None:
         try:
+            self._dir = tempfile.mkdtemp(prefix="ecodrive-tts-")
             import pyttsx3
 
             self._engine = pyttsx3.init("espeak")
@@ -99,4 +100,6 @@ class Speech:
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
             self._executor = None
-        shutil.rmtree(self._dir, ignore_errors=True)
+        if self._dir is not None:
+            shutil.rmtree(self._dir, ignore_errors=True)
+            self._dir = None

@@ -40,7 +40,8 @@ class Proc:
         return f"{self.scheme}://127.0.0.1:{self.port}"
 
     def start(self) -> Proc:
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", **self.env}
+        # TMPDIR beside the log: what the process leaves in its temporary folder when killed stays in pytest's tmp dirs
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "TMPDIR": str(self.log_path.parent), **self.env}
         log = self.log_path.open("ab")
         self.proc = subprocess.Popen([sys.executable, *self.args, "--port", str(self.port)], cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT)
         log.close()

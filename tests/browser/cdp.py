@@ -17,6 +17,7 @@ import os
 import shutil
 import signal
 import subprocess
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -136,11 +137,19 @@ class Browser:
 
 
 def _kill(proc: subprocess.Popen) -> None:
-    """Chromium and all its helper processes (its own session: the group has its pid)."""
+    """Chromium and all its helper processes (its own session: the group has its pid), and the singleton
+    folder it keeps in /tmp (``org.chromium.Chromium.*``, which a killed chromium cannot remove; the socket
+    path inside it must stay short, so it cannot live under pytest's tmp dirs)."""
     with contextlib.suppress(ProcessLookupError):
         os.killpg(proc.pid, signal.SIGKILL)
     with contextlib.suppress(subprocess.TimeoutExpired):
         proc.wait(timeout=10)
+    profile = Path(next(a for a in proc.args if a.startswith("--user-data-dir=")).removeprefix("--user-data-dir="))
+    for link in ("SingletonSocket", "SingletonLock"):
+        with contextlib.suppress(OSError):
+            target = Path(os.readlink(profile / link)).parent
+            if target.name.startswith("org.chromium.") and target.parent == Path(tempfile.gettempdir()):
+                shutil.rmtree(target, ignore_errors=True)
 
 
 class Page:
