@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test bench study feed clean
+.PHONY: run test bench study feed app-figure clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,10 @@ study: $(STAMP)
 
 feed: $(STAMP)
 	$(PY) -m spat_feed
+
+app-figure: $(STAMP)  # the README's screenshots of the phone app (a demo drive in headless chromium)
+	sh scripts/system-deps.sh
+	ECODRIVE_APP_FIGURE=docs/figures/app_demo_drive.png $(PY) -m pytest -q tests/browser -k demo_drive
 
 bench: $(STAMP)
 	for b in bench/bench_*.py; do $(PY) $$b || exit 1; done

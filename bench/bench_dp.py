@@ -25,8 +25,8 @@ from advisory.optimizer.dp import GridSpec, build_problem, solve_numpy, solve_pr
 from advisory.physics.params import model_params  # noqa: E402
 from advisory.drivers.regular import regular_driver  # noqa: E402
 from advisory.signals import paper_scenario  # noqa: E402
-from advisory.evaluation.study import study_cases  # noqa: E402
-from replay.study import run_study  # noqa: E402
+from advisory.evaluation.study import paper_cases  # noqa: E402
+from ecodrive.study import run_study  # noqa: E402
 
 BENCH_GRID = GridSpec(stage_m=20.0, time_bin_s=0.5, dwell_s=1.0)
 
@@ -81,10 +81,10 @@ def main() -> None:
             prev = s.cost_usd
 
     if not quick:
-        cases = study_cases()
+        cases = paper_cases()
         workers = os.cpu_count() or 1
         t0 = time.perf_counter()
-        run_study(cases, GridSpec(stage_m=10.0), workers, progress=None)
+        run_study(cases, GridSpec(stage_m=10.0), workers, progress=False)
         t_study = time.perf_counter() - t0
         print(f"\nFull study: {len(cases)} cases (64 x 3 variants) at stage 10 m on {workers} processes: {t_study:.1f} s (target < 30 s on 2 cores)")
     print(f"Peak RSS of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")

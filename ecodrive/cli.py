@@ -1,6 +1,7 @@
 """`ecodrive <command>`: the project's commands by name, each dispatched to the module that implements it.
 
-Commands: ``study`` (the paper's study), ``score`` (same as ``replay``: score a trace).
+Commands: ``study`` (the paper's study), ``score`` (same as ``replay``: score a trace), ``serve``, ``corridor``
+(corridor and plan files: ``from-osm``, ``show``, ``tables``, ``schema``).
 """
 
 from __future__ import annotations
@@ -9,9 +10,10 @@ import sys
 from collections.abc import Sequence
 
 COMMANDS = {
-    "study": "replay.study",
+    "study": "ecodrive.study",
     "score": "replay.cli",
     "serve": "server.main",
+    "corridor": "ecodrive.corridor",
 }
 
 

@@ -114,7 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--plot", type=Path, metavar="OUT.png", help="draw the paper's four panels (time-distance with red bars, speed, energy, decay)")
     gps = parser.add_argument_group("GPS traces")
     gps.add_argument("--corridor", help="corridor preset or JSON file (default: the trace's '# corridor:', else found by map matching)")
-    gps.add_argument("--timing", help="signal timing preset, e.g. field_test or -15_15 (default: the trace's '# timing:')")
+    gps.add_argument("--timing", help="signal timing: a paper preset (field_test, -15_15), a plan of the corridor, or a plan file .json/.toml (default: the trace's '# timing:', else the corridor's own plan)")
     gps.add_argument("--entry", type=float, metavar="UNIX_S", help="zone-entry instant the timing is relative to (default: '# entry_unix_s:', else when the fixes cross station 0)")
     gps.add_argument("--smooth-s", type=float, default=None, help="Gaussian speed smoothing sigma [s] (default: 0 for GPS speeds, 1 for speeds from positions)")
     gps.add_argument("--baseline", type=Path, metavar="TRACE", help="another GPS trace of the same corridor (e.g. a regular drive): print this drive's change against it")

@@ -14,12 +14,16 @@
    (interpolated between fixes; a trace that starts inside the zone is extrapolated back, as the
    service does), as a trajectory whose positions are integrated from the speeds
    (``advisory.evaluation.track.trajectory_from_samples``).
-5. **The lights**: the timing (``--timing`` / ``# timing:``) anchored at ``entry_unix_s`` (``--entry`` /
-   ``# entry_unix_s:``, default: the measured zone entry), seen from the measured entry
-   (``spat_feed.scenarios.advisory_scenario_at``).
+5. **The lights**: the timing (``--timing`` / ``# timing:``: a paper preset, a plan of the corridor, or a
+   plan file; default: the corridor's own plan if it has one) anchored at ``entry_unix_s`` (``--entry`` /
+   ``# entry_unix_s:``, default: the measured zone entry; a plan by time of day runs on the trace's own
+   clock), seen from the measured entry (``spat_feed.scenarios.advisory_scenario_at``), through all N lights.
 6. **Scores** (``advisory.evaluation.endstate.score_in_end_state``: zone + re-acceleration to the limit) of the drive,
    the paper's regular driver entering at the same instant at the limit, and the DP optimum
-   (``advisory.optimizer.dp.solve``, 20 m stages), and the changes against the regular driver.
+   (``advisory.optimizer.dp.solve``, 20 m stages), and the changes against the regular driver. The DP needs
+   every stop line on a stage boundary: where a corridor's are not (a real road), it solves with 10 m
+   stages and the stop lines moved to the nearest boundary (at most 5 m; said in the notes,
+   :func:`dp_scenario`). The speed limit is the corridor's lowest over the zone where its file states one.
 """
 
 from __future__ import annotations
@@ -43,8 +47,8 @@ from advisory.evaluation.track import (  # noqa: F401  (smooth_speed_mps, STANDS
 from advisory.trajectory import Trajectory
 from replay.matching import CorridorChoice, MatchedTrace, find_corridor, match
 from replay.trace_io import GpsTrace, TraceError
-from spat_feed.corridors import TIMING_PRESETS, load_corridor
-from spat_feed.scenarios import FeedScenario, advisory_scenario_at, make_scenario
+from spat_feed.corridors import TIMING_PRESETS, load_corridor, preset_names
+from spat_feed.scenarios import FeedScenario, advisory_scenario_at, make_scenario, resolve_timing
 
 SMOOTH_POSITIONS_S = 1.0
 """Default Gaussian smoothing (standard deviation) of speeds derived from positions. [s]
@@ -53,6 +57,41 @@ peaks, and smoothing them further lowers the energy more than the noise raises i
 EDGE_M = 25.0
 """The fixes must reach within this of the zone entry and exit for the drive to be complete. [m]"""
 DP_STAGE_M = 20.0
+DP_FINE_STAGE_M = 10.0
+"""DP stage where the stop lines are not on the 20 m grid; they move at most half of it. [m]"""
+
+
+def dp_scenario(scenario: Scenario, stage_m: float = DP_STAGE_M) -> tuple[Scenario, float, float]:
+    """The scenario the DP can solve, its stage and the largest stop-line move. [-, m, m]
+
+    Unchanged with ``stage_m`` when every stop line and the zone end lie on its grid; else on the
+    :data:`DP_FINE_STAGE_M` grid, each stop line (and the zone end) moved to the nearest boundary, kept in
+    order and inside the zone. The timing is not moved.
+    """
+    from dataclasses import replace
+
+    def on_grid(x: float, ds: float) -> bool:
+        return abs(x / ds - round(x / ds)) < 1e-9
+
+    if all(on_grid(s.position_m, stage_m) for s in scenario.signals) and on_grid(scenario.zone_length_m, stage_m):
+        return scenario, stage_m, 0.0
+    ds = DP_FINE_STAGE_M
+    moved, out, last = 0.0, [], 0.0
+    for s in scenario.signals:
+        x = max(round(s.position_m / ds) * ds, last + ds)
+        moved = max(moved, abs(x - s.position_m))
+        out.append(replace(s, position_m=x))
+        last = x
+    zone = max(round(scenario.zone_length_m / ds) * ds, last + ds)
+    moved = max(moved, abs(zone - scenario.zone_length_m))
+    return replace(scenario, signals=tuple(out), zone_length_m=zone), ds, moved
+
+
+def _plans_of(corridor: str) -> tuple:
+    try:
+        return load_corridor(corridor).plans
+    except (KeyError, ValueError, OSError):
+        return ()  # reported when the corridor is loaded
 
 
 def speed_from_stations_mps(t_s: np.ndarray, station_m: np.ndarray) -> np.ndarray:
@@ -181,8 +220,10 @@ def score_drive(
             entry_unix_s = float(trace.meta["entry_unix_s"])
         except ValueError:
             raise TraceError(f"{trace.source}: '# entry_unix_s: {trace.meta['entry_unix_s']}' is not a number") from None
-    if timing is not None and timing not in TIMING_PRESETS:
-        raise TraceError(f"unknown timing {timing!r}; choose from {sorted(TIMING_PRESETS)}")
+    if timing is not None and timing not in TIMING_PRESETS and not timing.lower().endswith((".json", ".toml")):
+        plans = {p.name for name in ([corridor] if corridor else preset_names()) for p in _plans_of(name)}
+        if timing not in plans:
+            raise TraceError(f"unknown timing {timing!r}; choose from {sorted(plans) + sorted(TIMING_PRESETS)}, or a plan file (.json/.toml)")
     if corridor:
         try:
             cor = load_corridor(corridor)
@@ -195,6 +236,7 @@ def score_drive(
             notes.append(f"corridor {choice.matched.corridor.name} {choice.how}; {', '.join(choice.ambiguous)} fit as well: give --corridor")
     m = choice.matched
     length_m = m.corridor.length_m
+    speed_limit_mps = m.corridor.zone_speed_limit_mps(speed_limit_mps)  # the corridor's own limit where its file states one
     on = m.on_route
     if on.sum() < 2:
         raise TraceError(f"{trace.source}: fewer than two fixes within 30 m of corridor {m.corridor.name}")
@@ -231,6 +273,10 @@ def score_drive(
     traj = trajectory_from_samples(zt, zv, x0_m=0.0, t0_s=t_in)
     driven = DriverResult(traj, score_in_end_state(traj, params, speed_limit_mps, keep_series=True))
 
+    own_plan = m.corridor.plan()
+    if timing is None and own_plan is not None:
+        timing = own_plan.name
+        notes.append(f"timing: the corridor's plan {timing!r} (pattern in force at the zone entry)")
     result = DriveResult(trace, choice, m, speed_source, float(smooth_s), t_in, entry_unix_s, timing, complete, driven, notes=notes)
     if timing is None:
         notes.append("no signal timing (--timing or '# timing:'): no comparison with the regular driver and the DP optimum")
@@ -238,11 +284,14 @@ def score_drive(
     anchor = t_in if entry_unix_s is None else entry_unix_s
     result.entry_unix_s = anchor
     try:
-        feed: FeedScenario = make_scenario(m.corridor, timing, anchor)
+        feed: FeedScenario = make_scenario(m.corridor, resolve_timing(m.corridor, timing, anchor), anchor)
+        scenario = advisory_scenario_at(feed, t_in, speed_limit_mps)
+    except KeyError as exc:
+        raise TraceError(str(exc.args[0])) from None
     except ValueError as exc:
         raise TraceError(str(exc)) from None
     # the regular driver and the DP optimum enter when and as fast as the recorded drive did
-    scenario = replace(advisory_scenario_at(feed, t_in, speed_limit_mps), initial_speed_mps=float(min(max(zv[0], 0.0), speed_limit_mps)))
+    scenario = replace(scenario, initial_speed_mps=float(min(max(zv[0], 0.0), scenario.speed_limit_mps)))
     result.scenario = scenario
     result.red_crossings = red_light_crossings(traj, scenario.signals, t - t_in, st)
     for c in result.red_crossings:
@@ -255,8 +304,11 @@ def score_drive(
 
     reg = regular_driver(scenario)
     result.regular = DriverResult(reg, score_in_end_state(reg, params, speed_limit_mps, keep_series=True))
+    solvable, stage_m, moved_m = dp_scenario(scenario)
+    if moved_m > 0:
+        notes.append(f"DP optimum on {stage_m:g} m stages with the stop lines moved to the grid (at most {moved_m:.1f} m)")
     try:
-        sol = dp.solve(scenario, params, dp.GridSpec(stage_m=DP_STAGE_M))
+        sol = dp.solve(solvable, params, dp.GridSpec(stage_m=stage_m))
     except dp.InfeasibleError as exc:
         notes.append(f"DP optimum: {exc}")
     else:

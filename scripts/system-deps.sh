@@ -8,6 +8,7 @@
 set -u
 NEEDS='
 espeak-ng espeak-ng speech for GET /v1/trips/{id}/advice.wav
+chromium chromium headless browser for the phone app tests (tests/browser)
 '
 missing=""
 for_what=""

@@ -22,8 +22,8 @@ from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, advise
 from advisory.physics.params import VEHICLE_PRESETS
-from spat_feed.corridors import TIMING_PRESETS, Corridor, timing_for_trip
-from spat_feed.scenarios import FeedScenario, Uncertainty
+from spat_feed.corridors import Corridor
+from spat_feed.scenarios import FeedScenario, Uncertainty, resolve_timing
 
 from server.config import Settings
 from server.errors import ApiError
@@ -110,14 +110,12 @@ class Engine:
         entry = now if body.entry_unix_s is None else body.entry_unix_s
         if body.entry_unix_s is not None:
             self.check_time(entry, "entry_unix_s", s.max_entry_future_s)
-        if body.timing is None or body.timing == "trip":
-            timing = timing_for_trip(entry)
-        elif body.timing in TIMING_PRESETS:
-            timing = TIMING_PRESETS[body.timing]
-        else:
-            raise ApiError(422, "unknown_timing", f"unknown timing {body.timing!r}; choose from {sorted(TIMING_PRESETS)} or 'trip'")
-        if len(timing.red_starts_s) != len(corridor.intersections):
-            raise ApiError(422, "timing_mismatch", f"timing {timing.name!r} has {len(timing.red_starts_s)} lights, corridor {corridor.name!r} has {len(corridor.intersections)}")
+        try:  # the corridor's plans by name, a paper preset, or "trip" (never a path from a request)
+            timing = resolve_timing(corridor, body.timing, entry, allow_files=False)
+        except KeyError as exc:
+            raise ApiError(422, "unknown_timing", str(exc.args[0])) from None
+        except ValueError as exc:
+            raise ApiError(422, "timing_mismatch", str(exc)) from None
         uncertainty = Uncertainty(s.spat_early_s, s.spat_late_s, s.spat_confidence_frac)
         scenario = FeedScenario(corridor, timing, float(entry), uncertainty)
         units = body.units or corridor_units(corridor)
@@ -196,7 +194,7 @@ class Engine:
             readings = trip.spat.readings(fix.t_unix_s) if on_route else {}
             if trip.observed is not None and readings:
                 trip.observed.add(fix.t_unix_s, readings)
-            obs = observation(trip.corridor, m.station_m, speed or 0.0, fix.t_unix_s, readings, s.speed_limit_mps, on_route=on_route)
+            obs = observation(trip.corridor, m.station_m, speed or 0.0, fix.t_unix_s, readings, trip.corridor.advisory_limit_mps(m.station_m, s.speed_limit_mps), on_route=on_route)
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
             advice, memory = advise(obs, trip.memory, trip.params, trip.tables)
@@ -214,7 +212,7 @@ class Engine:
             speed_source=point.speed_source if point is not None else ("gps" if fix.speed_mps is not None else "none"),
             next_intersection_id=nxt.intersection_id if nxt else None, distance_to_line_m=round(nxt.distance_m, 2) if nxt else None,
             spat_fresh=spat_fresh, action=advice.action, reason=advice.reason,
-            target_speed_mps=None if advice.target_speed_mps is None else round(advice.target_speed_mps, 2),
+            target_speed_mps=None if advice.target_speed_mps is None else math.floor(advice.target_speed_mps * 100.0 + 1e-9) / 100.0,  # down: never above the limit
             light_red=advice.light_red, seconds_to_change_s=_finite(advice.seconds_to_change_s), message=advice.message,
             speak=advice.speak, source=advice.source, fix_note=None,
         )  # fmt: skip

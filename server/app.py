@@ -22,7 +22,7 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from advisory.advice.advisor import AdvisorParams
 from advisory.physics.params import model_params
-from spat_feed.corridors import Corridor, load_corridor
+from spat_feed.corridors import Corridor, load_corridor, load_corridor_dir
 from spat_feed.scenarios import make_scenario
 
 from server.advising import Engine
@@ -32,7 +32,7 @@ from server.errors import install_handlers
 from server.metrics import Metrics
 from server.middleware import GuardMiddleware
 from server.openapi import install_docs
-from server.routes import audio, corridors, health, stream, trips
+from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
 from server.spat import RemoteFeed
 
@@ -48,51 +48,51 @@ Every error is JSON: `{"error": code, "message": sentence, "detail": ...}`.
 
 
 def load_corridors(settings: Settings) -> dict[str, Corridor]:
+    """The presets named in ``corridors``, the corridor (and plan) files of ``corridor_dir``, and
+    ``corridor_file``. Errors name the file; a name defined twice is refused."""
     out = {name: load_corridor(name) for name in settings.corridors}
+    extra = list(load_corridor_dir(settings.corridor_dir).values()) if settings.corridor_dir is not None else []
     if settings.corridor_file is not None:
-        extra = load_corridor(settings.corridor_file)
-        out[extra.name] = extra
+        extra.append(load_corridor(settings.corridor_file))
+    for corridor in extra:
+        if corridor.name in out:
+            raise ValueError(f"corridor {corridor.name!r} is defined twice (a preset and {settings.corridor_dir or settings.corridor_file})")
+        out[corridor.name] = corridor
     if settings.default_corridor not in out:
         raise ValueError(f"default corridor {settings.default_corridor!r} is not among the served corridors {sorted(out)}")
     return out
 
 
 def build_tables(settings: Settings, corridors: dict[str, Corridor]) -> dict[str, object]:
-    """DP lookup tables per corridor for the default vehicle (cached as .npz in ``tables_dir`` if set).
+    """DP lookup tables per corridor for the default vehicle, for every plan its trips can run under
+    (``spat_feed.corridor_tables``), cached as .npz in ``tables_dir`` if set.
 
-    A corridor whose geometry the tables cannot handle (lights of other durations, stations off the grid)
-    gets none: the advisor then uses its rules.
+    A corridor without any fixed-time light gets none: the advisor then uses its rules.
     """
     if not settings.tables:
         return {}
-    from advisory.advice.tables import AdviceTables, paper_offsets_s
+    from spat_feed.corridor_tables import corridor_tables
 
     params = model_params(settings.default_vehicle)
     out: dict[str, object] = {}
     for name, corridor in corridors.items():
-        if len(corridor.intersections) != 2:
-            continue
-        path = None if settings.tables_dir is None else Path(settings.tables_dir) / f"{name}_{settings.default_vehicle}.npz"
         try:
-            if path is not None and path.exists():
-                out[name] = AdviceTables.load(path, params)
-                continue
-            geometry = make_scenario(corridor, "15_15", 0.0).advisory_scenario()
-            geometry = type(geometry)(geometry.name, geometry.signals, geometry.zone_length_m, settings.speed_limit_mps)
-            tables = AdviceTables.build(geometry, params, offsets_s=paper_offsets_s())
-            if path is not None:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                tables.save(path)
-            out[name] = tables
+            tables, report = corridor_tables(corridor, params, cache_dir=settings.tables_dir, default_limit_mps=settings.speed_limit_mps)
         except (ValueError, KeyError) as exc:
             log.warning("no lookup tables for corridor %s: %s", name, exc)
+            continue
+        if tables is None:
+            log.info("no lookup tables for corridor %s: no light has a fixed-time plan (the rules advise)", name)
+            continue
+        log.info("tables %s", report.line())
+        out[name] = tables
     return out
 
 
 def warm_up(engine: Engine) -> None:
     """Run each numba/pyproj path once (compiles or loads the cached machine code)."""
-    corridor = next(iter(engine.corridors.values()))
-    scenario = make_scenario(corridor, "15_15", 0.0)
+    corridor = engine.corridors[engine.settings.default_corridor]
+    scenario = make_scenario(corridor, "trip", 0.0)
     engine.matchers[corridor.name].match(*corridor.position(10.0))
     t = np.array([0.0, 1.0, 2.0])
     v = np.array([20.0, 20.0, 20.0])
@@ -149,10 +149,11 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     # come early and the documentation pages last. The routers' routes go straight into the app's list
     # (each router carries its own prefix and tags; no include-level options are used): FastAPI's
     # include_router adds a nested matching level per router. Together ~25 us less per fix (docs/SERVICE.md).
-    for module in (health, trips, stream, corridors, audio):
+    # The phone app's static files (/app) come after every API route, the documentation pages last.
+    for module in (health, trips, stream, corridors, audio, webapp):
         app.router.routes.extend(r for r in module.router.routes if not (getattr(r, "path", "") == "/metrics" and settings.metrics_access == "off"))
     default = corridors_[settings.default_corridor]
-    install_docs(app, default.position(min(50.0, default.length_m / 2)), default.name)  # last: the documentation pages
+    install_docs(app, default.position(min(50.0, default.length_m / 2)), default.name)
     install_handlers(app)
     app.add_middleware(GuardMiddleware, max_body_bytes=settings.max_body_bytes, metrics=metrics)
     if settings.cors_origins:  # outermost: answers browsers' preflight requests (docs/SERVICE.md, CORS)

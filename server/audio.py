@@ -19,6 +19,8 @@ from concurrent.futures import ThreadPoolExecutor
 log = logging.getLogger("server.audio")
 
 MAX_TEXT_CHARS = 500
+WAV_HEADER_BYTES = 44  # a PCM WAV's RIFF + fmt + data headers: a file this long holds no sound
+RENDER_TRIES = 3
 
 
 class SpeechUnavailable(RuntimeError):
@@ -36,10 +38,11 @@ class Speech:
         self._engine = None
         self._executor: ThreadPoolExecutor | None = None
         self._cache: OrderedDict[str, bytes] = OrderedDict()
-        self._dir = tempfile.mkdtemp(prefix="ecodrive-tts-")
+        self._dir: str | None = None  # made when the engine starts, removed when it stops
 
     def _init_engine(self) -> None:
         try:
+            self._dir = tempfile.mkdtemp(prefix="ecodrive-tts-")
             import pyttsx3
 
             self._engine = pyttsx3.init("espeak")
@@ -52,6 +55,15 @@ class Speech:
             log.warning("speech unavailable: %s", self.reason)
 
     def _render(self, text: str) -> bytes:
+        """WAV bytes of ``text``. pyttsx3's espeak driver now and then writes a header and no samples (seen
+        under load; pyttsx3 issues #142, #242): such a file is rendered again, and never cached."""
+        for _ in range(RENDER_TRIES):
+            data = self._render_once(text)
+            if len(data) > WAV_HEADER_BYTES:
+                return data
+        raise SpeechUnavailable(f"the speech engine wrote no audio ({RENDER_TRIES} tries)")
+
+    def _render_once(self, text: str) -> bytes:
         path = os.path.join(self._dir, "advice.wav")
         if os.path.exists(path):
             os.remove(path)
@@ -88,4 +100,6 @@ class Speech:
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
             self._executor = None
-        shutil.rmtree(self._dir, ignore_errors=True)
+        if self._dir is not None:
+            shutil.rmtree(self._dir, ignore_errors=True)
+            self._dir = None

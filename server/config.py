@@ -13,7 +13,7 @@ from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from advisory.physics.params import SPEED_LIMIT_MPS
-from spat_feed.corridors import PAPER_CORRIDOR_NAMES
+from spat_feed.corridors import preset_names
 
 
 class Settings(BaseSettings):
@@ -23,12 +23,13 @@ class Settings(BaseSettings):
 
     # corridors and vehicles
     corridors: Annotated[tuple[str, ...], NoDecode] = Field(
-        default=PAPER_CORRIDOR_NAMES, description="corridor presets served (comma-separated in the environment)"
+        default_factory=lambda: tuple(preset_names()), description="corridor presets served (comma-separated in the environment); default: all shipped"
     )
+    corridor_dir: Path | None = Field(default=None, description="a folder of corridor and plan files (JSON/TOML) to serve besides the presets")
     corridor_file: Path | None = Field(default=None, description="an extra corridor JSON file to serve")
     default_corridor: str = "paper_s400"
     default_vehicle: str = "paper_54kwh"
-    speed_limit_mps: float = Field(default=SPEED_LIMIT_MPS, gt=0, le=70)
+    speed_limit_mps: float = Field(default=SPEED_LIMIT_MPS, gt=0, le=70, description="limit on corridors whose files state none [m/s]")
 
     # SPaT
     spat_feed_url: str | None = Field(default=None, description="remote SPaT feed (http://host:port); None = in-process simulation")

@@ -67,6 +67,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     parser.add_argument("--ws", default="websockets-sansio", choices=["auto", "websockets", "websockets-sansio", "wsproto"], help="uvicorn WebSocket implementation")
     parser.add_argument("--no-access-log", action="store_true", help="do not log every request")
+    parser.add_argument("--ssl-certfile", help="serve HTTPS with this certificate (PEM): phones give a page GPS only over https (docs/APP.md)")
+    parser.add_argument("--ssl-keyfile", help="the certificate's private key (PEM)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
     settings = Settings()
@@ -84,6 +86,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         ws_per_message_deflate=False,
         timeout_keep_alive=settings.keep_alive_s,
         timeout_graceful_shutdown=5,
+        ssl_certfile=args.ssl_certfile,
+        ssl_keyfile=args.ssl_keyfile,
     )
     install_log_redaction()  # after uvicorn's Config has set up its loggers
     uvicorn.Server(config).run()

@@ -43,7 +43,8 @@ class TripCreate(_In):
     corridor: str | None = Field(default=None, description="corridor name (GET /v1/corridors); default: the service's", max_length=200)
     timing: str | None = Field(
         default=None,
-        description="simulated signal timing preset (e.g. '15_15', 'field_test'); default: one of the paper's 16 picked from the entry time",
+        description="signal timing: one of the corridor's plans (GET /v1/corridors), or a paper preset (e.g. '15_15', 'field_test'); "
+        "default: the corridor's own plan, else one of the paper's 16 picked from the entry time",
         max_length=50,
     )
     vehicle: str | None = Field(default=None, description="vehicle preset (paper_54kwh, paper_75kwh, calibrated)", max_length=50)
@@ -144,7 +145,7 @@ class AdviceOut(_Out):
     spat_fresh: bool | None = None
     action: Action
     reason: Reason
-    target_speed_mps: float | None = Field(default=None, description="advised speed [m/s, 0.01]")
+    target_speed_mps: float | None = Field(default=None, description="advised speed [m/s, 0.01, rounded down: never above the limit]")
     light_red: bool | None = Field(default=None, description="the next light is red now")
     seconds_to_change_s: float | None = Field(default=None, description="until the next light changes (to green when red, else to red) [s, 0.1]")
     message: str = Field(description="what the driver hears, in the trip's units")
@@ -200,6 +201,9 @@ class CorridorSummary(_Out):
     description: str
     length_m: float
     intersection_ids: list[int]
+    units: Literal["metric", "imperial"] = Field(default="metric", description="the corridor's default units for spoken speeds")
+    plans: list[str] = Field(default_factory=list, description="signal plans known for the corridor (trip 'timing')")
+    default_plan: str | None = None
 
 
 class HealthOut(_Out):

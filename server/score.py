@@ -137,6 +137,7 @@ def trip_score(
     (live SPaT); None: the scenario's plans are the truth."""
     params = model_params(vehicle)
     length_m = scenario.corridor.length_m
+    speed_limit_mps = scenario.corridor.zone_speed_limit_mps(speed_limit_mps)  # the corridor's own limit where its file states one
     notes = list(notes or ())
     t, x, raw_v = np.asarray(t_s, dtype=float), np.asarray(x_m, dtype=float), np.minimum(np.asarray(v_mps, dtype=float), 70.0)
     v = _pipeline(t, raw_v) if t.size else raw_v
@@ -149,10 +150,13 @@ def trip_score(
         entry_s = zone.t_in_s
         v_in = float(min(max(zone.v_mps[0], 0.0), speed_limit_mps))
     v_seen = v_in if zone is None else float(np.interp(entry_s, t, raw_v))  # as recorded: between the fixes around the entry
-    lights = advisory_scenario_at(scenario, entry_s, speed_limit_mps)
-    if observed is not None:
+    try:
+        lights = None if observed is not None else advisory_scenario_at(scenario, entry_s, speed_limit_mps)
+    except ValueError:  # live lights: no plan to compare against, only what the trip saw
+        observed = {}
+    if lights is None:
         signals = tuple(ObservedSignal(ix.stop_line_m, observed.get(ix.id, ()), entry_s) for ix in scenario.corridor.intersections)
-        lights = Scenario(lights.name, signals, lights.zone_length_m, lights.speed_limit_mps)
+        lights = Scenario(f"{scenario.corridor.name} observed", signals, length_m, speed_limit_mps, speed_limit_mps)
         notes.append("signal truth: the phases this trip observed on its live SPaT")
     lights = replace(lights, initial_speed_mps=v_in)
     exact_regular = regular_driver(lights)

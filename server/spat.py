@@ -42,7 +42,7 @@ class SimulatedSpat:
             self._fixed = self._from_plans(scenario.fixed_plans())
 
     def _from_plans(self, plans: dict[tuple[int, int], Plan]) -> dict[int, PlanReading]:
-        return {ix.id: PlanReading(plans[(ix.id, ix.signal_groups[0].id)]) for ix in self.scenario.corridor.intersections}
+        return {ix.id: PlanReading(plans.get((ix.id, ix.signal_groups[0].id))) for ix in self.scenario.corridor.intersections}  # live light: no data
 
     def readings(self, t_unix_s: float) -> dict[int, PlanReading]:
         if self._fixed is not None:

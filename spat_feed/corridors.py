@@ -10,6 +10,13 @@ Shipped presets (``spat_feed/presets/*.json``) reproduce the paper's zone: 100 m
 Champs-Élysées in Paris (see ``CHAMPS_ELYSEES`` and docs/SPAT.md). Regenerate them with
 ``python -m spat_feed.corridors``; a test checks the shipped files equal the generated ones.
 
+Schema version 2 (``schema_version``; files without it are version 1 and still load) adds the corridor's
+speed limits and grades per segment (``segments``, with ``speed_limit_mps`` as the default), its spoken units
+(``units``: metric or imperial) and the signal plans known for it (``plans``, ``default_plan``; plan files
+can also be loaded on their own, :mod:`spat_feed.signal_plans`). The whole schema: docs/CORRIDORS.md, or
+``ecodrive corridor schema`` (JSON Schema). Errors name the file, the field and the reason
+(:class:`spat_feed.files.FileFormatError`).
+
 Geodesy uses pyproj's WGS 84 geodesic (Karney's algorithm), not a spherical approximation.
 """
 
@@ -25,7 +32,9 @@ from pathlib import Path
 
 import numpy as np
 from numba import njit
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 from pyproj import Geod
 
 from advisory.signals import (
@@ -34,9 +43,17 @@ from advisory.signals import (
     PAPER_SPACINGS_M,
     PAPER_TIMINGS_S,
 )
+from advisory.physics.params import SPEED_LIMIT_MPS
+from spat_feed.files import FileFormatError, read_document, validate
+from spat_feed.plans import FixedTimePlan
+from spat_feed.signal_plans import SignalPlan
 
 WGS84 = Geod(ellps="WGS84")
 PRESET_DIR = "presets"
+SCHEMA_VERSION = 2
+"""Version of the corridor schema this program writes; it reads every version up to it."""
+MAX_SPEED_LIMIT_MPS = 70.0
+"""Largest speed limit a file may state (252 km/h: a typo guard). [m/s]"""
 
 
 class LatLon(BaseModel):
@@ -70,6 +87,24 @@ class IntersectionSpec(BaseModel):
     signal_groups: tuple[SignalGroupSpec, ...] = Field(min_length=1)
 
 
+class Segment(BaseModel):
+    """A stretch ``[start_m, end_m)`` of the route with its speed limit and grade."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    start_m: float = Field(ge=0)
+    end_m: float = Field(gt=0)
+    speed_limit_mps: float | None = Field(default=None, gt=0, le=MAX_SPEED_LIMIT_MPS, description="None: the corridor's speed_limit_mps")
+    grade_frac: float = Field(default=0.0, ge=-0.3, le=0.3, description="rise over run, + uphill in the direction of travel")
+    name: str = ""
+    source: str = Field(default="", description="where the limit comes from (an OSM tag, a default)")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Segment:
+        if not self.end_m > self.start_m:
+            raise ValueError(f"end_m {self.end_m:g} must be after start_m {self.start_m:g}")
+        return self
+
+
 class RoadSource(BaseModel):
     """Where the route lies and where its coordinates come from."""
 
@@ -82,21 +117,40 @@ class RoadSource(BaseModel):
 
 
 class Corridor(BaseModel):
-    """A route from station 0 (zone entry) to ``length_m`` (zone exit) and its intersections in order."""
+    """A route from station 0 (zone entry) to ``length_m`` (zone exit) and its intersections in order.
+
+    Each intersection's first signal group is the one the corridor's through movement follows (how a live
+    SPaT source finds the light: intersection id + signal group).
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
-    name: str
+    schema_version: int = Field(default=1, ge=1, description="1: the first files (no segments, units, plans); 2: this schema")
+    name: str = Field(min_length=1, max_length=100)
     description: str = ""
     road: RoadSource | None = None
+    units: Literal["metric", "imperial"] = Field(default="metric", description="default units of spoken advice (km/h or mph)")
     length_m: float = Field(gt=0)
+    speed_limit_mps: float | None = Field(default=None, gt=0, le=MAX_SPEED_LIMIT_MPS, description="limit where no segment says; None: the program's default")
+    segments: tuple[Segment, ...] = Field(default=(), description="speed limit and grade per stretch, covering [0, length_m] in order")
     polyline: tuple[RoutePoint, ...] = Field(min_length=2)
     intersections: tuple[IntersectionSpec, ...]
+    plans: tuple[SignalPlan, ...] = Field(default=(), description="signal plans known for this corridor")
+    default_plan: str | None = Field(default=None, description="the plan trips use unless they name one")
+
+    @field_validator("schema_version")
+    @classmethod
+    def _known_version(cls, value: int) -> int:
+        if value > SCHEMA_VERSION:
+            raise ValueError(f"corridor schema version {value} is newer than this program's ({SCHEMA_VERSION}); upgrade ecodrive")
+        return value
 
     @model_validator(mode="after")
     def _consistent(self) -> Corridor:
         stations = [p.station_m for p in self.polyline]
         if stations[0] != 0.0 or any(b <= a for a, b in zip(stations, stations[1:])):
-            raise ValueError("polyline stations must start at 0 and increase")
+            bad = next((i for i, (a, b) in enumerate(zip(stations, stations[1:])) if b <= a), None)
+            where = "polyline[0].station_m must be 0" if stations[0] != 0.0 else f"polyline[{bad + 1}].station_m {stations[bad + 1]:g} <= the one before"
+            raise ValueError(f"polyline stations must start at 0 and increase: {where}")
         if abs(stations[-1] - self.length_m) > 1e-6:
             raise ValueError(f"last polyline station {stations[-1]} != length_m {self.length_m}")
         lines = [ix.stop_line_m for ix in self.intersections]
@@ -105,7 +159,86 @@ class Corridor(BaseModel):
         ids = [ix.id for ix in self.intersections]
         if len(set(ids)) != len(ids):
             raise ValueError("intersection ids must be unique")
+        if self.segments:
+            ends = [(seg.start_m, seg.end_m) for seg in self.segments]
+            if ends[0][0] != 0.0 or abs(ends[-1][1] - self.length_m) > 1e-6 or any(abs(a[1] - b[0]) > 1e-6 for a, b in zip(ends, ends[1:])):
+                raise ValueError("segments must cover [0, length_m] without gaps or overlaps, in order")
+        names = [p.name for p in self.plans]
+        if len(set(names)) != len(names):
+            raise ValueError(f"plan names must be unique: {names}")
+        for i, plan in enumerate(self.plans):
+            try:
+                plan.check(self)
+            except ValueError as exc:
+                raise ValueError(f"plans[{i}] ({plan.name}): {exc}") from None
+        if self.default_plan is not None and self.default_plan not in names:
+            raise ValueError(f"default_plan {self.default_plan!r} is not among the plans {names}")
         return self
+
+    # -- speed limits and grades ------------------------------------------------------------------------
+    @cached_property
+    def _profile(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if not self.segments:
+            return np.array([0.0]), np.array([np.nan]), np.array([0.0])
+        return (
+            np.array([seg.start_m for seg in self.segments]),
+            np.array([np.nan if seg.speed_limit_mps is None else seg.speed_limit_mps for seg in self.segments]),
+            np.array([seg.grade_frac for seg in self.segments]),
+        )
+
+    def limit_profile(self, default_mps: float = SPEED_LIMIT_MPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(start stations, speed limits, grades) of the route's stretches, shape (n,) each; the last
+        stretch runs to ``length_m``. A stretch without a limit gets ``speed_limit_mps`` or ``default_mps``."""
+        starts, limits, grades = self._profile
+        return starts, np.where(np.isnan(limits), self.speed_limit_mps or default_mps, limits), grades
+
+    def speed_limit_mps_over(self, from_m: float, to_m: float, default_mps: float = SPEED_LIMIT_MPS) -> float:
+        """Lowest speed limit on ``[from_m, to_m]`` (clipped to the route). [m/s]
+
+        Examples
+        --------
+        >>> paper_corridor(400.0).speed_limit_mps_over(0.0, 600.0)
+        24.5872
+        """
+        starts, limits, _ = self._profile
+        lo = max(int(np.searchsorted(starts, max(from_m, 0.0), side="right")) - 1, 0)
+        hi = max(int(np.searchsorted(starts, min(max(to_m, from_m), self.length_m), side="left")), lo + 1)
+        fallback = self.speed_limit_mps or default_mps
+        return float(min(fallback if math.isnan(x) else x for x in limits[lo:hi].tolist()))
+
+    def zone_speed_limit_mps(self, default_mps: float = SPEED_LIMIT_MPS) -> float:
+        """Lowest speed limit over the whole zone: the one the DP and the regular driver use. [m/s]"""
+        return self.speed_limit_mps_over(0.0, self.length_m, default_mps)
+
+    def advisory_limit_mps(self, station_m: float, default_mps: float = SPEED_LIMIT_MPS, n_lights: int = 2) -> float:
+        """The limit for advice at ``station_m``: the lowest from there to the ``n_lights``-th stop line ahead
+        (or the zone end), so an advised speed held to the lights never exceeds a limit on the way. [m/s]"""
+        if not self.segments:
+            return self.speed_limit_mps or default_mps
+        ahead = [ix.stop_line_m for ix in self.intersections if ix.stop_line_m > station_m][:n_lights]
+        return self.speed_limit_mps_over(station_m, ahead[-1] if len(ahead) == n_lights else self.length_m, default_mps)
+
+    # -- plans ------------------------------------------------------------------------------------------
+    def plan(self, name: str | None = None) -> SignalPlan | None:
+        """The plan called ``name`` (``KeyError`` if unknown), or with None the default plan (or the only
+        one); None when the corridor has no plans."""
+        if name is None:
+            if self.default_plan is not None:
+                name = self.default_plan
+            elif len(self.plans) == 1:
+                return self.plans[0]
+            else:
+                return None
+        for p in self.plans:
+            if p.name == name:
+                return p
+        raise KeyError(name)
+
+    def with_plans(self, *plans: SignalPlan, default: str | None = None) -> Corridor:
+        """This corridor with ``plans`` added (same names replaced); checked against the corridor."""
+        keep = tuple(p for p in self.plans if p.name not in {q.name for q in plans})
+        return Corridor.model_validate({**self.model_dump(exclude={"plans"}), "plans": keep + tuple(plans),
+                                        "default_plan": default if default is not None else self.default_plan})  # fmt: skip
 
     def intersection(self, intersection_id: int) -> IntersectionSpec:
         """The intersection with this J2735 id (``KeyError`` if absent)."""
@@ -227,9 +360,11 @@ def _nearest_segments(lon, lat, seg):
 # Loading
 
 
-def corridor_from_json(text: str) -> Corridor:
-    """Validate a corridor JSON text."""
-    return Corridor.model_validate_json(text)
+def corridor_from_json(text: str, source: str = "<corridor JSON>") -> Corridor:
+    """Validate a corridor JSON text (errors: :class:`FileFormatError` naming ``source`` and the field)."""
+    from spat_feed.files import parse_text
+
+    return validate(Corridor, parse_text(text, source), source)
 
 
 def preset_names() -> list[str]:
@@ -238,15 +373,91 @@ def preset_names() -> list[str]:
     return sorted(p.name.removesuffix(".json") for p in folder.iterdir() if p.name.endswith(".json"))
 
 
-def load_corridor(name_or_path: str | Path) -> Corridor:
-    """A shipped preset by name (``"paper_s400"``), or a corridor JSON file by path."""
+def is_plan_document(data: dict) -> bool:
+    """A parsed file is a plan file (``"kind": "signal_plan"``) rather than a corridor."""
+    return data.get("kind") == "signal_plan"
+
+
+def load_plan(path: str | Path) -> SignalPlan:
+    """A signal-plan file (JSON or TOML) by path; errors name the file and the field."""
+    data = read_document(path)
+    return validate(SignalPlan, data, str(path))
+
+
+def load_corridor(name_or_path: str | Path, plans: tuple[str | Path, ...] = ()) -> Corridor:
+    """A shipped preset by name (``"paper_s400"``), or a corridor file (JSON or TOML) by path.
+
+    A preset comes with the shipped plan files naming it (``presets/plans/``). ``plans``: plan files to
+    attach (each checked against the corridor; errors name the file). Unknown names raise ``KeyError``;
+    bad files :class:`FileFormatError` (a ``ValueError``).
+    """
     path = Path(name_or_path)
-    if path.suffix == ".json" or path.exists():
-        return corridor_from_json(path.read_text(encoding="utf-8"))
-    resource = resources.files("spat_feed") / PRESET_DIR / f"{name_or_path}.json"
-    if not resource.is_file():
-        raise KeyError(f"no corridor preset {name_or_path!r}; presets: {preset_names()}")
-    return corridor_from_json(resource.read_text(encoding="utf-8"))
+    if path.suffix.lower() in (".json", ".toml") or path.exists():
+        data, source = read_document(path), str(path)
+        preset_plans: list[tuple[str, SignalPlan]] = []
+    else:
+        resource = resources.files("spat_feed") / PRESET_DIR / f"{name_or_path}.json"
+        if not resource.is_file():
+            raise KeyError(f"no corridor preset {name_or_path!r}; presets: {preset_names()}")
+        from spat_feed.files import parse_text
+
+        source = f"preset {name_or_path}"
+        data = parse_text(resource.read_text(encoding="utf-8"), source)
+        preset_plans = [(src, p) for src, p in _preset_plans() if p.corridor == name_or_path]
+    if is_plan_document(data):
+        raise FileFormatError(source, ["(file): this is a signal-plan file (kind: signal_plan), not a corridor; give it as the timing"])
+    corridor = validate(Corridor, data, source)
+    return attach_plans(corridor, preset_plans + [(str(p), load_plan(p)) for p in plans])
+
+
+def _preset_plans() -> list[tuple[str, SignalPlan]]:
+    """The shipped plan files (``presets/plans/*.json``) as (source, plan)."""
+    from spat_feed.files import parse_text
+
+    folder = resources.files("spat_feed") / PRESET_DIR / "plans"
+    if not folder.is_dir():
+        return []
+    out = []
+    for entry in sorted(folder.iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".json"):
+            source = f"preset plan {entry.name}"
+            out.append((source, validate(SignalPlan, parse_text(entry.read_text(encoding="utf-8"), source), source)))
+    return out
+
+
+def attach_plans(corridor: Corridor, plans: list[tuple[str, SignalPlan]]) -> Corridor:
+    """``corridor`` with ``plans`` (source, plan) attached; a plan that does not fit names its file."""
+    for source, plan in plans:
+        try:
+            plan.check(corridor)
+        except ValueError as exc:
+            raise FileFormatError(source, [str(exc)]) from None
+    return corridor.with_plans(*(p for _, p in plans)) if plans else corridor
+
+
+def load_corridor_dir(folder: str | Path) -> dict[str, Corridor]:
+    """Every corridor in ``folder`` (``*.json``, ``*.toml``), with the plan files there attached to the
+    corridor they name (``"corridor": NAME``). Errors name the file; two corridors of one name are refused."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileFormatError(str(folder), ["not a folder"])
+    corridors: dict[str, tuple[str, Corridor]] = {}
+    plans: list[tuple[str, SignalPlan]] = []
+    for path in sorted(p for p in folder.iterdir() if p.suffix.lower() in (".json", ".toml") and p.is_file()):
+        data = read_document(path)
+        if is_plan_document(data):
+            plans.append((str(path), validate(SignalPlan, data, str(path))))
+            continue
+        corridor = validate(Corridor, data, str(path))
+        if corridor.name in corridors:
+            raise FileFormatError(str(path), [f"name: corridor {corridor.name!r} is also defined in {corridors[corridor.name][0]}"])
+        corridors[corridor.name] = (str(path), corridor)
+    out = {name: c for name, (_, c) in corridors.items()}
+    for source, plan in plans:
+        if plan.corridor is None or plan.corridor not in out:
+            raise FileFormatError(source, [f"corridor: {plan.corridor!r} names no corridor in {folder} ({sorted(out)})"])
+        out[plan.corridor] = attach_plans(out[plan.corridor], [(source, plan)])
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -295,12 +506,14 @@ def straight_corridor(
     description: str = "",
     first_id: int = 1,
     signal_group: int = 2,
+    speed_limit_mps: float | None = SPEED_LIMIT_MPS,
 ) -> Corridor:
     """A corridor along ``road`` from its zone start, with a light at each of ``stop_lines_m``.
 
     Vertices every 50 m (and at each stop line) lie on the WGS 84 geodesic from ``road.a`` to
     ``road.b``. Intersection ids are ``first_id, first_id + 1, ...``; each has one signal group,
-    ``signal_group`` (NEMA phase 2, main-street through, by convention).
+    ``signal_group`` (NEMA phase 2, main-street through, by convention). ``speed_limit_mps``: the whole
+    route's limit (the paper's 55 mph by default).
     """
     (lat_a, lon_a), (lat_b, lon_b) = road.a, road.b
     az_deg, _, total_m = WGS84.inv(lon_a, lat_a, lon_b, lat_b)
@@ -330,8 +543,11 @@ def straight_corridor(
     lat_s, lon_s, _ = point(0.0)
     lat_e, lon_e, _ = point(length_m)
     return Corridor(
+        schema_version=SCHEMA_VERSION,
         name=name,
         description=description,
+        units="metric",
+        speed_limit_mps=speed_limit_mps,
         road=RoadSource(
             name=road.name,
             start=LatLon(lat_deg=lat_s, lon_deg=lon_s),
@@ -382,6 +598,19 @@ class Timing:
     green_s: float = 30.0
     amber_s: float = 0.0
     description: str = ""
+
+    def check(self, corridor: Corridor) -> None:
+        """``ValueError`` unless the timing has one red start per light of ``corridor``."""
+        if len(self.red_starts_s) != len(corridor.intersections):
+            raise ValueError(f"timing {self.name!r} has {len(self.red_starts_s)} lights, corridor {corridor.name!r} has {len(corridor.intersections)}")
+
+    def fixed_plans(self, corridor: Corridor, entry_unix_s: float) -> dict[tuple[int, int], FixedTimePlan]:
+        """(intersection id, signal group) -> fixed-time plan on the Unix axis for a trip entering at ``entry_unix_s``."""
+        return {
+            (ix.id, sg.id): FixedTimePlan(self.red_s, self.green_s, self.amber_s, entry_unix_s + red_start_s)
+            for ix, red_start_s in zip(corridor.intersections, self.red_starts_s)
+            for sg in ix.signal_groups
+        }
 
 
 def _paper_timing(x_s: float, y_s: float) -> Timing:

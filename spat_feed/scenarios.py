@@ -1,5 +1,10 @@
 """A feed scenario: a corridor, a timing and a trip's entry instant, giving every light's plan in Unix time.
 
+The timing is a paper-style :class:`~spat_feed.corridors.Timing` (relative to the entry) or a signal-plan
+file (:class:`~spat_feed.signal_plans.SignalPlan`: the pattern in force at the entry, on the Unix axis);
+lights a plan marks ``live`` have no simulated plan (their SPaT comes from a live source).
+:func:`resolve_timing` turns a timing name into one of these for a corridor.
+
 Pure: :func:`spat_message_at` builds the SPaT message of a scenario at an instant it is handed. The
 service (``spat_feed.service``) and the in-process source (``spat_feed.source``) both call it.
 """
@@ -11,9 +16,12 @@ from functools import lru_cache
 
 from advisory.physics.params import SPEED_LIMIT_MPS
 from advisory.signals import Scenario
-from spat_feed.corridors import TIMING_PRESETS, Corridor, Timing, load_corridor, timing_for_trip
+from spat_feed.corridors import TIMING_PRESETS, Corridor, Timing, load_corridor, load_plan, timing_for_trip
 from spat_feed.messages import IntersectionState, MovementState, SpatMessage, from_unix_s, movement_events
 from spat_feed.plans import FixedTimePlan, Plan, to_fixed_time_signal, uncertain_from_fixed
+from spat_feed.signal_plans import SignalPlan
+
+TimingLike = Timing | SignalPlan
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,16 +50,12 @@ class FeedScenario:
     """Lights of ``corridor`` timed by ``timing`` for a car entering the zone at ``entry_unix_s``."""
 
     corridor: Corridor
-    timing: Timing
+    timing: TimingLike
     entry_unix_s: float
     uncertainty: Uncertainty = field(default_factory=Uncertainty)
 
     def __post_init__(self) -> None:
-        if len(self.timing.red_starts_s) != len(self.corridor.intersections):
-            raise ValueError(
-                f"timing {self.timing.name!r} has {len(self.timing.red_starts_s)} lights, "
-                f"corridor {self.corridor.name!r} has {len(self.corridor.intersections)}"
-            )
+        self.timing.check(self.corridor)
 
     @property
     def key(self) -> tuple:
@@ -60,13 +64,8 @@ class FeedScenario:
         return (self.corridor.name, self.timing.name, round(self.entry_unix_s, 3), u.early_s, u.late_s, u.confidence_frac)
 
     def fixed_plans(self) -> dict[tuple[int, int], FixedTimePlan]:
-        """(intersection id, signal group) -> fixed-time plan on the Unix axis."""
-        t = self.timing
-        return {
-            (ix.id, sg.id): FixedTimePlan(t.red_s, t.green_s, t.amber_s, self.entry_unix_s + red_start_s)
-            for ix, red_start_s in zip(self.corridor.intersections, t.red_starts_s)
-            for sg in ix.signal_groups
-        }
+        """(intersection id, signal group) -> fixed-time plan on the Unix axis (``live`` lights absent)."""
+        return self.timing.fixed_plans(self.corridor, self.entry_unix_s)
 
     def plans_at(self, now_unix_s: float) -> dict[tuple[int, int], Plan]:
         """The plans as published at ``now_unix_s``: fixed, or uncertain windows around now.
@@ -96,12 +95,20 @@ def advisory_scenario_at(scenario: FeedScenario, entry_unix_s: float, speed_limi
     The plans stay anchored at ``scenario.entry_unix_s``; ``entry_unix_s`` is when a car really crossed
     station 0 (a recorded drive rarely enters at the planned instant to the millisecond). With
     ``entry_unix_s == scenario.entry_unix_s`` this is :meth:`FeedScenario.advisory_scenario`.
+
+    The speed limit is the corridor's lowest over the zone when its file states limits, else
+    ``speed_limit_mps`` (the DP and the regular driver take one limit; never above any segment's).
+    ``ValueError`` if a light is ``live`` (no fixed plan to plan against).
     """
     plans = scenario.fixed_plans()
+    missing = [ix.id for ix in scenario.corridor.intersections if (ix.id, ix.signal_groups[0].id) not in plans]
+    if missing:
+        raise ValueError(f"intersection(s) {missing} of {scenario.corridor.name!r} are live in timing {scenario.timing.name!r}: no fixed plan to compare against")
     signals = tuple(
         to_fixed_time_signal(plans[(ix.id, ix.signal_groups[0].id)], ix.stop_line_m, t0_s=entry_unix_s) for ix in scenario.corridor.intersections
     )
-    return Scenario(f"{scenario.corridor.name} {scenario.timing.name}", signals, scenario.corridor.length_m, speed_limit_mps)
+    limit = scenario.corridor.zone_speed_limit_mps(speed_limit_mps)
+    return Scenario(f"{scenario.corridor.name} {scenario.timing.name}", signals, scenario.corridor.length_m, limit, limit)
 
 
 @lru_cache(maxsize=64)
@@ -109,18 +116,48 @@ def _cached_corridor(name_or_path: str) -> Corridor:
     return load_corridor(name_or_path)
 
 
+def resolve_timing(corridor: Corridor, timing: str | TimingLike | None, entry_unix_s: float = 0.0, *, allow_files: bool = True) -> TimingLike:
+    """The timing a trip on ``corridor`` runs under.
+
+    ``timing``: a plan of the corridor by name, a paper preset by name (``"15_15"``, ``"field_test"``), a
+    plan file by path (``.json``/``.toml``), or ``None`` / ``"trip"``: the corridor's default plan if it has
+    one, else one of the paper's 16 picked from ``entry_unix_s`` (:func:`timing_for_trip`). ``KeyError``
+    for an unknown name; ``ValueError`` (naming the file) for a plan that does not fit the corridor.
+    ``allow_files=False`` (names from a network request): paths are unknown names.
+    """
+    if isinstance(timing, (Timing, SignalPlan)):
+        out = timing
+    elif timing is None or timing == "trip":
+        out = corridor.plan() or timing_for_trip(entry_unix_s)
+    elif any(p.name == timing for p in corridor.plans):
+        out = corridor.plan(timing)
+    elif timing in TIMING_PRESETS:
+        out = TIMING_PRESETS[timing]
+    elif allow_files and timing.lower().endswith((".json", ".toml")):
+        out = load_plan(timing)
+        try:
+            out.check(corridor)
+        except ValueError as exc:
+            raise ValueError(f"{timing}: {exc}") from None
+    else:
+        plans = [p.name for p in corridor.plans]
+        files = ", or a plan file (.json/.toml)" if allow_files else ""
+        raise KeyError(f"unknown timing {timing!r}; choose from {plans + sorted(TIMING_PRESETS)} or 'trip'{files}")
+    out.check(corridor)
+    return out
+
+
 def make_scenario(
     corridor: str | Corridor = "paper_s400",
-    timing: str | Timing = "15_15",
+    timing: str | TimingLike | None = "15_15",
     entry_unix_s: float = 0.0,
     uncertainty: Uncertainty | None = None,
 ) -> FeedScenario:
-    """A scenario from preset names. ``timing="trip"`` picks one of the 16 from ``entry_unix_s``."""
+    """A scenario from names (see :func:`resolve_timing`); ``timing="trip"``: the corridor's default plan,
+    or one of the paper's 16 picked from ``entry_unix_s``."""
     if isinstance(corridor, str):
         corridor = _cached_corridor(corridor)
-    if isinstance(timing, str):
-        timing = timing_for_trip(entry_unix_s) if timing == "trip" else TIMING_PRESETS[timing]
-    return FeedScenario(corridor, timing, float(entry_unix_s), uncertainty or Uncertainty())
+    return FeedScenario(corridor, resolve_timing(corridor, timing, entry_unix_s), float(entry_unix_s), uncertainty or Uncertainty())
 
 
 def spat_message_at(scenario: FeedScenario, now_unix_s: float, n_events: int = 3, *, revision: int = 0) -> SpatMessage:
@@ -139,6 +176,9 @@ def spat_message_at(scenario: FeedScenario, now_unix_s: float, n_events: int = 3
                 state_time_speed=movement_events(plans[(ix.id, sg.id)], now_unix_s, n_events),
             )
             for sg in ix.signal_groups
+            if (ix.id, sg.id) in plans  # a live light: no simulated state
         ]
+        if not states:
+            continue
         intersections.append(IntersectionState(id=ix.id, name=ix.name, revision=revision, timestamp=stamp, states=states))
     return SpatMessage(timestamp=stamp, name=f"{scenario.corridor.name} {scenario.timing.name}", intersections=intersections)

@@ -6,8 +6,9 @@ import pytest
 from advisory.physics.params import model_params
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / "shared" / "data"
-"""Real data made by others (``../shared/data``: cycles/, spat/, osm/); tests skip what is absent."""
+SHARED_DATA = next((p for p in (REPO.parent / "shared" / "data", REPO.parents[1] / "shared" / "data") if p.is_dir()), REPO.parent / "shared" / "data")
+"""Real data made by others (``../shared/data``, or ``../../shared/data`` from a worktree: cycles/, spat/, osm/);
+tests skip what is absent."""
 CYCLES = SHARED_DATA / "cycles"
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import socket
+import ssl
 import subprocess
 import sys
 import time
@@ -31,13 +32,16 @@ class Proc:
     env: dict[str, str] = field(default_factory=dict)
     port: int = field(default_factory=free_port)
     proc: subprocess.Popen | None = None
+    scheme: str = "http"
+    verify: ssl.SSLContext | bool = True  # https: trust this context (e.g. a self-signed certificate's)
 
     @property
     def base_url(self) -> str:
-        return f"http://127.0.0.1:{self.port}"
+        return f"{self.scheme}://127.0.0.1:{self.port}"
 
     def start(self) -> Proc:
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", **self.env}
+        # TMPDIR beside the log: what the process leaves in its temporary folder when killed stays in pytest's tmp dirs
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "TMPDIR": str(self.log_path.parent), **self.env}
         log = self.log_path.open("ab")
         self.proc = subprocess.Popen([sys.executable, *self.args, "--port", str(self.port)], cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT)
         log.close()
@@ -46,7 +50,7 @@ class Proc:
             if self.proc.poll() is not None:
                 raise RuntimeError(f"{self.args} exited with {self.proc.returncode}:\n{self.log_path.read_text()}")
             try:
-                if httpx.get(self.base_url + "/health", timeout=1.0).status_code == 200:
+                if httpx.get(self.base_url + "/health", timeout=1.0, verify=self.verify).status_code == 200:
                     return self
             except httpx.HTTPError:
                 pass

@@ -5,10 +5,12 @@ import csv
 import numpy as np
 import pytest
 
+from advisory.evaluation.study import SPACINGS, TIMINGS, StudyCase, paper_cases, run_case, table2
 from advisory.optimizer.dp import GridSpec
-from advisory.evaluation.study import run_case
+from advisory.signals import paper_scenario
 from ecodrive.cli import main as ecodrive
-from replay.study import TIMINGS, table2
+
+COARSE = GridSpec(stage_m=20.0)
 
 
 def test_study_command_writes_report_csv_and_figures(tmp_path, capsys):
@@ -24,15 +26,25 @@ def test_study_command_writes_report_csv_and_figures(tmp_path, capsys):
     assert "64 cases" in capsys.readouterr().out
 
 
-def test_study_rejects_unknown_override(tmp_path):
-    with pytest.raises(SystemExit):
-        ecodrive(["study", "--out", str(tmp_path), "--set", "warp_drive=1"])
+@pytest.mark.parametrize("args", [["--set", "warp_drive=1"], ["--set", "mass_kg=heavy"], ["--set", "name=x"], ["--stage-m", "30"]])
+def test_study_rejects_bad_options_with_a_message(tmp_path, args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        ecodrive(["study", "--out", str(tmp_path), "--variants", "lfp54", "--workers", "1", "--no-figures", *args])
+    assert exc.value.code == 2
+    assert "error:" in capsys.readouterr().err
+
+
+def test_a_case_is_a_scenario_and_a_variant():
+    cases = paper_cases(["lfp54", "nca75"])
+    assert len(cases) == 128 and cases[0].key == ("lfp54", -30.0, -30.0, 200.0)
+    mine = StudyCase(paper_scenario(15, 15, 400), "nca75")  # any scenario, no label needed
+    res = run_case(mine, COARSE)
+    assert res.key == ("nca75",) and res.reduction_pct("cost") > 0
 
 
 def test_light_one_timing_is_irrelevant_when_both_pass_it_at_four_seconds():
     """[-30 y] and [15 y] are the same drive: light 1 is green at t = 4 s in both (paper rows differ for y = 15)."""
-    grid = GridSpec(stage_m=20.0)
-    a, b = run_case("lfp54", -30, 15, 400, grid), run_case("lfp54", 15, 15, 400, grid)
+    a, b = (run_case(StudyCase(paper_scenario(x, 15, 400), "lfp54"), COARSE) for x in (-30, 15))
     assert a.regular.cost_usd == pytest.approx(b.regular.cost_usd)
     assert a.eco.cost_usd == pytest.approx(b.eco.cost_usd)
     assert a.reduction_pct("cost") > 20
@@ -40,11 +52,10 @@ def test_light_one_timing_is_irrelevant_when_both_pass_it_at_four_seconds():
 
 def test_bigger_pack_cuts_cruise_decay_by_pack_ratio():
     """Below 0.5 C wear is per Ah: decay ratio 75/54 kWh = power ratio x 54/75 (Table 3's 25.5 % cells)."""
-    small, big = run_case("nca54", -30, -30, 200, GridSpec(stage_m=20.0)), run_case("nca75", -30, -30, 200, GridSpec(stage_m=20.0))
+    small, big = (run_case(StudyCase(paper_scenario(-30, -30, 200), v), COARSE) for v in ("nca54", "nca75"))
     power_ratio = big.regular.energy_kwh / small.regular.energy_kwh
     assert 1 - big.regular.soh_lost_frac / small.regular.soh_lost_frac == pytest.approx(1 - power_ratio * 54 / 75, rel=1e-6)
 
 
 def test_table2_layout():
-    res = {("lfp54", float(x), float(y), float(s)): None for x, y in TIMINGS for s in (200, 400, 600, 800)}
-    assert table2({}).shape == (16, 4) and np.isnan(table2({})).all() and len(res) == 64
+    assert table2({}).shape == (len(TIMINGS), len(SPACINGS)) and np.isnan(table2({})).all()

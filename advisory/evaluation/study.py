@@ -1,22 +1,31 @@
 """The paper's study, case by case: regular driver vs DP eco-driver in the same end state.
 
-Pure computation (no files, no clock); ``replay.study`` runs it in parallel and writes the report.
+Pure computation (no files, no clock, no processes). A **case** is a :class:`~advisory.signals.Scenario`
+driven by one vehicle **variant**; :func:`run_case` scores it. ``ecodrive.study`` runs many cases in
+parallel and writes the report, tables and figures.
 
 Variants (paper Sec. 4):
+
 * ``lfp54``: paper vehicle, 54 kWh, LFP decay (Table 2, Figs. [15 15] and [-15 15]);
 * ``nca54``: same with the decay rate x10 (NCA, Sec. 4.2);
 * ``nca75``: 75 kWh / 1726 kg with the decay rate x10 (battery-size study, Sec. 4.3, Table 3).
+
+The paper's published numbers (Table 2, Table 3 and the figures quoted in its text) are here too, for
+the side-by-side comparison.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
+import numpy as np
+
+from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import EndStateScore, score_in_end_state
 from advisory.optimizer.dp import GridSpec, solve
-from advisory.physics.params import model_params
-from advisory.drivers.regular import regular_driver
-from advisory.signals import PAPER_EXIT_M, PAPER_SPACINGS_M, PAPER_TIMINGS_S, paper_scenario
+from advisory.physics.params import ModelParams, model_params
+from advisory.signals import PAPER_EXIT_M, PAPER_SPACINGS_M, PAPER_TIMINGS_S, Scenario, paper_scenario
 from advisory.trajectory import Trajectory
 
 VARIANTS: dict[str, tuple[str, float]] = {
@@ -24,17 +33,54 @@ VARIANTS: dict[str, tuple[str, float]] = {
     "nca54": ("paper_54kwh", 10.0),
     "nca75": ("paper_75kwh", 10.0),
 }
+"""Variant name -> (vehicle preset, battery-decay multiplier)."""
 
-STUDY_GRID = GridSpec(stage_m=10.0, time_bin_s=0.25, dwell_s=0.5)
-"""Default resolution of the study (see the convergence table of bench/bench_dp.py)."""
+STUDY_GRID = GridSpec()
+"""Resolution of the study (the convergence table of bench/bench_dp.py and docs/REPRODUCTION.md)."""
+
+SPACINGS = tuple(int(s) for s in PAPER_SPACINGS_M)
+TIMINGS = tuple((int(x), int(y)) for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S)
+
+
+@dataclass(frozen=True, slots=True)
+class StudyCase:
+    """One case: ``scenario`` driven by vehicle ``variant`` (a key of :data:`VARIANTS`).
+
+    ``label`` names the case inside its study, e.g. ``(x_s, y_s, spacing_m)`` for the paper's cases;
+    results are keyed by ``(variant, *label)``.
+    """
+
+    scenario: Scenario
+    variant: str
+    label: tuple = ()
+
+    @property
+    def key(self) -> tuple:
+        return (self.variant, *self.label)
+
+
+def variant_params(variant: str, overrides: dict | None = None) -> ModelParams:
+    """Model parameters of a variant, with vehicle fields replaced by ``overrides`` (sensitivity runs)."""
+    vehicle, decay = VARIANTS[variant]
+    params = model_params(vehicle, decay)
+    return replace(params, vehicle=replace(params.vehicle, **overrides)) if overrides else params
+
+
+def paper_cases(variants: Iterable[str] = tuple(VARIANTS), exit_m: float = PAPER_EXIT_M) -> list[StudyCase]:
+    """Every variant x the paper's 16 timings x 4 spacings (Table 2's order), labelled ``(x, y, s)``."""
+    return [
+        StudyCase(paper_scenario(x, y, s, exit_m=exit_m), v, (float(x), float(y), float(s)))
+        for v in variants
+        for x, y in TIMINGS
+        for s in SPACINGS
+    ]
 
 
 @dataclass(frozen=True, slots=True)
 class CaseResult:
-    variant: str
-    x_s: float
-    y_s: float
-    spacing_m: float
+    """A case scored for both drivers to the common end state, with their trajectories and the DP's own cost."""
+
+    case: StudyCase
     regular: EndStateScore
     eco: EndStateScore
     regular_traj: Trajectory
@@ -42,8 +88,8 @@ class CaseResult:
     dp_cost_usd: float
 
     @property
-    def key(self) -> tuple[str, float, float, float]:
-        return (self.variant, self.x_s, self.y_s, self.spacing_m)
+    def key(self) -> tuple:
+        return self.case.key
 
     def reduction_pct(self, what: str) -> float:
         """Eco-driving reduction of ``energy``, ``decay`` or ``cost`` against the regular driver. [%]"""
@@ -52,7 +98,10 @@ class CaseResult:
         return 100.0 * (1.0 - eco / reg)
 
     def row(self) -> dict:
-        out = {"variant": self.variant, "x_s": self.x_s, "y_s": self.y_s, "spacing_m": self.spacing_m}
+        """Flat record for CSV/JSON: the case, both drivers' totals, the reductions."""
+        out: dict = {"variant": self.case.variant, "scenario": self.case.scenario.name}
+        if len(self.case.label) == 3:
+            out.update(zip(("x_s", "y_s", "spacing_m"), self.case.label, strict=True))
         for who, s in (("regular", self.regular), ("eco", self.eco)):
             out.update(
                 {
@@ -71,40 +120,75 @@ class CaseResult:
         return out
 
 
-def study_cases(variants=tuple(VARIANTS)) -> list[tuple[str, float, float, float]]:
-    """(variant, x, y, s) for every variant x the paper's 16 timings x 4 spacings."""
-    return [(v, x, y, s) for v in variants for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S for s in PAPER_SPACINGS_M]
-
-
-def run_case(
-    variant: str,
-    x_s: float,
-    y_s: float,
-    spacing_m: float,
-    grid: GridSpec = STUDY_GRID,
-    overrides: dict | None = None,
-    exit_m: float = PAPER_EXIT_M,
-) -> CaseResult:
+def run_case(case: StudyCase, grid: GridSpec = STUDY_GRID, overrides: dict | None = None) -> CaseResult:
     """Regular driver and DP optimum for one case, both scored to the common end state.
 
-    ``overrides``: vehicle fields to replace (sensitivity studies), e.g. ``{"regen_power_max_w": 2e5}``.
+    ``overrides``: vehicle fields to replace (sensitivity runs), e.g. ``{"regen_power_max_w": 60e3}``.
     """
-    vehicle, decay = VARIANTS[variant]
-    params = model_params(vehicle, decay)
-    if overrides:
-        params = replace(params, vehicle=replace(params.vehicle, **overrides))
-    scenario = paper_scenario(x_s, y_s, spacing_m, exit_m=exit_m)
+    params = variant_params(case.variant, overrides)
+    scenario = case.scenario
     regular = regular_driver(scenario)
     sol = solve(scenario, params, grid)
     v_lim = scenario.speed_limit_mps
     return CaseResult(
-        variant=variant,
-        x_s=x_s,
-        y_s=y_s,
-        spacing_m=spacing_m,
+        case=case,
         regular=score_in_end_state(regular, params, v_lim, keep_series=True),
         eco=score_in_end_state(sol.trajectory, params, v_lim, keep_series=True),
         regular_traj=regular,
         eco_traj=sol.trajectory,
         dp_cost_usd=sol.cost_usd,
     )
+
+
+def _cell(results: dict, variant: str, x, y, s, what: str) -> float:
+    res = results.get((variant, float(x), float(y), float(s)))
+    return np.nan if res is None else res.reduction_pct(what)
+
+
+def table2(results: dict, variant: str = "lfp54", what: str = "cost") -> np.ndarray:
+    """Paper Table 2 from ``results`` (keyed by ``(variant, x, y, s)``): reduction in %, (16 timings, 4 spacings)."""
+    return np.array([[_cell(results, variant, x, y, s, what) for s in SPACINGS] for x, y in TIMINGS])
+
+
+def table3(results: dict) -> np.ndarray:
+    """Paper Table 3: decay reduction 54 -> 75 kWh (both x10 decay) in %, (16 timings, regular/eco per spacing)."""
+    out = np.full((len(TIMINGS), 2 * len(SPACINGS)), np.nan)
+    for r, (x, y) in enumerate(TIMINGS):
+        for c, s in enumerate(SPACINGS):
+            small = results.get(("nca54", float(x), float(y), float(s)))
+            big = results.get(("nca75", float(x), float(y), float(s)))
+            if small and big:
+                out[r, 2 * c] = 100 * (1 - big.regular.soh_lost_frac / small.regular.soh_lost_frac)
+                out[r, 2 * c + 1] = 100 * (1 - big.eco.soh_lost_frac / small.eco.soh_lost_frac)
+    return out
+
+
+# The paper's published numbers (Wang, Advani, Prasad 2024), rows in TIMINGS order, columns in SPACINGS order.
+PAPER_TABLE2_COST_REDUCTION_PCT = np.array([
+    [0.0, 0.0, 0.0, 40.0], [47.2, 0.0, 0.0, 0.0], [23.5, 38.8, 40.6, 0.0], [0.0, 0.0, 0.0, 31.4],
+    [9.8, 46.6, 45.2, 41.9], [9.8, 11.2, 47.7, 45.6], [36.6, 11.2, 11.9, 10.8], [42.6, 44.7, 30.5, 10.8],
+    [42.3, 45.0, 31.1, 13.0], [9.6, 46.5, 45.1, 41.8], [10.1, 11.7, 47.6, 45.3], [36.8, 11.7, 13.2, 12.2],
+    [0.0, 0.0, 0.0, 40.0], [47.2, 0.0, 0.0, 0.0], [23.5, 38.8, 40.6, 0.0], [0.0, 31.4, 39.2, 41.6],
+])  # fmt: skip
+"""Paper Table 2: cost reduction (%) from eco-driving, (16 timings, 4 spacings)."""
+
+PAPER_TABLE3_DECAY_REDUCTION_PCT = np.array([
+    [25.5, 25.5, 25.5, 25.5, 25.5, 25.5, 20.8, 19.6], [19.5, 19.7, 25.5, 25.5, 25.5, 25.5, 25.5, 25.5],
+    [19.5, 18.6, 20.0, 19.2, 20.4, 21.7, 25.5, 25.5], [25.5, 25.5, 25.5, 25.5, 25.5, 25.5, 20.0, 18.8],
+    [19.5, 19.2, 19.1, 19.2, 19.4, 19.6, 19.7, 20.1], [19.5, 19.2, 20.0, 19.7, 20.9, 19.4, 19.7, 19.8],
+    [18.8, 19.2, 20.0, 19.7, 20.5, 20.1, 20.8, 20.4], [19.0, 19.0, 19.1, 19.4, 19.4, 20.0, 20.8, 20.4],
+    [19.0, 19.0, 19.1, 19.3, 19.4, 20.0, 20.8, 20.4], [19.5, 19.3, 19.1, 19.2, 19.4, 19.6, 19.7, 20.1],
+    [19.5, 19.2, 20.0, 19.7, 20.9, 19.4, 19.7, 19.8], [18.8, 19.1, 20.0, 19.7, 20.5, 20.1, 20.8, 20.4],
+    [25.5, 25.5, 25.5, 25.5, 25.5, 25.5, 20.8, 19.6], [19.5, 19.7, 25.5, 25.5, 25.5, 25.5, 25.5, 25.5],
+    [19.5, 18.6, 20.0, 19.2, 20.4, 21.7, 25.5, 25.5], [25.5, 25.5, 20.0, 18.8, 20.5, 19.4, 20.8, 21.0],
+])  # fmt: skip
+"""Paper Table 3: decay reduction (%) from 54 to 75 kWh (10x decay), per spacing (regular, eco)."""
+
+PAPER_15_15_S800_PCT = {"energy": 40.0, "decay": 54.0, "cost": 42.0}
+"""Paper Sec. 4.1: [15 15] at s = 800 m, reductions by eco-driving [%]."""
+PAPER_M15_15_COST = "30-45 % for s = 200-600 m, about 11 % for s = 800 m"
+"""Paper Sec. 4.1: [-15 15], cost reduction."""
+PAPER_NCA_15_15_COST = "up to 50 % for s = 800 m"
+"""Paper Sec. 4.2: [15 15] with 10x decay, cost reduction."""
+PAPER_FIELD_TEST_PCT = {"energy": 29.0, "decay": 38.0, "cost": 32.0}
+"""Paper Sec. 4.4: field test, reductions by the advised driver [%]."""

@@ -24,10 +24,14 @@ def _corridor(engine, name: str) -> Corridor:
 
 @router.get("", response_model=list[CorridorSummary])
 async def list_corridors(engine: EngineDep) -> list[CorridorSummary]:
+    """The served corridors: the shipped presets and the files of ``ECO_CORRIDOR_DIR``, with their plans."""
     return [
-        CorridorSummary(name=c.name, description=c.description, length_m=c.length_m, intersection_ids=[ix.id for ix in c.intersections])
+        CorridorSummary(
+            name=c.name, description=c.description, length_m=c.length_m, intersection_ids=[ix.id for ix in c.intersections],
+            units=c.units, plans=[p.name for p in c.plans], default_plan=(p.name if (p := c.plan()) is not None else None),
+        )
         for c in engine.corridors.values()
-    ]
+    ]  # fmt: skip
 
 
 @router.get("/{name}", response_model=Corridor, responses={404: {"model": ErrorOut}})
