@@ -13,7 +13,7 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
 from advisory.advice.advisor import ACTIONS, REASONS
 
-SERVER_REASONS = ("poor_gps", "no_speed", "no_fix")
+SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew")
 """Pauses the service decides itself (``server.advising.SERVER_PHRASES``)."""
 Action = Enum("Action", {a: a for a in ACTIONS}, type=str)
 Action.__doc__ = "What the driver is advised to do; `none`: no speed advice (`reason` says why)."
@@ -206,10 +206,29 @@ class CorridorSummary(_Out):
     default_plan: str | None = None
 
 
+class SpatIntersectionOut(_Out):
+    id: int = Field(description="J2735 intersection id")
+    status: Literal["ok", "stale", "clock_skew", "no_spat"] = Field(description="ok: fresh; stale: older than spat_stale_after_s; clock_skew: the controller's clock is off ours; no_spat: never heard")
+    age_s: float | None = Field(description="age of the latest state (controller timestamp) [s]")
+
+
+class SpatSourceOut(_Out):
+    model_config = ConfigDict(extra="allow")
+    kind: Literal["simulator", "feed", "mqtt", "log"]
+    connected: bool = Field(description="connected (feed, MQTT) or still playing (log)")
+
+
+class SpatHealthOut(_Out):
+    source: str = Field(description="where the SPaT comes from, in words")
+    sources: list[SpatSourceOut]
+    intersections: list[SpatIntersectionOut] = Field(description="intersections whose SPaT comes from a source (simulated lights are always fresh)")
+
+
 class HealthOut(_Out):
-    status: Literal["ok"]
+    status: Literal["ok", "degraded"] = Field(description="degraded: a SPaT source is down or an intersection's SPaT is not fresh (the service still answers)")
     now_unix_s: float
     trips: int
-    spat: str
+    spat: str = Field(description="where the SPaT comes from, in words (spat_health has the details)")
+    spat_health: SpatHealthOut
     tables: list[str]
     speech: bool

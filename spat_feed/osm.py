@@ -500,7 +500,9 @@ class ImportResult:
     notes: list[str]
 
 
-def corridors_from_osm(path: str | Path, street: str, *, name: str | None = None, units: str | None = None, direction: str | None = None) -> ImportResult:
+def corridors_from_osm(
+    path: str | Path, street: str, *, name: str | None = None, units: str | None = None, direction: str | None = None, first_id: int = 1
+) -> ImportResult:
     """Corridors along ``street`` in the OSM file ``path``, one per direction of travel (module docstring).
 
     ``name``: corridor name prefix (default: the street's, e.g. ``7th_street``), suffixed with the
@@ -535,7 +537,7 @@ def corridors_from_osm(path: str | Path, street: str, *, name: str | None = None
             row.append(match)
         ids.append(row)
     order = sorted(range(len(centres)), key=lambda k: (min(r.index(k) if k in r else 1e9 for r in ids), k))
-    number = {k: n + 1 for n, k in enumerate(order)}
+    number = {k: first_id + n for n, k in enumerate(order)}
     out: list[Corridor] = []
     for r_index, ((route, stations, lights), row) in enumerate(zip(results, ids)):
         heading_deg = _azimuth(data.nodes[route.nodes[0]], data.nodes[route.nodes[-1]])
