@@ -571,7 +571,7 @@ def corridors_from_osm(
             frac = (light.stop_m - stations[i - 1]) / max(stations[i] - stations[i - 1], 1e-9)
             lon, lat, _ = WGS84.fwd(data.nodes[route.nodes[i - 1]][1], data.nodes[route.nodes[i - 1]][0], az, frac * (stations[i] - stations[i - 1]))
             cross = sorted({t.get("name", "") for _, refs, t in data.other_ways if light.node in refs and t.get("name")})
-            label = f"{street} & {' / '.join(cross)}" if cross else f"{street} signal {number[k]}"
+            label = f"{street} & {' / '.join(cross)}" if cross else f"{street} signal {number[k] - first_id + 1}"
             intersections.append(IntersectionSpec(
                 id=number[k], name=label, stop_line_m=stop, lat_deg=round(lat, 7), lon_deg=round(lon, 7), approach_heading_deg=round(az, 2) % 360.0,
                 signal_groups=(SignalGroupSpec(id=group, name=f"{bound} through"),)))  # fmt: skip
