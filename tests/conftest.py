@@ -1,3 +1,4 @@
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,20 @@ SHARED_DATA = next((p for p in (REPO.parent / "shared" / "data", REPO.parents[1]
 """Real data made by others (``../shared/data``, or ``../../shared/data`` from a worktree: cycles/, spat/, osm/);
 tests skip what is absent."""
 CYCLES = SHARED_DATA / "cycles"
+
+
+@pytest.fixture
+def start_proc(tmp_path) -> Iterator:
+    """``start_proc(Proc) -> Proc`` (a real process on loopback, ``tests.procs``); everything started is killed at the end of the test."""
+    procs: list = []
+
+    def start(proc):
+        procs.append(proc)
+        return proc.start()
+
+    yield start
+    for proc in procs:
+        proc.kill()
 
 
 @pytest.fixture(scope="session")
