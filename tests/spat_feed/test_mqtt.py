@@ -154,11 +154,15 @@ def test_recorded_day_through_mqtt_reaches_trips_and_survives_a_broker_restart(s
         assert any(shape(rec.states, to_unix_s(rec.timestamp)) == seen_shape for rec in recorded), seen_shape
 
         # the broker dies: stale within the stale age (2 s), said plainly; health degraded; one WARNING logged
+        last_fresh = fix()
+        messages_before_kill = metric(client.get("/metrics").text, "ecodrive_spat_messages_total", intersection="648")
         broker.kill()
         t_kill = time.monotonic()
         advice = until("stale after the broker died", lambda: fix_when(False), every_s=0.05)
         assert time.monotonic() - t_kill < 2.0 + 1.5  # stale age + one SPaT period and a request's slack
-        assert advice["action"] == "none" and advice["reason"] == "stale_spat" and advice["target_speed_mps"] is None
+        # no new speed advice on stale data: nothing, or the last fresh advice held through a short dropout
+        assert advice["reason"] == "stale_spat" and "Signal data" in advice["message"], advice
+        assert advice["action"] in ("none", last_fresh["action"]) and advice["target_speed_mps"] in (None, last_fresh["target_speed_mps"])
         health = client.get("/health").json()
         assert health["status"] == "degraded" and health["spat_health"]["intersections"][0]["status"] == "stale"
         until("WARNING in the service log", lambda: "SPaT of intersection 648: stale" in (tmp_path / "service.log").read_text())
@@ -169,8 +173,8 @@ def test_recorded_day_through_mqtt_reaches_trips_and_survives_a_broker_restart(s
         until("health ok again", lambda: client.get("/health").json()["status"] == "ok")
         metrics = client.get("/metrics").text
         assert metric(metrics, "ecodrive_spat_source_reconnects_total", kind="mqtt") >= 1
-        assert metric(metrics, "ecodrive_spat_messages_total", intersection="648") > 5
-        assert metric(metrics, "ecodrive_advice_total", action="none", reason="stale_spat") >= 1
+        assert metric(metrics, "ecodrive_spat_messages_total", intersection="648") > messages_before_kill >= 1
+        assert metric(metrics, "ecodrive_advice_total", reason="stale_spat") >= 1
     feed.kill()
 
 
