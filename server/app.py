@@ -23,7 +23,6 @@ from fastapi.middleware.cors import CORSMiddleware
 from advisory.advice.advisor import AdvisorParams
 from advisory.physics.params import model_params
 from spat_feed.corridors import Corridor, load_corridor, load_corridor_dir
-from spat_feed.scenarios import make_scenario
 
 from server.advising import Engine
 from server.audio import Speech
@@ -35,6 +34,7 @@ from server.openapi import install_docs
 from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
 from server.spat import SpatHub
+from spat_feed.simulator import shared_scenario
 
 log = logging.getLogger("server")
 
@@ -92,7 +92,7 @@ def build_tables(settings: Settings, corridors: dict[str, Corridor]) -> dict[str
 def warm_up(engine: Engine) -> None:
     """Run each numba/pyproj path once (compiles or loads the cached machine code)."""
     corridor = engine.corridors[engine.settings.default_corridor]
-    scenario = make_scenario(corridor, "trip", 0.0)
+    scenario = shared_scenario(corridor, 0.0)
     engine.matchers[corridor.name].match(*corridor.position(10.0))
     t = np.array([0.0, 1.0, 2.0])
     v = np.array([20.0, 20.0, 20.0])

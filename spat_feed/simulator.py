@@ -16,6 +16,7 @@ Pure: the instant is handed in; no clock, no I/O.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from collections.abc import Iterable
 
 from spat_feed.corridors import TIMING_PRESETS, Corridor
@@ -50,7 +51,10 @@ def shared_scenario(corridor: Corridor, entry_unix_s: float) -> FeedScenario:
     plan = corridor.plan()
     if plan is not None and plan.reference == "local_midnight":
         return FeedScenario(corridor, plan, float(entry_unix_s))
-    return FeedScenario(corridor, plan or TIMING_PRESETS[SHARED_TIMING], 0.0)
+    if plan is not None:
+        return FeedScenario(corridor, plan, 0.0)
+    timing = TIMING_PRESETS[SHARED_TIMING]  # every light of any number turns red at 15 s past each minute
+    return FeedScenario(corridor, replace(timing, red_starts_s=(timing.red_starts_s[0],) * len(corridor.intersections)), 0.0)
 
 
 def simulated_plans(corridors: Iterable[Corridor], t_unix_s: float) -> dict[tuple[int, int], FixedTimePlan]:
