@@ -43,14 +43,15 @@ class TripCreate(_In):
     corridor: str | None = Field(default=None, description="corridor name (GET /v1/corridors); default: the service's", max_length=200)
     timing: str | None = Field(
         default=None,
-        description="signal timing: one of the corridor's plans (GET /v1/corridors), or a paper preset (e.g. '15_15', 'field_test'); "
-        "default: the corridor's own plan, else one of the paper's 16 picked from the entry time",
+        description="signal timing of a scenario simulated for this trip alone: one of the corridor's plans (GET /v1/corridors), a paper preset "
+        "(e.g. '15_15', 'field_test') or 'trip' (one of the paper's 16 picked from the entry time); default: none, the lights as they run "
+        "for everyone (the service's shared SPaT: simulated, a feed, MQTT or a recorded log)",
         max_length=50,
     )
     vehicle: str | None = Field(default=None, description="vehicle preset (paper_54kwh, paper_75kwh, calibrated)", max_length=50)
     entry_unix_s: float | None = Field(
         default=None,
-        description="zone-entry instant the simulated timing is relative to [Unix s]; default: the creation instant. At most 300 s from server time.",
+        description="zone-entry instant a trip's own timing is relative to, and the start of its score [Unix s]; default: the creation instant. At most 300 s from server time.",
     )
     units: Literal["metric", "imperial"] | None = Field(
         default=None, description="speeds in the spoken messages: km/h (metric) or mph (imperial); default: the corridor's (metric if it has none)"
