@@ -37,6 +37,20 @@ def calibrated():
     return model_params("calibrated")
 
 
+def recorded_spat_slice(folder: Path, n_rows: int = 400, day: str = "2019-05-01") -> Path:
+    """The first ``n_rows`` rows of a shared Antwerp recording, as a CSV in ``folder`` (skip if absent)."""
+    import gzip
+
+    src = SHARED_DATA / "spat" / f"antwerp-{day}.csv.gz"
+    if not src.exists():
+        pytest.skip(f"{src} not present")
+    with gzip.open(src, "rt") as fh:
+        lines = [next(fh) for _ in range(n_rows + 1)]
+    path = folder / f"antwerp-{day}-slice.csv"
+    path.write_text("".join(lines))
+    return path
+
+
 def load_cycle(name: str) -> tuple[np.ndarray, np.ndarray]:
     path = CYCLES / f"{name}.csv"
     if not path.exists():

@@ -6,7 +6,6 @@ Needs ``mosquitto`` (``scripts/system-deps.sh`` installs it); skipped with the r
 
 from __future__ import annotations
 
-import gzip
 import shutil
 import socket
 import subprocess
@@ -21,7 +20,7 @@ from spat_feed.messages import to_unix_s
 from spat_feed.mqtt import MqttPublisher
 from spat_feed.player import read_spat_log
 
-from tests.conftest import SHARED_DATA
+from tests.conftest import recorded_spat_slice
 from tests.procs import REPO, Proc, free_port
 
 LIVE_DIR = REPO / "spat_feed" / "presets" / "live"
@@ -69,18 +68,6 @@ def broker(tmp_path):
     b.kill()
 
 
-def recorded_slice(tmp_path: Path, n_rows: int = 1200) -> Path:
-    """The first ~2 minutes of a shared recording (the whole day plays the same way, only longer)."""
-    src = SHARED_DATA / "spat" / "antwerp-2019-05-01.csv.gz"
-    if not src.exists():
-        pytest.skip(f"{src} not present")
-    with gzip.open(src, "rt") as fh:
-        lines = [next(fh) for _ in range(n_rows + 1)]
-    path = tmp_path / "antwerp-slice.csv"
-    path.write_text("".join(lines))
-    return path
-
-
 def until(what, check, timeout_s: float = WAIT_S, every_s: float = 0.1):
     deadline = time.monotonic() + timeout_s
     while True:
@@ -103,7 +90,7 @@ def metric(text: str, name: str, **labels: str) -> float:
 
 
 def test_recorded_day_through_mqtt_reaches_trips_and_survives_a_broker_restart(start_proc, tmp_path, broker):
-    log_path = recorded_slice(tmp_path)
+    log_path = recorded_spat_slice(tmp_path, 1200)
     recorded = read_spat_log(log_path)
     feed = start_proc(Proc(["-m", "spat_feed", "--corridors", "none", "--log", str(log_path), "--loop", "--mqtt", broker.url], tmp_path / "feed.log"))
     svc = start_proc(Proc(["-m", "server", "--log-level", "info", "--no-access-log"], tmp_path / "service.log", {
@@ -182,7 +169,7 @@ def test_malformed_duplicate_out_of_order_and_skewed_messages_are_rejected_and_c
     svc = start_proc(Proc(["-m", "server", "--log-level", "warning", "--no-access-log"], tmp_path / "service.log", {
         "ECO_CORRIDORS": "paper_s200", "ECO_CORRIDOR_DIR": str(LIVE_DIR), "ECO_DEFAULT_CORRIDOR": "antwerp_k648",
         "ECO_SPAT_MQTT_URL": broker.url, "ECO_TABLES": "false", "ECO_SPEECH": "false", "ECO_METRICS_ACCESS": "public"}))  # fmt: skip
-    log_path = recorded_slice(tmp_path, 40)
+    log_path = recorded_spat_slice(tmp_path, 40)
     recorded = read_spat_log(log_path)
     until("the service subscribed", lambda: httpx.get(svc.base_url + "/health").json()["spat_health"]["sources"][-1]["connected"])
     pub = MqttPublisher(broker.url)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gzip
 import json
 import logging
 
@@ -16,7 +15,7 @@ from spat_feed.recorded import RecordedLogError
 from spat_feed.simulator import IntersectionSimulator, shared_scenario, simulated_plans
 from spat_feed.source import SpatStore, TimeRules
 
-from tests.conftest import SHARED_DATA
+from tests.conftest import recorded_spat_slice
 
 T0 = 1_790_000_000.0
 
@@ -137,19 +136,8 @@ def test_one_intersection_id_with_two_plans_is_refused(tmp_path):
         IntersectionSimulator([paper_corridor(200.0), oakland_as_1_2])
 
 
-def _csv_slice(tmp_path, n_rows: int = 400):
-    src = SHARED_DATA / "spat" / "antwerp-2019-05-01.csv.gz"
-    if not src.exists():
-        pytest.skip(f"{src} not present")
-    with gzip.open(src, "rt") as fh:
-        lines = [next(fh) for _ in range(n_rows + 1)]
-    path = tmp_path / "slice.csv"
-    path.write_text("".join(lines))
-    return path
-
-
 def test_log_player_maps_the_recorded_clock_onto_now(tmp_path):
-    log = read_spat_log(_csv_slice(tmp_path))
+    log = read_spat_log(recorded_spat_slice(tmp_path))
     t_first = to_unix_s(log[0].timestamp)
     player = LogPlayer(log, start_unix_s=T0, speedup=2.0)
     assert player.due(T0 - 0.01) == []
