@@ -16,7 +16,7 @@ def test_service_with_remote_feed_end_to_end(start_proc, tmp_path, s200):
     svc = start_proc(service_proc(tmp_path, ECO_SPAT_FEED_URL=feed.base_url, ECO_TABLES="false", ECO_SPEECH="false"))
     with httpx.Client(base_url=svc.base_url, timeout=10.0) as client:
         assert client.get("/health").json()["spat"] == f"remote {feed.base_url}"
-        trip_id, auth, created = new_trip(client, corridor="paper_s200", timing="15_15")
+        trip_id, auth, created = new_trip(client, corridor="paper_s200")  # no timing: the lights as the feed runs them for everyone
 
         def post(k: int) -> dict:
             lat, lon = s200.position(min(10.0 * k, 90.0))
@@ -44,7 +44,7 @@ def test_service_with_remote_feed_end_to_end(start_proc, tmp_path, s200):
             if advice["spat_fresh"] is False:
                 break
             time.sleep(0.2)
-        assert advice["spat_fresh"] is False and advice["action"] == "none" and advice["reason"] == "stale_spat"
-        assert "out of date" in advice["message"]
+        # no new speed advice on stale data: none ("out of date"), or the last advice held through a short dropout ("delayed")
+        assert advice["spat_fresh"] is False and advice["reason"] == "stale_spat" and "Signal data" in advice["message"], advice
         score = client.post(f"/v1/trips/{trip_id}/end", headers=auth)
         assert score.status_code == 200
