@@ -20,7 +20,7 @@ import numpy as np
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
-from advisory.advice.advisor import AdvisorParams
+from advisory.advice.advisor import AdvisorParams, advise
 from advisory.physics.params import model_params
 from spat_feed.corridors import Corridor, load_corridor, load_corridor_dir
 
@@ -34,6 +34,7 @@ from server.openapi import install_docs
 from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
 from server.spat import SpatHub
+from spat_feed.observe import PlanReading, observation
 from spat_feed.simulator import shared_scenario
 
 log = logging.getLogger("server")
@@ -97,6 +98,11 @@ def warm_up(engine: Engine) -> None:
     t = np.array([0.0, 1.0, 2.0])
     v = np.array([20.0, 20.0, 20.0])
     trip_score("warm-up", scenario, engine.settings.default_vehicle, t, v, np.array([0.0, 20.0, 40.0]), engine.settings.speed_limit_mps)
+    readings = {ix: PlanReading(plan) for (ix, _), plan in scenario.fixed_plans().items()}
+    for station_m in (0.0, corridor.length_m / 2):  # the advisor's kernels, with the tables and without
+        obs = observation(corridor, station_m, 15.0, 30.0, readings, engine.settings.speed_limit_mps)
+        for tables in (engine.tables.get(corridor.name), None):
+            advise(obs, None, engine.params, tables)
 
 
 async def _expire_idle(engine: Engine, metrics: Metrics, period_s: float) -> None:
