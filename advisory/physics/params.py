@@ -7,6 +7,7 @@ objects as arguments; nothing here reads the environment.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 G_MPS2 = 9.80665
@@ -155,8 +156,11 @@ PAPER_54KWH = VehicleParams(
     inverter_eff_frac=0.95,
     pack_energy_kwh=54.0,
     pack_voltage_v=350.0,
+    regen_power_max_w=math.inf,
 )
-"""Paper Table 1 (Tesla Model 3 standard range); motor, pack voltage and regen are our choices."""
+"""Paper Table 1 (Tesla Model 3 standard range), literally: Eq. 1 states no regen power limit, so there is none
+(all braking through the motor, the chain efficiency multiplied on the way back). Motor efficiency and pack
+voltage are our choices (the paper omits them)."""
 
 PAPER_75KWH = replace(PAPER_54KWH, name="paper_75kwh", mass_kg=1726.0, pack_energy_kwh=75.0)
 """Paper Sec. 4.3: the long-range Model 3, 75 kWh and 1726 kg, same pack voltage."""
@@ -168,6 +172,7 @@ CALIBRATED = replace(
     trans_eff_frac=0.97,
     motor_eff_frac=0.88,
     inverter_eff_frac=0.97,
+    regen_power_max_w=60e3,
     aux_power_w=250.0,
 )
 """Public-data efficiency chain for a Model 3 RWD on the EPA dynamometer (docs/MODEL.md)."""
