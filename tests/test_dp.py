@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from advisory.evaluation.endstate import reacceleration_penalty, score_in_end_state
-from advisory.physics.model import battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.physics.model import pack, step_battery_power_w, step_cost_usd, step_wheel_power_w
 from advisory.optimizer.dp import (
     GridSpec,
     InfeasibleError,
@@ -47,7 +47,7 @@ def brute_force(scenario, params, grid, speeds, t_max_s, max_dwell_steps=8):
         if np.any(v[1:] + v[:-1] == 0):
             continue
         dt = 2 * ds / (v[1:] + v[:-1])
-        steps = [step_cost_usd(battery_power_for_wheel_w(step_wheel_power_w(v[k], v[k + 1], dt[k], 0.0, p), p), dt[k], p, rates, pref)
+        steps = [step_cost_usd(step_battery_power_w(v[k], v[k + 1], dt[k], 0.0, p), dt[k], p, rates, pref)
                  for k in range(n_stage)]
         # where the car stands still (not on a stop line) it may wait 0..max_dwell_steps dwell steps
         waits = [k for k in range(n_stage) if v[k] == 0 and k not in stops]

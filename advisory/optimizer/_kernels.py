@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from advisory.physics.model import I_AUX, battery_power_for_wheel_w, step_cost_usd, step_wheel_power_w
+from advisory.physics.model import I_AUX, step_battery_power_w, step_cost_usd
 
 RED_TOL_S = 1e-9
 """A crossing this close after a red ends counts as green (25 nm at 88.5 km/h), never earlier."""
@@ -86,7 +86,7 @@ def forward_pass(
                         step_dt[i, j] = np.inf
                         continue
                     dt = 2.0 * stage_m / (v + v2)
-                    battery_w = battery_power_for_wheel_w(step_wheel_power_w(v, v2, dt, grade_frac[k], p), p)
+                    battery_w = step_battery_power_w(v, v2, dt, grade_frac[k], p)
                     step_dt[i, j] = dt
                     step_usd[i, j] = step_cost_usd(battery_w, dt, p, m_c_rates, m_prefactor)
         # dwell at standstill (never on a stop line), bins in ascending order so waits chain

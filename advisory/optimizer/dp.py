@@ -30,7 +30,7 @@ from functools import lru_cache
 import numpy as np
 
 from advisory.evaluation.endstate import reacceleration_penalty
-from advisory.physics.model import I_AUX, battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.physics.model import I_AUX, pack, step_battery_power_w, step_cost_usd, step_wheel_power_w
 from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, forward_pass
 from advisory.physics.params import ModelParams, VehicleParams
 from advisory.drivers.regular import time_to_cover_s
@@ -308,7 +308,7 @@ def solve_numpy(prob: DPProblem) -> DPSolution:
             i2 = np.arange(prob.band_lo[i], prob.band_hi[i] + 1)
             i2 = i2[v[i] + v[i2] > 0]
             dt = 2.0 * g.stage_m / (v[i] + v[i2])
-            battery = battery_power_for_wheel_w(step_wheel_power_w(v[i], v[i2], dt, prob.grade_frac[k], p), p)
+            battery = step_battery_power_w(v[i], v[i2], dt, prob.grade_frac[k], p)
             step = step_cost_usd(battery, dt, p, rates, pref)
             for j, target in enumerate(i2):
                 t2 = time[k, i, src] + dt[j]
