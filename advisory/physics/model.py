@@ -163,3 +163,20 @@ def step_cost_usd(battery_w, dt_s, p, m_c_rates, m_prefactor):
     """Paper Eq. 4 over one step: electricity on net battery energy plus pack wear [$]."""
     wear = soh_loss_frac(battery_w, dt_s, p, m_c_rates, m_prefactor)
     return battery_w * dt_s * p[I_USD_PER_J] + wear * p[I_WEAR_USD]
+
+
+@register_jitable
+def arc_cost_usd(v0_mps, v1_mps, dt_s, grade_frac, n_steps, p, m_c_rates, m_prefactor):
+    """Cost [$] of a constant-acceleration arc from ``v0`` to ``v1`` in ``dt_s``, in ``n_steps`` equal time steps.
+
+    Each step is priced in the mid-step form, so the arc's kinetic energy is exact and its aerodynamic and
+    battery-wear terms converge as ``n_steps`` grows (the scoring uses steps of 0.1 s).
+    """
+    total = 0.0 * v0_mps
+    dv = (v1_mps - v0_mps) / n_steps
+    step_s = dt_s / n_steps
+    for s in range(n_steps):
+        va = v0_mps + dv * s
+        battery_w = step_battery_power_w(va, va + dv, step_s, grade_frac, p)
+        total = total + step_cost_usd(battery_w, step_s, p, m_c_rates, m_prefactor)
+    return total
