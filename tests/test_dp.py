@@ -74,7 +74,7 @@ def brute_force_with_arcs(scenario, params, grid, speeds, t_max_s, max_dwell_ste
     at standstill off a stop line, a wait of one dwell step (up to max_dwell_steps in all); braking at a constant
     rate to a halt ``stop_gap_m`` short of the next light (from any stage after the previous light), waits there,
     then a launch at a constant rate to node j at a stage past the line, leaving at the first instant that crosses
-    the line on green; from a standstill at a stage, the same launch. Stages priced in ``step_substeps`` steps,
+    the line on green; from a standstill reached by a move (not by a wait), the same launch. Stages priced in ``step_substeps`` steps,
     arcs from or to rest in ``arc_steps`` steps (``arc_cost_usd``).
     """
     p, rates, pref = pack(params)
@@ -129,7 +129,7 @@ def brute_force_with_arcs(scenario, params, grid, speeds, t_max_s, max_dwell_ste
         if v == 0 and k not in lights:
             if dwell_left:
                 visit(k, i, t + grid.dwell_s, c + grid.dwell_s * idle_per_s, dwell_left - 1)
-            if kl is not None:
+            if kl is not None and dwell_left == max_dwell_steps:  # a launch times its own wait
                 launch(k * ds, t, c, kl, min(last, k + n_launch))
         if kl is None or v == 0:
             return

@@ -98,12 +98,13 @@ def forward_pass(
 
     **Stop arcs** (light l at stage ``light_stage[l]``, standstill ``stop_gap`` short of its line): from every
     label at a stage ``arc_k_lo[l] <= k < light_stage[l]``, brake at constant deceleration to a halt at the
-    standstill (``stop_dt_s``/``stop_usd`` (n_l, K_arc, n_v)); wait there (``s_*`` tables (n_l, n_bins),
-    waits in ``dwell_s`` steps); launch at constant acceleration to node j at stage ``light_stage + m``
-    (``launch_*`` (n_l, M, n_v), ``launch_cross_s`` the time from rest to the line). The launch leaves at the
+    standstill (``stop_dt_s``/``stop_usd`` (K_arc, n_v), row n: from n + 1 stages before the line); wait there
+    (``s_*`` tables (n_l, n_bins), waits in ``dwell_s`` steps); launch at constant acceleration to node j at
+    stage ``light_stage + 1 + m`` (``launch_*`` (M, n_v), ``launch_cross_s`` the time from rest to the line). The launch leaves at the
     exact instant that crosses the line as the red ends (or at once when it is green), so stopping, waiting
     and launching are exact whatever the grid. **Timed launches**: from a standstill at any stage before a
-    light (after the previous one), the same exact launch across the line to node j at stage k2
+    light (after the previous one), reached by a move (not by a wait there), the same exact launch across the
+    line to node j at stage k2
     (``rest_dt_s``/``rest_usd`` (N, n_v): from rest over k2 - k stages), so a car that halts early crosses the
     line with speed exactly as it turns green. Red checks and the time limit use exact times throughout.
 
@@ -114,7 +115,7 @@ def forward_pass(
     n_v = speed_mps.shape[0]
     n_bins = cost_usd.shape[2]
     n_light = light_stage.shape[0]
-    n_launch = launch_dt_s.shape[1]
+    n_launch = launch_dt_s.shape[0]
     occ_lo = np.full((n_stage + 1, n_v), n_bins, dtype=np.int64)
     occ_hi = np.full((n_stage + 1, n_v), -1, dtype=np.int64)
     cost_usd[0, i_start, 0] = 0.0
@@ -169,17 +170,17 @@ def forward_pass(
                     if k2 > n_stage:
                         break
                     for j in range(n_v):
-                        dt = launch_dt_s[l, m, j]
+                        dt = launch_dt_s[m, j]
                         if dt == np.inf:
                             continue
-                        cross = launch_cross_s[l, m, j]
+                        cross = launch_cross_s[m, j]
                         wait = red_left_s(t0 + cross, red_start, red_len, cycle)
                         t2 = t0 + wait + dt
                         if t2 > t_max_s + LATE_TOL_S - t_rem_min_s[k2, j]:
                             continue
                         if is_stop[k2] and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
                             continue
-                        c2 = c0 + wait * idle_per_s + launch_usd[l, m, j]
+                        c2 = c0 + wait * idle_per_s + launch_usd[m, j]
                         if c2 + lower_bound_usd[k2, j] > upper_bound_usd:
                             continue
                         b2 = int((t2 - t_lo_s[k2]) / bin_s)
@@ -210,8 +211,8 @@ def forward_pass(
                 x_cross = (kl - k) * stage_m
                 for b in range(occ_lo[k, 0], occ_hi[k, 0] + 1):
                     c0 = cost_usd[k, 0, b]
-                    if c0 == np.inf:
-                        continue
+                    if c0 == np.inf or parent[k, 0, b] // (n_v * n_bins) == k:
+                        continue  # empty, or reached by a wait here: the launch times its own wait
                     t0 = time_s[k, 0, b]
                     code = -(2 + n_light * n_bins + (k * n_v) * n_bins + b)
                     for k2 in range(kl + 1, k_end + 1):
@@ -239,10 +240,10 @@ def forward_pass(
             for i in range(n_v):
                 if occ_hi[k, i] < 0:
                     continue
-                dt = stop_dt_s[l, k - arc_k_lo[l], i]
+                dt = stop_dt_s[kl - k - 1, i]
                 if dt == np.inf:
                     continue
-                step = stop_usd[l, k - arc_k_lo[l], i]
+                step = stop_usd[kl - k - 1, i]
                 for b in range(occ_lo[k, i], occ_hi[k, i] + 1):
                     c0 = cost_usd[k, i, b]
                     if c0 == np.inf:

@@ -245,44 +245,39 @@ def arc_table(v0_mps, v1_mps, distance_m, params: ModelParams, n_steps: int) -> 
 
 
 def _no_arcs(n_v: int) -> dict:
-    empty = np.zeros((0, 1, n_v))
+    empty = np.zeros((0, n_v))
     return dict(light_stage=np.zeros(0, dtype=np.int64), arc_k_lo=np.zeros(0, dtype=np.int64), stop_dt_s=empty,
-                stop_usd=empty, launch_dt_s=empty, launch_usd=empty, launch_cross_s=empty,
-                rest_dt_s=np.zeros((0, n_v)), rest_usd=np.zeros((0, n_v)))
+                stop_usd=empty, launch_dt_s=empty, launch_usd=empty, launch_cross_s=empty, rest_dt_s=empty, rest_usd=empty)
+
+
+@lru_cache(maxsize=32)
+def _arc_tables(params: ModelParams, grid: GridSpec, speed: tuple[float, ...], n_stop: int) -> tuple[np.ndarray, ...]:
+    """Stop arcs by distance (row n: from n + 1 stages before the line to the halt), launches from the halt
+    (row m: to m + 1 stages past the line), launches from rest at a stage (row n: over n + 1 stages)."""
+    ds, gap, v = grid.stage_m, grid.stop_gap_m, np.asarray(speed)[None, :]
+    n_launch = max(1, int(np.floor((grid.launch_max_m - gap) / ds)))
+    dist = np.arange(1, n_stop + 1)[:, None] * ds - gap
+    ok = (v > 0) & (dist > 0) & (v**2 <= 2 * grid.brake_max_mps2 * dist + 1e-9)
+    stop_dt, stop_usd = arc_table(v, 0.0, np.maximum(dist, 1e-9), params, grid.arc_steps)
+    out = [np.where(ok, stop_dt, np.inf), np.where(ok, stop_usd, np.inf)]
+    for dist in (np.arange(1, n_launch + 1)[:, None] * ds + gap, np.arange(1, n_launch + 1)[:, None] * ds):
+        ok = (v > 0) & (v**2 <= 2 * grid.accel_max_mps2 * dist + 1e-9)
+        dt, usd = arc_table(0.0, v, dist, params, grid.arc_steps)
+        out += [np.where(ok, dt, np.inf), np.where(ok, usd, np.inf)]
+    accel = np.where(out[2] < np.inf, v**2, 1.0) / (2 * (np.arange(1, n_launch + 1)[:, None] * ds + gap))
+    cross = np.where(out[2] < np.inf, np.sqrt(2 * gap / accel), np.inf)
+    return (*out, cross)
 
 
 def _stop_arcs(scenario: Scenario, params: ModelParams, grid: GridSpec, speed: np.ndarray, n_stage: int) -> dict:
     """Tables of the exact stop arcs (see ``_kernels.forward_pass``): halts before each light, launches after it."""
-    ds, gap = grid.stage_m, grid.stop_gap_m
-    stages = [int(round(light.position_m / ds)) for light in scenario.signals]
+    stages = [int(round(light.position_m / grid.stage_m)) for light in scenario.signals]
     k_lo = [0] + stages[:-1]  # arcs start at or after the previous line: they never cross a light
-    n_l, n_v = len(stages), speed.size
-    k_arc = max(kl - lo for kl, lo in zip(stages, k_lo, strict=True))
-    n_launch = max(1, int(np.floor((grid.launch_max_m - gap) / ds)))
-    stop_dt, stop_usd = np.full((n_l, k_arc, n_v), np.inf), np.full((n_l, k_arc, n_v), np.inf)
-    launch_dt, launch_usd = np.full((n_l, n_launch, n_v), np.inf), np.full((n_l, n_launch, n_v), np.inf)
-    cross = np.full((n_l, n_launch, n_v), np.inf)
-    for l, (kl, lo) in enumerate(zip(stages, k_lo, strict=True)):
-        dist = (kl - np.arange(lo, kl))[:, None] * ds - gap  # (K_arc_l, 1) from stage k to the halt
-        ok = (speed[None, :] > 0) & (dist > 0) & (speed[None, :] ** 2 <= 2 * grid.brake_max_mps2 * dist + 1e-9)
-        dt, usd = arc_table(speed[None, :], 0.0, np.maximum(dist, 1e-9), params, grid.arc_steps)
-        stop_dt[l, : kl - lo] = np.where(ok, dt, np.inf)
-        stop_usd[l, : kl - lo] = np.where(ok, usd, np.inf)
-        m = np.arange(1, n_launch + 1)
-        dist = (m * ds + gap)[:, None]  # (M, 1) from the halt to stage kl + m
-        nxt = stages[l + 1] if l + 1 < n_l else n_stage
-        ok = (speed[None, :] > 0) & (speed[None, :] ** 2 <= 2 * grid.accel_max_mps2 * dist + 1e-9) & ((kl + m)[:, None] <= nxt)
-        dt, usd = arc_table(0.0, speed[None, :], dist, params, grid.arc_steps)
-        launch_dt[l] = np.where(ok, dt, np.inf)
-        launch_usd[l] = np.where(ok, usd, np.inf)
-        accel = speed[None, :] ** 2 / (2 * dist)
-        cross[l] = np.where(ok, np.sqrt(2 * gap / np.where(ok, accel, 1.0)), np.inf)
-    n = np.arange(1, n_launch + 1)[:, None]  # timed launches from a standstill at a stage: n stages from rest
-    ok = (speed[None, :] > 0) & (speed[None, :] ** 2 <= 2 * grid.accel_max_mps2 * n * ds + 1e-9)
-    dt, usd = arc_table(0.0, speed[None, :], n * ds, params, grid.arc_steps)
+    n_stop = max(kl - lo for kl, lo in zip(stages, k_lo, strict=True))
+    stop_dt, stop_usd, launch_dt, launch_usd, rest_dt, rest_usd, cross = _arc_tables(params, grid, tuple(speed), n_stop)
     return dict(light_stage=np.array(stages, dtype=np.int64), arc_k_lo=np.array(k_lo, dtype=np.int64), stop_dt_s=stop_dt,
                 stop_usd=stop_usd, launch_dt_s=launch_dt, launch_usd=launch_usd, launch_cross_s=cross,
-                rest_dt_s=np.where(ok, dt, np.inf), rest_usd=np.where(ok, usd, np.inf))
+                rest_dt_s=rest_dt, rest_usd=rest_usd)
 
 
 @dataclass(frozen=True, slots=True)
@@ -339,7 +334,7 @@ def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=No
         elif code <= -2:  # launched from the halt before light l: the halt, its waits, then the stop arc
             l, sb = divmod(-code - 2, nb)
             halt_m = prob.scenario.signals[l].position_m - prob.grid.stop_gap_m
-            knots.append((time[k, i, b] - prob.launch_dt_s[l, k - prob.light_stage[l] - 1, i], halt_m, 0.0))
+            knots.append((time[k, i, b] - prob.launch_dt_s[k - prob.light_stage[l] - 1, i], halt_m, 0.0))
             while True:
                 knots.append((s_time[l, sb], halt_m, 0.0))
                 code = int(s_parent[l, sb])
