@@ -8,8 +8,13 @@ Formulation
   grid it can only alternate holding speed and braking, which costs several per cent and converges slowly
   (the convergence table in bench/bench_dp.py shows it); the chain makes coasting exact at any resolution.
 * **Transitions** between nodes at constant acceleration, ``a = (v'² - v²) / (2 ds)`` in
-  ``[-brake_max, accel_max]``, ``dt = 2 ds / (v + v')``; cost = paper Eq. 4 on the mid-step battery power
-  (``advisory.physics.model``). At standstill (not on a stop line) the car may wait in steps of ``dwell_s``.
+  ``[-brake_max, accel_max]``, ``dt = 2 ds / (v + v')``; cost = paper Eq. 4 on the battery power, priced in
+  ``step_substeps`` mid-step pieces (``advisory.physics.model.arc_cost_usd``). At standstill (not on a stop
+  line) the car may wait in steps of ``dwell_s``.
+* **Stops, exactly**: from any label before a light, an arc brakes at a constant rate to a halt ``stop_gap_m``
+  short of its line; the car waits there and launches at a constant rate to a node past the line, leaving at
+  the exact instant that crosses the line as the red ends. A car standing at a stage launches the same way
+  (timed launch). Arc costs do not depend on the grid, so where and when a car stops is not quantized.
 * **Time** is carried **exactly** on each label; labels are only *binned* by time (``time_bin_s``) to
   decide which of two paths to keep. A stop line may be crossed only at an exact time outside red, and
   the trip-time limit is checked on exact times: no rounding of time can let a path cheat a red light,
