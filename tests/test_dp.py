@@ -1,6 +1,7 @@
 """DP optimizer: brute force on tiny grids, the NumPy twin, constraints, and the paper scenarios."""
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from advisory.evaluation.endstate import reacceleration_penalty, score_in_end_state
-from advisory.physics.model import battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.physics.model import arc_cost_usd, pack, step_cost_usd, step_wheel_power_w
 from advisory.optimizer.dp import (
     GridSpec,
     InfeasibleError,
@@ -47,8 +48,7 @@ def brute_force(scenario, params, grid, speeds, t_max_s, max_dwell_steps=8):
         if np.any(v[1:] + v[:-1] == 0):
             continue
         dt = 2 * ds / (v[1:] + v[:-1])
-        steps = [step_cost_usd(battery_power_for_wheel_w(step_wheel_power_w(v[k], v[k + 1], dt[k], 0.0, p), p), dt[k], p, rates, pref)
-                 for k in range(n_stage)]
+        steps = [arc_cost_usd(v[k], v[k + 1], dt[k], 0.0, grid.step_substeps, p, rates, pref) for k in range(n_stage)]
         # where the car stands still (not on a stop line) it may wait 0..max_dwell_steps dwell steps
         waits = [k for k in range(n_stage) if v[k] == 0 and k not in stops]
         for counts in itertools.product(range(max_dwell_steps + 1), repeat=len(waits)):
@@ -67,6 +67,82 @@ def brute_force(scenario, params, grid, speeds, t_max_s, max_dwell_steps=8):
     return best
 
 
+def brute_force_with_arcs(scenario, params, grid, speeds, t_max_s, max_dwell_steps=4):
+    """Cheapest path by depth-first enumeration of every move the DP allows, stop arcs and timed launches included.
+
+    Moves from (stage k, node i, exact time t): a stage at constant acceleration to any node within the limits;
+    at standstill off a stop line, a wait of one dwell step (up to max_dwell_steps in all); braking at a constant
+    rate to a halt ``stop_gap_m`` short of the next light (from any stage after the previous light), waits there,
+    then a launch at a constant rate to node j at a stage past the line, leaving at the first instant that crosses
+    the line on green; from a standstill reached by a move (not by a wait), the same launch. Stages priced in ``step_substeps`` steps,
+    arcs from or to rest in ``arc_steps`` steps (``arc_cost_usd``).
+    """
+    p, rates, pref = pack(params)
+    ds, gap = grid.stage_m, grid.stop_gap_m
+    n_stage = int(round(scenario.zone_length_m / ds))
+    lights = {int(round(s.position_m / ds)): s for s in scenario.signals}
+    order = sorted(lights)
+    n_launch = int(np.floor((grid.launch_max_m - gap) / ds))
+    pen = reacceleration_penalty(speeds, params, scenario.speed_limit_mps, grid.accel_max_mps2)
+    idle_per_s = step_cost_usd(params.vehicle.aux_power_w, 1.0, p, rates, pref)
+    best = [np.inf]
+
+    def arc(v0, v1, dist, n_steps):
+        dt = 2 * dist / (v0 + v1)
+        return dt, arc_cost_usd(v0, v1, dt, 0.0, n_steps, p, rates, pref)
+
+    def launch(x_from, t0, c0, kl, last_stage):
+        """From rest at x_from (time t0, cost c0) across light kl to every node at stages kl + 1..last_stage."""
+        light = lights[kl]
+        for k2 in range(kl + 1, last_stage + 1):
+            dist = k2 * ds - x_from
+            for j, vj in enumerate(speeds):
+                if vj <= 0 or vj**2 > 2 * grid.accel_max_mps2 * dist + 1e-9:
+                    continue
+                cross = np.sqrt(2 * (light.position_m - x_from) * dist) / vj
+                t_cross = light.next_green_start_s(t0 + cross) if light.is_red(t0 + cross) else t0 + cross
+                dt, usd = arc(0.0, vj, dist, grid.arc_steps)
+                t2 = t_cross - cross + dt
+                if k2 in lights and lights[k2].is_red(t2):
+                    continue
+                visit(k2, j, t2, c0 + (t_cross - t0 - cross) * idle_per_s + usd, max_dwell_steps)
+
+    def visit(k, i, t, c, dwell_left):
+        if t > t_max_s + 1e-6:  # costs can fall (regen): only time prunes
+            return
+        if k == n_stage:
+            if t + pen.time_s[i] <= t_max_s + 1e-9:
+                best[0] = min(best[0], c + pen.cost_usd[i])
+            return
+        v = speeds[i]
+        for j, vj in enumerate(speeds):
+            a = (vj**2 - v**2) / (2 * ds)
+            if v + vj == 0 or a > grid.accel_max_mps2 + 1e-9 or a < -grid.brake_max_mps2 - 1e-9:
+                continue
+            dt, usd = arc(v, vj, ds, grid.step_substeps)
+            if k + 1 in lights and lights[k + 1].is_red(t + dt):
+                continue
+            visit(k + 1, j, t + dt, c + usd, max_dwell_steps)
+        ahead = [kl for kl in order if kl > k]
+        kl = ahead[0] if ahead else None
+        last = ahead[1] if len(ahead) > 1 else n_stage
+        if v == 0 and k not in lights:
+            if dwell_left:
+                visit(k, i, t + grid.dwell_s, c + grid.dwell_s * idle_per_s, dwell_left - 1)
+            if kl is not None and dwell_left == max_dwell_steps:  # a launch times its own wait
+                launch(k * ds, t, c, kl, min(last, k + n_launch))
+        if kl is None or v == 0:
+            return
+        halt = kl * ds - gap
+        if halt > k * ds and v**2 <= 2 * grid.brake_max_mps2 * (halt - k * ds) + 1e-9:
+            dt, usd = arc(v, 0.0, halt - k * ds, grid.arc_steps)
+            for n in range(max_dwell_steps + 1):
+                launch(halt, t + dt + n * grid.dwell_s, c + usd + n * grid.dwell_s * idle_per_s, kl, min(last, kl + n_launch))
+
+    visit(0, int(np.argmin(abs(speeds - scenario.initial_speed_mps))), 0.0, 0.0, max_dwell_steps)
+    return best[0]
+
+
 TINY_LIGHT = FixedTimeSignal(position_m=30.0, red_start_s=0.0, red_s=4.5, green_s=20.0)
 TINY = Scenario("tiny", (TINY_LIGHT,), zone_length_m=50.0, speed_limit_mps=10.0, initial_speed_mps=10.0)
 
@@ -74,7 +150,7 @@ TINY = Scenario("tiny", (TINY_LIGHT,), zone_length_m=50.0, speed_limit_mps=10.0,
 @pytest.mark.parametrize("t_max_s", [6.0, 6.8, 7.5, 12.0])
 def test_dp_equals_brute_force_on_a_tiny_grid(t_max_s):
     params = model_params()
-    grid = GridSpec(stage_m=10.0, time_bin_s=1e-4, dwell_s=0.75)
+    grid = GridSpec(stage_m=10.0, time_bin_s=1e-4, dwell_s=0.75, stop_arcs=False)
     speeds = np.array([0.0, 2.5, 4.5, 6.5, 8.0, 9.0, 10.0])
     prob = build_problem(TINY, params, grid, t_max_s, speed_nodes_mps=speeds)
     if t_max_s == 6.0:  # red until 4.5 s at 30 m, then 20 m at <= 10 m/s: 6.5 s at best
@@ -92,7 +168,7 @@ def test_tiny_grid_with_a_wait():
     light = FixedTimeSignal(position_m=30.0, red_start_s=0.0, red_s=14.0, green_s=20.0)
     sc = Scenario("wait", (light,), zone_length_m=40.0, speed_limit_mps=10.0, initial_speed_mps=10.0)
     params = model_params("calibrated")  # aux power: waiting is not free
-    grid = GridSpec(stage_m=10.0, time_bin_s=1e-4, dwell_s=1.0)
+    grid = GridSpec(stage_m=10.0, time_bin_s=1e-4, dwell_s=1.0, stop_arcs=False)
     speeds = np.array([0.0, 3.0, 6.0, 8.0, 10.0])
     prob = build_problem(sc, params, grid, 20.0, speed_nodes_mps=speeds)
     sol = solve_problem(prob)
@@ -102,11 +178,38 @@ def test_tiny_grid_with_a_wait():
     assert violations(sol.trajectory, sc) == []
 
 
+TWO_LIGHTS = Scenario(
+    "two", (FixedTimeSignal(20.0, 0.0, 5.0, 20.0), FixedTimeSignal(40.0, 3.0, 7.0, 20.0)),
+    zone_length_m=60.0, speed_limit_mps=10.0, initial_speed_mps=10.0,
+)
+
+
+@pytest.mark.parametrize(
+    "scenario,t_max_s,vehicle",
+    [(TINY, 9.0, "paper_54kwh"), (TINY, 12.0, "calibrated"), (TWO_LIGHTS, 14.0, "paper_54kwh"), (TWO_LIGHTS, 18.0, "calibrated")],
+)
+def test_dp_with_stop_arcs_equals_brute_force_on_a_tiny_grid(scenario, t_max_s, vehicle):
+    """Stop arcs, exact waits and timed launches: the DP finds exactly the cheapest of every path they allow."""
+    params = model_params(vehicle)
+    grid = GridSpec(stage_m=10.0, time_bin_s=1e-4, dwell_s=0.75, launch_max_m=30.0)
+    speeds = np.array([0.0, 3.0, 6.0, 8.0, 10.0])
+    prob = build_problem(scenario, params, grid, t_max_s, speed_nodes_mps=speeds)
+    sol = solve_problem(prob)
+    assert sol.cost_usd == pytest.approx(brute_force_with_arcs(scenario, params, grid, prob.speed_mps, t_max_s), rel=1e-12)
+    assert violations(sol.trajectory, scenario) == []
+    tr = sol.trajectory
+    assert np.all(np.diff(tr.t_s) > 0) and np.all(np.abs(tr.accel_mps2) <= grid.brake_max_mps2 + 1e-9)
+    if scenario is TWO_LIGHTS:  # here the optimum halts 1 m short of light 1, waits, and launches past it
+        assert 19.0 in tr.x_m[tr.v_mps == 0]
+        with pytest.raises(InfeasibleError):  # which the node grid alone cannot do in time
+            solve_problem(build_problem(scenario, params, replace(grid, stop_arcs=False), t_max_s, speed_nodes_mps=speeds))
+
+
 @pytest.mark.parametrize("case", [(15, 15, 400), (-15, 15, 200), (0, 0, 200)])
 def test_numba_and_numpy_recursions_agree(case):
     sc = paper_scenario(*case)
     params = model_params()
-    grid = GridSpec(stage_m=20.0, time_bin_s=0.5, dwell_s=1.0)
+    grid = GridSpec(stage_m=20.0, time_bin_s=0.5, dwell_s=1.0, stop_arcs=False)
     prob = build_problem(sc, params, grid, time_limit_s(regular_driver(sc), params, sc, grid))
     fast, slow = solve_problem(prob), solve_numpy(prob)
     assert fast.cost_usd == pytest.approx(slow.cost_usd, rel=1e-12)

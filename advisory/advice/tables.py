@@ -55,7 +55,7 @@ from numba import njit
 from advisory.evaluation.endstate import reacceleration_penalty
 from advisory.optimizer._kernels import is_red
 from advisory.optimizer.dp import coast_chain_mps
-from advisory.physics.model import I_AUX, battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.physics.model import I_AUX, pack, step_battery_power_w, step_cost_usd
 from advisory.physics.params import ModelParams
 from advisory.signals import FixedTimeSignal, Scenario
 
@@ -208,7 +208,7 @@ def _transitions(speed, stage_m, grade_frac, params: ModelParams, grid: TableGri
         v_next = speed[band_lo[i] : band_hi[i] + 1]
         ok = speed[i] + v_next > 0
         dt = np.where(ok, 2 * stage_m / np.maximum(speed[i] + v_next, 1e-12), np.inf)
-        battery = battery_power_for_wheel_w(step_wheel_power_w(speed[i], v_next, np.where(ok, dt, 1.0), grade_frac, p), p)
+        battery = step_battery_power_w(speed[i], v_next, np.where(ok, dt, 1.0), grade_frac, p)
         step_dt[i, : v_next.size] = dt
         step_usd[i, : v_next.size] = np.where(ok, step_cost_usd(battery, np.where(ok, dt, 1.0), p, rates, pref), 0.0)
     return band_lo.astype(np.int64), step_dt, step_usd

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from advisory.physics.model import J_PER_KWH, battery_power_for_wheel_w, pack, soh_loss_frac, step_wheel_power_w
+from advisory.physics.model import J_PER_KWH, pack, soh_loss_frac, step_battery_power_w
 from advisory.physics.params import ModelParams
 from advisory.evaluation.scoring import DriveScore, score_trace
 from advisory.trajectory import Trajectory
@@ -42,12 +42,12 @@ def reacceleration_penalty(
     v = v0[:, None] + (speed_limit_mps - v0[:, None]) * frac[None, :]  # (n, n_sub + 1)
     t_acc = (speed_limit_mps - v0) / accel_mps2
     dt = np.maximum(t_acc / n_sub, 1e-12)[:, None]
-    battery_w = battery_power_for_wheel_w(step_wheel_power_w(v[:, :-1], v[:, 1:], dt, 0.0, p), p)
+    battery_w = step_battery_power_w(v[:, :-1], v[:, 1:], dt, 0.0, p)
     energy_j = (battery_w * dt).sum(axis=1)
     soh = soh_loss_frac(battery_w, dt, p, rates, pref).sum(axis=1)
     d_acc = (speed_limit_mps**2 - v0**2) / (2.0 * accel_mps2)
     t_cruise = d_acc / speed_limit_mps
-    cruise_w = battery_power_for_wheel_w(step_wheel_power_w(speed_limit_mps, speed_limit_mps, 1.0, 0.0, p), p)
+    cruise_w = step_battery_power_w(speed_limit_mps, speed_limit_mps, 1.0, 0.0, p)
     energy_j = energy_j - cruise_w * t_cruise
     soh = soh - soh_loss_frac(cruise_w, t_cruise, p, rates, pref)
     energy_kwh = energy_j / J_PER_KWH

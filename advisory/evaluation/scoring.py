@@ -20,13 +20,12 @@ from advisory.physics.model import (
     I_CR1,
     I_CR2,
     I_DRAG,
-    I_ETA,
     I_MASS,
     I_REGEN_MAX,
-    I_REGEN_SHARE,
     I_RHO,
     J_PER_KWH,
     battery_power_for_wheel_w,
+    chain_effs,
     pack,
     soh_loss_frac,
     step_wheel_power_w,
@@ -49,13 +48,13 @@ def _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals, 
     and SOH loss [-]; pass empty arrays to skip them.
     """
     keep = out_battery_w.shape[0] > 0
-    eta = p[I_ETA]
     weight = p[I_MASS] * G_MPS2
     for k in range(t_s.shape[0] - 1):
         dt = t_s[k + 1] - t_s[k]
         grade = 0.5 * (grade_frac[k] + grade_frac[k + 1])
         wheel = step_wheel_power_w(speed_mps[k], speed_mps[k + 1], dt, grade, p)
-        battery = battery_power_for_wheel_w(wheel, p)
+        v = 0.5 * (speed_mps[k] + speed_mps[k + 1])
+        battery = battery_power_for_wheel_w(wheel, v, p)
         soh = soh_loss_frac(battery, dt, p, m_c_rates, m_prefactor)
         energy = battery * dt
         if energy >= 0.0:
@@ -67,18 +66,18 @@ def _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals, 
             out_battery_w[k] = battery
             out_soh_loss[k] = soh
         # audit terms
-        v = 0.5 * (speed_mps[k] + speed_mps[k + 1])
         dist = v * dt
         cos_theta = 1.0 / np.sqrt(1.0 + grade * grade)
         totals[T_DIST] += dist
         totals[T_POT] += weight * grade * cos_theta * dist
         totals[T_AERO] += 0.5 * p[I_RHO] * p[I_AREA] * p[I_DRAG] * v * v * dist
         totals[T_ROLL] += (p[I_CR1] + p[I_CR2] * v) * weight * cos_theta * dist
-        motor = motor_braking_power_w(wheel, eta, p[I_REGEN_SHARE], p[I_REGEN_MAX])
+        drive_eff, regen_eff, share = chain_effs(wheel, v, p)
+        motor = motor_braking_power_w(wheel, regen_eff, share, p[I_REGEN_MAX])
         if wheel > 0.0:
-            totals[T_DRIVE] += wheel * (1.0 / eta - 1.0) * dt
+            totals[T_DRIVE] += wheel * (1.0 / drive_eff - 1.0) * dt
         else:
-            totals[T_REGEN] += motor * (1.0 - eta) * dt
+            totals[T_REGEN] += motor * (1.0 - regen_eff) * dt
             totals[T_FRICTION] += (-wheel - motor) * dt
         totals[T_AUX] += p[I_AUX] * dt
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from advisory.physics.model import I_AUX, battery_power_for_wheel_w, step_cost_usd, step_wheel_power_w
+from advisory.physics.model import I_AUX, arc_cost_usd, step_cost_usd
 
 RED_TOL_S = 1e-9
 """A crossing this close after a red ends counts as green (25 nm at 88.5 km/h), never earlier."""
@@ -19,6 +19,26 @@ def is_red(t_s, red_start_s, red_s, cycle_s):
     """Red at ``t_s`` for a fixed-time light whose red phases are [red_start + k cycle, + red_s)."""
     phase = (t_s - red_start_s) % cycle_s
     return phase < red_s - RED_TOL_S
+
+
+@njit(cache=True)
+def red_left_s(t_s, red_start_s, red_s, cycle_s):
+    """Seconds until the red phase containing ``t_s`` ends (0 when ``t_s`` is green)."""
+    phase = (t_s - red_start_s) % cycle_s
+    return red_s - phase if phase < red_s - RED_TOL_S else 0.0
+
+
+@njit(cache=True, inline="always")
+def _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k, i, b, c, t, code):
+    """Keep label (cost c, exact time t, parent code) in cell (k, i, b) if it is cheaper."""
+    if c < cost_usd[k, i, b]:
+        cost_usd[k, i, b] = c
+        time_s[k, i, b] = t
+        parent[k, i, b] = code
+        if b < occ_lo[k, i]:
+            occ_lo[k, i] = b
+        if b > occ_hi[k, i]:
+            occ_hi[k, i] = b
 
 
 @njit(cache=True)
@@ -36,33 +56,66 @@ def forward_pass(
     bin_s,
     dwell_s,
     allow_dwell,
+    step_substeps,
     t_max_s,
     t_rem_min_s,
     i_start,
     p,
     m_c_rates,
     m_prefactor,
+    light_stage,
+    arc_k_lo,
+    stop_dt_s,
+    stop_usd,
+    launch_dt_s,
+    launch_usd,
+    launch_cross_s,
+    rest_dt_s,
+    rest_usd,
     cost_usd,
     time_s,
     parent,
+    s_cost_usd,
+    s_time_s,
+    s_parent,
+    lower_bound_usd,
+    upper_bound_usd,
 ):
     """
-    Forward DP over distance stages with labels carrying exact arrival times.
+    Forward DP over distance stages with labels carrying exact arrival times, plus exact stop arcs.
+
+    Each transition is priced in ``step_substeps`` equal time steps (``arc_cost_usd``).
 
     Shapes: ``speed_mps`` (n_v,); ``band_lo/band_hi`` (n_v,) next-speed index range allowed by the
     acceleration limits; ``grade_frac`` (K,); ``stop_*``/``is_stop``/``t_lo_s`` (K + 1,);
     ``t_rem_min_s`` (K + 1, n_v); outputs ``cost_usd``, ``time_s``, ``parent`` (K + 1, n_v, n_bins).
 
     Cell (k, i, b) holds the cheapest path found that reaches stage k at speed i at an exact time in
-    ``[t_lo[k] + b bin_s, t_lo[k] + (b + 1) bin_s)``, with that exact time. ``parent`` >= 0 encodes the
-    previous stage's cell ``i_prev * n_bins + b_prev``; ``-(b_prev + 2)`` a dwell at standstill in the
-    same stage; -1 the start. Red checks and the time limit use exact times, so no rounding of time can
-    let a path cross a stop line during red. Labels that cannot reach the end by ``t_max_s`` even at the
-    fastest (``t_rem_min_s``) are never stored, so they cannot displace feasible ones.
+    ``[t_lo[k] + b bin_s, t_lo[k] + (b + 1) bin_s)``, with that exact time. ``parent`` >= 0 is the flat index
+    of the previous cell (a stage transition, or a dwell at standstill in the same stage); -1 the start;
+    ``-(2 + l n_bins + b)`` a launch from bin b of the halt before light l; ``-(2 + n_l n_bins + f)`` a timed
+    launch from the standstill cell of flat index f (see below).
+
+    **Stop arcs** (light l at stage ``light_stage[l]``, standstill ``stop_gap`` short of its line): from every
+    label at a stage ``arc_k_lo[l] <= k < light_stage[l]``, brake at constant deceleration to a halt at the
+    standstill (``stop_dt_s``/``stop_usd`` (K_arc, n_v), row n: from n + 1 stages before the line); wait there
+    (``s_*`` tables (n_l, n_bins), waits in ``dwell_s`` steps); launch at constant acceleration to node j at
+    stage ``light_stage + 1 + m`` (``launch_*`` (M, n_v), ``launch_cross_s`` the time from rest to the line). The launch leaves at the
+    exact instant that crosses the line as the red ends (or at once when it is green), so stopping, waiting
+    and launching are exact whatever the grid. **Timed launches**: from a standstill at any stage before a
+    light (after the previous one), reached by a move (not by a wait there), the same exact launch across the
+    line to node j at stage k2
+    (``rest_dt_s``/``rest_usd`` (N, n_v): from rest over k2 - k stages), so a car that halts early crosses the
+    line with speed exactly as it turns green. Red checks and the time limit use exact times throughout.
+
+    **Pruning**: a label whose cost plus ``lower_bound_usd[k, i]`` (cheapest completion, no time or lights)
+    exceeds ``upper_bound_usd`` is dropped; ``inf`` turns pruning off.
     """
     n_stage = cost_usd.shape[0] - 1
     n_v = speed_mps.shape[0]
     n_bins = cost_usd.shape[2]
+    n_light = light_stage.shape[0]
+    n_launch = launch_dt_s.shape[0]
     occ_lo = np.full((n_stage + 1, n_v), n_bins, dtype=np.int64)
     occ_hi = np.full((n_stage + 1, n_v), -1, dtype=np.int64)
     cost_usd[0, i_start, 0] = 0.0
@@ -70,13 +123,17 @@ def forward_pass(
     parent[0, i_start, 0] = -1
     occ_lo[0, i_start] = 0
     occ_hi[0, i_start] = 0
-    # standstill: only accessories draw power
+    # standstill: only accessories draw power (linear in time)
     idle_cost = step_cost_usd(p[I_AUX], dwell_s, p, m_c_rates, m_prefactor)
+    idle_per_s = step_cost_usd(p[I_AUX], 1.0, p, m_c_rates, m_prefactor)
     max_band = 0
     for i in range(n_v):
         max_band = max(max_band, band_hi[i] - band_lo[i] + 1)
     step_dt = np.empty((n_v, max_band))
     step_usd = np.empty((n_v, max_band))
+    light_of = np.full(n_stage + 1, -1, dtype=np.int64)
+    for l in range(n_light):
+        light_of[light_stage[l]] = l
     for k in range(n_stage):
         if k == 0 or grade_frac[k] != grade_frac[k - 1]:  # transition table: once per distinct grade
             for i in range(n_v):
@@ -86,9 +143,49 @@ def forward_pass(
                         step_dt[i, j] = np.inf
                         continue
                     dt = 2.0 * stage_m / (v + v2)
-                    battery_w = battery_power_for_wheel_w(step_wheel_power_w(v, v2, dt, grade_frac[k], p), p)
                     step_dt[i, j] = dt
-                    step_usd[i, j] = step_cost_usd(battery_w, dt, p, m_c_rates, m_prefactor)
+                    step_usd[i, j] = arc_cost_usd(v, v2, dt, grade_frac[k], step_substeps, p, m_c_rates, m_prefactor)
+        # a light at this stage: its standstill is complete; wait there, then launch past the line
+        l = light_of[k]
+        if l >= 0:
+            red_start, red_len, cycle = stop_red_start_s[k], stop_red_s[k], stop_cycle_s[k]
+            for b in range(n_bins):  # waits, bins ascending so that they chain
+                c0 = s_cost_usd[l, b]
+                if c0 == np.inf:
+                    continue
+                t2 = s_time_s[l, b] + dwell_s
+                b2 = int((t2 - t_lo_s[k]) / bin_s)
+                if b2 < n_bins and t2 + t_rem_min_s[k, 0] <= t_max_s + LATE_TOL_S and c0 + idle_cost < s_cost_usd[l, b2]:
+                    s_cost_usd[l, b2] = c0 + idle_cost
+                    s_time_s[l, b2] = t2
+                    s_parent[l, b2] = -(2 + l * n_bins + b)
+            for b in range(n_bins):
+                c0 = s_cost_usd[l, b]
+                if c0 == np.inf:
+                    continue
+                t0 = s_time_s[l, b]
+                code = -(2 + l * n_bins + b)
+                for m in range(n_launch):
+                    k2 = k + 1 + m
+                    if k2 > n_stage:
+                        break
+                    for j in range(n_v):
+                        dt = launch_dt_s[m, j]
+                        if dt == np.inf:
+                            continue
+                        cross = launch_cross_s[m, j]
+                        wait = red_left_s(t0 + cross, red_start, red_len, cycle)
+                        t2 = t0 + wait + dt
+                        if t2 > t_max_s + LATE_TOL_S - t_rem_min_s[k2, j]:
+                            continue
+                        if is_stop[k2] and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
+                            continue
+                        c2 = c0 + wait * idle_per_s + launch_usd[m, j]
+                        if c2 + lower_bound_usd[k2, j] > upper_bound_usd:
+                            continue
+                        b2 = int((t2 - t_lo_s[k2]) / bin_s)
+                        if b2 < n_bins:
+                            _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k2, j, b2, c2, t2, code)
         # dwell at standstill (never on a stop line), bins in ascending order so waits chain
         if allow_dwell and speed_mps[0] == 0.0 and not is_stop[k] and occ_hi[k, 0] >= 0:
             b = occ_lo[k, 0]
@@ -98,13 +195,70 @@ def forward_pass(
                     t2 = time_s[k, 0, b] + dwell_s
                     if t2 + t_rem_min_s[k, 0] <= t_max_s + LATE_TOL_S:
                         b2 = int((t2 - t_lo_s[k]) / bin_s)
-                        if b2 < n_bins and c0 + idle_cost < cost_usd[k, 0, b2]:
-                            cost_usd[k, 0, b2] = c0 + idle_cost
-                            time_s[k, 0, b2] = t2
-                            parent[k, 0, b2] = -(b + 2)
-                            if b2 > occ_hi[k, 0]:
-                                occ_hi[k, 0] = b2
+                        if b2 < n_bins:
+                            _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k, 0, b2, c0 + idle_cost, t2, (k * n_v) * n_bins + b)
                 b += 1
+        # timed launches from a standstill at this stage across the next light: leave at the exact instant
+        # that crosses the line as its red ends, accelerate at a constant rate to node j at stage k2
+        if not is_stop[k] and occ_hi[k, 0] >= 0:
+            for l in range(n_light):
+                kl = light_stage[l]
+                if not (arc_k_lo[l] <= k < kl):
+                    continue
+                k_end = n_stage if l + 1 == n_light else light_stage[l + 1]
+                k_end = min(k_end, k + rest_dt_s.shape[0])
+                ra, rl, cy = stop_red_start_s[kl], stop_red_s[kl], stop_cycle_s[kl]
+                x_cross = (kl - k) * stage_m
+                for b in range(occ_lo[k, 0], occ_hi[k, 0] + 1):
+                    c0 = cost_usd[k, 0, b]
+                    if c0 == np.inf or parent[k, 0, b] // (n_v * n_bins) == k:
+                        continue  # empty, or reached by a wait here: the launch times its own wait
+                    t0 = time_s[k, 0, b]
+                    code = -(2 + n_light * n_bins + (k * n_v) * n_bins + b)
+                    for k2 in range(kl + 1, k_end + 1):
+                        dist = (k2 - k) * stage_m
+                        for j in range(1, n_v):
+                            dt = rest_dt_s[k2 - k - 1, j]
+                            if dt == np.inf:
+                                break  # speeds ascend: the rest need more than the acceleration limit
+                            cross = np.sqrt(2.0 * x_cross * dist) / speed_mps[j]
+                            wait = red_left_s(t0 + cross, ra, rl, cy)
+                            t2 = t0 + wait + dt
+                            if t2 > t_max_s + LATE_TOL_S - t_rem_min_s[k2, j]:
+                                continue
+                            if is_stop[k2] and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
+                                continue
+                            c2 = c0 + wait * idle_per_s + rest_usd[k2 - k - 1, j]
+                            b2 = int((t2 - t_lo_s[k2]) / bin_s)
+                            if b2 < n_bins:
+                                _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k2, j, b2, c2, t2, code)
+        # stop arcs from this stage to the standstill before each light ahead within reach
+        for l in range(n_light):
+            kl = light_stage[l]
+            if not (arc_k_lo[l] <= k < kl):
+                continue
+            for i in range(n_v):
+                if occ_hi[k, i] < 0:
+                    continue
+                dt = stop_dt_s[kl - k - 1, i]
+                if dt == np.inf:
+                    continue
+                step = stop_usd[kl - k - 1, i]
+                for b in range(occ_lo[k, i], occ_hi[k, i] + 1):
+                    c0 = cost_usd[k, i, b]
+                    if c0 == np.inf:
+                        continue
+                    t2 = time_s[k, i, b] + dt
+                    if t2 + t_rem_min_s[kl, 0] > t_max_s + LATE_TOL_S:
+                        continue
+                    c2 = c0 + step
+                    if c2 + lower_bound_usd[kl, 0] > upper_bound_usd:
+                        continue
+                    b2 = int((t2 - t_lo_s[kl]) / bin_s)
+                    if b2 < n_bins and c2 < s_cost_usd[l, b2]:
+                        s_cost_usd[l, b2] = c2
+                        s_time_s[l, b2] = t2
+                        s_parent[l, b2] = (k * n_v + i) * n_bins + b
         k2 = k + 1
         stop_next = is_stop[k2]
         red_start, red_len, cycle = stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]
@@ -114,6 +268,7 @@ def forward_pass(
                 continue
             b_lo, b_hi = occ_lo[k, i], occ_hi[k, i] + 1
             cost_row, time_row = cost_usd[k, i], time_s[k, i]
+            base = (k * n_v + i) * n_bins
             for j in range(band_hi[i] - band_lo[i] + 1):
                 dt = step_dt[i, j]
                 if dt == np.inf:
@@ -121,11 +276,12 @@ def forward_pass(
                 i2 = band_lo[i] + j
                 step = step_usd[i, j]
                 slack = t_max_s + LATE_TOL_S - t_rem_min_s[k2, i2]
+                bound = upper_bound_usd - lower_bound_usd[k2, i2] - step
                 cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]
                 lo2, hi2 = occ_lo[k2, i2], occ_hi[k2, i2]
                 for b in range(b_lo, b_hi):
                     c0 = cost_row[b]
-                    if c0 == np.inf:
+                    if c0 > bound:  # also skips empty cells (inf)
                         continue
                     t2 = time_row[b] + dt
                     if t2 > slack:
@@ -139,7 +295,7 @@ def forward_pass(
                     if c2 < cost_next[b2]:
                         cost_next[b2] = c2
                         time_next[b2] = t2
-                        parent_next[b2] = i * n_bins + b
+                        parent_next[b2] = base + b
                         if b2 < lo2:
                             lo2 = b2
                         if b2 > hi2:

@@ -8,8 +8,13 @@ Formulation
   grid it can only alternate holding speed and braking, which costs several per cent and converges slowly
   (the convergence table in bench/bench_dp.py shows it); the chain makes coasting exact at any resolution.
 * **Transitions** between nodes at constant acceleration, ``a = (v'² - v²) / (2 ds)`` in
-  ``[-brake_max, accel_max]``, ``dt = 2 ds / (v + v')``; cost = paper Eq. 4 on the mid-step battery power
-  (``advisory.physics.model``). At standstill (not on a stop line) the car may wait in steps of ``dwell_s``.
+  ``[-brake_max, accel_max]``, ``dt = 2 ds / (v + v')``; cost = paper Eq. 4 on the battery power, priced in
+  ``step_substeps`` mid-step pieces (``advisory.physics.model.arc_cost_usd``). At standstill (not on a stop
+  line) the car may wait in steps of ``dwell_s``.
+* **Stops, exactly**: from any label before a light, an arc brakes at a constant rate to a halt ``stop_gap_m``
+  short of its line; the car waits there and launches at a constant rate to a node past the line, leaving at
+  the exact instant that crosses the line as the red ends. A car standing at a stage launches the same way
+  (timed launch). Arc costs do not depend on the grid, so where and when a car stops is not quantized.
 * **Time** is carried **exactly** on each label; labels are only *binned* by time (``time_bin_s``) to
   decide which of two paths to keep. A stop line may be crossed only at an exact time outside red, and
   the trip-time limit is checked on exact times: no rounding of time can let a path cheat a red light,
@@ -30,7 +35,7 @@ from functools import lru_cache
 import numpy as np
 
 from advisory.evaluation.endstate import reacceleration_penalty
-from advisory.physics.model import I_AUX, battery_power_for_wheel_w, pack, step_cost_usd, step_wheel_power_w
+from advisory.physics.model import I_AUX, arc_cost_usd, pack, step_cost_usd, step_wheel_power_w
 from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, forward_pass
 from advisory.physics.params import ModelParams, VehicleParams
 from advisory.drivers.regular import time_to_cover_s
@@ -45,7 +50,12 @@ class GridSpec:
     ``stage_m`` sets both the distance step and the speed nodes (a coasting chain, see
     :func:`coast_chain_mps`); ``coast_split`` > 1 adds nodes between chain nodes (finer accelerations,
     coasting stays exact every ``coast_split`` nodes); ``time_bin_s`` is the width of the time bins that
-    decide which of two labels to keep (times themselves are exact).
+    decide which of two labels to keep (times themselves are exact). Each transition is priced in
+    ``step_substeps`` equal time steps (the scoring's aerodynamic and wear terms, not only at mid-stage).
+
+    ``stop_arcs``: stops at a light are exact arcs (brake at a constant rate to a halt ``stop_gap_m`` short
+    of the line, wait, launch at a constant rate to a node up to ``launch_max_m`` past the halt), their costs
+    integrated in ``arc_steps`` equal time steps, so they do not depend on the grid.
     """
 
     stage_m: float = 10.0
@@ -56,13 +66,18 @@ class GridSpec:
     accel_max_mps2: float = 2.0
     brake_max_mps2: float = 4.0
     time_buffer_frac: float = 0.0
+    stop_arcs: bool = True
+    stop_gap_m: float = 1.0
+    launch_max_m: float = 300.0
+    arc_steps: int = 32
+    step_substeps: int = 4
 
     def __post_init__(self) -> None:
-        for name in ("stage_m", "time_bin_s", "dwell_s", "accel_max_mps2", "brake_max_mps2"):
+        for name in ("stage_m", "time_bin_s", "dwell_s", "accel_max_mps2", "brake_max_mps2", "stop_gap_m", "launch_max_m", "arc_steps"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0")
-        if self.coast_split < 1:
-            raise ValueError("coast_split must be >= 1")
+        if self.coast_split < 1 or self.step_substeps < 1:
+            raise ValueError("coast_split and step_substeps must be >= 1")
         if self.time_buffer_frac <= -1:
             raise ValueError("time_buffer_frac must be > -1")
 
@@ -137,10 +152,25 @@ class DPProblem:
     n_bins: int
     terminal_cost_usd: np.ndarray
     terminal_time_s: np.ndarray
+    light_stage: np.ndarray
+    arc_k_lo: np.ndarray
+    stop_dt_s: np.ndarray
+    stop_usd: np.ndarray
+    launch_dt_s: np.ndarray
+    launch_usd: np.ndarray
+    launch_cross_s: np.ndarray
+    rest_dt_s: np.ndarray
+    rest_usd: np.ndarray
+    lower_bound_usd: np.ndarray
+    upper_bound_usd: float = np.inf
 
     @property
     def n_stages(self) -> int:
         return self.grade_frac.shape[0]
+
+    @property
+    def n_lights(self) -> int:
+        return self.light_stage.shape[0]
 
 
 def build_problem(
@@ -179,6 +209,7 @@ def build_problem(
     if n_bins < 2:
         raise InfeasibleError(f"time limit {t_max_s:.3f} s is below the fastest possible {scenario.zone_length_m / v_lim:.3f} s")
     pen = reacceleration_penalty(speed, params, v_lim, grid.accel_max_mps2)
+    arcs = _stop_arcs(scenario, params, grid, speed, n_stage) if grid.stop_arcs else _no_arcs(speed.size)
     return DPProblem(
         scenario=scenario,
         grid=grid,
@@ -198,7 +229,60 @@ def build_problem(
         n_bins=n_bins,
         terminal_cost_usd=np.asarray(pen.cost_usd),
         terminal_time_s=np.asarray(pen.time_s),
+        **arcs,
+        lower_bound_usd=np.zeros((n_stage + 1, speed.size)),
     )
+
+
+def arc_table(v0_mps, v1_mps, distance_m, params: ModelParams, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Duration [s] and cost [$] of constant-acceleration arcs from ``v0`` to ``v1`` over ``distance_m`` (broadcast).
+
+    Priced by ``arc_cost_usd`` in ``n_steps`` equal time steps, so an arc's cost does not depend on the DP grid.
+    Arcs with ``v0 + v1 = 0`` get an infinite duration and cost.
+    """
+    v0, v1, d = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (v0_mps, v1_mps, distance_m)))
+    moving = v0 + v1 > 0
+    total = np.where(moving, 2.0 * d / np.where(moving, v0 + v1, 1.0), np.inf)
+    p, rates, pref = pack(params)
+    cost = arc_cost_usd(v0, v1, np.where(moving, total, 1.0), 0.0, n_steps, p, rates, pref)
+    return total, np.where(moving, cost, np.inf)
+
+
+def _no_arcs(n_v: int) -> dict:
+    empty = np.zeros((0, n_v))
+    return dict(light_stage=np.zeros(0, dtype=np.int64), arc_k_lo=np.zeros(0, dtype=np.int64), stop_dt_s=empty,
+                stop_usd=empty, launch_dt_s=empty, launch_usd=empty, launch_cross_s=empty, rest_dt_s=empty, rest_usd=empty)
+
+
+@lru_cache(maxsize=32)
+def _arc_tables(params: ModelParams, grid: GridSpec, speed: tuple[float, ...], n_stop: int) -> tuple[np.ndarray, ...]:
+    """Stop arcs by distance (row n: from n + 1 stages before the line to the halt), launches from the halt
+    (row m: to m + 1 stages past the line), launches from rest at a stage (row n: over n + 1 stages)."""
+    ds, gap, v = grid.stage_m, grid.stop_gap_m, np.asarray(speed)[None, :]
+    n_launch = max(1, int(np.floor((grid.launch_max_m - gap) / ds)))
+    dist = np.arange(1, n_stop + 1)[:, None] * ds - gap
+    ok = (v > 0) & (dist > 0) & (v**2 <= 2 * grid.brake_max_mps2 * dist + 1e-9)
+    stop_dt, stop_usd = arc_table(v, 0.0, np.maximum(dist, 1e-9), params, grid.arc_steps)
+    out = [np.where(ok, stop_dt, np.inf), np.where(ok, stop_usd, np.inf)]
+    for dist in (np.arange(1, n_launch + 1)[:, None] * ds + gap, np.arange(1, n_launch + 1)[:, None] * ds):
+        ok = (v > 0) & (v**2 <= 2 * grid.accel_max_mps2 * dist + 1e-9)
+        dt, usd = arc_table(0.0, v, dist, params, grid.arc_steps)
+        out += [np.where(ok, dt, np.inf), np.where(ok, usd, np.inf)]
+    accel = np.where(out[2] < np.inf, v**2, 1.0) / (2 * (np.arange(1, n_launch + 1)[:, None] * ds + gap))
+    cross = np.where(out[2] < np.inf, np.sqrt(2 * gap / accel), np.inf)
+    return (*out, cross)
+
+
+def _stop_arcs(scenario: Scenario, params: ModelParams, grid: GridSpec, speed: np.ndarray, n_stage: int) -> dict:
+    """Tables of the exact stop arcs (see ``_kernels.forward_pass``): halts before each light, launches after it."""
+    stages = [int(round(light.position_m / grid.stage_m)) for light in scenario.signals]
+    k_lo = [0] + stages[:-1]  # arcs start at or after the previous line: they never cross a light
+    n_stop = max(kl - lo for kl, lo in zip(stages, k_lo, strict=True))
+    stop_dt, stop_usd, launch_dt, launch_usd, rest_dt, rest_usd, cross = _arc_tables(params, grid, tuple(speed), n_stop)
+    return dict(light_stage=np.array(stages, dtype=np.int64), arc_k_lo=np.array(k_lo, dtype=np.int64), stop_dt_s=stop_dt,
+                stop_usd=stop_usd, launch_dt_s=launch_dt, launch_usd=launch_usd, launch_cross_s=cross,
+                rest_dt_s=rest_dt, rest_usd=rest_usd)
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,7 +298,9 @@ class DPSolution:
 
 def _empty_tables(prob: DPProblem):
     shape = (prob.n_stages + 1, prob.speed_mps.size, prob.n_bins)
-    return np.full(shape, np.inf), np.full(shape, np.nan), np.full(shape, -2, dtype=np.int64)
+    s_shape = (prob.n_lights, prob.n_bins)
+    return (np.full(shape, np.inf), np.full(shape, np.nan), np.full(shape, -1, dtype=np.int64),
+            np.full(s_shape, np.inf), np.full(s_shape, np.nan), np.full(s_shape, -1, dtype=np.int64))
 
 
 def _kernel_args(prob: DPProblem):
@@ -222,12 +308,13 @@ def _kernel_args(prob: DPProblem):
     g = prob.grid
     return (
         prob.speed_mps, prob.band_lo, prob.band_hi, g.stage_m, prob.grade_frac, prob.stop_red_start_s,
-        prob.stop_red_s, prob.stop_cycle_s, prob.is_stop, prob.t_lo_s, g.time_bin_s, g.dwell_s, g.allow_dwell,
-        prob.t_max_s, prob.t_rem_min_s, prob.i_start, p, rates, pref,
+        prob.stop_red_s, prob.stop_cycle_s, prob.is_stop, prob.t_lo_s, g.time_bin_s, g.dwell_s, g.allow_dwell, g.step_substeps,
+        prob.t_max_s, prob.t_rem_min_s, prob.i_start, p, rates, pref, prob.light_stage, prob.arc_k_lo,
+        prob.stop_dt_s, prob.stop_usd, prob.launch_dt_s, prob.launch_usd, prob.launch_cross_s, prob.rest_dt_s, prob.rest_usd,
     )
 
 
-def _read_solution(prob: DPProblem, cost, time, parent) -> DPSolution:
+def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=None) -> DPSolution:
     total = cost[-1] + prob.terminal_cost_usd[:, None]
     late = time[-1] + prob.terminal_time_s[:, None] > prob.t_max_s + LATE_TOL_S
     total = np.where(late | ~np.isfinite(cost[-1]), np.inf, total)
@@ -238,28 +325,40 @@ def _read_solution(prob: DPProblem, cost, time, parent) -> DPSolution:
             f"{prob.scenario.name}: no path reaches the end state by {prob.t_max_s:.3f} s on this grid "
             f"(stage {prob.grid.stage_m} m, {prob.speed_mps.size} speeds, bin {prob.grid.time_bin_s} s)"
         )
-    i, b = divmod(flat, prob.n_bins)
-    k = prob.n_stages
+    nb, nv, ds = prob.n_bins, prob.speed_mps.size, prob.grid.stage_m
+    k, (i, b) = prob.n_stages, divmod(flat, nb)
     knots = []
     while True:
-        knots.append((time[k, i, b], k * prob.grid.stage_m, prob.speed_mps[i]))
-        code = parent[k, i, b]
+        knots.append((time[k, i, b], k * ds, prob.speed_mps[i]))
+        code = int(parent[k, i, b])
         if code == -1:
             break
-        if code <= -2:  # dwell: same stage, standstill, earlier bin
-            b = -code - 2
-        else:
-            i, b = divmod(int(code), prob.n_bins)
-            k -= 1
-    t, x, v = (np.array(c, dtype=float) for c in zip(*reversed(knots), strict=True))
+        if code <= -2 - prob.n_lights * nb:  # a timed launch from a standstill cell: the launch, then the wait
+            code = -code - 2 - prob.n_lights * nb
+            knots.append((time[k, i, b] - prob.rest_dt_s[k - code // (nv * nb) - 1, i], (code // (nv * nb)) * ds, 0.0))
+        elif code <= -2:  # launched from the halt before light l: the halt, its waits, then the stop arc
+            l, sb = divmod(-code - 2, nb)
+            halt_m = prob.scenario.signals[l].position_m - prob.grid.stop_gap_m
+            knots.append((time[k, i, b] - prob.launch_dt_s[k - prob.light_stage[l] - 1, i], halt_m, 0.0))
+            while True:
+                knots.append((s_time[l, sb], halt_m, 0.0))
+                code = int(s_parent[l, sb])
+                if code >= 0:
+                    break
+                sb = -code - 2 - l * nb
+        k, rest = divmod(code, nv * nb)
+        i, b = divmod(rest, nb)
+    knots = knots[::-1]
+    keep = [0] + [n for n in range(1, len(knots)) if knots[n][0] > knots[n - 1][0]]  # a launch without a wait
+    t, x, v = (np.array([knots[n][c] for n in keep], dtype=float) for c in range(3))
     return DPSolution(prob, Trajectory(t, x, v), best, float(t[-1]), int(np.isfinite(cost).sum()))
 
 
 def solve_problem(prob: DPProblem) -> DPSolution:
     """Run the numba forward pass on a built problem and read off the optimal trajectory."""
-    cost, time, parent = _empty_tables(prob)
-    forward_pass(*_kernel_args(prob), cost, time, parent)
-    return _read_solution(prob, cost, time, parent)
+    cost, time, parent, s_cost, s_time, s_parent = _empty_tables(prob)
+    forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd, prob.upper_bound_usd)
+    return _read_solution(prob, cost, time, parent, s_time, s_parent)
 
 
 def time_limit_s(regular: Trajectory, params: ModelParams, scenario: Scenario, grid: GridSpec) -> float:
@@ -284,8 +383,10 @@ def solve(scenario: Scenario, params: ModelParams, grid: GridSpec | None = None,
 
 
 def solve_numpy(prob: DPProblem) -> DPSolution:
-    """The same forward recursion as ``forward_pass`` in plain NumPy/Python (reference and benchmark)."""
-    cost, time, parent = _empty_tables(prob)
+    """The same forward recursion as ``forward_pass`` in plain NumPy/Python (reference and benchmark), without stop arcs."""
+    if prob.n_lights and prob.grid.stop_arcs:
+        raise ValueError("solve_numpy has no stop arcs: build the problem with GridSpec(stop_arcs=False)")
+    cost, time, parent, *_ = _empty_tables(prob)
     p, rates, pref = pack(prob.params)
     g = prob.grid
     nb = prob.n_bins
@@ -299,7 +400,7 @@ def solve_numpy(prob: DPProblem) -> DPSolution:
                     t2 = time[k, 0, b] + g.dwell_s
                     b2 = int((t2 - prob.t_lo_s[k]) / g.time_bin_s)
                     if t2 + prob.t_rem_min_s[k, 0] <= prob.t_max_s + LATE_TOL_S and b2 < nb and cost[k, 0, b] + idle < cost[k, 0, b2]:
-                        cost[k, 0, b2], time[k, 0, b2], parent[k, 0, b2] = cost[k, 0, b] + idle, t2, -(b + 2)
+                        cost[k, 0, b2], time[k, 0, b2], parent[k, 0, b2] = cost[k, 0, b] + idle, t2, (k * v.size) * nb + b
         k2 = k + 1
         for i in range(v.size):
             src = np.flatnonzero(np.isfinite(cost[k, i]))
@@ -308,8 +409,7 @@ def solve_numpy(prob: DPProblem) -> DPSolution:
             i2 = np.arange(prob.band_lo[i], prob.band_hi[i] + 1)
             i2 = i2[v[i] + v[i2] > 0]
             dt = 2.0 * g.stage_m / (v[i] + v[i2])
-            battery = battery_power_for_wheel_w(step_wheel_power_w(v[i], v[i2], dt, prob.grade_frac[k], p), p)
-            step = step_cost_usd(battery, dt, p, rates, pref)
+            step = arc_cost_usd(v[i], v[i2], dt, prob.grade_frac[k], g.step_substeps, p, rates, pref)
             for j, target in enumerate(i2):
                 t2 = time[k, i, src] + dt[j]
                 ok = t2 <= prob.t_max_s + LATE_TOL_S - prob.t_rem_min_s[k2, target]
@@ -321,5 +421,5 @@ def solve_numpy(prob: DPProblem) -> DPSolution:
                 c2 = cost[k, i, src] + step[j]
                 for s_b, tb, cb, tt in zip(src[ok], b2[ok], c2[ok], t2[ok], strict=True):  # first minimum wins
                     if cb < cost[k2, target, tb]:
-                        cost[k2, target, tb], time[k2, target, tb], parent[k2, target, tb] = cb, tt, i * nb + s_b
+                        cost[k2, target, tb], time[k2, target, tb], parent[k2, target, tb] = cb, tt, (k * v.size + i) * nb + s_b
     return _read_solution(prob, cost, time, parent)

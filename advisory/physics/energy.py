@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba.extending import register_jitable
 
-from advisory.physics.params import G_MPS2
+from advisory.physics.params import G_MPS2, MPH_TO_MPS
 
 
 @register_jitable
@@ -126,7 +126,82 @@ def wheel_power_w(
 
 
 @register_jitable
-def motor_braking_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, regen_power_max_w):
+def em_eff_frac(power_frac, map_power_frac, map_eff_frac):
+    r"""
+    Efficiency of the electric machine (motor + inverter) at a fraction of its peak power.
+
+    Parameters
+    ----------
+    power_frac : numeric
+        Machine power over its peak, either direction (shaft out when driving, shaft in when braking). [-]
+    map_power_frac, map_eff_frac : 1-D arrays
+        The efficiency curve: increasing power fractions and the efficiency at each. [-], [-]
+
+    Returns
+    -------
+    numeric
+        Efficiency, linear between the curve's points and held at its ends. [-]
+
+    Notes
+    -----
+    FASTSim's convention (Brooker et al. 2015): one curve against power fraction, used for both directions.
+    A curve against power is a torque-speed map collapsed along the road load: light load is
+    where a permanent-magnet machine's fixed (iron, inverter switching) losses weigh most.
+
+    Examples
+    --------
+    FASTSim's 2022 Model 3 curve at 5 % of 239 kW (12 kW): halfway between 0.88 (4 %) and 0.90 (6 %).
+
+    >>> import numpy as np
+    >>> x = np.array([0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.2, 0.4, 0.6, 0.8, 1.0])
+    >>> y = np.array([0.84, 0.86, 0.88, 0.90, 0.91, 0.92, 0.94, 0.95, 0.95, 0.94, 0.93])
+    >>> round(float(em_eff_frac(0.05, x, y)), 4)
+    0.89
+    """
+    return np.interp(np.abs(power_frac), map_power_frac, map_eff_frac)
+
+
+@register_jitable
+def regen_share_frac(speed_mps, share_max_frac, fade_a, fade_b_per_mph):
+    r"""
+    Share of the braking demand the motor takes at a speed: full above walking pace, fading to zero at rest.
+
+    Parameters
+    ----------
+    speed_mps : numeric
+        Speed over ground. [m/s]
+    share_max_frac : float
+        Share at speed. [-]
+    fade_a, fade_b_per_mph : float
+        Fade constants (FASTSim 2: 500 and 0.99 1/mph); ``fade_a = 0`` turns the fade off. [-], [1/mph]
+
+    Returns
+    -------
+    numeric
+        Share of the wheels' braking power routed to the motor (before its power limit). [-]
+
+    Notes
+    -----
+    .. math:: s(v) = \frac{s_{max}}{1 + a\, e^{-b (v_{mph} + 1)}}
+
+    FASTSim 2's ``regen_contrl_lim_kw_perc`` (``simdrive.py``, constants ``regen_a``, ``regen_b`` in
+    ``parameters.py``): motors cannot brake to a standstill, so the friction brakes take over below
+    ~5 mph (2.2 m/s).
+
+    Examples
+    --------
+    >>> round(float(regen_share_frac(0.0, 0.98, 500.0, 0.99)), 4)
+    0.0052
+    >>> round(float(regen_share_frac(5 * 0.44704, 0.98, 500.0, 0.99)), 3)
+    0.423
+    >>> float(regen_share_frac(3.0, 1.0, 0.0, 0.0))
+    1.0
+    """
+    return share_max_frac / (1.0 + fade_a * np.exp(-fade_b_per_mph * (speed_mps / MPH_TO_MPS + 1.0)))
+
+
+@register_jitable
+def motor_braking_power_w(wheel_power_w, regen_eff_frac, regen_share_frac, regen_power_max_w):
     r"""
     Part of the braking power at the wheels that the motor absorbs (the rest goes to the friction brakes).
 
@@ -134,12 +209,12 @@ def motor_braking_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, 
     ----------
     wheel_power_w : numeric
         Wheel power; only its negative part (braking) matters. [W]
-    drivetrain_eff_frac : float
-        eta_trans * eta_motor * eta_invert, applied on the way back to the battery too. [-]
-    regen_share_frac : float
+    regen_eff_frac : numeric
+        Efficiency of the chain from the wheels back to the battery (gear times machine). [-]
+    regen_share_frac : numeric
         Share of the braking demand routed to the motor while under the power limit. [-]
     regen_power_max_w : float
-        Largest charging power the drive delivers to the battery. [W]
+        Largest charging power the drive delivers to the battery (``inf``: no limit). [W]
 
     Returns
     -------
@@ -148,7 +223,7 @@ def motor_braking_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, 
 
     Notes
     -----
-    .. math:: B_m = \min\left(s\,\max(-P_{wheel}, 0),\ P_{regen,max}/\eta\right)
+    .. math:: B_m = \min\left(s\,\max(-P_{wheel}, 0),\ P_{regen,max}/\eta_r\right)
 
     Examples
     --------
@@ -159,11 +234,11 @@ def motor_braking_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, 
     50000.0
     """
     braking_w = np.maximum(-wheel_power_w, 0.0)
-    return np.minimum(regen_share_frac * braking_w, regen_power_max_w / drivetrain_eff_frac)
+    return np.minimum(regen_share_frac * braking_w, regen_power_max_w / regen_eff_frac)
 
 
 @register_jitable
-def battery_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, regen_power_max_w, aux_power_w):
+def battery_power_w(wheel_power_w, drive_eff_frac, regen_eff_frac, regen_share_frac, regen_power_max_w, aux_power_w):
     r"""
     Battery terminal power for a wheel power: paper Eq. 1 when driving, physical regen when braking.
 
@@ -171,9 +246,10 @@ def battery_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, regen_
     ----------
     wheel_power_w : numeric
         Mechanical power at the wheels. [W]
-    drivetrain_eff_frac : float
-        eta_trans * eta_motor * eta_invert. [-]
-    regen_share_frac, regen_power_max_w : float
+    drive_eff_frac, regen_eff_frac : numeric
+        Chain efficiency battery -> wheels when driving, wheels -> battery when braking; the paper's
+        eta_trans * eta_motor * eta_invert for both. [-]
+    regen_share_frac, regen_power_max_w : numeric
         As in :func:`motor_braking_power_w`. [-], [W]
     aux_power_w : float
         Constant accessory load (0 in the paper). [W]
@@ -185,7 +261,7 @@ def battery_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, regen_
 
     Notes
     -----
-    .. math:: P_{batt} = \frac{\max(P_{wheel},0)}{\eta} - \eta\, B_m + P_{aux}
+    .. math:: P_{batt} = \frac{\max(P_{wheel},0)}{\eta_d} - \eta_r\, B_m + P_{aux}
 
     Paper Eq. 1 divides by eta for every sign of P. Applied to braking that would return *more*
     energy than the wheels give up; here the loss chain multiplies on the way back, so the battery
@@ -195,10 +271,11 @@ def battery_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, regen_
     --------
     Cruise of the paper vehicle: 7643.28 W / (0.8536 * 0.90 * 0.95) = 10473 W.
 
-    >>> round(float(battery_power_w(7643.28, 0.8536 * 0.90 * 0.95, 1.0, 60e3, 0.0)))
+    >>> eta = 0.8536 * 0.90 * 0.95
+    >>> round(float(battery_power_w(7643.28, eta, eta, 1.0, float("inf"), 0.0)))
     10473
-    >>> round(float(battery_power_w(-10e3, 0.73, 1.0, 60e3, 0.0)))
+    >>> round(float(battery_power_w(-10e3, 0.73, 0.73, 1.0, 60e3, 0.0)))
     -7300
     """
-    motor_w = motor_braking_power_w(wheel_power_w, drivetrain_eff_frac, regen_share_frac, regen_power_max_w)
-    return np.maximum(wheel_power_w, 0.0) / drivetrain_eff_frac - drivetrain_eff_frac * motor_w + aux_power_w
+    motor_w = motor_braking_power_w(wheel_power_w, regen_eff_frac, regen_share_frac, regen_power_max_w)
+    return np.maximum(wheel_power_w, 0.0) / drive_eff_frac - regen_eff_frac * motor_w + aux_power_w

@@ -7,6 +7,7 @@ objects as arguments; nothing here reads the environment.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 G_MPS2 = 9.80665
@@ -18,6 +19,11 @@ GAS_CONSTANT_J_PER_MOL_K = 8.3144
 MPH_TO_MPS = 0.44704
 SPEED_LIMIT_MPS = 55.0 * MPH_TO_MPS
 """The paper's speed limit, 55 mph = 88.5 km/h [m/s]."""
+
+LB_TO_KG = 0.45359237
+
+EM_MAP_MAX_POINTS = 16
+"""Most points of an electric-machine efficiency curve (they travel in the kernels' parameter vector)."""
 
 
 def _check_frac(name: str, value: float, *, allow_zero: bool = False) -> None:
@@ -38,6 +44,13 @@ class VehicleParams:
 
     Units are in the field names. ``rolling_coef`` and ``rolling_speed_coef_s_per_m`` are the
     paper's C_r1 [-] and C_r2 [s/m]: rolling force = (C_r1 + C_r2 v) m g cos(theta).
+
+    Electric machine (motor + inverter): with ``em_eff_power_frac`` / ``em_eff_frac`` empty its efficiency is
+    the constant ``motor_eff_frac * inverter_eff_frac`` (the paper); otherwise it is read off that curve at the
+    machine's power over ``em_power_max_w`` (both directions, FASTSim's convention). The share of braking routed
+    to the motor fades at low speed as ``regen_share_frac / (1 + a exp(-b (v_mph + 1)))`` with
+    ``a = regen_fade_a`` (0: no fade) and ``b = regen_fade_b_per_mph``; the motor then returns at most
+    ``regen_power_max_w`` to the battery (``inf``: no limit).
     """
 
     name: str
@@ -55,6 +68,11 @@ class VehicleParams:
     regen_share_frac: float = 1.0
     regen_power_max_w: float = 60e3
     aux_power_w: float = 0.0
+    em_power_max_w: float = math.inf
+    em_eff_power_frac: tuple[float, ...] = ()
+    em_eff_frac: tuple[float, ...] = ()
+    regen_fade_a: float = 0.0
+    regen_fade_b_per_mph: float = 0.0
 
     def __post_init__(self) -> None:
         _check_positive(
@@ -72,11 +90,29 @@ class VehicleParams:
             raise ValueError("rolling coefficients must be >= 0")
         if self.regen_power_max_w < 0 or self.aux_power_w < 0:
             raise ValueError("regen_power_max_w and aux_power_w must be >= 0")
+        _check_positive(em_power_max_w=self.em_power_max_w)
+        if self.regen_fade_a < 0 or self.regen_fade_b_per_mph < 0:
+            raise ValueError("regen_fade_a and regen_fade_b_per_mph must be >= 0")
+        xs, ys = self.em_eff_power_frac, self.em_eff_frac
+        if len(xs) != len(ys) or len(xs) == 1 or len(xs) > EM_MAP_MAX_POINTS:
+            raise ValueError(f"em_eff_power_frac and em_eff_frac need the same length, 0 or 2..{EM_MAP_MAX_POINTS}")
+        if any(b <= a for a, b in zip(xs, xs[1:], strict=False)) or (xs and xs[0] < 0):
+            raise ValueError("em_eff_power_frac must start at >= 0 and increase")
+        for value in ys:
+            _check_frac("em_eff_frac", value)
 
     @property
     def drivetrain_eff_frac(self) -> float:
-        """eta_trans * eta_motor * eta_invert, the paper's Eq. 1 denominator [-]."""
+        """eta_trans * eta_motor * eta_invert, the paper's Eq. 1 denominator [-] (constant-efficiency chain)."""
         return self.trans_eff_frac * self.motor_eff_frac * self.inverter_eff_frac
+
+    @property
+    def em_map(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """The machine's efficiency curve (power fraction, efficiency); two flat points for a constant chain."""
+        if self.em_eff_power_frac:
+            return self.em_eff_power_frac, self.em_eff_frac
+        flat = self.motor_eff_frac * self.inverter_eff_frac
+        return (0.0, 1.0), (flat, flat)
 
     @property
     def pack_capacity_ah(self) -> float:
@@ -155,22 +191,37 @@ PAPER_54KWH = VehicleParams(
     inverter_eff_frac=0.95,
     pack_energy_kwh=54.0,
     pack_voltage_v=350.0,
+    regen_power_max_w=math.inf,
 )
-"""Paper Table 1 (Tesla Model 3 standard range); motor, pack voltage and regen are our choices."""
+"""Paper Table 1 (Tesla Model 3 standard range), literally: Eq. 1 states no regen power limit, so there is none
+(all braking through the motor, the chain efficiency multiplied on the way back). Motor efficiency and pack
+voltage are our choices (the paper omits them)."""
 
 PAPER_75KWH = replace(PAPER_54KWH, name="paper_75kwh", mass_kg=1726.0, pack_energy_kwh=75.0)
 """Paper Sec. 4.3: the long-range Model 3, 75 kWh and 1726 kg, same pack voltage."""
 
+FASTSIM_MODEL3_EM_POWER_FRAC = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.2, 0.4, 0.6, 0.8, 1.0)
+FASTSIM_MODEL3_EM_EFF_FRAC = (0.84, 0.86, 0.88, 0.90, 0.91, 0.92, 0.94, 0.95, 0.95, 0.94, 0.93)
+"""FASTSim 3.1, vehicle "2022 Tesla Model 3 RWD": electric machine (motor + power electronics) efficiency
+against output power over its 239 kW peak (``em.eff_interp_achieved``), docs/MODEL.md."""
+
 CALIBRATED = replace(
     PAPER_54KWH,
     name="calibrated",
-    mass_kg=1747.0,
-    trans_eff_frac=0.97,
-    motor_eff_frac=0.88,
-    inverter_eff_frac=0.97,
+    mass_kg=4250.0 * LB_TO_KG,
+    trans_eff_frac=0.98,
+    em_power_max_w=239e3,
+    em_eff_power_frac=FASTSIM_MODEL3_EM_POWER_FRAC,
+    em_eff_frac=FASTSIM_MODEL3_EM_EFF_FRAC,
+    regen_share_frac=0.98,
+    regen_fade_a=500.0,
+    regen_fade_b_per_mph=0.99,
+    regen_power_max_w=60e3,
     aux_power_w=250.0,
 )
-"""Public-data efficiency chain for a Model 3 RWD on the EPA dynamometer (docs/MODEL.md)."""
+"""A Model 3 RWD on the EPA dynamometer from public sources (docs/MODEL.md): EPA's equivalent test weight
+(4250 lb), the paper's road load, FASTSim's 2022 Model 3 RWD drivetrain (0.98 gear, the efficiency curve
+above, 250 W accessories) and FASTSim's low-speed regen fade, with a 60 kW regen limit at the battery."""
 
 VEHICLE_PRESETS: dict[str, VehicleParams] = {
     v.name: v for v in (PAPER_54KWH, PAPER_75KWH, CALIBRATED)
