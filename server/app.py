@@ -102,9 +102,10 @@ def warm_up(engine: Engine) -> None:
 async def _expire_idle(engine: Engine, metrics: Metrics, period_s: float) -> None:
     while True:
         await asyncio.sleep(period_s)
-        for trip_id in engine.trips.idle(engine.settings.trip_idle_ttl_s):
-            with contextlib.suppress(Exception):
-                await engine.end_trip(trip_id)
+        with contextlib.suppress(Exception):
+            for trip in await engine.trips.sweep(engine.settings.trip_idle_ttl_s):
+                with contextlib.suppress(Exception):
+                    await trip.spat.close()
                 metrics.trips_closed.labels("expired").inc()
 
 
@@ -135,6 +136,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
             with contextlib.suppress(asyncio.CancelledError):
                 await sweeper
             await speech.stop()
+            await engine.trips.close()
             if remote is not None:
                 await remote.close()
 

@@ -19,7 +19,7 @@ async def health(engine: EngineDep, settings: SettingsDep, speech: SpeechDep) ->
     return HealthOut(
         status="ok",
         now_unix_s=time.time(),
-        trips=len(engine.trips),
+        trips=await engine.trips.count(),
         spat=f"remote {settings.spat_feed_url}" if settings.spat_feed_url else "in-process simulation",
         tables=sorted(engine.tables),
         speech=speech.available,

@@ -17,6 +17,7 @@ from pydantic import ValidationError
 from pydantic_core import to_json
 
 from server.advising import fix_from_schema
+from server.gps import Fix
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
 from server.errors import ApiError, clean_errors, validation_summary
 from server.schemas import GpsFixIn
@@ -48,6 +49,15 @@ class StreamCounts:
                 table.pop(key, None)
 
 
+def _parse(text: str) -> Fix:
+    try:
+        return fix_from_schema(GpsFixIn.model_validate_json(text))
+    except ValidationError as exc:
+        errors = clean_errors(exc.errors())
+        kind = "malformed_json" if any(e["type"] == "json_invalid" for e in errors) else "validation_error"
+        raise ApiError(422, kind, validation_summary(errors), detail=errors) from None
+
+
 def _error(exc: ApiError) -> str:
     return json.dumps({**exc.body(), "status": exc.status})
 
@@ -57,8 +67,9 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
     await ws.accept()
     counts: StreamCounts = ws.app.state.streams
     client = client_address(ws)
+    token = bearer_token(ws, allow_query=True)
     try:
-        trip = engine.trips.authorize(trip_id, bearer_token(ws, allow_query=True))
+        trip = await engine.trips.authorize(trip_id, token)
         counts.open(trip.id, client, settings.ws_max_per_trip, settings.ws_max_per_client)
     except ApiError as exc:
         await ws.send_text(_error(exc))
@@ -71,24 +82,15 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
             message = await ws.receive()
             if message["type"] == "websocket.disconnect":
                 break
-            engine.trips.touch(trip)
             text = message.get("text")
             if text is None:
                 data = message.get("bytes") or b""
                 text = data.decode("utf-8", errors="replace")
             try:
                 if len(text) > limit:
+                    await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
                     raise ApiError(413, "payload_too_large", f"message larger than {limit} bytes")
-                if not engine.trips.is_open(trip):
-                    raise ApiError(404, "unknown_trip", "the trip has ended")
-                try:
-                    fix = GpsFixIn.model_validate_json(text)
-                except ValidationError as exc:
-                    errors = clean_errors(exc.errors())
-                    kind = "malformed_json" if any(e["type"] == "json_invalid" for e in errors) else "validation_error"
-                    raise ApiError(422, kind, validation_summary(errors), detail=errors) from None
-                engine.rate_limit(trip)
-                out = engine.on_fix(trip, fix_from_schema(fix))
+                out = await engine.apply_fix(trip_id, token, lambda: _parse(text))
                 await ws.send_text(to_json(out).decode())
             except ApiError as exc:
                 await ws.send_text(_error(exc))
