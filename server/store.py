@@ -316,7 +316,7 @@ SAMPLE = np.dtype("<f8")
 
 
 def _json(data) -> bytes:
-    return to_json(data, inf_nan="constants")  # advisories may hold infinite seconds
+    return to_json(data, inf_nan_mode="constants")  # advisories may hold infinite seconds
 
 
 class RedisTrips:
