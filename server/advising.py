@@ -159,7 +159,7 @@ class Engine:
     async def apply_fix(self, trip_id: str, token: str | None, parse: Callable[[], Fix]) -> dict:
         """Authorize (one token of the trip's bucket), parse the fix (``parse`` raises the 422), apply it, and
         save the trip; with a shared store the fix is applied again on fresh state if another worker wrote
-        the trip meanwhile."""
+        the trip meanwhile (the bucket's token is taken by the first write only)."""
         store = self.trips
         if not store.shared:
             trip = await store.authorize(trip_id, token, take=True)
@@ -167,11 +167,11 @@ class Engine:
         fix = None
         for attempt in range(SAVE_TRIES):
             async with store.hold(trip_id):
-                trip = await store.authorize(trip_id, token, take=attempt == 0)
+                trip = await store.for_fix(trip_id, token)
                 if fix is None:
                     fix = parse()
                 out = self.on_fix(trip, fix)
-                if out["fix_status"] in ("duplicate", "out_of_order") or await store.save(trip):
+                if await store.save(trip, take=attempt == 0):  # also when the fix changed nothing: the copy was current
                     return out
         raise ApiError(503, "trip_busy", "the trip changed under this fix too often (many workers at once); retry", headers={"Retry-After": "1"})
 

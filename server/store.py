@@ -9,7 +9,9 @@ Both answer the same calls, all ``async``:
 * ``authorize(trip_id, token, take)``: the trip if ``token`` is its token (404 unknown or expired, 401, 403),
   its idle clock reset; ``take``: one token of the trip's request bucket too (429 when empty).
 * ``save(trip)``: after :meth:`server.advising.Engine.on_fix`, the new state and the new score samples
-  (False: another worker changed the trip meanwhile; reload and apply again).
+  (False: another worker changed the trip meanwhile; reload and apply again). With Redis, ``for_fix`` gives
+  the trip a fix applies to (this worker's copy when it has one) and ``save`` also checks the token, takes
+  the bucket's token and resets the idle clock: a fix on a trip this worker served last is one round trip.
 * ``samples(trip)``: the trip's score samples ``(t, v, x)``; ``remove(trip_id)``: the trip is ended.
 
 **Redis layout** (prefix ``ECO_STORE_PREFIX``, default ``eco``), every key expiring ``trip_idle_ttl_s`` after
@@ -27,8 +29,9 @@ the trip's last request:
 * ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets.
 
 Each call is one round trip (a Lua script, atomic in Redis). A worker keeps the trips it served in a small
-cache (:class:`RedisTrips` ``_cache``) and reads a trip's state only when its version moved (another
-worker served it); within a worker, calls on one trip are serialised (:meth:`RedisTrips.hold`), across
+cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
+version it was computed from (one round trip); a trip not cached, or whose version moved (another worker
+served it), is read first (two); within a worker, calls on one trip are serialised (:meth:`RedisTrips.hold`), across
 workers a write carries the version it was computed from and is refused if the trip moved (``save``).
 A fix is accepted (answered 200) only once Redis has it: a worker killed at any instant loses no accepted
 fix. Redis unreachable: 503 ``store_unavailable`` with ``Retry-After`` (never 404: the trip is not gone).
@@ -39,6 +42,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hmac
+import logging
 import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
@@ -50,6 +54,8 @@ from server.config import Settings
 from server.errors import ApiError
 from server.ratelimit import KeyedBuckets, TokenBucket
 from server.trips import Trip, token_hash
+
+log = logging.getLogger("server")
 
 RETRY_AFTER_S = 1
 """What a phone is told to wait when the store is unreachable or a trip is busy. [s]"""
@@ -173,7 +179,7 @@ class MemoryTrips:
     def hold(self, trip_id: str) -> contextlib.nullcontext:
         return contextlib.nullcontext()  # on_fix runs in one step on the event loop: nothing to serialise
 
-    async def save(self, trip: Trip) -> bool:
+    async def save(self, trip: Trip, take: bool = False) -> bool:
         return True
 
     async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -256,11 +262,23 @@ redis.call('PEXPIRE', KEYS[3], ms)
 return 0
 """
 
+_TOUCH = """
+local function touch(key, tok, client, ttl_s, now, p, id)
+  local ms = math.ceil(ttl_s * 1000)
+  redis.call('PEXPIRE', key, ms)
+  redis.call('PEXPIRE', key .. ':tr', ms)
+  redis.call('PEXPIRE', p .. ':k:' .. tok, ms)
+  redis.call('ZADD', p .. ':open', now, id)
+  redis.call('ZADD', p .. ':c:' .. client, now, id)
+  redis.call('PEXPIRE', p .. ':c:' .. client, ms)
+end
+"""
+
 # KEYS: trip. ARGV: token hash, version held ('' none), meta wanted (0/1), take (0/1), now, rate, burst,
 # ttl_s, prefix, id.
 # -> {0} unknown, {1} bad token, {2} another trip's token, {3, wait} rate limited,
 #    {4, version, state or nil, meta or nil}
-_LOAD = _TAKE + """
+_LOAD = _TAKE + _TOUCH + """
 local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client')
 if not h[1] then return {0} end
 local p = ARGV[9]
@@ -268,13 +286,8 @@ if h[2] ~= ARGV[1] then
   if redis.call('EXISTS', p .. ':k:' .. ARGV[1]) == 1 then return {2} end
   return {1}
 end
-local now, ms = tonumber(ARGV[5]), math.ceil(tonumber(ARGV[8]) * 1000)
-redis.call('PEXPIRE', KEYS[1], ms)
-redis.call('PEXPIRE', KEYS[1] .. ':tr', ms)
-redis.call('PEXPIRE', p .. ':k:' .. ARGV[1], ms)
-redis.call('ZADD', p .. ':open', now, ARGV[10])
-redis.call('ZADD', p .. ':c:' .. h[3], now, ARGV[10])
-redis.call('PEXPIRE', p .. ':c:' .. h[3], ms)
+local now = tonumber(ARGV[5])
+touch(KEYS[1], h[2], h[3], tonumber(ARGV[8]), now, p, ARGV[10])
 if ARGV[4] == '1' then
   local wait = take(KEYS[1], 'bt', 'bs', tonumber(ARGV[6]), tonumber(ARGV[7]), now)
   if wait > 0 then return {3, tostring(wait)} end
@@ -285,19 +298,28 @@ if ARGV[3] == '1' then meta = redis.call('HGET', KEYS[1], 'meta') end
 return {4, h[1], state, meta}
 """
 
-# KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), ttl_s.
-# -> new version, 0 the trip moved meanwhile, -1 gone
-_SAVE = """
-local v = redis.call('HGET', KEYS[1], 'v')
-if not v then return -1 end
-if v ~= ARGV[1] then return 0 end
-local nv = tonumber(v) + 1
+# KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), ttl_s, token hash, take (0/1),
+# now, rate, burst, prefix, id. The trip's token is checked, its idle clock reset, a token of its bucket
+# taken (when asked), then the state written if the trip is still at the version it was computed from.
+# -> {new version}, {0, version, state} the trip moved meanwhile, {-1} gone, {-2} not its token, {-3, wait} rate limited
+_SAVE = _TAKE + _TOUCH + """
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client')
+if not h[1] then return {-1} end
+if h[2] ~= ARGV[5] then return {-2} end
+local now = tonumber(ARGV[7])
+touch(KEYS[1], h[2], h[3], tonumber(ARGV[4]), now, ARGV[10], ARGV[11])
+if ARGV[6] == '1' then
+  local wait = take(KEYS[1], 'bt', 'bs', tonumber(ARGV[8]), tonumber(ARGV[9]), now)
+  if wait > 0 then return {-3, tostring(wait)} end
+end
+if h[1] ~= ARGV[1] then return {0, h[1], redis.call('HGET', KEYS[1], 'state')} end
+local nv = tonumber(h[1]) + 1
 redis.call('HSET', KEYS[1], 'v', tostring(nv), 'state', ARGV[2])
 if #ARGV[3] > 0 then
   redis.call('APPEND', KEYS[2], ARGV[3])
   redis.call('PEXPIRE', KEYS[2], math.ceil(tonumber(ARGV[4]) * 1000))
 end
-return nv
+return {nv}
 """
 
 # KEYS: trip, samples. ARGV: prefix, id. -> 1 removed, 0 already gone
@@ -339,6 +361,8 @@ class RedisTrips:
         self.release = release
         self.clock = clock
         self.p = settings.store_prefix
+        # a connection per concurrent call, up to store_max_connections (redis-py's blocking pool, which makes
+        # calls wait for a free connection, starved some waiters for seconds under 200 concurrent trips)
         self.redis = client or aioredis.Redis.from_url(
             settings.store_url, socket_timeout=settings.store_timeout_s, socket_connect_timeout=settings.store_timeout_s,
             health_check_interval=30, max_connections=settings.store_max_connections,
@@ -366,6 +390,7 @@ class RedisTrips:
         try:
             yield
         except (ConnectionError, TimeoutError, BusyLoadingError, OSError) as exc:
+            log.warning("trip store unreachable: %r", exc)
             raise ApiError(503, "store_unavailable", f"the trip store is unreachable ({type(exc).__name__}); the trip is kept: retry in {RETRY_AFTER_S} s",
                            headers={"Retry-After": str(RETRY_AFTER_S)}) from None  # fmt: skip
 
@@ -460,29 +485,52 @@ class RedisTrips:
         async with self._reach():
             return bool(await self.redis.exists(self._key(trip_id)))
 
-    async def save(self, trip: Trip) -> bool:
+    async def for_fix(self, trip_id: str, token: str | None) -> Trip:
+        """The trip to apply a fix to: this worker's copy when it has one and ``token`` is its token (no round
+        trip: :meth:`save` finds out whether the copy was current), else :meth:`authorize` (no bucket token)."""
+        cached = self._cache.get(trip_id)
+        if cached is not None and cached[0].version > 0 and token and hmac.compare_digest(token_hash(token), cached[0].token_hash):
+            return cached[0]
+        return await self.authorize(trip_id, token)
+
+    async def save(self, trip: Trip, take: bool = False) -> bool:
+        """Write the trip's new state and samples if the store still holds the version they were computed from
+        (False: another worker wrote first; the copy now holds the store's state: apply the fix again).
+        ``take``: one token of the trip's bucket first (429 when empty, nothing written)."""
         n = len(trip.trace_t)
         samples = b""
         if n:
             rows = np.empty((n, 3), dtype=SAMPLE)
             rows[:, 0], rows[:, 1], rows[:, 2] = trip.trace_t, trip.trace_v, trip.trace_x
             samples = rows.tobytes()
-        state = trip.state()
+        s = self.s
         try:
             async with self._reach():
-                version = int(await self._save(keys=[self._key(trip.id), self._key(trip.id) + ":tr"], args=[str(trip.version), _json(state), samples, self.s.trip_idle_ttl_s]))
+                r = await self._save(
+                    keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
+                    args=[str(trip.version), _json(trip.state()), samples, s.trip_idle_ttl_s, trip.token_hash, 1 if take else 0,
+                          repr(self.clock()), s.rate_per_s, s.rate_burst, self.p, trip.id],
+                )  # fmt: skip
         except ApiError:
-            self._forget(trip.id)  # not known to be written: the cached copy may be ahead of the store
+            trip.version = -1  # not known to be written: the copy may be ahead of the store, reload its state
             raise
-        if version == -1:
-            self._forget(trip.id)
-            raise unknown_trip(trip.id)
-        if version == 0:
-            self._forget(trip.id)  # another worker wrote first: this copy holds a fix applied to old state
+        version = int(r[0])
+        if version == 0:  # another worker wrote first: the copy takes the store's state, the fix is applied again
+            trip.restore(from_json(r[2]))
+            trip.version = int(r[1])
             return False
+        if version < 0:
+            trip.version = -1  # the copy holds a fix that is not in the store
+            if version == -1:
+                self._forget(trip.id)
+                raise unknown_trip(trip.id)
+            if version == -2:
+                raise bad_token(False)
+            raise self.limits.trip_rate(float(r[1]))
         trip.version = version
         trip.trace_base += n
         del trip.trace_t[:], trip.trace_v[:], trip.trace_x[:]
+        self._cache[trip.id] = (trip, time.monotonic())
         return True
 
     async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
