@@ -13,6 +13,7 @@ import contextlib
 import json
 import os
 import signal
+import subprocess
 import time
 from pathlib import Path
 
@@ -21,7 +22,7 @@ import pytest
 import redis
 import websockets
 
-from tests.procs import Proc, RedisServer, redis_server_path
+from tests.procs import REPO, Proc, RedisServer, free_port, redis_server_path
 from tests.server.conftest import service_proc
 
 KEYS = ("k-drive", "k-quota", "k-global", "k-ws")
@@ -254,6 +255,66 @@ def _worker_of(supervisor_pid: int, ws) -> int:
             if target.startswith("socket:[") and target[8:-1] in inodes:
                 return pid
     raise AssertionError("no worker holds the connection")
+
+
+def _advised(worker: Proc) -> float:
+    """Advisories this worker computed (its Prometheus counter)."""
+    text = httpx.get(worker.base_url + "/metrics", headers={"X-API-Key": KEYS[0]}).text
+    return sum(float(line.rsplit(" ", 1)[1]) for line in text.splitlines() if line.startswith("ecodrive_advice_total{"))
+
+
+def test_behind_the_load_balancer_workers_come_and_go_and_the_trip_goes_on(workers, s200, tmp_path):
+    """deploy/haproxy.cfg (docker compose's ``lb``) in front of the two workers on loopback: requests spread over
+    both, a killed worker is passed over, none at all is 503 + Retry-After (JSON), a restarted one serves again."""
+    import shutil
+
+    if shutil.which("haproxy") is None:
+        pytest.skip("haproxy is not installed (sh scripts/system-deps.sh, as root)")
+    a, b = workers
+    port = free_port()
+    cfg = (REPO / "deploy" / "haproxy.cfg").read_text().replace("/app/deploy", str(REPO / "deploy")).replace("bind :8000", f"bind 127.0.0.1:{port}")
+    cfg = cfg.replace("server-template advisory 16 advisory:8000", f"server a 127.0.0.1:{a.port}\n    server b 127.0.0.1:{b.port}")
+    (tmp_path / "haproxy.cfg").write_text(cfg)
+    lb = subprocess.Popen(["haproxy", "-db", "-f", str(tmp_path / "haproxy.cfg")], stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            with contextlib.suppress(httpx.HTTPError):
+                if httpx.get(base + "/health", timeout=1).status_code == 200:
+                    break
+            time.sleep(0.1)
+        before = [_advised(w) for w in workers]
+        t0 = time.time() - 100.0
+        trip_id, auth = _create(base, "k-ws", corridor="paper_s200", timing="15_15", entry_unix_s=t0)
+        fixes = drive_fixes(s200, t0, 40)
+        with httpx.Client(base_url=base, headers=auth, timeout=10) as c:
+            for fix in fixes[:10]:
+                assert c.post(f"/v1/trips/{trip_id}/fixes", json=fix).status_code == 200
+            assert all(_advised(w) > n for w, n in zip(workers, before))  # no sticky sessions: both served the trip
+            a.kill()
+            for fix in fixes[10:20]:  # passed over: the load balancer retries the other worker
+                r = c.post(f"/v1/trips/{trip_id}/fixes", json=fix)
+                assert r.status_code == 200, r.text
+            b.kill()
+            r = c.post(f"/v1/trips/{trip_id}/fixes", json=fixes[20])
+            assert r.status_code == 503 and r.json()["error"] == "service_unavailable" and int(r.headers["retry-after"]) >= 1
+            a.start()
+            deadline = time.monotonic() + 30
+            while (r := c.post(f"/v1/trips/{trip_id}/fixes", json=fixes[20])).status_code == 503 and time.monotonic() < deadline:
+                time.sleep(0.2)  # the phone's retry, with the same fix and token
+            assert r.status_code == 200 and r.json()["seq"] == 21
+            for fix in fixes[21:]:
+                assert c.post(f"/v1/trips/{trip_id}/fixes", json=fix).status_code == 200
+            assert c.get(f"/v1/trips/{trip_id}").json()["n_fixes"] == 40
+            score = c.post(f"/v1/trips/{trip_id}/end", timeout=60).json()
+            assert score["complete"] and score["n_fixes"] >= 30
+    finally:
+        lb.kill()
+        lb.wait(timeout=10)
+        for w in workers:
+            if w.proc is None:
+                w.start()
 
 
 def test_store_outage_is_503_retry_and_the_trip_survives_a_store_restart(s200, tmp_path):
