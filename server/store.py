@@ -31,8 +31,9 @@ the trip's last request:
 Each call is one round trip (a Lua script, atomic in Redis). A worker keeps the trips it served in a small
 cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
 version it was computed from (one round trip); a trip not cached, or whose version moved (another worker
-served it), is read first (two); within a worker, calls on one trip are serialised (:meth:`RedisTrips.hold`), across
-workers a write carries the version it was computed from and is refused if the trip moved (``save``).
+served it), is read first (two). Within a worker, fixes of one trip are serialised (:meth:`RedisTrips.hold`);
+across workers a write carries the version it was computed from, and if the trip moved meanwhile it is
+refused and the current state comes back instead, on which the fix is applied again (``save``).
 A fix is accepted (answered 200) only once Redis has it: a worker killed at any instant loses no accepted
 fix. Redis unreachable: 503 ``store_unavailable`` with ``Retry-After`` (never 404: the trip is not gone).
 """
@@ -150,14 +151,6 @@ class MemoryTrips:
         self._by_token[trip.token_hash] = trip.id
         self._per_client[trip.client] = self._per_client.get(trip.client, 0) + 1
 
-    def open_for(self, client: str) -> int:
-        return self._per_client.get(client, 0)
-
-    @staticmethod
-    def touch(trip: Trip) -> None:
-        """The trip is in use (a request or a WebSocket message): it is not idle."""
-        trip.last_seen_s = time.monotonic()
-
     def get(self, trip_id: str) -> Trip:
         trip = self._trips.get(trip_id)
         if trip is None:
@@ -176,11 +169,8 @@ class MemoryTrips:
             raise self.limits.trip_rate(wait_s)
         return trip
 
-    def hold(self, trip_id: str) -> contextlib.nullcontext:
-        return contextlib.nullcontext()  # on_fix runs in one step on the event loop: nothing to serialise
-
     async def save(self, trip: Trip, take: bool = False) -> bool:
-        return True
+        return True  # the trip object is the stored trip (Engine.apply_fix does not call this: on_fix is one step)
 
     async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return tuple(np.frombuffer(a, dtype=np.float64).copy() for a in (trip.trace_t, trip.trace_v, trip.trace_x))  # type: ignore[return-value]
