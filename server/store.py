@@ -535,16 +535,19 @@ class RedisTrips:
         cached = self._cache.get(trip_id)
         async with self._reach():
             gone = not await self._remove(keys=[self._key(trip_id), self._key(trip_id) + ":tr"], args=[self.p, trip_id])
-        trip = self._forget(trip_id) or (cached[0] if cached else None)
-        if gone or trip is None:
+        trip = self._forget(trip_id, release=False) or (cached[0] if cached else None)  # the caller closes its SPaT
+        if gone or trip is None:  # another call ended it first
+            if trip is not None and self.release is not None:
+                await self.release(trip)
             raise unknown_trip(trip_id)
         return trip
 
-    def _forget(self, trip_id: str) -> Trip | None:
+    def _forget(self, trip_id: str, release: bool = True) -> Trip | None:
+        """Drop this worker's copy of the trip (and with ``release`` what it holds: its SPaT view)."""
         entry = self._cache.pop(trip_id, None)
         if entry is None:
             return None
-        if self.release is not None:
+        if release and self.release is not None:
             asyncio.get_running_loop().create_task(self.release(entry[0]))
         return entry[0]
 

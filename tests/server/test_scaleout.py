@@ -339,3 +339,19 @@ def test_store_outage_is_503_retry_and_the_trip_survives_a_store_restart(s200, t
     finally:
         worker.kill()
         store.kill()
+
+
+def test_compose_runs_workers_on_redis_behind_one_port():
+    import yaml
+
+    spec = yaml.safe_load((REPO / "docker-compose.yml").read_text())["services"]
+    svc, store, lb = spec["advisory"], spec["redis"], spec["lb"]
+    assert svc["environment"]["ECO_STORE_URL"] == "redis://redis:6379/0" and "--workers" in svc["command"]
+    assert "ports" not in svc and svc["deploy"]["replicas"] and svc["depends_on"]["redis"]["condition"] == "service_healthy"
+    assert store["command"][0] == "redis-server" and "--appendonly" in store["command"] and "redis-cli" in store["healthcheck"]["test"]
+    assert lb["ports"] == ["127.0.0.1:8000:8000"] and lb["depends_on"]["advisory"]["condition"] == "service_healthy"
+    assert lb["command"][0] == "haproxy" and lb["command"][-1] == "/app/deploy/haproxy.cfg"
+    cfg = (REPO / "deploy" / "haproxy.cfg").read_text()
+    assert "advisory:8000" in cfg and "bind :8000" in cfg and "/app/deploy/503.http" in cfg
+    docker = (REPO / "Dockerfile").read_text()
+    assert "redis-server" in docker and "haproxy" in docker and "COPY deploy deploy" in docker
