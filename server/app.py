@@ -35,6 +35,7 @@ from server.openapi import install_docs
 from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
 from server.spat import RemoteFeed
+from server.store import RedisStreams
 
 log = logging.getLogger("server")
 
@@ -124,6 +125,8 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         engine.on_ignored_fix = lambda status: metrics.fixes.labels(status).inc()
         engine.on_rate_limited = metrics.rate_limited.inc
         app.state.engine = engine
+        if engine.trips.shared:  # WebSocket caps across workers
+            app.state.streams = RedisStreams(engine.trips)
         await asyncio.to_thread(warm_up, engine)
         await speech.start()
         sweeper = asyncio.create_task(_expire_idle(engine, metrics, min(60.0, settings.trip_idle_ttl_s / 2)))

@@ -26,7 +26,8 @@ the trip's last request:
 * ``eco:k:<token hash>`` -> id (tells "another trip's token", 403, from an invalid one, 401);
 * ``eco:open`` and ``eco:c:<client>``: sorted sets of open trips by last request (the caps; members idle
   longer than the TTL are dropped when counted);
-* ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets.
+* ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets;
+* ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`RedisStreams`, leases).
 
 Each call is one round trip (a Lua script, atomic in Redis). A worker keeps the trips it served in a small
 cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
@@ -46,6 +47,7 @@ import hmac
 import logging
 import math
 import time
+import uuid
 from collections.abc import AsyncIterator, Awaitable, Callable
 
 import numpy as np
@@ -566,6 +568,76 @@ class RedisTrips:
         for trip_id in list(self._cache):
             self._forget(trip_id)
         await self.redis.aclose()
+
+
+# KEYS: the trip's and the client's stream sets. ARGV: now, stream id, per trip, per client (0: none), lease_s.
+# -> 0 opened, 1 the trip's streams are full, 2 the client's
+_STREAM_OPEN = """
+local now, lease = tonumber(ARGV[1]), tonumber(ARGV[5])
+redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now)
+redis.call('ZREMRANGEBYSCORE', KEYS[2], '-inf', now)
+if redis.call('ZCARD', KEYS[1]) >= tonumber(ARGV[3]) then return 1 end
+if tonumber(ARGV[4]) > 0 and redis.call('ZCARD', KEYS[2]) >= tonumber(ARGV[4]) then return 2 end
+for i = 1, 2 do
+  redis.call('ZADD', KEYS[i], now + lease, ARGV[2])
+  redis.call('PEXPIRE', KEYS[i], math.ceil(lease * 1000))
+end
+return 0
+"""
+
+# KEYS: as above. ARGV: now, stream id, lease_s (0: the stream closed)
+_STREAM_RENEW = """
+for i = 1, 2 do
+  if tonumber(ARGV[3]) > 0 then
+    redis.call('ZADD', KEYS[i], 'XX', tonumber(ARGV[1]) + tonumber(ARGV[3]), ARGV[2])
+    redis.call('PEXPIRE', KEYS[i], math.ceil(tonumber(ARGV[3]) * 1000))
+  else
+    redis.call('ZREM', KEYS[i], ARGV[2])
+  end
+end
+return 0
+"""
+
+
+class RedisStreams:
+    """Open WebSocket streams per trip and per client address, counted in Redis across every worker (the
+    in-process count is ``server.routes.stream.StreamCounts``). Each stream holds a lease of ``LEASE_S``,
+    renewed by its messages: the streams of a killed worker lapse within a lease."""
+
+    LEASE_S = 60.0
+
+    def __init__(self, store: RedisTrips) -> None:
+        self.store = store
+        self._open = store.redis.register_script(_STREAM_OPEN)
+        self._renew = store.redis.register_script(_STREAM_RENEW)
+
+    def _keys(self, trip_id: str, client: str) -> list[str]:
+        return [f"{self.store.p}:ws:t:{trip_id}", f"{self.store.p}:ws:c:{client}"]
+
+    async def open(self, trip_id: str, client: str, per_trip: int, per_client: int) -> list:
+        """A handle for :meth:`renew` and :meth:`close`; 429 ``too_many_streams`` beyond the caps."""
+        sid = uuid.uuid4().hex
+        now = self.store.clock()
+        async with self.store._reach():
+            code = await self._open(keys=self._keys(trip_id, client), args=[repr(now), sid, per_trip, per_client, self.LEASE_S])
+        if code == 1:
+            raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
+        if code == 2:
+            raise ApiError(429, "too_many_streams", f"this client address already has {per_client} open streams")
+        return [trip_id, client, sid, now + self.LEASE_S / 3]
+
+    async def renew(self, handle: list) -> None:
+        """Called per message; renews the lease once a third of it has passed."""
+        now = self.store.clock()
+        if now >= handle[3]:
+            handle[3] = now + self.LEASE_S / 3
+            async with self.store._reach():
+                await self._renew(keys=self._keys(handle[0], handle[1]), args=[repr(now), handle[2], self.LEASE_S])
+
+    async def close(self, handle: list) -> None:
+        with contextlib.suppress(ApiError):
+            async with self.store._reach():
+                await self._renew(keys=self._keys(handle[0], handle[1]), args=[repr(self.store.clock()), handle[2], 0])
 
 
 def make_store(settings: Settings, limits: Limits, build, release, clock) -> MemoryTrips | RedisTrips:

@@ -153,6 +153,28 @@ def store_trips(store: RedisServer) -> list[bytes]:
         return [k for k in r.scan_iter("eco:t:*") if not k.endswith(b":tr")]
 
 
+def test_websocket_streams_are_capped_across_workers(workers):
+    """At most ECO_WS_MAX_PER_TRIP (2) streams per trip, wherever they are opened; a closed one frees its slot."""
+    a, b = workers
+    trip_id, auth = _create(a.base_url, "k-ws", entry_unix_s=time.time() - 10)
+
+    async def run() -> None:
+        urls = [f"ws://127.0.0.1:{w.port}/v1/trips/{trip_id}/stream" for w in (a, b, a)]
+        async with websockets.connect(urls[0], additional_headers=auth) as ws1, websockets.connect(urls[1], additional_headers=auth):
+            async with websockets.connect(urls[2], additional_headers=auth) as ws3:
+                msg = json.loads(await asyncio.wait_for(ws3.recv(), 10))
+                assert msg["status"] == 429 and msg["error"] == "too_many_streams"
+                with pytest.raises(websockets.ConnectionClosed) as closed:
+                    await asyncio.wait_for(ws3.recv(), 10)
+                assert closed.value.rcvd.code == 4429
+            await ws1.close()
+            async with websockets.connect(urls[2], additional_headers=auth) as ws4:  # the slot ws1 held
+                await ws4.send(json.dumps({"t_unix_s": time.time() - 1, "lat_deg": 0.0, "lon_deg": 0.0}))
+                assert "seq" in json.loads(await asyncio.wait_for(ws4.recv(), 10))
+
+    asyncio.run(run())
+
+
 def test_trip_state_is_bounded_and_expires(workers, store, s200):
     a, _ = workers
     t0 = time.time() - 60.0
