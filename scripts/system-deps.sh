@@ -10,6 +10,8 @@ NEEDS='
 espeak-ng espeak-ng speech for GET /v1/trips/{id}/advice.wav
 chromium chromium headless browser for the phone app tests (tests/browser)
 mosquitto mosquitto MQTT broker for live SPaT (make antwerp, tests/spat_feed/test_mqtt.py)
+redis-server redis-server the shared trip store of several workers (ECO_STORE_URL) and its tests (tests/server/test_scaleout.py)
+haproxy haproxy the load balancer in front of several workers (docker compose lb; tests/server/test_scaleout.py)
 '
 missing=""
 for_what=""

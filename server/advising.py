@@ -32,21 +32,19 @@ from server.config import Settings
 from server.errors import ApiError
 from server.gps import Fix, RouteMatcher
 from spat_feed.observe import observation
-from server.ratelimit import KeyedBuckets, TokenBucket
+from server.ratelimit import TokenBucket
 from server.schemas import MS_TIMESTAMP_MIN, TripCreate
 from server.spat import ScenarioSpat, SharedSpat, SpatHub, TripSpat
+from server.store import Limits, make_store, retry_after  # noqa: F401  (retry_after: re-exported)
+from server.trips import Trip
 from spat_feed.simulator import shared_scenario
-from server.trips import Trip, TripStore
 
 ADVISOR_UNITS = {"metric": "kmh", "imperial": "mph"}
 """A trip's ``units`` -> the advisor's spoken speed unit (``AdvisorParams.units``)."""
 
 
-def retry_after(wait_s: float) -> tuple[int, dict[str, str]]:
-    """Whole seconds to wait (HTTP's Retry-After is an integer, never 0) and the header saying so."""
-    seconds = max(1, math.ceil(wait_s))
-    return seconds, {"Retry-After": str(seconds)}
-
+SAVE_TRIES = 5
+"""A fix is applied at most this many times when other workers keep writing its trip first."""
 
 SERVER_PHRASES = {
     "poor_gps": "GPS signal weak. Advice paused.",
@@ -76,13 +74,19 @@ class Engine:
         self.params = params or AdvisorParams()
         self.spat = spat if spat is not None else SpatHub(settings, corridors, clock)
         self.clock = clock
-        self.trips = TripStore(settings.max_trips, settings.max_trips_per_client)
-        self.create_bucket = TokenBucket(settings.create_rate_per_s, settings.create_burst)
-        self.client_buckets = KeyedBuckets(settings.create_rate_per_client_per_s, settings.create_burst_per_client)
+        self.limits = Limits(settings)
+        self.trips = make_store(settings, self.limits, self.trip_from_meta, self._release, clock)
         self._params = {units: replace(self.params, units=ADVISOR_UNITS[units]) for units in ADVISOR_UNITS}
         self.on_advice: Callable[[Trip, Advice, str, float], None] | None = None  # metrics hooks
         self.on_ignored_fix: Callable[[str], None] | None = None
-        self.on_rate_limited: Callable[[], None] | None = None
+
+    @property
+    def on_rate_limited(self) -> Callable[[], None] | None:
+        return self.limits.on_rate_limited
+
+    @on_rate_limited.setter
+    def on_rate_limited(self, hook: Callable[[], None] | None) -> None:
+        self.limits.on_rate_limited = hook
 
     # -- trips ----------------------------------------------------------------------------------------
     def check_time(self, t_unix_s: float, what: str, future_s: float | None = None) -> None:
@@ -97,13 +101,7 @@ class Engine:
 
     async def create_trip(self, body: TripCreate, client: str = "") -> Trip:
         s = self.settings
-        if wait_s := self.client_buckets.take(client):
-            seconds, headers = retry_after(wait_s)
-            raise ApiError(429, "rate_limited", f"this client creates trips too fast (limit {s.create_rate_per_client_per_s:g}/s, burst {s.create_burst_per_client:g}); retry in {seconds} s", headers=headers)
-        self.trips.check_capacity(client)
-        if wait_s := self.create_bucket.take():
-            seconds, headers = retry_after(wait_s)
-            raise ApiError(429, "rate_limited", f"too many trips created service-wide; retry in {seconds} s", headers=headers)
+        await self.trips.admit(client)
         corridor_name = body.corridor or s.default_corridor
         corridor = self.corridors.get(corridor_name)
         if corridor is None:
@@ -115,48 +113,79 @@ class Engine:
         entry = now if body.entry_unix_s is None else body.entry_unix_s
         if body.entry_unix_s is not None:
             self.check_time(entry, "entry_unix_s", s.max_entry_future_s)
-        spat: TripSpat
-        if body.timing is None:  # the lights as they run for everyone: the shared SPaT
-            scenario = shared_scenario(corridor, float(entry))
-            spat = SharedSpat(self.spat, scenario)
-        else:  # a scenario of its own, simulated for this trip (the corridor's plans by name, a paper preset, or "trip"; never a path from a request)
+        timing = None  # the lights as they run for everyone: the shared SPaT
+        if body.timing is not None:  # a scenario of its own (the corridor's plans by name, a paper preset, or "trip"; never a path from a request)
             try:
                 timing = resolve_timing(corridor, body.timing, entry, allow_files=False)
             except KeyError as exc:
                 raise ApiError(422, "unknown_timing", str(exc.args[0])) from None
             except ValueError as exc:
                 raise ApiError(422, "timing_mismatch", str(exc)) from None
-            uncertainty = Uncertainty(s.spat_early_s, s.spat_late_s, s.spat_confidence_frac)
-            scenario = FeedScenario(corridor, timing, float(entry), uncertainty)
-            spat = ScenarioSpat(scenario, self.clock)
-        units = body.units or corridor_units(corridor)
-        self.trips.check_capacity(client)
-        trip = Trip(
-            corridor, self.matchers[corridor_name], scenario, spat, vehicle, now,
-            TokenBucket(s.rate_per_s, s.rate_burst), s.dropout_s,
-            tables=self.tables.get(corridor_name) if vehicle == s.default_vehicle else None,
-            client=client, units=units, params=self._params[units], observe_spat=isinstance(spat, SharedSpat) and spat.live,
-            max_speed_mps=s.max_speed_mps,
-        )  # fmt: skip
+        meta = {"corridor": corridor_name, "timing": timing, "entry_unix_s": float(entry), "uncertainty": [s.spat_early_s, s.spat_late_s, s.spat_confidence_frac],
+                "vehicle": vehicle, "created_unix_s": now, "client": client, "units": body.units or corridor_units(corridor), "observe_spat": None}  # fmt: skip
+        trip = await self.trip_from_meta(meta)
         try:
-            self.trips.add(trip)
+            await self.trips.add(trip)
         except ApiError:
-            await spat.close()
+            await trip.spat.close()
             raise
         return trip
 
-    async def end_trip(self, trip_id: str) -> Trip:
-        trip = self.trips.pop(trip_id)
-        await trip.spat.close()
-        return trip
+    async def trip_from_meta(self, meta: dict) -> Trip:
+        """A trip from what it was created with (:meth:`Trip.meta`; no ``id``: a new trip with a new token).
+        Any worker rebuilds a stored trip's corridor, SPaT view and tables from it."""
+        s = self.settings
+        corridor = self.corridors[meta["corridor"]]
+        timing = meta["timing"]
+        spat: TripSpat
+        if timing is None:  # the shared SPaT (simulated lights from their plans, the others from the process's store)
+            scenario = shared_scenario(corridor, meta["entry_unix_s"])
+            spat = SharedSpat(self.spat, scenario)
+        else:  # a scenario simulated for this trip alone
+            if isinstance(timing, str):
+                timing = resolve_timing(corridor, timing, meta["entry_unix_s"], allow_files=False)
+            scenario = FeedScenario(corridor, timing, meta["entry_unix_s"], Uncertainty(*meta["uncertainty"]))
+            spat = ScenarioSpat(scenario, self.clock)
+        observe = meta["observe_spat"]
+        vehicle, units = meta["vehicle"], meta["units"]
+        return Trip(
+            corridor, self.matchers[corridor.name], scenario, spat, vehicle, meta["created_unix_s"],
+            TokenBucket(s.rate_per_s, s.rate_burst), s.dropout_s,
+            tables=self.tables.get(corridor.name) if vehicle == s.default_vehicle else None,
+            client=meta["client"], units=units, params=self._params[units],
+            observe_spat=spat.live if observe is None else observe,
+            max_speed_mps=s.max_speed_mps, trip_id=meta.get("id"),
+        )  # fmt: skip
 
-    def rate_limit(self, trip: Trip) -> None:
-        if wait_s := trip.bucket.take():
-            if self.on_rate_limited is not None:
-                self.on_rate_limited()
-            seconds, headers = retry_after(wait_s)
-            raise ApiError(429, "rate_limited", f"too many requests for this trip (limit {self.settings.rate_per_s:g}/s, burst {self.settings.rate_burst:g}); retry in {seconds} s",
-                           headers=headers)  # fmt: skip
+    @staticmethod
+    async def _release(trip: Trip) -> None:
+        await trip.spat.close()
+
+    async def end_trip(self, trip: Trip) -> tuple[Trip, tuple]:
+        """End ``trip`` (authorized): its score samples, then it is removed (404 if another call ended it first)."""
+        samples = await self.trips.samples(trip)
+        trip = await self.trips.remove(trip.id)
+        await trip.spat.close()
+        return trip, samples
+
+    async def apply_fix(self, trip_id: str, token: str | None, parse: Callable[[], Fix]) -> dict:
+        """Authorize (one token of the trip's bucket), parse the fix (``parse`` raises the 422), apply it, and
+        save the trip; with a shared store the fix is applied again on fresh state if another worker wrote
+        the trip meanwhile (the bucket's token is taken by the first write only)."""
+        store = self.trips
+        if not store.shared:
+            trip = await store.authorize(trip_id, token, take=True)
+            return self.on_fix(trip, parse())
+        fix = None
+        for attempt in range(SAVE_TRIES):
+            async with store.hold(trip_id):
+                trip = await store.for_fix(trip_id, token)
+                if fix is None:
+                    fix = parse()
+                out = self.on_fix(trip, fix)
+                if await store.save(trip, take=attempt == 0):  # also when the fix changed nothing: the copy was current
+                    return out
+        raise ApiError(503, "trip_busy", "the trip changed under this fix too often (many workers at once); retry", headers={"Retry-After": "1"})
 
     # -- fixes ----------------------------------------------------------------------------------------
     def latest(self, trip: Trip, fix_status: str = "none") -> dict:
@@ -212,7 +241,7 @@ class Engine:
                 advice = _spat_reason(advice, trip.spat.status(lights[0].intersection_id))
         trip.memory = memory
         trip.n_fixes += 1
-        if on_route and speed is not None and len(trip.trace_t) < s.max_trace_fixes:
+        if on_route and speed is not None and trip.n_trace < s.max_trace_fixes:
             trip.trace_t.append(fix.t_unix_s)
             trip.trace_v.append(speed)
             trip.trace_x.append(m.route_m)

@@ -36,6 +36,7 @@ from server.score import trip_score
 from server.spat import SpatHub
 from spat_feed.observe import PlanReading, observation
 from spat_feed.simulator import shared_scenario
+from server.store import RedisStreams
 
 log = logging.getLogger("server")
 
@@ -108,9 +109,10 @@ def warm_up(engine: Engine) -> None:
 async def _expire_idle(engine: Engine, metrics: Metrics, period_s: float) -> None:
     while True:
         await asyncio.sleep(period_s)
-        for trip_id in engine.trips.idle(engine.settings.trip_idle_ttl_s):
-            with contextlib.suppress(Exception):
-                await engine.end_trip(trip_id)
+        with contextlib.suppress(Exception):
+            for trip in await engine.trips.sweep(engine.settings.trip_idle_ttl_s):
+                with contextlib.suppress(Exception):
+                    await trip.spat.close()
                 metrics.trips_closed.labels("expired").inc()
 
 
@@ -129,6 +131,8 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         engine.on_ignored_fix = lambda status: metrics.fixes.labels(status).inc()
         engine.on_rate_limited = metrics.rate_limited.inc
         app.state.engine = engine
+        if engine.trips.shared:  # WebSocket caps across workers
+            app.state.streams = RedisStreams(engine.trips)
         await asyncio.to_thread(warm_up, engine)
         await speech.start()
         await hub.start()
@@ -142,6 +146,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
             with contextlib.suppress(asyncio.CancelledError):
                 await sweeper
             await speech.stop()
+            await engine.trips.close()
             await hub.stop()
 
     app = FastAPI(title="ecodrive advisory service", version="1.0.0", description=DESCRIPTION, lifespan=lifespan, docs_url=None, redoc_url=None, openapi_url=None)

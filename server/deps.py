@@ -67,11 +67,18 @@ def bearer_token(conn: HTTPConnection, *, allow_query: bool = False) -> str | No
 
 
 async def get_trip(conn: HTTPConnection, trip_id: TripId) -> Trip:
-    """The trip named in the path, if the request carries its token (404 / 401 / 403 otherwise)."""
-    return conn.app.state.engine.trips.authorize(trip_id, bearer_token(conn))
+    """The trip named in the path, if the request carries its token (404 / 401 / 403 otherwise), and one token
+    of the trip's request bucket (429 when empty)."""
+    return await conn.app.state.engine.trips.authorize(trip_id, bearer_token(conn), take=True)
+
+
+async def get_trip_to_end(conn: HTTPConnection, trip_id: TripId) -> Trip:
+    """As :func:`get_trip`, outside the rate limit: a phone can always end its trip."""
+    return await conn.app.state.engine.trips.authorize(trip_id, bearer_token(conn))
 
 
 TripDep = Annotated[Trip, Depends(get_trip)]
+TripToEndDep = Annotated[Trip, Depends(get_trip_to_end)]
 
 
 def api_key_of(conn: HTTPConnection) -> str | None:

@@ -86,6 +86,17 @@ class Track:
         self._jumped: list[tuple[float, float]] = []  # consecutive rejected (t, station), bounded by REANCHOR_FIXES
         self.reanchors = 0
 
+    def state(self) -> list:
+        """Everything this track remembers, as plain data (for a shared trip store); :meth:`restore` reads it back."""
+        return [self.last_t_unix_s, [list(p) for p in self._recent], [list(p) for p in self._jumped], self.reanchors]
+
+    def restore(self, state: list) -> None:
+        last_t, recent, jumped, self.reanchors = state
+        self.last_t_unix_s = last_t
+        self._recent.clear()
+        self._recent.extend((t, s) for t, s in recent)
+        self._jumped = [(t, s) for t, s in jumped]
+
     def implausible(self, t_unix_s: float, station_m: float) -> str | None:
         """Why an on-route fix at ``station_m`` cannot follow the track (a teleport), or None if it can.
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import re
 from collections.abc import Sequence
 
@@ -57,6 +58,23 @@ def warn_if_open(settings: Settings) -> None:
         )  # fmt: skip
 
 
+def app_from_env():
+    """The app of one worker process of ``ecodrive serve --workers N`` (uvicorn's factory): settings from the
+    environment, which every worker inherits."""
+    logging.basicConfig(level=os.environ.get("ECODRIVE_LOG_LEVEL", "info").upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    install_log_redaction()
+    return create_app(Settings())
+
+
+def __getattr__(name: str):
+    """``server.main:EnvProtocol``: the guarded HTTP protocol (``server.protocol``) with the environment's limits,
+    named by import string so that uvicorn's worker processes can build it."""
+    if name == "EnvProtocol":
+        s = Settings()
+        return protocol_class(s.read_timeout_s, s.max_connections, s.max_connections_per_client)
+    raise AttributeError(name)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="ecodrive serve",
@@ -64,6 +82,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1; 0.0.0.0 in a container)")
     parser.add_argument("--port", type=int, default=8000)
+    parser.add_argument("--workers", type=int, default=1, help="worker processes (default 1); more need ECO_STORE_URL (trips in Redis, shared by the workers)")
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     parser.add_argument("--ws", default="websockets-sansio", choices=["auto", "websockets", "websockets-sansio", "wsproto"], help="uvicorn WebSocket implementation")
     parser.add_argument("--no-access-log", action="store_true", help="do not log every request")
@@ -72,15 +91,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
     settings = Settings()
+    if args.workers < 1:
+        parser.error("--workers must be at least 1")
+    if args.workers > 1 and not settings.store_url:
+        parser.error("--workers > 1 needs ECO_STORE_URL=redis://host:6379/0: with trips in process memory each worker would hold only its own trips (docs/SERVICE.md, Scaling)")
     warn_if_open(settings)
-    app = create_app(settings)
-    config = uvicorn.Config(
-        app,
+    common = dict(
         host=args.host,
         port=args.port,
         log_level=args.log_level,
         access_log=not args.no_access_log,
-        http=protocol_class(settings.read_timeout_s, settings.max_connections, settings.max_connections_per_client),
         ws=args.ws,
         ws_max_size=settings.ws_max_message_bytes,
         ws_per_message_deflate=False,
@@ -89,8 +109,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         ssl_certfile=args.ssl_certfile,
         ssl_keyfile=args.ssl_keyfile,
     )
+    if args.workers > 1:  # uvicorn's supervisor: one listening socket, N processes, a dead one replaced
+        os.environ["ECODRIVE_LOG_LEVEL"] = args.log_level
+        config = uvicorn.Config("server.main:app_from_env", factory=True, workers=args.workers, http="server.main:EnvProtocol", **common)
+    else:
+        config = uvicorn.Config(create_app(settings), http=protocol_class(settings.read_timeout_s, settings.max_connections, settings.max_connections_per_client), **common)
     install_log_redaction()  # after uvicorn's Config has set up its loggers
-    uvicorn.Server(config).run()
+    if args.workers > 1:
+        from uvicorn.supervisors import Multiprocess
+
+        Multiprocess(config, sockets=[config.bind_socket()]).run()
+    else:
+        uvicorn.Server(config).run()
     return 0
 
 

@@ -41,6 +41,9 @@ log = logging.getLogger("server.spat")
 
 
 class TripSpat(Protocol):
+    shared: bool  # the process's shared SPaT (True) or a scenario of the trip's own
+    live: bool  # some light comes from a source (its score then uses the phases the trip observed)
+
     def readings(self, t_unix_s: float) -> dict[int, PlanReading]: ...
 
     def status(self, intersection_id: int) -> str: ...
@@ -151,6 +154,7 @@ class SharedSpat:
     """A trip's view of the hub: simulated lights from their fixed plans, the others from the store."""
 
     __slots__ = ("hub", "scenario", "_fixed", "_live")
+    shared = True  # rebuilt from the corridor and entry alone (server.trips.Trip.meta: timing None)
 
     def __init__(self, hub: SpatHub, scenario: FeedScenario) -> None:
         self.hub = hub
@@ -205,6 +209,8 @@ class ScenarioSpat:
     """A trip with its own ``timing`` (a paper scenario), simulated for it alone: always fresh."""
 
     __slots__ = ("scenario", "_fixed", "_clock")
+    shared = False
+    live = False  # never observed: the scenario's plans are the truth of its score
 
     def __init__(self, scenario: FeedScenario, clock: Clock = time.time) -> None:
         self.scenario = scenario

@@ -1,28 +1,29 @@
-"""Open trips, in memory: one car on one corridor, its token, fix history, advisor memory and last advice.
+"""A trip: one car on one corridor, its token, fix history, advisor memory and last advice.
 
 A trip's state only changes in :meth:`server.advising.Engine.on_fix`, after the fix has been validated,
 and in one synchronous step on the event loop, so a bad request never leaves a trip half-updated.
 Everything a trip records is plain data of bounded size (numbers, strings, lists of floats; the fix trace
-capped by ``max_trace_fixes``, observed phases by ``ObservedLights.MAX_RUNS``), so it can be serialised to
-a shared store.
+capped by ``max_trace_fixes``, observed phases by ``ObservedLights.MAX_RUNS``), so a shared store
+(``server.store``) holds it as three parts: :meth:`Trip.meta` (written once: what the trip was created
+with, from which any worker rebuilds its corridor, SPaT view and tables), :meth:`Trip.state` (rewritten
+per fix: track, advisor memory, last advice, counters) and the score samples (appended per fix).
 """
 
 from __future__ import annotations
 
-import hmac
+import hashlib
 import secrets
 import time
 import uuid
 from array import array
 from typing import TYPE_CHECKING
 
-from advisory.advice.advisor import AdvisorMemory
+from advisory.advice.advisor import Advice, AdvisorMemory
 from spat_feed.corridors import Corridor
 from spat_feed.scenarios import FeedScenario
 
 from spat_feed.plans import phase_class, state_at, state_start_s
 
-from server.errors import ApiError
 from server.gps import RouteMatcher, Track
 from server.ratelimit import TokenBucket
 
@@ -68,21 +69,26 @@ class ObservedLights:
 
 class Trip:
     """One car on one corridor. ``trace_*``: accepted on-route fixes with a speed, for the trip score
-    (stations along the route extended beyond its ends)."""
+    (stations along the route extended beyond its ends); with a shared store only those not yet written
+    there (``trace_base`` counts the written ones)."""
 
     __slots__ = (
-        "id", "token", "corridor", "matcher", "timing", "vehicle", "entry_unix_s", "created_unix_s", "scenario", "spat",
-        "track", "memory", "last", "bucket", "trace_t", "trace_v", "trace_x", "n_fixes", "last_seen_s", "tables",
-        "client", "units", "params", "observed", "n_rejected",
+        "id", "token", "token_hash", "corridor", "matcher", "timing", "vehicle", "entry_unix_s", "created_unix_s", "scenario", "spat",
+        "track", "memory", "last", "bucket", "trace_t", "trace_v", "trace_x", "trace_base", "n_fixes", "last_seen_s", "tables",
+        "client", "units", "params", "observed", "n_rejected", "version",
     )  # fmt: skip
 
     def __init__(
         self, corridor: Corridor, matcher: RouteMatcher, scenario: FeedScenario, spat: TripSpat, vehicle: str,
         created_unix_s: float, bucket: TokenBucket, dropout_s: float, tables=None, *, client: str = "", units: str = "metric",
-        params=None, observe_spat: bool = False, max_speed_mps: float = 50.0,
+        params=None, observe_spat: bool = False, max_speed_mps: float = 50.0, trip_id: str | None = None,
     ) -> None:  # fmt: skip
-        self.id = uuid.uuid4().hex
-        self.token = f"{self.id[:8]}.{secrets.token_urlsafe(24)}"
+        self.id = trip_id or uuid.uuid4().hex
+        self.token: str | None = None  # the bearer token, known only to the worker that created the trip
+        self.token_hash = b""  # what the stores keep (token_hash(token))
+        if trip_id is None:
+            self.token = f"{self.id[:8]}.{secrets.token_urlsafe(24)}"
+            self.token_hash = token_hash(self.token)
         self.corridor = corridor
         self.matcher = matcher
         self.scenario = scenario
@@ -98,6 +104,7 @@ class Trip:
         self.trace_t = array("d")
         self.trace_v = array("d")
         self.trace_x = array("d")
+        self.trace_base = 0
         self.n_fixes = 0
         self.last_seen_s = time.monotonic()
         self.tables = tables
@@ -106,79 +113,46 @@ class Trip:
         self.params = params  # the advisor's settings for this trip (units)
         self.observed = ObservedLights() if observe_spat else None  # live SPaT: what the trip saw, for its score
         self.n_rejected = 0  # fixes rejected as implausible (jumps)
+        self.version = 0  # a shared store's version of the state this object holds
+
+    @property
+    def n_trace(self) -> int:
+        """Score samples recorded so far (written to a store or pending)."""
+        return self.trace_base + len(self.trace_t)
+
+    def meta(self) -> dict:
+        """What the trip was created with (never changes): enough for any worker to rebuild it."""
+        u = self.scenario.uncertainty
+        return {"id": self.id, "corridor": self.corridor.name, "timing": None if self.spat.shared else self.timing, "entry_unix_s": self.entry_unix_s,
+                "uncertainty": [u.early_s, u.late_s, u.confidence_frac], "vehicle": self.vehicle, "created_unix_s": self.created_unix_s,
+                "client": self.client, "units": self.units, "observe_spat": self.observed is not None}  # fmt: skip
+
+    def state(self) -> dict:
+        """What a fix changes, as plain data of bounded size (the score samples apart)."""
+        m = self.memory
+        return {
+            "track": self.track.state(),
+            "memory": None if m is None else [_advice_dict(m.last), _advice_dict(m.spoken)],
+            "last": self.last, "n_fixes": self.n_fixes, "n_rejected": self.n_rejected, "n_trace": self.n_trace,
+            "observed": None if self.observed is None else [[ix, runs] for ix, runs in self.observed.runs.items()],
+        }  # fmt: skip
+
+    def restore(self, state: dict) -> None:
+        """Take :meth:`state` (of this trip, from a store) as this object's own; pending samples are dropped."""
+        self.track.restore(state["track"])
+        m = state["memory"]
+        self.memory = None if m is None else AdvisorMemory(*(None if a is None else Advice(**a) for a in m))
+        self.last, self.n_fixes, self.n_rejected = state["last"], state["n_fixes"], state["n_rejected"]
+        self.trace_base = state["n_trace"]
+        del self.trace_t[:], self.trace_v[:], self.trace_x[:]
+        if state["observed"] is not None and self.observed is not None:
+            self.observed.runs = {int(ix): runs for ix, runs in state["observed"]}
 
 
-class TripStore:
-    """Trips by id and by token. Tokens are random; comparing them is constant-time."""
+def token_hash(token: str) -> bytes:
+    """What a store keeps of a trip token: its SHA-256 (a leaked store gives no working token)."""
+    return hashlib.sha256(token.encode()).digest()
 
-    def __init__(self, max_trips: int, max_per_client: int = 0) -> None:
-        self.max_trips = max_trips
-        self.max_per_client = max_per_client
-        self._trips: dict[str, Trip] = {}
-        self._by_token: dict[str, str] = {}
-        self._per_client: dict[str, int] = {}
 
-    def __len__(self) -> int:
-        return len(self._trips)
-
-    def add(self, trip: Trip) -> None:
-        self.check_capacity(trip.client)
-        self._trips[trip.id] = trip
-        self._by_token[trip.token] = trip.id
-        self._per_client[trip.client] = self._per_client.get(trip.client, 0) + 1
-
-    def open_for(self, client: str) -> int:
-        return self._per_client.get(client, 0)
-
-    def check_capacity(self, client: str | None = None) -> None:
-        if client is not None and self.max_per_client and self._per_client.get(client, 0) >= self.max_per_client:
-            raise ApiError(429, "too_many_trips_for_client", f"this client already holds its maximum of {self.max_per_client} open trips; end one (POST /v1/trips/{{id}}/end) or wait for idle ones to expire",
-                           headers={"Retry-After": "60"})  # fmt: skip
-        if len(self._trips) >= self.max_trips:
-            raise ApiError(503, "too_many_trips", f"the service holds its maximum of {self.max_trips} open trips; end one or retry later",
-                           headers={"Retry-After": "30"})  # fmt: skip
-
-    @staticmethod
-    def touch(trip: Trip) -> None:
-        """The trip is in use (a request or a WebSocket message): it is not idle."""
-        trip.last_seen_s = time.monotonic()
-
-    def get(self, trip_id: str) -> Trip:
-        trip = self._trips.get(trip_id)
-        if trip is None:
-            raise ApiError(404, "unknown_trip", f"no open trip {trip_id!r} (never created, ended or expired)")
-        return trip
-
-    def authorize(self, trip_id: str, token: str | None) -> Trip:
-        """The trip if ``token`` is its token: 404 unknown trip, 401 no/invalid token, 403 another trip's token."""
-        trip = self.get(trip_id)
-        if not token:
-            raise ApiError(401, "unauthorized", "missing bearer token: send 'Authorization: Bearer <trip token>'",
-                           headers={"WWW-Authenticate": "Bearer"})  # fmt: skip
-        if hmac.compare_digest(token.encode(), trip.token.encode()):
-            trip.last_seen_s = time.monotonic()
-            return trip
-        if self._by_token.get(token) is not None:
-            raise ApiError(403, "forbidden", "this token belongs to another trip")
-        raise ApiError(401, "unauthorized", "invalid bearer token for this trip", headers={"WWW-Authenticate": "Bearer"})
-
-    def is_open(self, trip: Trip) -> bool:
-        return self._trips.get(trip.id) is trip
-
-    def pop(self, trip_id: str) -> Trip:
-        trip = self.get(trip_id)
-        del self._trips[trip_id]
-        self._by_token.pop(trip.token, None)
-        left = self._per_client.get(trip.client, 1) - 1
-        if left > 0:
-            self._per_client[trip.client] = left
-        else:
-            self._per_client.pop(trip.client, None)
-        return trip
-
-    def idle(self, ttl_s: float, now_s: float | None = None) -> list[str]:
-        now = time.monotonic() if now_s is None else now_s
-        return [tid for tid, trip in self._trips.items() if now - trip.last_seen_s > ttl_s]
-
-    def all(self) -> list[Trip]:
-        return list(self._trips.values())
+def _advice_dict(advice: Advice | None) -> dict | None:
+    return None if advice is None else advice.as_dict()

@@ -64,3 +64,55 @@ class Proc:
             self.proc.kill()
             self.proc.wait(timeout=10)
         self.proc = None
+
+
+def redis_server_path() -> str | None:
+    """``redis-server``, installed by ``scripts/system-deps.sh`` (apt-get, as root) when missing; None if it cannot be."""
+    import shutil
+
+    if shutil.which("redis-server") is None:
+        subprocess.run(["sh", str(REPO / "scripts" / "system-deps.sh")], capture_output=True, timeout=900)
+    return shutil.which("redis-server")
+
+
+@dataclass
+class RedisServer:
+    """A real ``redis-server`` on a free loopback port with its files in ``folder`` (append-only file on, fsync per
+    write by default: a killed and restarted server keeps what it acknowledged; ``everysec`` as deployed)."""
+
+    folder: Path
+    port: int = field(default_factory=free_port)
+    fsync: str = "always"
+    proc: subprocess.Popen | None = None
+
+    @property
+    def url(self) -> str:
+        return f"redis://127.0.0.1:{self.port}/0"
+
+    def start(self) -> RedisServer:
+        exe = redis_server_path()
+        if exe is None:
+            raise FileNotFoundError("redis-server")
+        args = [exe, "--port", str(self.port), "--bind", "127.0.0.1", "--dir", str(self.folder), "--save", "", "--appendonly", "yes",
+                "--appendfsync", self.fsync, "--logfile", str(self.folder / "redis.log")]  # fmt: skip
+        self.proc = subprocess.Popen(args, cwd=self.folder, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+        import redis
+
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"redis-server exited with {self.proc.returncode}: {(self.folder / 'redis.log').read_text()}")
+            try:
+                with redis.Redis(port=self.port, socket_timeout=1) as r:
+                    if r.ping():
+                        return self
+            except (redis.ConnectionError, redis.TimeoutError, redis.BusyLoadingError):
+                time.sleep(0.02)
+        self.kill()
+        raise RuntimeError("redis-server did not answer PING")
+
+    def kill(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(timeout=10)
+        self.proc = None

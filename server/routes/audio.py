@@ -20,7 +20,6 @@ router = APIRouter(prefix="/v1/trips", tags=["audio"])
 )
 async def advice_audio(trip: TripDep, engine: EngineDep, speech: SpeechDep) -> Response:
     """The latest advisory's message as a WAV file (espeak-ng via pyttsx3); 503 without a speech engine."""
-    engine.rate_limit(trip)
     text = engine.latest(trip)["message"] or "No advice."
     try:
         data = await speech.wav(text)

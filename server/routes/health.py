@@ -20,7 +20,7 @@ async def health(engine: EngineDep, settings: SettingsDep, speech: SpeechDep) ->
     return HealthOut(
         status=spat["status"],
         now_unix_s=time.time(),
-        trips=len(engine.trips),
+        trips=await engine.trips.count(),
         spat=spat["source"],
         spat_health=SpatHealthOut.model_validate({k: v for k, v in spat.items() if k != "status"}),
         tables=sorted(engine.tables),

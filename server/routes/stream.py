@@ -17,6 +17,7 @@ from pydantic import ValidationError
 from pydantic_core import to_json
 
 from server.advising import fix_from_schema
+from server.gps import Fix
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
 from server.errors import ApiError, clean_errors, validation_summary
 from server.schemas import GpsFixIn
@@ -25,27 +26,42 @@ router = APIRouter(prefix="/v1/trips", tags=["stream"])
 
 
 class StreamCounts:
-    """Open streams per trip and per client address (bounded: entries leave at zero)."""
+    """Open streams per trip and per client address in this process (bounded: entries leave at zero); with
+    a shared trip store, ``server.store.RedisStreams`` counts them across workers (same calls)."""
 
     def __init__(self) -> None:
         self.by_trip: dict[str, int] = {}
         self.by_client: dict[str, int] = {}
 
-    def open(self, trip_id: str, client: str, per_trip: int, per_client: int) -> None:
+    async def open(self, trip_id: str, client: str, per_trip: int, per_client: int) -> tuple[str, str]:
         if self.by_trip.get(trip_id, 0) >= per_trip:
             raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
         if per_client and self.by_client.get(client, 0) >= per_client:
             raise ApiError(429, "too_many_streams", f"this client address already has {per_client} open streams")
         self.by_trip[trip_id] = self.by_trip.get(trip_id, 0) + 1
         self.by_client[client] = self.by_client.get(client, 0) + 1
+        return trip_id, client
 
-    def close(self, trip_id: str, client: str) -> None:
+    async def renew(self, handle: tuple[str, str]) -> None:
+        return None
+
+    async def close(self, handle: tuple[str, str]) -> None:
+        trip_id, client = handle
         for table, key in ((self.by_trip, trip_id), (self.by_client, client)):
             left = table.get(key, 1) - 1
             if left > 0:
                 table[key] = left
             else:
                 table.pop(key, None)
+
+
+def _parse(text: str) -> Fix:
+    try:
+        return fix_from_schema(GpsFixIn.model_validate_json(text))
+    except ValidationError as exc:
+        errors = clean_errors(exc.errors())
+        kind = "malformed_json" if any(e["type"] == "json_invalid" for e in errors) else "validation_error"
+        raise ApiError(422, kind, validation_summary(errors), detail=errors) from None
 
 
 def _error(exc: ApiError) -> str:
@@ -55,11 +71,12 @@ def _error(exc: ApiError) -> str:
 @router.websocket("/{trip_id}/stream")
 async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: MetricsDep, settings: SettingsDep) -> None:
     await ws.accept()
-    counts: StreamCounts = ws.app.state.streams
+    counts: StreamCounts = ws.app.state.streams  # or server.store.RedisStreams
     client = client_address(ws)
+    token = bearer_token(ws, allow_query=True)
     try:
-        trip = engine.trips.authorize(trip_id, bearer_token(ws, allow_query=True))
-        counts.open(trip.id, client, settings.ws_max_per_trip, settings.ws_max_per_client)
+        trip = await engine.trips.authorize(trip_id, token)
+        handle = await counts.open(trip.id, client, settings.ws_max_per_trip, settings.ws_max_per_client)
     except ApiError as exc:
         await ws.send_text(_error(exc))
         await ws.close(code=4000 + exc.status, reason=exc.error)
@@ -71,24 +88,16 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
             message = await ws.receive()
             if message["type"] == "websocket.disconnect":
                 break
-            engine.trips.touch(trip)
             text = message.get("text")
             if text is None:
                 data = message.get("bytes") or b""
                 text = data.decode("utf-8", errors="replace")
             try:
+                await counts.renew(handle)
                 if len(text) > limit:
+                    await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
                     raise ApiError(413, "payload_too_large", f"message larger than {limit} bytes")
-                if not engine.trips.is_open(trip):
-                    raise ApiError(404, "unknown_trip", "the trip has ended")
-                try:
-                    fix = GpsFixIn.model_validate_json(text)
-                except ValidationError as exc:
-                    errors = clean_errors(exc.errors())
-                    kind = "malformed_json" if any(e["type"] == "json_invalid" for e in errors) else "validation_error"
-                    raise ApiError(422, kind, validation_summary(errors), detail=errors) from None
-                engine.rate_limit(trip)
-                out = engine.on_fix(trip, fix_from_schema(fix))
+                out = await engine.apply_fix(trip_id, token, lambda: _parse(text))
                 await ws.send_text(to_json(out).decode())
             except ApiError as exc:
                 await ws.send_text(_error(exc))
@@ -98,5 +107,5 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
     except WebSocketDisconnect:
         pass
     finally:
-        counts.close(trip.id, client)
+        await counts.close(handle)
         metrics.ws_open.dec()

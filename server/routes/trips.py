@@ -12,7 +12,8 @@ from pydantic_core import to_json
 from fastapi.concurrency import run_in_threadpool
 
 from server.advising import Engine, fix_from_schema
-from server.deps import ApiKeyDep, EngineDep, MetricsDep, TripDep, TripId, bearer_token
+from server.gps import Fix
+from server.deps import ApiKeyDep, EngineDep, MetricsDep, TripDep, TripId, TripToEndDep, bearer_token
 from server.schemas import AdviceOut, ErrorOut, GpsFixIn, TripCreate, TripCreated, TripLinks, TripOut, TripScoreOut
 from server.trips import Trip
 from server.score import trip_score
@@ -55,7 +56,6 @@ async def create_trip(body: TripCreate, engine: EngineDep, metrics: MetricsDep, 
 @router.get("/{trip_id}", response_model=TripOut, responses=ERRORS)
 async def get_trip(trip: TripDep, engine: EngineDep) -> TripOut:
     """The trip: its corridor, timing, vehicle, units, entry and fixes so far."""
-    engine.rate_limit(trip)
     return TripOut(**_trip_out(trip, engine))
 
 
@@ -84,18 +84,20 @@ async def post_fix(trip_id: TripId, request: Request) -> Response:
     says so and the latest advisory is returned.
     \f
     The hot path (a :class:`DirectRoute`): the token is checked first (401 / 403 / 404, as for every trip
-    route), then the body is validated by pydantic straight from the raw bytes (422 with the same error shape
-    as FastAPI's), then the fix goes inline on the event loop (well under a millisecond of pure computation,
-    cheaper than a thread hop).
+    route, then the rate limit, 429), then the body is validated by pydantic straight from the raw bytes (422
+    with the same error shape as FastAPI's), then the fix goes inline on the event loop (well under a
+    millisecond of pure computation, cheaper than a thread hop) and the trip is saved to its store.
     """
     engine: Engine = request.app.state.engine
-    trip = engine.trips.authorize(trip_id, bearer_token(request))
-    try:
-        fix = GpsFixIn.model_validate_json(await _body(request))
-    except ValidationError as exc:
-        raise RequestValidationError([{**e, "loc": ("body", *e["loc"])} for e in exc.errors(include_url=False)]) from None
-    engine.rate_limit(trip)
-    return _json(engine.on_fix(trip, fix_from_schema(fix)))
+    body = await _body(request)
+
+    def parse() -> Fix:
+        try:
+            return fix_from_schema(GpsFixIn.model_validate_json(body))
+        except ValidationError as exc:
+            raise RequestValidationError([{**e, "loc": ("body", *e["loc"])} for e in exc.errors(include_url=False)]) from None
+
+    return _json(await engine.apply_fix(trip_id, bearer_token(request), parse))
 
 
 async def _body(request: Request) -> bytes:
@@ -121,28 +123,26 @@ def _json(out: dict) -> Response:
 @router.get("/{trip_id}/advice", response_model=AdviceOut, responses=ERRORS)
 async def get_advice(trip: TripDep, engine: EngineDep) -> Response:
     """The latest advisory (for polling clients)."""
-    engine.rate_limit(trip)
     return _json(engine.latest(trip))
 
 
 @router.get("/{trip_id}/spat", responses=ERRORS)
 async def get_spat(trip: TripDep, engine: EngineDep) -> dict:
     """The trip's current SPaT message (J2735-aligned JSON, see docs/SPAT.md)."""
-    engine.rate_limit(trip)
     return trip.spat.message()
 
 
 @router.post("/{trip_id}/end", response_model=TripScoreOut, responses=ERRORS)
-async def end_trip(trip: TripDep, engine: EngineDep, metrics: MetricsDep) -> TripScoreOut:
+async def end_trip(trip: TripToEndDep, engine: EngineDep, metrics: MetricsDep) -> TripScoreOut:
     """End the trip (its token stops working) and score it: energy, wear and cost, against the regular driver."""
-    trip = await engine.end_trip(trip.id)
+    trip, samples = await engine.end_trip(trip)
     metrics.trips_closed.labels("ended").inc()
-    return await run_in_threadpool(score_of, trip, engine.settings.speed_limit_mps)
+    return await run_in_threadpool(score_of, trip, samples, engine.settings.speed_limit_mps)
 
 
-def score_of(trip: Trip, speed_limit_mps: float) -> TripScoreOut:
-    """The ended trip's score (``server.score.trip_score``) from what it recorded."""
-    t, v, x = (np.frombuffer(a, dtype=np.float64).copy() for a in (trip.trace_t, trip.trace_v, trip.trace_x))
+def score_of(trip: Trip, samples: tuple[np.ndarray, np.ndarray, np.ndarray], speed_limit_mps: float) -> TripScoreOut:
+    """The ended trip's score (``server.score.trip_score``) from what it recorded: ``samples`` = (t, v, x)."""
+    t, v, x = samples
     notes = []
     if trip.n_rejected:
         notes.append(f"{trip.n_rejected} fix(es) ignored as implausible jumps")

@@ -1,0 +1,648 @@
+"""Where open trips live: in this process (:class:`MemoryTrips`, the default) or in Redis (:class:`RedisTrips`,
+``ECO_STORE_URL=redis://host:6379/0``), shared by any number of workers.
+
+Both answer the same calls, all ``async``:
+
+* ``admit(client)``: may this client create a trip now? The per-client and service-wide creation buckets
+  and the open-trip caps (per client, in all); 429 / 503 with ``Retry-After`` otherwise.
+* ``add(trip)``: the new trip is open (the caps checked again, atomically).
+* ``authorize(trip_id, token, take)``: the trip if ``token`` is its token (404 unknown or expired, 401, 403),
+  its idle clock reset; ``take``: one token of the trip's request bucket too (429 when empty).
+* ``save(trip)``: after :meth:`server.advising.Engine.on_fix`, the new state and the new score samples
+  (False: another worker changed the trip meanwhile; reload and apply again). With Redis, ``for_fix`` gives
+  the trip a fix applies to (this worker's copy when it has one) and ``save`` also checks the token, takes
+  the bucket's token and resets the idle clock: a fix on a trip this worker served last is one round trip.
+* ``samples(trip)``: the trip's score samples ``(t, v, x)``; ``remove(trip_id)``: the trip is ended.
+
+**Redis layout** (prefix ``ECO_STORE_PREFIX``, default ``eco``), every key expiring ``trip_idle_ttl_s`` after
+the trip's last request:
+
+* ``eco:t:<id>``, a hash: ``meta`` (JSON, written once: corridor, timing, entry time, vehicle, units, client;
+  any worker rebuilds the trip and its SPaT view from it), ``state`` (JSON, rewritten per fix, ~1-2 kB:
+  track, advisor memory, last advice, counters), ``v`` (version, +1 per write), ``tok`` (SHA-256 of the
+  token), ``client``, ``bt``/``bs`` (the trip's request bucket: tokens, stamp);
+* ``eco:t:<id>:tr``: the score samples, 24 bytes per accepted fix (``t, v, x`` as little-endian doubles)
+  appended per fix, at most ``max_trace_fixes`` of them;
+* ``eco:k:<token hash>`` -> id (tells "another trip's token", 403, from an invalid one, 401);
+* ``eco:open`` and ``eco:c:<client>``: sorted sets of open trips by last request (the caps; members idle
+  longer than the TTL are dropped when counted);
+* ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets;
+* ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`RedisStreams`, leases).
+
+Each call is one round trip (a Lua script, atomic in Redis). A worker keeps the trips it served in a small
+cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
+version it was computed from (one round trip); a trip not cached, or whose version moved (another worker
+served it), is read first (two). Within a worker, fixes of one trip are serialised (:meth:`RedisTrips.hold`);
+across workers a write carries the version it was computed from, and if the trip moved meanwhile it is
+refused and the current state comes back instead, on which the fix is applied again (``save``).
+A fix is accepted (answered 200) only once Redis has it: a worker killed at any instant loses no accepted
+fix. Redis unreachable: 503 ``store_unavailable`` with ``Retry-After`` (never 404: the trip is not gone).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+import logging
+import math
+import time
+import uuid
+from collections.abc import AsyncIterator, Awaitable, Callable
+
+import numpy as np
+from pydantic_core import from_json, to_json
+
+from server.config import Settings
+from server.errors import ApiError
+from server.ratelimit import KeyedBuckets, TokenBucket
+from server.trips import Trip, token_hash
+
+log = logging.getLogger("server")
+
+RETRY_AFTER_S = 1
+"""What a phone is told to wait when the store is unreachable or a trip is busy. [s]"""
+
+
+def retry_after(wait_s: float) -> tuple[int, dict[str, str]]:
+    """Whole seconds to wait (HTTP's Retry-After is an integer, never 0) and the header saying so."""
+    seconds = max(1, math.ceil(wait_s))
+    return seconds, {"Retry-After": str(seconds)}
+
+
+class Limits:
+    """The errors of the limits, worded once for both stores (``s``: the settings)."""
+
+    def __init__(self, s: Settings, on_rate_limited: Callable[[], None] | None = None) -> None:
+        self.s = s
+        self.on_rate_limited = on_rate_limited
+
+    def trip_rate(self, wait_s: float) -> ApiError:
+        if self.on_rate_limited is not None:
+            self.on_rate_limited()
+        seconds, headers = retry_after(wait_s)
+        return ApiError(429, "rate_limited", f"too many requests for this trip (limit {self.s.rate_per_s:g}/s, burst {self.s.rate_burst:g}); retry in {seconds} s", headers=headers)
+
+    def client_rate(self, wait_s: float) -> ApiError:
+        seconds, headers = retry_after(wait_s)
+        return ApiError(429, "rate_limited", f"this client creates trips too fast (limit {self.s.create_rate_per_client_per_s:g}/s, burst {self.s.create_burst_per_client:g}); retry in {seconds} s", headers=headers)
+
+    def create_rate(self, wait_s: float) -> ApiError:
+        seconds, headers = retry_after(wait_s)
+        return ApiError(429, "rate_limited", f"too many trips created service-wide; retry in {seconds} s", headers=headers)
+
+    def client_full(self) -> ApiError:
+        return ApiError(429, "too_many_trips_for_client", f"this client already holds its maximum of {self.s.max_trips_per_client} open trips; end one (POST /v1/trips/{{id}}/end) or wait for idle ones to expire",
+                        headers={"Retry-After": "60"})  # fmt: skip
+
+    def service_full(self) -> ApiError:
+        return ApiError(503, "too_many_trips", f"the service holds its maximum of {self.s.max_trips} open trips; end one or retry later", headers={"Retry-After": "30"})
+
+
+def unknown_trip(trip_id: str) -> ApiError:
+    return ApiError(404, "unknown_trip", f"no open trip {trip_id!r} (never created, ended or expired)")
+
+
+def no_token() -> ApiError:
+    return ApiError(401, "unauthorized", "missing bearer token: send 'Authorization: Bearer <trip token>'", headers={"WWW-Authenticate": "Bearer"})
+
+
+def bad_token(other_trip: bool) -> ApiError:
+    if other_trip:
+        return ApiError(403, "forbidden", "this token belongs to another trip")
+    return ApiError(401, "unauthorized", "invalid bearer token for this trip", headers={"WWW-Authenticate": "Bearer"})
+
+
+class MemoryTrips:
+    """Trips in this process, by id and by token hash: the embedded default (one worker; a restart loses them)."""
+
+    shared = False
+
+    def __init__(self, settings: Settings, limits: Limits) -> None:
+        self.limits = limits
+        self.max_trips = settings.max_trips
+        self.max_per_client = settings.max_trips_per_client
+        self._trips: dict[str, Trip] = {}
+        self._by_token: dict[bytes, str] = {}
+        self._per_client: dict[str, int] = {}
+        self.create_bucket = TokenBucket(settings.create_rate_per_s, settings.create_burst)
+        self.client_buckets = KeyedBuckets(settings.create_rate_per_client_per_s, settings.create_burst_per_client)
+
+    def __len__(self) -> int:
+        return len(self._trips)
+
+    async def count(self) -> int:
+        return len(self._trips)
+
+    def _check_capacity(self, client: str) -> None:
+        if self.max_per_client and self._per_client.get(client, 0) >= self.max_per_client:
+            raise self.limits.client_full()
+        if len(self._trips) >= self.max_trips:
+            raise self.limits.service_full()
+
+    async def admit(self, client: str) -> None:
+        if wait_s := self.client_buckets.take(client):
+            raise self.limits.client_rate(wait_s)
+        self._check_capacity(client)
+        if wait_s := self.create_bucket.take():
+            raise self.limits.create_rate(wait_s)
+
+    async def add(self, trip: Trip) -> None:
+        self._check_capacity(trip.client)
+        self._trips[trip.id] = trip
+        self._by_token[trip.token_hash] = trip.id
+        self._per_client[trip.client] = self._per_client.get(trip.client, 0) + 1
+
+    def get(self, trip_id: str) -> Trip:
+        trip = self._trips.get(trip_id)
+        if trip is None:
+            raise unknown_trip(trip_id)
+        return trip
+
+    async def authorize(self, trip_id: str, token: str | None, take: bool = False) -> Trip:
+        trip = self.get(trip_id)
+        if not token:
+            raise no_token()
+        digest = token_hash(token)
+        if not hmac.compare_digest(digest, trip.token_hash):
+            raise bad_token(self._by_token.get(digest) is not None)
+        trip.last_seen_s = time.monotonic()
+        if take and (wait_s := trip.bucket.take()):
+            raise self.limits.trip_rate(wait_s)
+        return trip
+
+    async def save(self, trip: Trip, take: bool = False) -> bool:
+        return True  # the trip object is the stored trip (Engine.apply_fix does not call this: on_fix is one step)
+
+    async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return tuple(np.frombuffer(a, dtype=np.float64).copy() for a in (trip.trace_t, trip.trace_v, trip.trace_x))  # type: ignore[return-value]
+
+    async def remove(self, trip_id: str) -> Trip:
+        trip = self.get(trip_id)
+        del self._trips[trip_id]
+        self._by_token.pop(trip.token_hash, None)
+        left = self._per_client.get(trip.client, 1) - 1
+        if left > 0:
+            self._per_client[trip.client] = left
+        else:
+            self._per_client.pop(trip.client, None)
+        return trip
+
+    def idle(self, ttl_s: float, now_s: float | None = None) -> list[str]:
+        now = time.monotonic() if now_s is None else now_s
+        return [tid for tid, trip in self._trips.items() if now - trip.last_seen_s > ttl_s]
+
+    async def sweep(self, ttl_s: float) -> list[Trip]:
+        """Remove and return the trips idle longer than ``ttl_s`` (the caller closes their SPaT)."""
+        out = []
+        for trip_id in self.idle(ttl_s):
+            with contextlib.suppress(ApiError):
+                out.append(await self.remove(trip_id))
+        return out
+
+    async def close(self) -> None:
+        return None
+
+
+# -- Redis ------------------------------------------------------------------------------------------------
+_TAKE = """
+local function take(key, fn, fs, rate, burst, now)
+  local b = redis.call('HMGET', key, fn, fs)
+  local n = tonumber(b[1]) or burst
+  local s = tonumber(b[2]) or now
+  n = math.min(burst, n + math.max(0, now - s) * rate)
+  local wait = 0
+  if n >= 1 then n = n - 1 else wait = (1 - n) / rate end
+  redis.call('HSET', key, fn, string.format('%.17g', n), fs, string.format('%.17g', now))
+  return wait
+end
+local function count(key, oldest)
+  redis.call('ZREMRANGEBYSCORE', key, '-inf', '(' .. oldest)
+  return redis.call('ZCARD', key)
+end
+"""
+
+# KEYS: open, client zset, client bucket, create bucket. ARGV: now, ttl_s, max_trips, max_per_client,
+# client rate, client burst, create rate, create burst.
+# -> {0} admitted, {1, wait} client rate, {2} client full, {3} service full, {4, wait} service rate
+_ADMIT = _TAKE + """
+local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
+local wait = take(KEYS[3], 'n', 's', tonumber(ARGV[5]), tonumber(ARGV[6]), now)
+redis.call('PEXPIRE', KEYS[3], math.ceil(1000 * (tonumber(ARGV[6]) / tonumber(ARGV[5]) + 1)))
+if wait > 0 then return {1, tostring(wait)} end
+if tonumber(ARGV[4]) > 0 and count(KEYS[2], now - ttl) >= tonumber(ARGV[4]) then return {2} end
+if count(KEYS[1], now - ttl) >= tonumber(ARGV[3]) then return {3} end
+wait = take(KEYS[4], 'n', 's', tonumber(ARGV[7]), tonumber(ARGV[8]), now)
+redis.call('PEXPIRE', KEYS[4], math.ceil(1000 * (tonumber(ARGV[8]) / tonumber(ARGV[7]) + 1)))
+if wait > 0 then return {4, tostring(wait)} end
+return {0}
+"""
+
+# KEYS: trip, open, client zset, token key. ARGV: now, ttl_s, max_trips, max_per_client, id, token hash,
+# client, burst, meta, state. -> 0 added, 2 client full, 3 service full
+_ADD = _TAKE + """
+local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
+if tonumber(ARGV[4]) > 0 and count(KEYS[3], now - ttl) >= tonumber(ARGV[4]) then return 2 end
+if count(KEYS[2], now - ttl) >= tonumber(ARGV[3]) then return 3 end
+local ms = math.ceil(ttl * 1000)
+redis.call('HSET', KEYS[1], 'v', '1', 'tok', ARGV[6], 'client', ARGV[7], 'bt', ARGV[8], 'bs', ARGV[1], 'meta', ARGV[9], 'state', ARGV[10])
+redis.call('PEXPIRE', KEYS[1], ms)
+redis.call('SET', KEYS[4], ARGV[5], 'PX', ms)
+redis.call('ZADD', KEYS[2], now, ARGV[5])
+redis.call('ZADD', KEYS[3], now, ARGV[5])
+redis.call('PEXPIRE', KEYS[3], ms)
+return 0
+"""
+
+_TOUCH = """
+local function touch(key, tok, client, ttl_s, now, p, id)
+  local ms = math.ceil(ttl_s * 1000)
+  redis.call('PEXPIRE', key, ms)
+  redis.call('PEXPIRE', key .. ':tr', ms)
+  redis.call('PEXPIRE', p .. ':k:' .. tok, ms)
+  redis.call('ZADD', p .. ':open', now, id)
+  redis.call('ZADD', p .. ':c:' .. client, now, id)
+  redis.call('PEXPIRE', p .. ':c:' .. client, ms)
+end
+"""
+
+# KEYS: trip. ARGV: token hash, version held ('' none), meta wanted (0/1), take (0/1), now, rate, burst,
+# ttl_s, prefix, id.
+# -> {0} unknown, {1} bad token, {2} another trip's token, {3, wait} rate limited,
+#    {4, version, state or nil, meta or nil}
+_LOAD = _TAKE + _TOUCH + """
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client')
+if not h[1] then return {0} end
+local p = ARGV[9]
+if h[2] ~= ARGV[1] then
+  if redis.call('EXISTS', p .. ':k:' .. ARGV[1]) == 1 then return {2} end
+  return {1}
+end
+local now = tonumber(ARGV[5])
+touch(KEYS[1], h[2], h[3], tonumber(ARGV[8]), now, p, ARGV[10])
+if ARGV[4] == '1' then
+  local wait = take(KEYS[1], 'bt', 'bs', tonumber(ARGV[6]), tonumber(ARGV[7]), now)
+  if wait > 0 then return {3, tostring(wait)} end
+end
+local state, meta = false, false
+if h[1] ~= ARGV[2] then state = redis.call('HGET', KEYS[1], 'state') end
+if ARGV[3] == '1' then meta = redis.call('HGET', KEYS[1], 'meta') end
+return {4, h[1], state, meta}
+"""
+
+# KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), ttl_s, token hash, take (0/1),
+# now, rate, burst, prefix, id. The trip's token is checked, its idle clock reset, a token of its bucket
+# taken (when asked), then the state written if the trip is still at the version it was computed from.
+# -> {new version}, {0, version, state} the trip moved meanwhile, {-1} gone, {-2} not its token, {-3, wait} rate limited
+_SAVE = _TAKE + _TOUCH + """
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client')
+if not h[1] then return {-1} end
+if h[2] ~= ARGV[5] then return {-2} end
+local now = tonumber(ARGV[7])
+touch(KEYS[1], h[2], h[3], tonumber(ARGV[4]), now, ARGV[10], ARGV[11])
+if ARGV[6] == '1' then
+  local wait = take(KEYS[1], 'bt', 'bs', tonumber(ARGV[8]), tonumber(ARGV[9]), now)
+  if wait > 0 then return {-3, tostring(wait)} end
+end
+if h[1] ~= ARGV[1] then return {0, h[1], redis.call('HGET', KEYS[1], 'state')} end
+local nv = tonumber(h[1]) + 1
+redis.call('HSET', KEYS[1], 'v', tostring(nv), 'state', ARGV[2])
+if #ARGV[3] > 0 then
+  redis.call('APPEND', KEYS[2], ARGV[3])
+  redis.call('PEXPIRE', KEYS[2], math.ceil(tonumber(ARGV[4]) * 1000))
+end
+return {nv}
+"""
+
+# KEYS: trip, samples. ARGV: prefix, id. -> 1 removed, 0 already gone
+_REMOVE = """
+local h = redis.call('HMGET', KEYS[1], 'tok', 'client')
+if not h[1] then return 0 end
+local p = ARGV[1]
+redis.call('DEL', KEYS[1], KEYS[2], p .. ':k:' .. h[1])
+redis.call('ZREM', p .. ':open', ARGV[2])
+redis.call('ZREM', p .. ':c:' .. h[2], ARGV[2])
+return 1
+"""
+
+SAMPLE = np.dtype("<f8")
+"""A score sample's fields (t, v, x) as stored: little-endian doubles, 24 bytes a fix."""
+
+
+def _json(data) -> bytes:
+    return to_json(data, inf_nan_mode="constants")  # advisories may hold infinite seconds
+
+
+class RedisTrips:
+    """Trips in Redis, shared by every worker (see the module docstring). ``build(meta)`` makes a trip from its
+    meta (``Engine.trip_from_meta``); ``release(trip)`` closes what a cached trip holds (its SPaT view)."""
+
+    shared = True
+    CACHE_IDLE_S = 120.0
+    """A worker forgets a trip it has not served for this long (the trip stays in Redis). [s]"""
+
+    def __init__(
+        self, settings: Settings, limits: Limits, build: Callable[[dict], Awaitable[Trip]],
+        release: Callable[[Trip], Awaitable[None]] | None = None, clock: Callable[[], float] = time.time, client=None,
+    ) -> None:  # fmt: skip
+        import redis.asyncio as aioredis
+
+        self.s = settings
+        self.limits = limits
+        self.build = build
+        self.release = release
+        self.clock = clock
+        self.p = settings.store_prefix
+        # a connection per concurrent call, up to store_max_connections (redis-py's blocking pool, which makes
+        # calls wait for a free connection, starved some waiters for seconds under 200 concurrent trips)
+        self.redis = client or aioredis.Redis.from_url(
+            settings.store_url, socket_timeout=settings.store_timeout_s, socket_connect_timeout=settings.store_timeout_s,
+            health_check_interval=30, max_connections=settings.store_max_connections,
+        )  # fmt: skip
+        self._admit = self.redis.register_script(_ADMIT)
+        self._add = self.redis.register_script(_ADD)
+        self._load = self.redis.register_script(_LOAD)
+        self._save = self.redis.register_script(_SAVE)
+        self._remove = self.redis.register_script(_REMOVE)
+        self._cache: dict[str, tuple[Trip, float]] = {}  # id -> (trip, last used, monotonic)
+        self._locks: dict[str, list] = {}  # id -> [lock, holders and waiters]
+        self._count = 0
+
+    def __len__(self) -> int:
+        return self._count  # as of the last count() (health, sweep)
+
+    def _key(self, trip_id: str) -> str:
+        return f"{self.p}:t:{trip_id}"
+
+    @contextlib.asynccontextmanager
+    async def _reach(self) -> AsyncIterator[None]:
+        """Redis errors as 503 (the trip is not gone: retry)."""
+        from redis.exceptions import ConnectionError, TimeoutError, BusyLoadingError
+
+        try:
+            yield
+        except (ConnectionError, TimeoutError, BusyLoadingError, OSError) as exc:
+            log.warning("trip store unreachable: %r", exc)
+            raise ApiError(503, "store_unavailable", f"the trip store is unreachable ({type(exc).__name__}); the trip is kept: retry in {RETRY_AFTER_S} s",
+                           headers={"Retry-After": str(RETRY_AFTER_S)}) from None  # fmt: skip
+
+    async def count(self) -> int:
+        async with self._reach():
+            await self.redis.zremrangebyscore(f"{self.p}:open", "-inf", f"({self.clock() - self.s.trip_idle_ttl_s}")
+            self._count = int(await self.redis.zcard(f"{self.p}:open"))
+        return self._count
+
+    async def admit(self, client: str) -> None:
+        s = self.s
+        async with self._reach():
+            r = await self._admit(
+                keys=[f"{self.p}:open", f"{self.p}:c:{client}", f"{self.p}:rl:c:{client}", f"{self.p}:rl:create"],
+                args=[repr(self.clock()), s.trip_idle_ttl_s, s.max_trips, s.max_trips_per_client, s.create_rate_per_client_per_s,
+                      s.create_burst_per_client, s.create_rate_per_s, s.create_burst],
+            )  # fmt: skip
+        code = int(r[0])
+        if code == 1:
+            raise self.limits.client_rate(float(r[1]))
+        if code == 2:
+            raise self.limits.client_full()
+        if code == 3:
+            raise self.limits.service_full()
+        if code == 4:
+            raise self.limits.create_rate(float(r[1]))
+
+    async def add(self, trip: Trip) -> None:
+        s = self.s
+        async with self._reach():
+            code = await self._add(
+                keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash],
+                args=[repr(self.clock()), s.trip_idle_ttl_s, s.max_trips, s.max_trips_per_client, trip.id, trip.token_hash, trip.client,
+                      s.rate_burst, _json(trip.meta()), _json(trip.state())],
+            )  # fmt: skip
+        if code == 2:
+            raise self.limits.client_full()
+        if code == 3:
+            raise self.limits.service_full()
+        trip.version = 1
+        self._cache[trip.id] = (trip, time.monotonic())
+
+    @contextlib.asynccontextmanager
+    async def hold(self, trip_id: str) -> AsyncIterator[None]:
+        """Serialise this worker's calls on one trip (load, apply, save)."""
+        entry = self._locks.get(trip_id)
+        if entry is None:
+            entry = self._locks[trip_id] = [asyncio.Lock(), 0]
+        entry[1] += 1
+        try:
+            async with entry[0]:
+                yield
+        finally:
+            entry[1] -= 1
+            if not entry[1]:
+                del self._locks[trip_id]
+
+    async def authorize(self, trip_id: str, token: str | None, take: bool = False) -> Trip:
+        if not token:
+            if self._cache.get(trip_id) is None and not await self._exists(trip_id):
+                raise unknown_trip(trip_id)
+            raise no_token()
+        s = self.s
+        cached = self._cache.get(trip_id)
+        trip = cached[0] if cached is not None else None
+        digest = token_hash(token)
+        async with self._reach():
+            r = await self._load(
+                keys=[self._key(trip_id)],
+                args=[digest, "" if trip is None else str(trip.version), 0 if trip is not None else 1, 1 if take else 0, repr(self.clock()),
+                      s.rate_per_s, s.rate_burst, s.trip_idle_ttl_s, self.p, trip_id],
+            )  # fmt: skip
+        code = int(r[0])
+        if code == 0:
+            self._forget(trip_id)
+            raise unknown_trip(trip_id)
+        if code in (1, 2):
+            raise bad_token(code == 2)
+        if code == 3:
+            raise self.limits.trip_rate(float(r[1]))
+        version, state, meta = int(r[1]), r[2], r[3]
+        if trip is None:
+            trip = await self.build(from_json(meta))
+            trip.token_hash = digest
+        if state is not None:
+            trip.restore(from_json(state))
+            trip.version = version
+        self._cache[trip_id] = (trip, time.monotonic())
+        return trip
+
+    async def _exists(self, trip_id: str) -> bool:
+        async with self._reach():
+            return bool(await self.redis.exists(self._key(trip_id)))
+
+    async def for_fix(self, trip_id: str, token: str | None) -> Trip:
+        """The trip to apply a fix to: this worker's copy when it has one and ``token`` is its token (no round
+        trip: :meth:`save` finds out whether the copy was current), else :meth:`authorize` (no bucket token)."""
+        cached = self._cache.get(trip_id)
+        if cached is not None and cached[0].version > 0 and token and hmac.compare_digest(token_hash(token), cached[0].token_hash):
+            return cached[0]
+        return await self.authorize(trip_id, token)
+
+    async def save(self, trip: Trip, take: bool = False) -> bool:
+        """Write the trip's new state and samples if the store still holds the version they were computed from
+        (False: another worker wrote first; the copy now holds the store's state: apply the fix again).
+        ``take``: one token of the trip's bucket first (429 when empty, nothing written)."""
+        n = len(trip.trace_t)
+        samples = b""
+        if n:
+            rows = np.empty((n, 3), dtype=SAMPLE)
+            rows[:, 0], rows[:, 1], rows[:, 2] = trip.trace_t, trip.trace_v, trip.trace_x
+            samples = rows.tobytes()
+        s = self.s
+        try:
+            async with self._reach():
+                r = await self._save(
+                    keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
+                    args=[str(trip.version), _json(trip.state()), samples, s.trip_idle_ttl_s, trip.token_hash, 1 if take else 0,
+                          repr(self.clock()), s.rate_per_s, s.rate_burst, self.p, trip.id],
+                )  # fmt: skip
+        except ApiError:
+            trip.version = -1  # not known to be written: the copy may be ahead of the store, reload its state
+            raise
+        version = int(r[0])
+        if version == 0:  # another worker wrote first: the copy takes the store's state, the fix is applied again
+            trip.restore(from_json(r[2]))
+            trip.version = int(r[1])
+            return False
+        if version < 0:
+            trip.version = -1  # the copy holds a fix that is not in the store
+            if version == -1:
+                self._forget(trip.id)
+                raise unknown_trip(trip.id)
+            if version == -2:
+                raise bad_token(False)
+            raise self.limits.trip_rate(float(r[1]))
+        trip.version = version
+        trip.trace_base += n
+        del trip.trace_t[:], trip.trace_v[:], trip.trace_x[:]
+        self._cache[trip.id] = (trip, time.monotonic())
+        return True
+
+    async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        async with self._reach():
+            data = await self.redis.get(self._key(trip.id) + ":tr") or b""
+        rows = np.frombuffer(data, dtype=SAMPLE)[: 3 * (len(data) // (3 * SAMPLE.itemsize))].reshape(-1, 3)
+        pending = np.column_stack([np.frombuffer(a, dtype=np.float64) for a in (trip.trace_t, trip.trace_v, trip.trace_x)]).reshape(-1, 3)
+        rows = np.concatenate([rows, pending]) if pending.size else rows
+        return rows[:, 0].copy(), rows[:, 1].copy(), rows[:, 2].copy()
+
+    async def remove(self, trip_id: str) -> Trip:
+        cached = self._cache.get(trip_id)
+        async with self._reach():
+            gone = not await self._remove(keys=[self._key(trip_id), self._key(trip_id) + ":tr"], args=[self.p, trip_id])
+        trip = self._forget(trip_id, release=False) or (cached[0] if cached else None)  # the caller closes its SPaT
+        if gone or trip is None:  # another call ended it first
+            if trip is not None and self.release is not None:
+                await self.release(trip)
+            raise unknown_trip(trip_id)
+        return trip
+
+    def _forget(self, trip_id: str, release: bool = True) -> Trip | None:
+        """Drop this worker's copy of the trip (and with ``release`` what it holds: its SPaT view)."""
+        entry = self._cache.pop(trip_id, None)
+        if entry is None:
+            return None
+        if release and self.release is not None:
+            asyncio.get_running_loop().create_task(self.release(entry[0]))
+        return entry[0]
+
+    async def sweep(self, ttl_s: float) -> list[Trip]:
+        """Forget the trips this worker has not served lately (they stay in Redis until their TTL);
+        refresh the open-trip count. Returns nothing to close: the caller's SPaT views are released here."""
+        now = time.monotonic()
+        for trip_id in [tid for tid, (_, used) in self._cache.items() if now - used > min(self.CACHE_IDLE_S, ttl_s)]:
+            if trip_id not in self._locks:
+                self._forget(trip_id)
+        with contextlib.suppress(ApiError):
+            await self.count()
+        return []
+
+    async def close(self) -> None:
+        for trip_id in list(self._cache):
+            self._forget(trip_id)
+        await self.redis.aclose()
+
+
+# KEYS: the trip's and the client's stream sets. ARGV: now, stream id, per trip, per client (0: none), lease_s.
+# -> 0 opened, 1 the trip's streams are full, 2 the client's
+_STREAM_OPEN = """
+local now, lease = tonumber(ARGV[1]), tonumber(ARGV[5])
+redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now)
+redis.call('ZREMRANGEBYSCORE', KEYS[2], '-inf', now)
+if redis.call('ZCARD', KEYS[1]) >= tonumber(ARGV[3]) then return 1 end
+if tonumber(ARGV[4]) > 0 and redis.call('ZCARD', KEYS[2]) >= tonumber(ARGV[4]) then return 2 end
+for i = 1, 2 do
+  redis.call('ZADD', KEYS[i], now + lease, ARGV[2])
+  redis.call('PEXPIRE', KEYS[i], math.ceil(lease * 1000))
+end
+return 0
+"""
+
+# KEYS: as above. ARGV: now, stream id, lease_s (0: the stream closed)
+_STREAM_RENEW = """
+for i = 1, 2 do
+  if tonumber(ARGV[3]) > 0 then
+    redis.call('ZADD', KEYS[i], 'XX', tonumber(ARGV[1]) + tonumber(ARGV[3]), ARGV[2])
+    redis.call('PEXPIRE', KEYS[i], math.ceil(tonumber(ARGV[3]) * 1000))
+  else
+    redis.call('ZREM', KEYS[i], ARGV[2])
+  end
+end
+return 0
+"""
+
+
+class RedisStreams:
+    """Open WebSocket streams per trip and per client address, counted in Redis across every worker (the
+    in-process count is ``server.routes.stream.StreamCounts``). Each stream holds a lease of ``LEASE_S``,
+    renewed by its messages: the streams of a killed worker lapse within a lease."""
+
+    LEASE_S = 60.0
+
+    def __init__(self, store: RedisTrips) -> None:
+        self.store = store
+        self._open = store.redis.register_script(_STREAM_OPEN)
+        self._renew = store.redis.register_script(_STREAM_RENEW)
+
+    def _keys(self, trip_id: str, client: str) -> list[str]:
+        return [f"{self.store.p}:ws:t:{trip_id}", f"{self.store.p}:ws:c:{client}"]
+
+    async def open(self, trip_id: str, client: str, per_trip: int, per_client: int) -> list:
+        """A handle for :meth:`renew` and :meth:`close`; 429 ``too_many_streams`` beyond the caps."""
+        sid = uuid.uuid4().hex
+        now = self.store.clock()
+        async with self.store._reach():
+            code = await self._open(keys=self._keys(trip_id, client), args=[repr(now), sid, per_trip, per_client, self.LEASE_S])
+        if code == 1:
+            raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
+        if code == 2:
+            raise ApiError(429, "too_many_streams", f"this client address already has {per_client} open streams")
+        return [trip_id, client, sid, now + self.LEASE_S / 3]
+
+    async def renew(self, handle: list) -> None:
+        """Called per message; renews the lease once a third of it has passed."""
+        now = self.store.clock()
+        if now >= handle[3]:
+            handle[3] = now + self.LEASE_S / 3
+            async with self.store._reach():
+                await self._renew(keys=self._keys(handle[0], handle[1]), args=[repr(now), handle[2], self.LEASE_S])
+
+    async def close(self, handle: list) -> None:
+        with contextlib.suppress(ApiError):
+            async with self.store._reach():
+                await self._renew(keys=self._keys(handle[0], handle[1]), args=[repr(self.store.clock()), handle[2], 0])
+
+
+def make_store(settings: Settings, limits: Limits, build, release, clock) -> MemoryTrips | RedisTrips:
+    """The store ``ECO_STORE_URL`` names: Redis (``redis://``, ``rediss://``, ``unix://``), else in process."""
+    if settings.store_url:
+        return RedisTrips(settings, limits, build, release, clock)
+    return MemoryTrips(settings, limits)
+
