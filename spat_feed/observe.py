@@ -20,8 +20,9 @@ Conversion of one light (:func:`light_view`):
   no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run),
   late at their :data:`LATE_QUANTILE` or ``maxEndTime``, whichever is sooner (soft: real phases outlast it); the
   next phases last their shortest / median / late durations seen. ``red_windows_s`` spans earliest start to late
-  end; ``likely_red_windows_s`` spans the likely ones (for aiming under uncertainty and for saying "stop" only
-  when a stop is likely). Both contain every red that ``minEndTime`` guarantees.
+  end; ``likely_red_windows_s`` the likely ones (the countdown; "stop" only when a stop is likely);
+  ``aim_red_windows_s`` earliest start to likely end (what a plan under uncertainty aims between). All three
+  contain every red that ``minEndTime`` guarantees.
 * **Clock**: a reading may carry the feed clock's estimated offset (subtracted) and its uncertainty (every
   ``red_windows_s`` widened by it on both sides), so a few seconds of skew never put the advice into a red.
 """
@@ -311,13 +312,13 @@ def light_view(
         return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s) if reading is not None else math.inf)
     plan, t_feed = reading.plan, t_unix_s + reading.clock_offset_s  # our instant on the feed's clock
     if isinstance(plan, FixedTimePlan):
-        windows = likely = red_windows_s(plan, t_feed, horizon_s)
+        windows = likely = aim = red_windows_s(plan, t_feed, horizon_s)
     else:
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
-        windows, likely = _windows(phases, t_feed, horizon_s, 0, 2), _windows(phases, t_feed, horizon_s, 1, 1)
+        windows, likely, aim = (_windows(phases, t_feed, horizon_s, a, b) for a, b in ((0, 2), (1, 1), (0, 1)))
     # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no chance)
     u = reading.clock_uncertainty_s
-    windows, likely = _widened(windows, u), _widened(likely, u)
+    windows, likely, aim = _widened(windows, u), _widened(likely, u), _widened(aim, u)
     return LightView(
         intersection.id,
         distance_m,
@@ -325,6 +326,7 @@ def light_view(
         confidence_frac=confidence_frac(plan, t_feed, horizon_s),
         red_windows_s=windows,
         likely_red_windows_s=None if likely == windows else likely,
+        aim_red_windows_s=None if aim == windows else aim,
         age_s=float(reading.age_s),
     )
 
