@@ -39,29 +39,43 @@ class FixedTimeSignal:
         """Seconds since the last red began, in [0, cycle). [s]"""
         return np.mod(np.asarray(t_s, dtype=float) - self.red_start_s, self.cycle_s)
 
+    def _cycle_index(self, t_s):
+        """The ``k`` whose cycle ``[red_start + k cycle, red_start + (k + 1) cycle)`` holds ``t_s``, as computed.
+
+        Every instant this class reports is one of ``red_start + k cycle`` (a red begins) or
+        ``(red_start + k cycle) + red_s`` (a green begins), and every answer compares ``t_s`` with those same
+        floating-point numbers: a light asked at the instant it reported for a green is green there, to the bit.
+        """
+        t = np.asarray(t_s, dtype=float)
+        k = np.floor((t - self.red_start_s) / self.cycle_s)
+        k = np.where(self.red_start_s + k * self.cycle_s > t, k - 1, k)
+        return np.where(self.red_start_s + (k + 1) * self.cycle_s <= t, k + 1, k)
+
     def is_red(self, t_s):
         """True where the light is red at ``t_s`` (scalar or array)."""
-        return self.phase_s(t_s) < self.red_s
+        k = self._cycle_index(t_s)
+        red = np.asarray(t_s, dtype=float) < (self.red_start_s + k * self.cycle_s) + self.red_s
+        return red if red.ndim else bool(red)
 
     def next_green_start_s(self, t_s: float) -> float:
         """``t_s`` itself if green now, else the instant the current red ends. [s]"""
-        phase = float(self.phase_s(t_s))
-        return t_s + (self.red_s - phase) if phase < self.red_s else t_s
+        k = float(self._cycle_index(t_s))
+        green_s = (self.red_start_s + k * self.cycle_s) + self.red_s
+        return float(green_s) if t_s < green_s else t_s
 
     def next_red_start_s(self, t_s: float) -> float:
         """``t_s`` itself if red now, else the instant the current green ends. [s]"""
-        phase = float(self.phase_s(t_s))
-        return t_s if phase < self.red_s else t_s + (self.cycle_s - phase)
+        k = float(self._cycle_index(t_s))
+        return t_s if t_s < (self.red_start_s + k * self.cycle_s) + self.red_s else float(self.red_start_s + (k + 1) * self.cycle_s)
 
     def red_intervals(self, t0_s: float, t1_s: float) -> list[tuple[float, float]]:
         """Red intervals ``[start, end)`` that overlap ``[t0_s, t1_s]``. [s]"""
-        k0 = int(np.floor((t0_s - self.red_start_s) / self.cycle_s)) - 1
+        k = int(np.floor((t0_s - self.red_start_s) / self.cycle_s)) - 1
         out = []
-        start = self.red_start_s + k0 * self.cycle_s
-        while start <= t1_s:
+        while (start := self.red_start_s + k * self.cycle_s) <= t1_s:
             if start + self.red_s > t0_s:
-                out.append((start, start + self.red_s))
-            start += self.cycle_s
+                out.append((float(start), float(start + self.red_s)))
+            k += 1
         return out
 
 
