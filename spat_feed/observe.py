@@ -160,7 +160,9 @@ def observation(
 ) -> Observation:
     """The advisor's input for a fix at ``t_unix_s``: ``readings`` maps intersection id to its plan reading."""
     if not on_route or station_m is None:
-        return Observation(speed_mps=speed_mps, speed_limit_mps=speed_limit_mps, lights=(), position_m=station_m, on_route=False)
+        # off the route with every light behind (the route's end is clamped to its last station): a normal exit
+        exit_ = station_m is not None and not intersections_ahead(corridor, station_m, 1)
+        return Observation(speed_mps=speed_mps, speed_limit_mps=speed_limit_mps, lights=(), position_m=station_m, on_route=False, zone_exit=exit_)
     lights: Sequence[LightView] = tuple(
         light_view(ix, readings.get(ix.id), station_m, t_unix_s, horizon_s) for ix in intersections_ahead(corridor, station_m, n_lights)
     )

@@ -6,8 +6,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from advisory.advice.advisor import (
+    KEEP_MODES,
     MODE_CODES,
     Advice,
+    AdvisorMemory,
     AdvisorParams,
     LightView,
     Observation,
@@ -296,3 +298,57 @@ def test_evaluation_against_the_dp_with_and_without_the_margin():
     assert 0.0 < ev.kept_frac <= ev.kept_margin_frac <= 1.0
     ev0 = evaluate(sc, params, advisor=AdvisorParams(green_margin_s=0.0))
     assert ev0.optimum_margin_usd == pytest.approx(ev0.optimum_usd, rel=1e-12)
+
+
+# -- defects of issue 13 ---------------------------------------------------------------------------
+
+
+def test_a_red_that_never_ends_gives_a_stop_without_a_countdown():
+    """Reproducer from the real controller: a "stop" with seconds_to_change_s = inf raised OverflowError in phrase()."""
+    adv = advise(Observation(13.89, 13.89, (LightView(1, 300.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
+    assert adv.action == "stop" and adv.message == "Red light ahead. Prepare to stop."
+    assert phrase(Advice("none", "too_close", None, True, float("inf"))) == ""
+    assert phrase(Advice("cruise", "green_wave", V, False, float("inf"))) == "Hold 55 miles per hour."
+
+
+def test_a_kept_coast_is_rechecked_with_the_margin_after_red():
+    """A driver coasting below its "slow to 12 m/s, then coast" target would cross 1 s after the red ends: inside the
+    2 s margin. The old fallback re-check had no margin and kept the advice (pointing into the real red)."""
+    v0, d = 10.0, 200.0
+    t_coast = crossing_time_s(d, v0, v0, P, "brake_coast", 0.0)
+    lit = light(d, (-10.0, t_coast - 1.0))
+    last = Advice("coast", "green_wave", 12.0, True, t_coast - 1.0)
+    adv = advise(Observation(v0, V, (lit,)), AdvisorMemory(last=last, spoken=last))[0]
+    assert (adv.action, adv.target_speed_mps) != ("coast", 12.0)
+    if adv.target_speed_mps is not None and adv.action in KEEP_MODES:
+        t = crossing_time_s(d, v0, adv.target_speed_mps, P, KEEP_MODES[adv.action])
+        assert t >= t_coast - 1.0 + P.green_margin_s - 1e-9
+
+
+def test_the_countdown_names_the_light_the_speed_is_for():
+    """100 m before light 1, passed on green in 4 s; light 2 (600 m) red for 40 s more: the speed is for light 2,
+    so is the countdown (it was "Red in 15 seconds", light 1's)."""
+    adv = advise(Observation(V, V, (light(100, (15, 45)), light(600, (-10, 40), ident=2))))[0]
+    assert adv.light_ahead == 2 and adv.light_red and adv.seconds_to_change_s == 40
+    assert adv.message.startswith("Second light: green in 40 seconds.")
+    t2 = crossing_time_s(600, V, adv.target_speed_mps, P, KEEP_MODES[adv.action])
+    assert t2 >= 40 + P.green_margin_s  # and the speed is for that light
+    alone = advise(Observation(V, V, (light(400, (-5, 25), (55, 85)),)))[0]
+    assert alone.light_ahead == 1 and alone.message.startswith("Green in 25 seconds.")
+
+
+def test_one_second_is_singular():
+    assert phrase(Advice("cruise", "green_wave", V, False, 1.2)) == "Red in 1 second. Hold 55 miles per hour."
+    assert phrase(Advice("stop", "red_ahead", 0.0, True, 0.6)) == "Red light ahead. Prepare to stop. Green in 1 second."
+
+
+def test_leaving_the_zone_past_the_last_light_is_not_off_route():
+    from spat_feed.observe import observation
+    from spat_feed.scenarios import make_scenario
+
+    corridor = make_scenario("paper_s400").corridor
+    end = observation(corridor, corridor.length_m, 20.0, 0.0, {}, V, on_route=False)
+    adv = advise(end)[0]
+    assert adv.reason == "past_lights" and adv.message == "Last light passed. Advice ends."
+    lost = advise(observation(corridor, 50.0, 20.0, 0.0, {}, V, on_route=False))[0]
+    assert lost.reason == "off_route" and lost.message == "Off the route. Advice paused."

@@ -21,6 +21,7 @@ How the advice is made (docs/ADVISOR.md):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -51,6 +52,13 @@ class LightView:
     fresh: bool = True
     confidence_frac: float = 1.0
     red_windows_s: tuple[tuple[float, float], ...] = ()
+    likely_red_windows_s: tuple[tuple[float, float], ...] | None = None  # at the likely changes; None: as red_windows_s
+    age_s: float = 0.0  # how old the SPaT behind this view is (a dropout: not fresh, windows of the last reading) [s]
+
+    def likely_red_at(self, t_s: float) -> bool:
+        """Red at ``t_s`` seconds from now if every change comes at its likely time (exact plans: :meth:`is_red_at`)."""
+        windows = self.red_windows_s if self.likely_red_windows_s is None else self.likely_red_windows_s
+        return any(start <= t_s < end for start, end in windows)
 
     @property
     def red_now(self) -> bool:
@@ -89,6 +97,7 @@ class Observation:
     lights: tuple[LightView, ...] = ()
     position_m: float | None = None  # along the corridor, for the DP tables
     on_route: bool = True
+    zone_exit: bool = False  # left the route past its last light: the advice ends, nothing is wrong
 
 
 ACTIONS = ("cruise", "ease_off", "coast", "slow_down", "brake_to", "accelerate", "stop", "resume", "none")
@@ -113,6 +122,7 @@ class Advice:
     speak: bool = False
     source: str = "rules"  # "dp_table" when the target came from the lookup tables
     current_speed_mps: float | None = None  # the car's speed when advised ("Slow to X, then coast" vs "Lift off")
+    light_ahead: int = 1  # which light the countdown (light_red, seconds_to_change_s) is about: 1 next, 2 the one after
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__slots__}
@@ -132,6 +142,7 @@ class AdvisorParams:
     too_close_m: float = 15.0
     short_wait_s: float = 3.0
     min_confidence_frac: float = 0.5
+    hold_stale_s: float = 10.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
     hysteresis_mps: float = 1.0
     speak_change_mps: float = 5 * 0.44704
     speed_step_mps: float = 0.44704  # candidates in whole mph: the spoken number is the advised one
@@ -428,31 +439,48 @@ def feasible_speeds_mps(
     return _feasible(_Lines.of((obs.lights if lights is None else lights)[:2]), obs, params, mode, reaction_s)
 
 
-def _green_crossing(light: LightView, t_s: float) -> bool:
-    """The line is reached (finite time) and not during a (conservative) red."""
-    return bool(np.isfinite(t_s)) and not light.is_red_at(t_s)
+def _green_crossing(light: LightView, t_s: float, after_red_s: float) -> bool:
+    """The line is reached (finite time), not during a (conservative) red nor within ``after_red_s`` after one ends."""
+    return bool(np.isfinite(t_s)) and not any(start <= t_s < end + after_red_s for start, end in light.red_windows_s)
 
 
 def _say_speed(speed_mps: float, units: str) -> str:
     return f"{round(speed_mps * (MPH_PER_MPS if units == 'mph' else KMH_PER_MPS)):d}"
 
 
+def _say_seconds(t_s: float | None) -> str:
+    """"1 second", "12 seconds"; "" when unknown, infinite or under half a second."""
+    if t_s is None or not math.isfinite(t_s) or round(t_s) < 1:
+        return ""
+    n = round(t_s)
+    return "1 second" if n == 1 else f"{n:d} seconds"
+
+
 def phrase(advice: Advice, units: str = "mph") -> str:
-    """Short, voice-ready English for an advisory (numbers rounded, speed in mph or km/h)."""
+    """Short, voice-ready English for an advisory (numbers rounded, speed in mph or km/h).
+
+    The countdown is about the light the speed is chosen for (``advice.light_ahead``): "Second light: green in
+    20 seconds. Slow to 40 kilometers per hour." when the next light is passed on green anyway."""
     unit_word = "miles per hour" if units == "mph" else "kilometers per hour"
-    t = advice.seconds_to_change_s
-    when = "" if t is None or round(t) < 1 else f"{round(t):d} seconds"
+    when = _say_seconds(advice.seconds_to_change_s)
+    speed = "" if advice.target_speed_mps is None else f"{_say_speed(advice.target_speed_mps, units)} {unit_word}"
+    if advice.reason == "stale_spat" and advice.action != "none":  # a dropout: the last advice, held
+        return f"Signal data delayed. Keep to {speed}." if advice.action != "stop" else "Signal data delayed. Prepare to stop."
     if advice.action == "none":
+        if advice.reason == "stale_spat" and advice.light_red is not None:
+            return "Signal data delayed."  # a short dropout: no new advice, and no push back to the limit
         return {
             "no_spat": "No signal data. Drive normally.",
             "stale_spat": "Signal data is out of date. Drive normally.",
             "low_confidence": "Signal timing uncertain. Drive normally.",
             "off_route": "Off the route. Advice paused.",
+            "past_lights": "Last light passed. Advice ends.",
         }.get(advice.reason, "")
-    speed = "" if advice.target_speed_mps is None else f"{_say_speed(advice.target_speed_mps, units)} {unit_word}"
     light = ""
     if when:
         light = f"Green in {when}. " if advice.light_red else f"Red in {when}. "
+        if advice.light_ahead == 2:
+            light = f"Second light: {light[0].lower()}{light[1:]}"
     if advice.action == "stop":
         return f"Red light ahead. Prepare to stop. Green in {when}." if when else "Red light ahead. Prepare to stop."
     if advice.action == "resume":
@@ -476,15 +504,66 @@ KEEP_MODES = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", 
 """How a driver following each action changes speed (the mode its feasibility is re-checked in)."""
 
 
+def _binding(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> int:
+    """Which light the advice is for (index into ``lights``): the first one that the car, holding its speed, would
+    not cross on green (with the after-red margin); the next light if it makes them all. The countdown names it."""
+    if obs.speed_mps <= 0.0:
+        return 0
+    for i, light in enumerate(lights):
+        if not _green_crossing(light, light.distance_m / obs.speed_mps, params.green_margin_s):
+            return i
+    return 0
+
+
+def _timed(action: str, reason: str, target: float | None, lights: tuple[LightView, ...], i: int, source: str = "rules") -> Advice:
+    """An advice whose countdown is light ``i``'s."""
+    red, to_change = _light_timing(lights[i])
+    return Advice(action, reason, target, red, to_change, source=source, light_ahead=i + 1)
+
+
+def _kept(lines: _Lines, usable: tuple[LightView, ...], obs: Observation, params: AdvisorParams, last: Advice) -> bool:
+    """A driver already following ``last`` (no new reaction delay) still makes every green, with the margin."""
+    keep_mode = KEEP_MODES[last.action]
+    if _keeps(lines, obs, params, keep_mode, last.target_speed_mps):
+        return True
+    if keep_mode != "brake_coast":
+        return False
+    # a coasting driver may be below the target already (it coasts on): check its own coast, margin included
+    keep_target = min(last.target_speed_mps, obs.speed_mps)
+    return all(
+        _green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, keep_target, params, keep_mode, 0.0), params.green_margin_s)
+        for light in usable
+    )
+
+
+def _likely_view(light: LightView) -> LightView:
+    """The light with its changes at their likely times (the windows a plan under uncertainty aims between)."""
+    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or ())
+
+
+def _held(obs: Observation, memory: AdvisorMemory, params: AdvisorParams) -> Advice | None:
+    """Through a short dropout: the last advice, re-checked on the last SPaT (its windows, aged); no new advice.
+    ``None`` when the dropout is too long (or nothing was advised): then the plain "out of date"."""
+    nxt, last = obs.lights[0], memory.last
+    if not nxt.red_windows_s or nxt.age_s > params.hold_stale_s or last is None:
+        return None
+    usable = tuple(light for light in obs.lights[:2] if light.red_windows_s)
+    red, to_change = _light_timing(nxt)
+    if last.action == "stop" or (last.action in KEEP_MODES and last.target_speed_mps is not None and _kept(_Lines.of(usable), usable, obs, params, last)):
+        return Advice(last.action, "stale_spat", last.target_speed_mps, red, to_change, source=last.source)
+    return Advice("none", "stale_spat", light_red=red, seconds_to_change_s=to_change)
+
+
 def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tables) -> Advice:
     if not obs.on_route:
-        return Advice("none", "off_route")
+        return Advice("none", "past_lights" if obs.zone_exit else "off_route")
     if not obs.lights:
         v = obs.speed_limit_mps
         return Advice("resume" if obs.speed_mps < v - 1.0 else "cruise", "past_lights", target_speed_mps=v)
     nxt = obs.lights[0]
     if not nxt.fresh:
-        return Advice("none", "stale_spat" if nxt.red_windows_s else "no_spat")
+        held = _held(obs, memory, params)
+        return held if held is not None else Advice("none", "stale_spat" if nxt.red_windows_s else "no_spat")
     if nxt.confidence_frac < params.min_confidence_frac:
         return Advice("none", "low_confidence")
     red, to_change = _light_timing(nxt)
@@ -493,26 +572,26 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     usable = tuple(light for light in obs.lights[:2] if light.fresh and light.confidence_frac >= params.min_confidence_frac)
     both = _Lines.of(usable)
     last = memory.last
-    if last is not None and last.target_speed_mps is not None and last.action in KEEP_MODES and usable:
+    if last is not None and last.target_speed_mps is not None and last.action in KEEP_MODES:
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
-        keep_mode = KEEP_MODES[last.action]
-        keep_target = last.target_speed_mps
-        if keep_mode == "brake_coast":
-            keep_target = min(keep_target, obs.speed_mps)
-        ok = _keeps(both, obs, params, keep_mode, last.target_speed_mps) or (
-            keep_mode == "brake_coast" and all(
-                bool(_green_crossing(light, crossing_time_s(light.distance_m, obs.speed_mps, keep_target, params, keep_mode, 0.0))) for light in usable
-            )
-        )
-        if ok:
+        if _kept(both, usable, obs, params, last):
             action = last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise"
-            return Advice(action, last.reason, last.target_speed_mps, red, to_change, source=last.source)
+            return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source)
     n_lines, mode, feasible = _search(both, obs, params)
+    if feasible.size == 0 and any(light.likely_red_windows_s is not None for light in usable):
+        # no speed makes the greens whenever the changes come: aim between the likely changes (never into a red
+        # that minEnd guarantees: the likely windows contain it); the driver's own eyes guard the rest
+        usable = tuple(_likely_view(light) for light in usable)
+        both = _Lines.of(usable)
+        n_lines, mode, feasible = _search(both, obs, params)
     if feasible.size == 0:
         arrival = crossing_time_s(nxt.distance_m, obs.speed_mps, obs.speed_mps, params) if obs.speed_mps > 0 else np.inf
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)
         slowest = crossing_time_s(nxt.distance_m, obs.speed_mps, params.min_cruise_speed_mps, params, "brake")
+        if not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
+            # a stop is possible but not likely: no "prepare to stop" for a car that most likely goes through
+            return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
         return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red,
                       seconds_to_change_s=nxt.seconds_to_green_after(min(arrival, slowest)))
     target, source = float(feasible.max()), "rules"
@@ -540,8 +619,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         near = feasible[np.abs(feasible - obs.speed_mps) <= params.hysteresis_mps]
         if near.size:  # within the band: hold the speed the car has, don't nudge it by a mile per hour
             target = float(near[np.argmin(np.abs(near - obs.speed_mps))])
-    return Advice(action, "green_wave", target_speed_mps=min(target, obs.speed_limit_mps), light_red=red,
-                  seconds_to_change_s=to_change, source=source)
+    return _timed(action, "green_wave", min(target, obs.speed_limit_mps), usable, _binding(usable[:n_lines], obs, params), source)
 
 
 def _meaningful_change(new: Advice, old: Advice | None, params: AdvisorParams) -> bool:
@@ -568,11 +646,15 @@ def advise(
     params = params or AdvisorParams()
     a = _decide(obs, memory, params, tables)
     # (constructor calls, not dataclasses.replace: this runs once a second per car)
-    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, source=a.source, current_speed_mps=obs.speed_mps)
+    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, source=a.source, current_speed_mps=obs.speed_mps,
+                    light_ahead=a.light_ahead)
     message = phrase(advice, params.units)
     speak = bool(message) and _meaningful_change(advice, memory.spoken, params)
-    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps)
+    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps, a.light_ahead)
     spoken, last = (advice if advice.speak else memory.spoken), advice
+    if advice.reason == "stale_spat" and advice.light_red is not None:
+        # a short dropout: the driver goes on with the plan it follows; that stays the plan when data returns
+        spoken, last = (advice if advice.speak else memory.spoken), memory.last
     if advice.action == "none" and advice.reason in ("too_close", "short_wait"):
         # silence: the driver goes on with what it was told, so that stays the plan to re-check (and the
         # reference for speaking) when the advisor talks again
