@@ -117,6 +117,11 @@ class TimelineSignal:
 
     position_m: float
     reds_s: tuple[tuple[float, float], ...] = ()
+    ambers_s: tuple[tuple[float, float], ...] = ()  # clearance before a red: green for the rules, a warning to the eye
+
+    def is_amber(self, t_s: float) -> bool:
+        """True while the light shows amber (a car that can stop should)."""
+        return any(a <= t_s < b for a, b in self.ambers_s)
 
     def __post_init__(self) -> None:
         for (a, b), (c, _) in zip(self.reds_s, self.reds_s[1:]):
@@ -154,7 +159,7 @@ class TimelineSignal:
 
     def shifted(self, dt_s: float) -> TimelineSignal:
         """The same light on an axis whose origin is ``dt_s`` later."""
-        return TimelineSignal(self.position_m, tuple((a - dt_s, b - dt_s) for a, b in self.reds_s))
+        return TimelineSignal(self.position_m, tuple((a - dt_s, b - dt_s) for a, b in self.reds_s), tuple((a - dt_s, b - dt_s) for a, b in self.ambers_s))
 
 
 @dataclass(frozen=True, slots=True)

@@ -154,12 +154,19 @@ def simulate(
                 green_at = display.next_green_start_s(t) if red_now else t  # t itself when green
                 # the next red to begin after any current one (green earlier than the display said: the one after its red)
                 next_red = display.next_red_start_s(display.next_green_start_s(green_at))
+            amber = bool(getattr(light, "is_amber", lambda _: False)(t))
+            if n in committed and amber and n not in surprised and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+                surprised.add(n)  # amber: stop if that takes no more than the regular driver's hardest braking, else clear
+                committed.discard(n)
+                surprises += 1
             if n in committed and red_now and n not in surprised and (display is None or not display.is_red(t)):
                 surprises += 1  # committed, and the light shows red it was not expected to: stop if at all possible
                 surprised.add(n)
                 if v * v / (2.0 * max(room, 1e-6)) <= driver.emergency_decel_mps2:
                     committed.discard(n)
-            if n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
+            if amber and n not in committed:
+                braking_for = n
+            elif n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
                 # go only if the light will be green on arrival at the current speed (a red now must end
                 # ``red_end_margin_s`` before) and no red can begin before the car is over the line
                 arrival = t + (dist / v if v > 0.1 else np.sqrt(2.0 * dist / driver.accel_mps2) + driver.reaction_s)
