@@ -229,6 +229,22 @@ def summarize(rows: list[dict]) -> dict:
     }
 
 
+def _read_head(path: str, limit_s: float) -> list:
+    """The snapshots of the log's first ``limit_s`` seconds, reading no further."""
+    import csv
+    import gzip
+
+    from spat_feed.recorded import iter_spat_csv
+
+    out = []
+    with (gzip.open(path, "rt", encoding="utf-8", newline="") if str(path).endswith(".gz") else open(path, encoding="utf-8", newline="")) as fh:
+        for ix in iter_spat_csv(csv.DictReader(fh), source=str(path)):
+            if out and (ix.timestamp - out[0].timestamp).total_seconds() > limit_s:
+                break
+            out.append(ix)
+    return sorted(out, key=lambda ix: ix.timestamp)
+
+
 def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_s: float | None = None, progress: bool = True) -> dict:
     """Replay the log at ``path`` (optionally only its first ``limit_s`` seconds); the summary and its rows."""
     from tqdm import tqdm
@@ -237,10 +253,7 @@ def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_
 
     global _LOGS
     setup = setup or Setup()
-    snapshots = read_spat_csv(path)
-    if limit_s is not None:
-        start = snapshots[0].timestamp.timestamp()
-        snapshots = [s for s in snapshots if s.timestamp.timestamp() - start <= limit_s]
+    snapshots = read_spat_csv(path) if limit_s is None else _read_head(path, limit_s)
     _LOGS = group_logs(snapshots)
     todo = jobs(_LOGS, setup)
     bar = dict(total=len(todo), desc=f"spat-eval {path.rsplit('/', 1)[-1]}", disable=not progress, file=sys.stderr)

@@ -155,16 +155,17 @@ def simulate(
                 # the next red to begin after any current one (green earlier than the display said: the one after its red)
                 next_red = display.next_red_start_s(display.next_green_start_s(green_at))
             amber = bool(getattr(light, "is_amber", lambda _: False)(t))
-            if n in committed and amber and n not in surprised and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
-                surprised.add(n)  # amber: stop if that takes no more than the regular driver's hardest braking, else clear
-                committed.discard(n)
-                surprises += 1
+            if n in committed and amber and n not in surprised:  # the regular driver's amber rule: stop if it would
+                surprised.add(n)  # not clear the line before the red and can stop at its hardest braking, else go on
+                if t + dist / max(v, 0.5) > light.next_red_start_s(t) and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+                    committed.discard(n)
+                    surprises += 1
             if n in committed and red_now and n not in surprised and (display is None or not display.is_red(t)):
                 surprises += 1  # committed, and the light shows red it was not expected to: stop if at all possible
                 surprised.add(n)
                 if v * v / (2.0 * max(room, 1e-6)) <= driver.emergency_decel_mps2:
                     committed.discard(n)
-            if amber and n not in committed:
+            if amber and n in surprised and n not in committed:
                 braking_for = n
             elif n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
                 # go only if the light will be green on arrival at the current speed (a red now must end
