@@ -135,11 +135,13 @@ class TimelineSignal:
         return bisect.bisect_right(self.reds_s, (t_s, math.inf)) - 1
 
     def is_red(self, t_s):
-        t = np.asarray(t_s, dtype=float)
-        if t.ndim:
-            return np.array([self.is_red(float(x)) for x in t.ravel()], dtype=bool).reshape(t.shape)
-        i = self._index(float(t))
-        return bool(i >= 0 and t < self.reds_s[i][1])
+        if not isinstance(t_s, float | int):
+            t = np.asarray(t_s, dtype=float)
+            if t.ndim:
+                return np.array([self.is_red(float(x)) for x in t.ravel()], dtype=bool).reshape(t.shape)
+            t_s = float(t)
+        i = self._index(t_s)
+        return bool(i >= 0 and t_s < self.reds_s[i][1])
 
     def next_green_start_s(self, t_s: float) -> float:
         """``t_s`` itself if green now, else the instant the current red ends (``inf``: never). [s]"""

@@ -170,7 +170,8 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     regular = regular_driver(scenario)
     reg = score_in_end_state(regular, params, v_lim)
     adv = score_in_end_state(run.trajectory, params, v_lim)
-    ahead = [a for t, a in run.advice if float(run.trajectory.position_at(t)) < positions[-1]]
+    at_m = np.interp([t for t, _ in run.advice], run.trajectory.t_s, run.trajectory.x_m)
+    ahead = [a for (_, a), x in zip(run.advice, at_m) if x < positions[-1]]
     out = {
         "kind": "single" if len(groups) == 1 else "pair",
         "groups": [int(_LOGS[g].key[1]) for g in groups],

@@ -134,7 +134,7 @@ def simulate(
             v_cmd = 0.0 if x < stop_line_m else v_lim  # a "stop" is void once its line is behind (crossed on green)
         else:
             v_cmd = active.target_speed_mps + (driver.drift_mps if active.target_speed_mps < driver.low_speed_mps else 0.0)
-            v_cmd = float(np.clip(v_cmd + error, 0.0, v_lim))
+            v_cmd = min(max(v_cmd + error, 0.0), v_lim)
         rate_up, rate_down = driver.accel_mps2, driver.decel_mps2
         if active is not None and active.action == "brake_to":
             rate_down = advisor.firm_decel_mps2
@@ -202,7 +202,7 @@ def simulate(
             else:
                 v_cmd = v_lim  # nobody coasts to a standstill: drive on
         gap = v_cmd - v
-        a = float(np.clip(gap / dt_s, -rate_down, rate_up))
+        a = min(max(gap / dt_s, -rate_down), rate_up)
         if v + a * dt_s < 0.0:  # comes to rest within the step: a knot where it stops
             h = v / -a
             x += 0.5 * v * h
