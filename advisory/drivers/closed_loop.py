@@ -12,13 +12,14 @@ the light is still red. Everything else comes from the advice (a "stop" only unt
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from advisory.advice.advisor import Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise, coast_decel_mps2
 from advisory.drivers.regular import DriverParams
-from advisory.signals import Scenario
+from advisory.signals import Scenario, Signal, TimelineSignal
 from advisory.trajectory import Trajectory
 
 
@@ -34,6 +35,7 @@ class DriverModel:
     noise_mps: float = 0.0  # standard deviation of the tracking error, redrawn every advice
     min_coast_mps: float = 2.0  # below this the driver stops coasting and drives on
     red_end_margin_s: float = 1.0  # a red seen at the decision point must end this long before arrival to go on
+    emergency_decel_mps2: float = 8.0  # a red the display did not announce: stop if this suffices, else go on
     coast_floor_frac: float = 0.7  # a coasting car keeps slowing past its target: plan with this share of it [-]
     seed: int = 0
 
@@ -45,6 +47,20 @@ class ClosedLoopResult:
     overrides: int
     stops: int
     max_advised_mps: float
+    surprises: int = 0  # reds the display did not announce (the light still red when its countdown said green, or an early red)
+
+
+Feed = Callable[[float, float, float], Observation]
+"""What the advisor is told at (t, x, v): the lights ahead as the SPaT source publishes them. ``LightView.intersection_id``
+is the light's index in the scenario plus one."""
+
+
+def belief(view: LightView | None, t_obs_s: float, position_m: float) -> TimelineSignal | None:
+    """What the driver's display says of one light after the observation at ``t_obs_s``: its (conservative)
+    red windows on the scenario's axis; None when it says nothing (no data, stale)."""
+    if view is None or not view.fresh:
+        return None
+    return TimelineSignal(position_m, tuple((t_obs_s + a, t_obs_s + b) for a, b in view.red_windows_s))
 
 
 def observe(scenario: Scenario, t_s: float, x_m: float, v_mps: float, horizon_s: float = 180.0) -> Observation:
@@ -64,8 +80,15 @@ def simulate(
     tables=None,
     driver: DriverModel | None = None,
     dt_s: float = 0.1,
+    feed: Feed | None = None,
 ) -> ClosedLoopResult:
-    """Drive ``scenario`` from entry to the zone end following the advisor; exact knots every ``dt_s``."""
+    """Drive ``scenario`` from entry to the zone end following the advisor; exact knots every ``dt_s``.
+
+    ``scenario.signals`` are the truth. ``feed`` is what the advisor and the driver's display are told (default:
+    a perfect fixed-time feed, :func:`observe`, so the display is the truth). The driver sees the light's present
+    colour and the display's countdowns, never the truth's future: a light still red when its display said green
+    (an actuated light switching late), or a red arriving before the display's earliest, is a *surprise*: the
+    driver stops if it can (up to ``emergency_decel_mps2``), else goes on (a red entry, counted by the checks)."""
     advisor = advisor or AdvisorParams()
     driver = driver or DriverModel()
     rules = DriverParams()
@@ -82,13 +105,19 @@ def simulate(
     log: list[tuple[float, Advice]] = []
     committed: set[int] = set()
     braking_for: int | None = None
-    overrides = stops = 0
+    overrides = stops = surprises = 0
+    shown: list[Signal | None] = list(scenario.signals)  # the display's view of each light (perfect feed: the truth)
+    surprised: set[int] = set()
     max_advised = 0.0
     steps_per_advice = int(round(1.0 / dt_s))
     step = 0
     while x < scenario.zone_length_m - 1e-9 and t < 600.0:
         if step % steps_per_advice == 0:
-            adv, memory = advise(observe(scenario, t, x, v), memory, advisor, tables)
+            obs = observe(scenario, t, x, v) if feed is None else feed(t, x, v)
+            if feed is not None:
+                views = {lv.intersection_id: lv for lv in obs.lights}
+                shown = [belief(views.get(n + 1), t, s.position_m) if s.position_m > x else None for n, s in enumerate(scenario.signals)]
+            adv, memory = advise(obs, memory, advisor, tables)
             log.append((t, adv))
             if adv.target_speed_mps is not None:
                 max_advised = max(max_advised, adv.target_speed_mps)
@@ -105,7 +134,7 @@ def simulate(
             v_cmd = 0.0 if x < stop_line_m else v_lim  # a "stop" is void once its line is behind (crossed on green)
         else:
             v_cmd = active.target_speed_mps + (driver.drift_mps if active.target_speed_mps < driver.low_speed_mps else 0.0)
-            v_cmd = float(np.clip(v_cmd + error, 0.0, v_lim))
+            v_cmd = min(max(v_cmd + error, 0.0), v_lim)
         rate_up, rate_down = driver.accel_mps2, driver.decel_mps2
         if active is not None and active.action == "brake_to":
             rate_down = advisor.firm_decel_mps2
@@ -115,10 +144,30 @@ def simulate(
             n, light = ahead[0]
             dist = light.position_m - x
             room = dist - rules.stop_gap_m
-            red_now = light.is_red(t)
-            green_at = light.next_green_start_s(t)  # t itself when green
-            next_red = light.next_red_start_s(green_at)  # the next red to begin after any current one
-            if n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
+            red_now = bool(light.is_red(t))  # what the driver sees; the future only from the display
+            display = shown[n]
+            if display is None:  # nothing shown: a red lasts, a green holds (as far as the driver knows)
+                green_at, next_red = (np.inf, np.inf) if red_now else (t, np.inf)
+            elif red_now and not display.is_red(t):  # red although the display says green: when it ends is unknown
+                green_at, next_red = np.inf, np.inf
+            else:
+                green_at = display.next_green_start_s(t) if red_now else t  # t itself when green
+                # the next red to begin after any current one (green earlier than the display said: the one after its red)
+                next_red = display.next_red_start_s(display.next_green_start_s(green_at))
+            amber = bool(getattr(light, "is_amber", lambda _: False)(t))
+            if n in committed and amber and n not in surprised:  # the regular driver's amber rule: stop if it would
+                surprised.add(n)  # not clear the line before the red and can stop at its hardest braking, else go on
+                if t + dist / max(v, 0.5) > light.next_red_start_s(t) and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+                    committed.discard(n)
+                    surprises += 1
+            if n in committed and red_now and n not in surprised and (display is None or not display.is_red(t)):
+                surprises += 1  # committed, and the light shows red it was not expected to: stop if at all possible
+                surprised.add(n)
+                if v * v / (2.0 * max(room, 1e-6)) <= driver.emergency_decel_mps2:
+                    committed.discard(n)
+            if amber and n in surprised and n not in committed:
+                braking_for = n
+            elif n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
                 # go only if the light will be green on arrival at the current speed (a red now must end
                 # ``red_end_margin_s`` before) and no red can begin before the car is over the line
                 arrival = t + (dist / v if v > 0.1 else np.sqrt(2.0 * dist / driver.accel_mps2) + driver.reaction_s)
@@ -131,7 +180,7 @@ def simulate(
                     braking_for = None
             if braking_for == n:  # stop short of the line at the constant rate that gets there
                 v_cmd = 0.0
-                rate_down = min(v * v / (2.0 * room), 4.0) if room > 1e-6 else 4.0
+                rate_down = min(v * v / (2.0 * room), driver.emergency_decel_mps2 if n in surprised else 4.0) if room > 1e-6 else 4.0
             elif n in committed:
                 if red_now:  # committed while red: it turns green before arrival at this speed, not faster
                     v_cmd = min(v_cmd, v)
@@ -153,7 +202,7 @@ def simulate(
             else:
                 v_cmd = v_lim  # nobody coasts to a standstill: drive on
         gap = v_cmd - v
-        a = float(np.clip(gap / dt_s, -rate_down, rate_up))
+        a = min(max(gap / dt_s, -rate_down), rate_up)
         if v + a * dt_s < 0.0:  # comes to rest within the step: a knot where it stops
             h = v / -a
             x += 0.5 * v * h
@@ -170,7 +219,7 @@ def simulate(
         knots.append((t, x, v))
         step += 1
     arr = np.array(knots)
-    return ClosedLoopResult(Trajectory(arr[:, 0], arr[:, 1], arr[:, 2]), log, overrides, stops, max_advised)
+    return ClosedLoopResult(Trajectory(arr[:, 0], arr[:, 1], arr[:, 2]), log, overrides, stops, max_advised, surprises)
 
 
 def _time_to_cover_s(dist_m: float, v_mps: float, v_to_mps: float, decel_mps2: float) -> float:
