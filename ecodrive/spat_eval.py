@@ -51,7 +51,7 @@ from advisory.physics.params import model_params
 from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
 from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.messages import MovementState, plan_from_movement, to_unix_s
-from spat_feed.observe import PlanReading, light_view
+from spat_feed.observe import CycleStats, PhaseHistory, PlanReading, light_view
 from spat_feed.plans import STOP_STATES, PhaseClass, phase_class
 
 HINDSIGHT_GRID = GridSpec(stage_m=20.0)
@@ -81,6 +81,7 @@ class GroupLog:
     t_s: np.ndarray
     movements: list[MovementState]
     truth: TimelineSignal  # position 0: placed by the approach
+    cycles: list[CycleStats] | None = None  # what the group had been seen to do at each snapshot (PhaseHistory)
 
     def reading(self, t_s: float, stale_after_s: float, cache: dict) -> PlanReading | None:
         i = int(np.searchsorted(self.t_s, t_s, side="right")) - 1
@@ -89,7 +90,7 @@ class GroupLog:
         if i not in cache:
             cache[i] = plan_from_movement(self.movements[i], float(self.t_s[i]))
         age = t_s - float(self.t_s[i])
-        return PlanReading(cache[i], fresh=age <= stale_after_s, age_s=age)
+        return PlanReading(cache[i], fresh=age <= stale_after_s, age_s=age, cycle=self.cycles[i] if self.cycles else None)
 
 
 def group_logs(snapshots) -> list[GroupLog]:
@@ -121,7 +122,9 @@ def group_logs(snapshots) -> list[GroupLog]:
         if not amber.any():  # a group that never publishes its amber (its non-red state as unavailable): it had one
             ends = [-math.inf] + [b for _, b in reds]
             ambers = tuple((max(a - AMBER_S, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a))
-        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers)))
+        history = PhaseHistory()
+        cycles = [history.update(float(tk), r[1].state_time_speed[0].event_state) for tk, r in zip(t, items)]
+        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers), cycles))
     return out
 
 

@@ -18,11 +18,12 @@ Conversion of one light (:func:`light_view`):
   group has been seen to do (:class:`PhaseHistory`, passed as ``PlanReading.cycle``) bounds the phases that
   follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the current phase ends
   no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run),
-  late at their :data:`LATE_QUANTILE` or ``maxEndTime``, whichever is sooner (soft: real phases outlast it); the
+  late at their :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
+  9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the
   next phases last their shortest / median / late durations seen. ``red_windows_s`` spans earliest start to late
   end; ``likely_red_windows_s`` the likely ones (the countdown; "stop" only when a stop is likely);
-  ``aim_red_windows_s`` earliest start to likely end (what a plan under uncertainty aims between). All three
-  contain every red that ``minEndTime`` guarantees.
+  ``late_red_windows_s`` latest start to late end (never slowed for a red that may not have begun on arrival;
+  what a driver's display may rely on). The first two contain every red that ``minEndTime`` guarantees.
 * **Clock**: a reading may carry the feed clock's estimated offset (subtracted) and its uncertainty (every
   ``red_windows_s`` widened by it on both sides), so a few seconds of skew never put the advice into a red.
 """
@@ -218,7 +219,8 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
     ends = [since + x for x in d if since + x >= after]
     if not ends:  # running longer than any seen: nothing to go by
         return out
-    likely, late = max(_quantile(ends, 0.5), lo), min(max(_quantile(ends, LATE_QUANTILE), lo), late)
+    # what this group has done beats what its controller predicts: maxEndTime was 9 s early or 2 minutes late
+    likely, late = max(_quantile(ends, 0.5), lo), max(_quantile(ends, LATE_QUANTILE), lo)
     out[-2] = (cls, begun, (lo, max(likely, lo), max(late, likely, lo)))
     del out[-1]
     start = out[-1][2]
@@ -312,13 +314,13 @@ def light_view(
         return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s) if reading is not None else math.inf)
     plan, t_feed = reading.plan, t_unix_s + reading.clock_offset_s  # our instant on the feed's clock
     if isinstance(plan, FixedTimePlan):
-        windows = likely = aim = red_windows_s(plan, t_feed, horizon_s)
+        windows = likely = late = red_windows_s(plan, t_feed, horizon_s)
     else:
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
-        windows, likely, aim = (_windows(phases, t_feed, horizon_s, a, b) for a, b in ((0, 2), (1, 1), (0, 1)))
+        windows, likely, late = (_windows(phases, t_feed, horizon_s, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
     # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no chance)
     u = reading.clock_uncertainty_s
-    windows, likely, aim = _widened(windows, u), _widened(likely, u), _widened(aim, u)
+    windows, likely, late = _widened(windows, u), _widened(likely, u), _widened(late, u)
     return LightView(
         intersection.id,
         distance_m,
@@ -326,7 +328,7 @@ def light_view(
         confidence_frac=confidence_frac(plan, t_feed, horizon_s),
         red_windows_s=windows,
         likely_red_windows_s=None if likely == windows else likely,
-        aim_red_windows_s=None if aim == windows else aim,
+        late_red_windows_s=None if late == windows else late,
         age_s=float(reading.age_s),
     )
 

@@ -1,5 +1,7 @@
 """The advisor: suppression rules, feasibility (never red, never above the limit), hysteresis, voice, tables."""
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -306,6 +308,8 @@ def test_evaluation_against_the_dp_with_and_without_the_margin():
 def test_a_red_that_never_ends_gives_a_stop_without_a_countdown():
     """Reproducer from the real controller: a "stop" with seconds_to_change_s = inf raised OverflowError in phrase()."""
     adv = advise(Observation(13.89, 13.89, (LightView(1, 300.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
+    assert adv.reason == "red_ahead" and adv.message == "Red light ahead."  # far out: no stop asked for yet
+    adv = advise(Observation(13.89, 13.89, (LightView(1, 100.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
     assert adv.action == "stop" and adv.message == "Red light ahead. Prepare to stop."
     assert phrase(Advice("none", "too_close", None, True, float("inf"))) == ""
     assert phrase(Advice("cruise", "green_wave", V, False, float("inf"))) == "Hold 55 miles per hour."
@@ -385,20 +389,31 @@ def test_an_actuated_red_aims_at_its_likely_end_never_before_min_end():
     """A red now whose end is known only as a window: surely not before 20 s (minEnd), likely at 30 s, late at 150 s.
     No speed reaches the line 600 m ahead after 150 s (+2 s), so the advisor aims at the likely end (+2 s margin): a
     real plan instead of "prepare to stop", and never a crossing before minEnd."""
-    lit = LightView(1, 600.0, True, 0.9, ((0.0, 150.0),), likely_red_windows_s=((0.0, 30.0),), aim_red_windows_s=((0.0, 30.0),))
+    lit = LightView(1, 600.0, True, 0.9, ((0.0, 150.0),), likely_red_windows_s=((0.0, 30.0),))
     adv = advise(Observation(V, V, (lit,)))[0]
     assert adv.action in KEEP_MODES and adv.light_red and adv.message.startswith("Green in 30 seconds.")
     t = crossing_time_s(600, V, adv.target_speed_mps, P, KEEP_MODES[adv.action])
     assert t >= 30.0 + P.green_margin_s and t >= 20.0
     exact = advise(Observation(V, V, (light(600, (0.0, 150.0)),)))[0]
-    assert exact.action == "stop"  # the same red known to last 150 s: a stop
+    assert exact.reason == "red_ahead" and exact.target_speed_mps is None  # the same red known to last 150 s: a stop ahead
 
 
 def test_prepare_to_stop_only_when_a_stop_is_likely():
     """Green now; it may end at 3 s (minEnd) but likely lasts until 10 s, and the car is there at ~6 s: no speed is
     sure to make it, yet a stop is not likely, so no "prepare to stop" (it said so before)."""
-    lit = LightView(1, 150.0, True, 0.9, ((3.0, 60.0),), likely_red_windows_s=((10.0, 40.0),), aim_red_windows_s=((3.0, 40.0),))
+    lit = LightView(1, 150.0, True, 0.9, ((3.0, 60.0),), likely_red_windows_s=((10.0, 40.0),))
     adv = advise(Observation(V, V, (lit,)))[0]
     assert adv.action != "stop" and "stop" not in adv.message.lower()
-    red_likely = LightView(1, 150.0, True, 0.9, ((3.0, 60.0),), likely_red_windows_s=((4.0, 40.0),), aim_red_windows_s=((3.0, 40.0),))
+    red_likely = LightView(1, 150.0, True, 0.9, ((3.0, 60.0),), likely_red_windows_s=((4.0, 40.0),))
     assert advise(Observation(V, V, (red_likely,)))[0].action == "stop"
+
+
+def test_a_red_far_ahead_is_announced_and_the_stop_asked_for_when_it_is_near():
+    """A red that lasts (no speed makes it) 300 m ahead at 50 km/h: "Red light ahead." and no speed (a "stop" there
+    halted the virtual driver 220 m short of the line); within a comfortable stop (+ reaction + 2 s): "prepare to stop"."""
+    v = 50 / 3.6
+    far = advise(Observation(v, v, (light(300, (0.0, math.inf)),)), params=AdvisorParams(units="kmh"))[0]
+    assert (far.action, far.reason, far.message, far.target_speed_mps) == ("none", "red_ahead", "Red light ahead.", None) and far.speak
+    near_m = v * (P.reaction_s + P.stop_lead_s) + v * v / (2 * P.comfort_decel_mps2)
+    near = advise(Observation(v, v, (light(near_m - 1.0, (0.0, math.inf)),)))[0]
+    assert near.action == "stop" and near.message == "Red light ahead. Prepare to stop."

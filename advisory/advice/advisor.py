@@ -46,10 +46,11 @@ class LightView:
     change to red counts from its earliest possible time, a change to green from its latest. A window with
     ``start <= 0`` means red now. At least the windows of the next ~2 minutes.
 
-    Under uncertainty (an actuated light) two more views: ``likely_red_windows_s`` (each change at its likely
-    instant: what the countdown says, and whether a stop is likely) and ``aim_red_windows_s`` (a red from its
-    earliest start to its likely end: what a plan aims between when the conservative windows leave no speed).
-    Both contain every red that minEnd guarantees.
+    Under uncertainty (an actuated light) two more views. ``likely_red_windows_s``: each change at its likely
+    instant (the countdown; whether a stop is likely; what a plan aims between when the conservative windows leave
+    no speed; it contains every red that minEnd guarantees). ``late_red_windows_s``: each change at its latest
+    instant: a car reaching the line inside a likely red but before such a red begins may still beat it as it is,
+    and is not slowed for the green after it; a driver's display may rely on a red lasting until then.
     """
 
     intersection_id: int
@@ -58,7 +59,7 @@ class LightView:
     confidence_frac: float = 1.0
     red_windows_s: tuple[tuple[float, float], ...] = ()
     likely_red_windows_s: tuple[tuple[float, float], ...] | None = None  # every change at its likely time; None: as red_windows_s
-    aim_red_windows_s: tuple[tuple[float, float], ...] | None = None  # earliest start to likely end; None: as red_windows_s
+    late_red_windows_s: tuple[tuple[float, float], ...] | None = None  # every change at its latest; None: not known
     age_s: float = 0.0  # how old the SPaT behind this view is (a dropout: not fresh, windows of the last reading) [s]
 
     def likely_red_at(self, t_s: float) -> bool:
@@ -148,6 +149,7 @@ class AdvisorParams:
     too_close_m: float = 15.0
     short_wait_s: float = 3.0
     min_confidence_frac: float = 0.5
+    stop_lead_s: float = 2.0  # "prepare to stop" this long before a comfortable stop must begin (earlier: "Red light ahead.") [s]
     hold_stale_s: float = 10.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
     hysteresis_mps: float = 1.0
     speak_change_mps: float = 5 * 0.44704
@@ -473,6 +475,8 @@ def phrase(advice: Advice, units: str = "mph") -> str:
     if advice.reason == "stale_spat" and advice.action != "none":  # a dropout: the last advice, held
         return f"Signal data delayed. Keep to {speed}." if advice.action != "stop" else "Signal data delayed. Prepare to stop."
     if advice.action == "none":
+        if advice.reason == "red_ahead":
+            return f"Red light ahead. Green in {when}." if when else "Red light ahead."
         if advice.reason == "stale_spat" and advice.light_red is not None:
             return "Signal data delayed."  # a short dropout: no new advice, and no push back to the limit
         return {
@@ -544,12 +548,24 @@ def _kept(lines: _Lines, usable: tuple[LightView, ...], obs: Observation, params
     )
 
 
-def _aim_view(light: LightView) -> LightView:
-    """The light as a plan under uncertainty sees it: each red from its earliest start to its likely end. A green
-    that may end early is never aimed at (a car meeting that red fast would brake hard); a red that lasts longer than
-    likely meets a car already slowed for it (a gentle stop). Its likely windows stay for the countdown."""
-    aim = light.red_windows_s if light.aim_red_windows_s is None else light.aim_red_windows_s
-    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, aim, light.likely_red_windows_s)
+def _likely_only(light: LightView) -> LightView:
+    """The light with each change at its likely instant, as a plan under uncertainty sees it."""
+    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or (), light.likely_red_windows_s)
+
+
+def _beats_maybe(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> bool:
+    """Holding its speed, the car reaches a line before a red's latest start but after its likely one: it may go
+    through as it is (the regular driver would try). Slowing for the green after that red cost a whole cycle
+    whenever the red came late; no speed makes the green for sure: no speed advice (issue 13, spat-eval)."""
+    if obs.speed_mps <= 0.0:
+        return False
+    for light in lights:
+        if light.late_red_windows_s is None or light.likely_red_windows_s is None:
+            continue
+        t = light.distance_m / obs.speed_mps
+        if any(a <= t < b for a, b in light.likely_red_windows_s) and not any(a <= t < b for a, b in light.late_red_windows_s):
+            return True
+    return False
 
 
 def _countdown_view(light: LightView) -> LightView:
@@ -596,12 +612,16 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             action = last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise"
             return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source)
     n_lines, mode, feasible = _search(both, obs, params)
-    if feasible.size == 0 and any(light.aim_red_windows_s is not None for light in usable):
-        # no speed makes the greens whenever the changes come: aim at the likely end of each red (never into a red
-        # that minEnd guarantees: the aim windows contain it, and the after-red margin still applies)
-        usable = tuple(_aim_view(light) for light in usable)
+    if feasible.size == 0 and any(light.likely_red_windows_s is not None for light in usable):
+        # no speed makes the greens whenever the changes come: plan on the likely changes (never into a red that
+        # minEnd guarantees: the likely windows contain it; the after-red margin still applies), never faster than now
+        # (no racing an uncertain red), and never slowing for a red the car may beat as it is (_beats_maybe)
+        if _beats_maybe(usable, obs, params):
+            return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
+        usable = tuple(_likely_only(light) for light in usable)
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
+        feasible = feasible[feasible <= max(obs.speed_mps, params.min_cruise_speed_mps) + 1e-9]
     if feasible.size == 0:
         arrival = crossing_time_s(nxt.distance_m, obs.speed_mps, obs.speed_mps, params) if obs.speed_mps > 0 else np.inf
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:
@@ -610,8 +630,12 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         if not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
             # a stop is possible but not likely: no "prepare to stop" for a car that most likely goes through
             return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
-        return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red,
-                      seconds_to_change_s=nxt.seconds_to_green_after(min(arrival, slowest)))
+        v = obs.speed_mps
+        to_green = _countdown_view(nxt).seconds_to_green_after(min(arrival, slowest))
+        if nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2):
+            # far out: say what is ahead, ask for nothing yet (a stop so far out would halt the car short of the line)
+            return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_green)
+        return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_green)
     target, source = float(feasible.max()), "rules"
     if tables is not None:
         wanted = tables.target_speed_mps(obs)
@@ -642,7 +666,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
 
 def _meaningful_change(new: Advice, old: Advice | None, params: AdvisorParams) -> bool:
     if old is None:
-        return new.action != "none" or new.reason in ("no_spat", "stale_spat", "low_confidence", "off_route")
+        return new.action != "none" or new.reason in ("no_spat", "stale_spat", "low_confidence", "off_route", "red_ahead", "past_lights")
     if (new.action, new.reason) != (old.action, old.reason):
         return new.reason not in ("too_close", "short_wait")
     if new.target_speed_mps is not None and old.target_speed_mps is not None:

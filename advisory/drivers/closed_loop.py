@@ -56,11 +56,14 @@ is the light's index in the scenario plus one."""
 
 
 def belief(view: LightView | None, t_obs_s: float, position_m: float) -> TimelineSignal | None:
-    """What the driver's display says of one light after the observation at ``t_obs_s``: its (conservative)
-    red windows on the scenario's axis; None when it says nothing (no data, stale)."""
+    """What the driver's display says of one light after the observation at ``t_obs_s``: its red windows on the
+    scenario's axis, each change at its latest (a red that may not have begun is the driver's eyes' to judge, as
+    for the regular driver; a red is not relied on to end before its latest); a fixed-time light's exact windows;
+    None when it says nothing (no data, stale)."""
     if view is None or not view.fresh:
         return None
-    return TimelineSignal(position_m, tuple((t_obs_s + a, t_obs_s + b) for a, b in view.red_windows_s))
+    windows = view.red_windows_s if view.late_red_windows_s is None else view.late_red_windows_s
+    return TimelineSignal(position_m, tuple((t_obs_s + a, t_obs_s + b) for a, b in windows))
 
 
 def observe(scenario: Scenario, t_s: float, x_m: float, v_mps: float, horizon_s: float = 180.0) -> Observation:
