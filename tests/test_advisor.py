@@ -395,7 +395,7 @@ def test_an_actuated_red_aims_at_its_likely_end_never_before_min_end():
     t = crossing_time_s(600, V, adv.target_speed_mps, P, KEEP_MODES[adv.action])
     assert t >= 30.0 + P.green_margin_s and t >= 20.0
     exact = advise(Observation(V, V, (light(600, (0.0, 150.0)),)))[0]
-    assert exact.reason == "red_ahead" and exact.target_speed_mps is None  # the same red known to last 150 s: a stop ahead
+    assert exact.action == "stop"  # the same red known to last 150 s: a stop (an early gentle one: its end is known)
 
 
 def test_prepare_to_stop_only_when_a_stop_is_likely():
@@ -409,7 +409,7 @@ def test_prepare_to_stop_only_when_a_stop_is_likely():
 
 
 def test_a_red_far_ahead_is_announced_and_the_stop_asked_for_when_it_is_near():
-    """A red that lasts (no speed makes it) 300 m ahead at 50 km/h: "Red light ahead." and no speed (a "stop" there
+    """A red of unknown end (no speed makes it) 300 m ahead at 50 km/h: "Red light ahead." and no speed (a "stop" there
     halted the virtual driver 220 m short of the line); within a comfortable stop (+ reaction + 2 s): "prepare to stop"."""
     v = 50 / 3.6
     far = advise(Observation(v, v, (light(300, (0.0, math.inf)),)), params=AdvisorParams(units="kmh"))[0]

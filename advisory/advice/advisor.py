@@ -14,7 +14,9 @@ How the advice is made (docs/ADVISOR.md):
    speeds within [min cruise speed, limit] are ever advised.
 3. **Target**: among feasible speeds, the DP lookup tables' target for this position, speed and signal
    phase when the tables match the live SPaT; otherwise the highest feasible speed (the rule-based closed
-   form). If no speed is feasible: prepare to stop.
+   form). If no speed is sure under an actuated light's windows: a plan on its likely changes (never faster
+   than now, never slowing for a red the car may beat as it is). If none: prepare to stop when a stop is
+   likely and near, "Red light ahead." when far.
 4. **Hysteresis**: the previous target is kept while it stays feasible and close; ``speak`` is raised only
    when the action changes, or the target moves by ``speak_change_mps``.
 """
@@ -627,13 +629,16 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)
         slowest = crossing_time_s(nxt.distance_m, obs.speed_mps, params.min_cruise_speed_mps, params, "brake")
-        if not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
+        uncertain = nxt.likely_red_windows_s is not None
+        if uncertain and not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
             # a stop is possible but not likely: no "prepare to stop" for a car that most likely goes through
             return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
         v = obs.speed_mps
         to_green = _countdown_view(nxt).seconds_to_green_after(min(arrival, slowest))
-        if nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2):
-            # far out: say what is ahead, ask for nothing yet (a stop so far out would halt the car short of the line)
+        far = nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)
+        if far and (uncertain or not math.isfinite(to_green)):
+            # far from a red whose end is uncertain: say what is ahead, ask for nothing yet (a stop so far out halted
+            # the car 220 m short of the line). A known end keeps the early gentle stop: the advisor re-plans from it
             return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_green)
         return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_green)
     target, source = float(feasible.max()), "rules"
@@ -680,8 +685,10 @@ def advise(
     """
     The advisory for one observation, and the memory to pass with the next one.
 
-    Never advises a speed above the limit or one that reaches a stop line during (conservative) red;
-    with missing, stale or low-confidence SPaT it gives no speed advice and says so.
+    Never advises a speed above the limit or one that reaches a stop line during (conservative) red; when no
+    speed is sure (an actuated light), a plan on the likely changes that is never faster than now and never into
+    a red that minEnd guarantees (docs/ADVISOR.md, 1a). With missing or low-confidence SPaT it gives no speed
+    advice and says so; through a short dropout it holds the last advice, re-checked, and makes no new one.
     ``tables``: optional :class:`advisory.advice.tables.AdviceTables` (DP lookup); ``None`` uses the rules alone.
     """
     memory = memory or AdvisorMemory()
