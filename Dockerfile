@@ -1,6 +1,6 @@
-# The ecodrive image: the advisory service (`ecodrive serve`) and the simulated SPaT feed (`python -m spat_feed`).
+# The ecodrive image: the advisory service (`ecodrive serve`), the SPaT feed and log player (`python -m spat_feed`), and Debian's mosquitto (the MQTT broker of docker-compose.yml).
 FROM python:3.11-slim
-RUN apt-get update && apt-get install -y --no-install-recommends espeak-ng curl && rm -rf /var/lib/apt/lists/*
+RUN apt-get update && apt-get install -y --no-install-recommends espeak-ng curl mosquitto && rm -rf /var/lib/apt/lists/*
 WORKDIR /app
 COPY pyproject.toml README.md ./
 COPY advisory advisory

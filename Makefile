@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test bench study feed app-figure clean
+.PHONY: run test bench study feed antwerp app-figure clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,10 @@ study: $(STAMP)
 
 feed: $(STAMP)
 	$(PY) -m spat_feed
+
+antwerp: $(STAMP)  # the service on the Antwerp controller's recorded SPaT, through a real MQTT broker (docs/SPAT.md)
+	sh scripts/system-deps.sh
+	sh scripts/antwerp.sh
 
 app-figure: $(STAMP)  # the README's screenshots of the phone app (a demo drive in headless chromium)
 	sh scripts/system-deps.sh

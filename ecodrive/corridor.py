@@ -107,7 +107,7 @@ def cmd_show(args) -> int:
 def cmd_from_osm(args) -> int:
     from spat_feed.osm import corridors_from_osm
 
-    result = corridors_from_osm(args.file, args.street, name=args.name, units=args.units, direction=args.direction)
+    result = corridors_from_osm(args.file, args.street, name=args.name, units=args.units, direction=args.direction, first_id=args.first_id)
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
     corridors = result.corridors
@@ -176,6 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     osm.add_argument("--direction", choices=("northbound", "eastbound", "southbound", "westbound"), help="keep only this direction")
     osm.add_argument("--name", help="corridor name prefix (default: the street's), suffixed with the direction")
     osm.add_argument("--units", choices=("metric", "imperial"), help="spoken units (default: guessed from maxspeed and location)")
+    osm.add_argument("--first-id", type=int, default=1, help="intersection id of the first signal along the street (ids count up from it; use the operator's J2735 ids for live SPaT)")
     osm.set_defaults(func=cmd_from_osm)
     show = sub.add_parser("show", help="print a corridor as the product understands it")
     show.add_argument("corridor", help="a corridor file (.json/.toml) or preset name")

@@ -9,6 +9,7 @@ set -u
 NEEDS='
 espeak-ng espeak-ng speech for GET /v1/trips/{id}/advice.wav
 chromium chromium headless browser for the phone app tests (tests/browser)
+mosquitto mosquitto MQTT broker for live SPaT (make antwerp, tests/spat_feed/test_mqtt.py)
 '
 missing=""
 for_what=""

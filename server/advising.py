@@ -8,9 +8,12 @@ From a fix to an advisory (:meth:`Engine.on_fix`):
    route, WGS 84 geodesics via pyproj. Farther than ``off_route_m`` (or a fix less accurate than
    ``max_accuracy_m``): the advice pauses and says so.
 3. **Speed**: the fix's speed over ground, else the least-squares slope of the last seconds' stations.
-4. **SPaT at the fix's own time**: the trip's plans (simulated or from the feed) for the next two lights,
-   turned into conservative red windows relative to the fix (``spat_feed.observe``).
+4. **SPaT at the fix's own time**: the trip's plans for the next two lights, from the process's shared SPaT
+   (``server.spat``: simulated plans, or the latest state per intersection from a feed, MQTT or a log), turned
+   into conservative red windows relative to the fix (``spat_feed.observe``).
 5. **Advice**: ``advisory.advice.advisor.advise(observation, memory, params, tables)``; the trip keeps the new memory.
+   When the advisor has no speed advice for want of SPaT, the reason says why: ``no_spat``, ``stale_spat``,
+   or ``clock_skew`` (the controller's clock is off ours).
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ from server.gps import Fix, RouteMatcher
 from spat_feed.observe import observation
 from server.ratelimit import KeyedBuckets, TokenBucket
 from server.schemas import MS_TIMESTAMP_MIN, TripCreate
-from server.spat import RemoteFeed, SimulatedSpat, TripSpat
+from server.spat import ScenarioSpat, SharedSpat, SpatHub, TripSpat
+from spat_feed.simulator import shared_scenario
 from server.trips import Trip, TripStore
 
 ADVISOR_UNITS = {"metric": "kmh", "imperial": "mph"}
@@ -48,6 +52,7 @@ SERVER_PHRASES = {
     "poor_gps": "GPS signal weak. Advice paused.",
     "no_speed": "Waiting for speed.",
     "no_fix": "No position yet.",
+    "clock_skew": "Signal clock out of sync. Drive normally.",
 }
 """Wording for the pauses the service decides itself (the advisor words its own)."""
 
@@ -61,7 +66,7 @@ class Engine:
         corridors: dict[str, Corridor],
         tables: dict[str, object] | None = None,
         params: AdvisorParams | None = None,
-        remote: RemoteFeed | None = None,
+        spat: SpatHub | None = None,
         clock: Callable[[], float] = time.time,
     ) -> None:
         self.settings = settings
@@ -69,7 +74,7 @@ class Engine:
         self.matchers = {name: RouteMatcher(c) for name, c in corridors.items()}
         self.tables = tables or {}
         self.params = params or AdvisorParams()
-        self.remote = remote
+        self.spat = spat if spat is not None else SpatHub(settings, corridors, clock)
         self.clock = clock
         self.trips = TripStore(settings.max_trips, settings.max_trips_per_client)
         self.create_bucket = TokenBucket(settings.create_rate_per_s, settings.create_burst)
@@ -110,22 +115,27 @@ class Engine:
         entry = now if body.entry_unix_s is None else body.entry_unix_s
         if body.entry_unix_s is not None:
             self.check_time(entry, "entry_unix_s", s.max_entry_future_s)
-        try:  # the corridor's plans by name, a paper preset, or "trip" (never a path from a request)
-            timing = resolve_timing(corridor, body.timing, entry, allow_files=False)
-        except KeyError as exc:
-            raise ApiError(422, "unknown_timing", str(exc.args[0])) from None
-        except ValueError as exc:
-            raise ApiError(422, "timing_mismatch", str(exc)) from None
-        uncertainty = Uncertainty(s.spat_early_s, s.spat_late_s, s.spat_confidence_frac)
-        scenario = FeedScenario(corridor, timing, float(entry), uncertainty)
+        spat: TripSpat
+        if body.timing is None:  # the lights as they run for everyone: the shared SPaT
+            scenario = shared_scenario(corridor, float(entry))
+            spat = SharedSpat(self.spat, scenario)
+        else:  # a scenario of its own, simulated for this trip (the corridor's plans by name, a paper preset, or "trip"; never a path from a request)
+            try:
+                timing = resolve_timing(corridor, body.timing, entry, allow_files=False)
+            except KeyError as exc:
+                raise ApiError(422, "unknown_timing", str(exc.args[0])) from None
+            except ValueError as exc:
+                raise ApiError(422, "timing_mismatch", str(exc)) from None
+            uncertainty = Uncertainty(s.spat_early_s, s.spat_late_s, s.spat_confidence_frac)
+            scenario = FeedScenario(corridor, timing, float(entry), uncertainty)
+            spat = ScenarioSpat(scenario, self.clock)
         units = body.units or corridor_units(corridor)
         self.trips.check_capacity(client)
-        spat: TripSpat = await self.remote.subscribe(scenario) if self.remote is not None else SimulatedSpat(scenario, self.clock)
         trip = Trip(
             corridor, self.matchers[corridor_name], scenario, spat, vehicle, now,
             TokenBucket(s.rate_per_s, s.rate_burst), s.dropout_s,
             tables=self.tables.get(corridor_name) if vehicle == s.default_vehicle else None,
-            client=client, units=units, params=self._params[units], observe_spat=not isinstance(spat, SimulatedSpat),
+            client=client, units=units, params=self._params[units], observe_spat=isinstance(spat, SharedSpat) and spat.live,
             max_speed_mps=s.max_speed_mps,
         )  # fmt: skip
         try:
@@ -198,6 +208,8 @@ class Engine:
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
             advice, memory = advise(obs, trip.memory, trip.params, trip.tables)
+            if advice.action == "none" and advice.reason in ("no_spat", "stale_spat") and lights:
+                advice = _spat_reason(advice, trip.spat.status(lights[0].intersection_id))
         trip.memory = memory
         trip.n_fixes += 1
         if on_route and speed is not None and len(trip.trace_t) < s.max_trace_fixes:
@@ -226,6 +238,14 @@ def corridor_units(corridor: Corridor) -> str:
     """The corridor's ``units`` ('metric' or 'imperial'; 'kmh'/'mph' read as those), metric when it has none."""
     units = str(getattr(corridor, "units", None) or "metric").lower()
     return {"kmh": "metric", "km/h": "metric", "mph": "imperial"}.get(units, units if units in ADVISOR_UNITS else "metric")
+
+
+def _spat_reason(advice: Advice, status: str) -> Advice:
+    """The advisor's "no SPaT" advice with the reason the shared SPaT gives (never, ahead or behind, skewed)."""
+    reason = {"no_spat": "no_spat", "stale": "stale_spat", "clock_skew": "clock_skew"}.get(status, advice.reason)
+    if reason == advice.reason:
+        return advice
+    return replace(advice, reason=reason, message=SERVER_PHRASES.get(reason) or advice.message)
 
 
 def _finite(x: float | None) -> float | None:

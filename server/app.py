@@ -1,7 +1,7 @@
 """``create_app(settings)``: the advisory service as a FastAPI app.
 
 Start-up (``lifespan``): load the corridors, build (or load) the DP lookup tables for each, start the
-speech engine and, with ``ECO_SPAT_FEED_URL``, the remote-feed connection manager; warm the numba code
+speech engine and the shared SPaT hub (``server.spat``: simulator, remote feed, MQTT, log); warm the numba code
 paths so the first request is not slow. A background task closes trips idle for ``trip_idle_ttl_s``.
 """
 
@@ -20,10 +20,9 @@ import numpy as np
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
-from advisory.advice.advisor import AdvisorParams
+from advisory.advice.advisor import AdvisorParams, advise
 from advisory.physics.params import model_params
 from spat_feed.corridors import Corridor, load_corridor, load_corridor_dir
-from spat_feed.scenarios import make_scenario
 
 from server.advising import Engine
 from server.audio import Speech
@@ -34,7 +33,9 @@ from server.middleware import GuardMiddleware
 from server.openapi import install_docs
 from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
-from server.spat import RemoteFeed
+from server.spat import SpatHub
+from spat_feed.observe import PlanReading, observation
+from spat_feed.simulator import shared_scenario
 
 log = logging.getLogger("server")
 
@@ -92,11 +93,16 @@ def build_tables(settings: Settings, corridors: dict[str, Corridor]) -> dict[str
 def warm_up(engine: Engine) -> None:
     """Run each numba/pyproj path once (compiles or loads the cached machine code)."""
     corridor = engine.corridors[engine.settings.default_corridor]
-    scenario = make_scenario(corridor, "trip", 0.0)
+    scenario = shared_scenario(corridor, 0.0)
     engine.matchers[corridor.name].match(*corridor.position(10.0))
     t = np.array([0.0, 1.0, 2.0])
     v = np.array([20.0, 20.0, 20.0])
     trip_score("warm-up", scenario, engine.settings.default_vehicle, t, v, np.array([0.0, 20.0, 40.0]), engine.settings.speed_limit_mps)
+    readings = {ix: PlanReading(plan) for (ix, _), plan in scenario.fixed_plans().items()}
+    for station_m in (0.0, corridor.length_m / 2):  # the advisor's kernels, with the tables and without
+        obs = observation(corridor, station_m, 15.0, 30.0, readings, engine.settings.speed_limit_mps)
+        for tables in (engine.tables.get(corridor.name), None):
+            advise(obs, None, engine.params, tables)
 
 
 async def _expire_idle(engine: Engine, metrics: Metrics, period_s: float) -> None:
@@ -117,14 +123,15 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         t0 = time.perf_counter()
         tables = await asyncio.to_thread(build_tables, settings, corridors_)
-        remote = RemoteFeed(settings.spat_feed_url, settings.spat_stale_after_s) if settings.spat_feed_url else None
-        engine = Engine(settings, corridors_, tables, advisor_params, remote, clock)
+        hub = SpatHub(settings, corridors_, clock)
+        engine = Engine(settings, corridors_, tables, advisor_params, hub, clock)
         engine.on_advice = metrics.observe_advice
         engine.on_ignored_fix = lambda status: metrics.fixes.labels(status).inc()
         engine.on_rate_limited = metrics.rate_limited.inc
         app.state.engine = engine
         await asyncio.to_thread(warm_up, engine)
         await speech.start()
+        await hub.start()
         sweeper = asyncio.create_task(_expire_idle(engine, metrics, min(60.0, settings.trip_idle_ttl_s / 2)))
         gc.freeze()  # start-up objects (tables, corridors, numba) to the permanent generation: collections stop rescanning them
         log.info("advisory service ready in %.1f s: %d corridors, tables for %s, speech %s", time.perf_counter() - t0, len(corridors_), sorted(tables), speech.reason)
@@ -135,14 +142,13 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
             with contextlib.suppress(asyncio.CancelledError):
                 await sweeper
             await speech.stop()
-            if remote is not None:
-                await remote.close()
+            await hub.stop()
 
     app = FastAPI(title="ecodrive advisory service", version="1.0.0", description=DESCRIPTION, lifespan=lifespan, docs_url=None, redoc_url=None, openapi_url=None)
     app.state.settings = settings
     speech = Speech(settings.speech, settings.audio_cache_size)
     app.state.speech = speech
-    metrics = Metrics(lambda: len(app.state.engine.trips) if hasattr(app.state, "engine") else 0)
+    metrics = Metrics(lambda: len(app.state.engine.trips) if hasattr(app.state, "engine") else 0, lambda: app.state.engine.spat if hasattr(app.state, "engine") else None)
     app.state.metrics = metrics
     app.state.streams = stream.StreamCounts()
     # Routes are tried in order, a regex and some bookkeeping each, so the per-second ones (fixes, stream)

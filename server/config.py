@@ -31,10 +31,18 @@ class Settings(BaseSettings):
     default_vehicle: str = "paper_54kwh"
     speed_limit_mps: float = Field(default=SPEED_LIMIT_MPS, gt=0, le=70, description="limit on corridors whose files state none [m/s]")
 
-    # SPaT
-    spat_feed_url: str | None = Field(default=None, description="remote SPaT feed (http://host:port); None = in-process simulation")
-    spat_stale_after_s: float = Field(default=2.0, gt=0)
-    spat_early_s: float = Field(default=0.0, ge=0, description="simulated actuated windows: earliest change before the plan [s]")
+    # SPaT (docs/SPAT.md "Sources"): one shared store per process, filled by any of these at once
+    spat_simulate: bool | None = Field(default=None, description="simulate lights with fixed-time plans in process; default: on unless spat_feed_url is set")
+    spat_feed_url: str | None = Field(default=None, description="remote SPaT feed (http://host:port): one WebSocket to its /spat/intersections/stream")
+    spat_mqtt_url: str | None = Field(default=None, description="MQTT broker with live SPaT: mqtt://[user:pw@]host[:port][/prefix], topic <prefix>/<intersection id>")
+    spat_log: Path | None = Field(default=None, description="a recorded SPaT log (.csv[.gz] as in shared/data/spat, or .jsonl[.gz]) played in process")
+    spat_log_speedup: float = Field(default=1.0, gt=0, le=1000, description="recorded seconds per second of play")
+    spat_log_loop: bool = Field(default=False, description="play the log again after its end")
+    spat_record: Path | None = Field(default=None, description="append every SPaT state received to this .jsonl[.gz] log")
+    spat_rate_hz: float = Field(default=10.0, gt=0, le=100, description="log player ticks per second")
+    spat_stale_after_s: float = Field(default=2.0, gt=0, description="SPaT older than this (controller timestamp) is stale: no speed advice [s]")
+    spat_clock_tolerance_s: float = Field(default=1.0, gt=0, description="a controller clock off ours by more than this: rejected (ahead) or flagged clock_skew [s]")
+    spat_early_s: float = Field(default=0.0, ge=0, description="trips with their own timing: simulated actuated windows, earliest change before the plan [s]")
     spat_late_s: float = Field(default=0.0, ge=0)
     spat_confidence_frac: float = Field(default=1.0, ge=0, le=1)
 
@@ -84,6 +92,20 @@ class Settings(BaseSettings):
     dropout_s: float = Field(default=5.0, gt=0, description="longer gaps reset the position-derived speed [s]")
     max_speed_mps: float = Field(default=50.0, gt=0, description="a fix implying a faster jump along the route is ignored as a GPS glitch [m/s]")
     max_trace_fixes: int = Field(default=7_200, ge=10, description="fixes kept per trip for its score")
+
+    @property
+    def spat_simulated(self) -> bool:
+        """Whether lights with fixed plans are simulated in process (``spat_simulate``, default: no remote feed)."""
+        return self.spat_simulate if self.spat_simulate is not None else not self.spat_feed_url
+
+    @field_validator("spat_mqtt_url")
+    @classmethod
+    def _mqtt_url(cls, value: str | None) -> str | None:
+        if value:
+            from spat_feed.mqtt import parse_mqtt_url
+
+            parse_mqtt_url(value)
+        return value or None
 
     @field_validator("corridors", "api_keys", "cors_origins", mode="before")
     @classmethod

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, ProcessCollector, generate_latest
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 from prometheus_client.exposition import CONTENT_TYPE_LATEST
 
 __all__ = ["Metrics", "CONTENT_TYPE_LATEST"]
@@ -12,14 +13,55 @@ __all__ = ["Metrics", "CONTENT_TYPE_LATEST"]
 LATENCY_BUCKETS_S = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5)
 
 
+class SpatCollector:
+    """SPaT per intersection and per source, read from the hub at each scrape (nothing on the hot path):
+    ``ecodrive_spat_age_seconds``, ``ecodrive_spat_fresh`` (1 when ok), ``ecodrive_spat_messages_total``
+    (``rate()`` gives messages/s), ``ecodrive_spat_rejected_total`` by reason, and per source
+    ``ecodrive_spat_source_connected`` and ``ecodrive_spat_source_reconnects_total``."""
+
+    def __init__(self, hub: Callable[[], object | None]) -> None:
+        self.hub = hub
+
+    def collect(self):
+        hub = self.hub()
+        if hub is None:
+            return
+        store = hub.store
+        age = GaugeMetricFamily("ecodrive_spat_age_seconds", "age of the latest SPaT state (controller timestamp)", labels=["intersection"])
+        fresh = GaugeMetricFamily("ecodrive_spat_fresh", "1 when the intersection's SPaT is fresh (status ok)", labels=["intersection", "status"])
+        messages = CounterMetricFamily("ecodrive_spat_messages", "SPaT states accepted", labels=["intersection"])
+        rejected = CounterMetricFamily("ecodrive_spat_rejected", "SPaT states rejected, by reason", labels=["intersection", "reason"])
+        readings = store.readings()
+        for ident in sorted(set(hub.needed) | set(store.stats)):
+            label = str(ident)
+            r = readings.get(ident)
+            if r is not None:
+                age.add_metric([label], r.age_s)
+            status = store.status(ident)
+            fresh.add_metric([label, status], 1.0 if status == "ok" else 0.0)
+            st = store.stats.get(ident)
+            messages.add_metric([label], st.messages if st else 0)
+            for reason, n in (st.rejected.items() if st else ()):
+                rejected.add_metric([label, reason], n)
+        if "malformed" in store.rejected:
+            rejected.add_metric(["", "malformed"], store.rejected["malformed"])
+        connected = GaugeMetricFamily("ecodrive_spat_source_connected", "1 when the SPaT source is connected (or playing)", labels=["kind"])
+        reconnects = CounterMetricFamily("ecodrive_spat_source_reconnects", "reconnections of the SPaT source", labels=["kind"])
+        for source in hub.sources():
+            connected.add_metric([source["kind"]], 1.0 if source["connected"] else 0.0)
+            if "reconnects" in source:
+                reconnects.add_metric([source["kind"]], source["reconnects"])
+        yield from (age, fresh, messages, rejected, connected, reconnects)
+
+
 class Metrics:
-    def __init__(self, open_trips: Callable[[], int]) -> None:
+    def __init__(self, open_trips: Callable[[], int], spat_hub: Callable[[], object | None] | None = None) -> None:
         r = self.registry = CollectorRegistry(auto_describe=True)
         self._children: dict[tuple, object] = {}
         self.requests = Counter("ecodrive_http_requests", "HTTP requests by route and status", ["method", "route", "status"], registry=r)
         self.request_s = Histogram("ecodrive_http_request_seconds", "HTTP request handling time", ["route"], buckets=LATENCY_BUCKETS_S, registry=r)
         self.fixes = Counter("ecodrive_fixes", "GPS fixes by outcome", ["outcome"], registry=r)
-        self.advice = Counter("ecodrive_advice", "advisories by action and source", ["action", "source"], registry=r)
+        self.advice = Counter("ecodrive_advice", "advisories by action, source and reason (no_spat, stale_spat, clock_skew, low_confidence, ...)", ["action", "source", "reason"], registry=r)
         self.advice_s = Histogram("ecodrive_advice_compute_seconds", "time to compute one advisory from a fix", buckets=LATENCY_BUCKETS_S, registry=r)
         self.trips_created = Counter("ecodrive_trips_created", "trips created", registry=r)
         self.trips_closed = Counter("ecodrive_trips_closed", "trips closed", ["how"], registry=r)
@@ -27,11 +69,13 @@ class Metrics:
         self.ws_open = Gauge("ecodrive_ws_connections", "open WebSocket streams", registry=r)
         self.trips_open = Gauge("ecodrive_trips_open", "open trips", registry=r)
         self.trips_open.set_function(open_trips)
+        if spat_hub is not None:
+            r.register(SpatCollector(spat_hub))
         ProcessCollector(registry=r)  # process_resident_memory_bytes, process_open_fds, process_max_fds, CPU seconds (Linux /proc)
 
     def observe_advice(self, trip, advice, outcome: str, seconds: float) -> None:
         self.child(self.fixes, outcome).inc()
-        self.child(self.advice, advice.action, advice.source).inc()
+        self.child(self.advice, advice.action, advice.source, advice.reason).inc()
         self.advice_s.observe(seconds)
 
     def child(self, metric, *labels: str):

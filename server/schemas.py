@@ -13,7 +13,7 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
 from advisory.advice.advisor import ACTIONS, REASONS
 
-SERVER_REASONS = ("poor_gps", "no_speed", "no_fix")
+SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew")
 """Pauses the service decides itself (``server.advising.SERVER_PHRASES``)."""
 Action = Enum("Action", {a: a for a in ACTIONS}, type=str)
 Action.__doc__ = "What the driver is advised to do; `none`: no speed advice (`reason` says why)."
@@ -43,14 +43,15 @@ class TripCreate(_In):
     corridor: str | None = Field(default=None, description="corridor name (GET /v1/corridors); default: the service's", max_length=200)
     timing: str | None = Field(
         default=None,
-        description="signal timing: one of the corridor's plans (GET /v1/corridors), or a paper preset (e.g. '15_15', 'field_test'); "
-        "default: the corridor's own plan, else one of the paper's 16 picked from the entry time",
+        description="signal timing of a scenario simulated for this trip alone: one of the corridor's plans (GET /v1/corridors), a paper preset "
+        "(e.g. '15_15', 'field_test') or 'trip' (one of the paper's 16 picked from the entry time); default: none, the lights as they run "
+        "for everyone (the service's shared SPaT: simulated, a feed, MQTT or a recorded log)",
         max_length=50,
     )
     vehicle: str | None = Field(default=None, description="vehicle preset (paper_54kwh, paper_75kwh, calibrated)", max_length=50)
     entry_unix_s: float | None = Field(
         default=None,
-        description="zone-entry instant the simulated timing is relative to [Unix s]; default: the creation instant. At most 300 s from server time.",
+        description="zone-entry instant a trip's own timing is relative to, and the start of its score [Unix s]; default: the creation instant. At most 300 s from server time.",
     )
     units: Literal["metric", "imperial"] | None = Field(
         default=None, description="speeds in the spoken messages: km/h (metric) or mph (imperial); default: the corridor's (metric if it has none)"
@@ -206,10 +207,29 @@ class CorridorSummary(_Out):
     default_plan: str | None = None
 
 
+class SpatIntersectionOut(_Out):
+    id: int = Field(description="J2735 intersection id")
+    status: Literal["ok", "stale", "clock_skew", "no_spat"] = Field(description="ok: fresh; stale: older than spat_stale_after_s; clock_skew: the controller's clock is off ours; no_spat: never heard")
+    age_s: float | None = Field(description="age of the latest state (controller timestamp) [s]")
+
+
+class SpatSourceOut(_Out):
+    model_config = ConfigDict(extra="allow")
+    kind: Literal["simulator", "feed", "mqtt", "log"]
+    connected: bool = Field(description="connected (feed, MQTT) or still playing (log)")
+
+
+class SpatHealthOut(_Out):
+    source: str = Field(description="where the SPaT comes from, in words")
+    sources: list[SpatSourceOut]
+    intersections: list[SpatIntersectionOut] = Field(description="intersections whose SPaT comes from a source (simulated lights are always fresh)")
+
+
 class HealthOut(_Out):
-    status: Literal["ok"]
+    status: Literal["ok", "degraded"] = Field(description="degraded: a SPaT source is down or an intersection's SPaT is not fresh (the service still answers)")
     now_unix_s: float
     trips: int
-    spat: str
+    spat: str = Field(description="where the SPaT comes from, in words (spat_health has the details)")
+    spat_health: SpatHealthOut
     tables: list[str]
     speech: bool

@@ -153,7 +153,7 @@ def trip_score(
     try:
         lights = None if observed is not None else advisory_scenario_at(scenario, entry_s, speed_limit_mps)
     except ValueError:  # live lights: no plan to compare against, only what the trip saw
-        observed = {}
+        observed, lights = {}, None
     if lights is None:
         signals = tuple(ObservedSignal(ix.stop_line_m, observed.get(ix.id, ()), entry_s) for ix in scenario.corridor.intersections)
         lights = Scenario(f"{scenario.corridor.name} observed", signals, length_m, speed_limit_mps, speed_limit_mps)

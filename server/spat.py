@@ -1,36 +1,208 @@
-"""Where each trip's SPaT comes from: the in-process simulation (default) or a remote feed.
+"""Where the service's SPaT comes from: one shared, per-intersection source for all trips.
 
-Both give, for a fix time, one :class:`~spat_feed.observe.PlanReading` per intersection, and the current
-SPaT message for ``GET .../spat``. For the simulation the trip's scenario (corridor, timing, zone entry)
-gives the plans directly (``FeedScenario.plans_at``), the same plans that ``InProcessSpatSource`` turns
-into messages. For a remote feed one :class:`spat_feed.client.SpatClient` per scenario subscribes to
-``/spat/stream`` with the trip's scenario as query parameters; trips with the same scenario share it.
+:class:`SpatHub` (one per process) holds a :class:`~spat_feed.source.SpatStore`: the latest state of every
+(intersection, signal group), filled by whichever sources the settings name, all at once if need be:
+
+* the **simulator**, in process (``ECO_SPAT_SIMULATE``, on by default without a remote feed): a light with a
+  fixed-time plan (the corridor's plan file, else the paper's ``15_15`` anchored on the epoch,
+  :func:`spat_feed.simulator.shared_scenario`) is read from its plan directly: exact, always fresh, and
+  fit for the DP lookup tables; nothing to do per tick;
+* a **remote feed** (``ECO_SPAT_FEED_URL``): one WebSocket to its ``/spat/intersections/stream``;
+* an **MQTT broker** (``ECO_SPAT_MQTT_URL``): one subscription per intersection the corridors need;
+* a **recorded log** played in process (``ECO_SPAT_LOG``, ``ECO_SPAT_LOG_SPEEDUP``, ``ECO_SPAT_LOG_LOOP``).
+
+A trip reads its lights from the hub (:class:`SharedSpat`): no per-trip connection, no per-trip work per
+message. A trip created with an explicit ``timing`` (the paper's scenarios, for research and demos) is
+simulated for itself (:class:`ScenarioSpat`), as before.
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import logging
 import time
 from typing import Any, Protocol
 
 from spat_feed.client import SpatClient
+from spat_feed.corridors import Corridor
 from spat_feed.messages import SpatMessage, from_unix_s
-from spat_feed.plans import Plan
-from spat_feed.scenarios import FeedScenario
-from spat_feed.source import Clock, InProcessSpatSource
-
+from spat_feed.mqtt import MqttSubscriber
 from spat_feed.observe import PlanReading
+from spat_feed.player import JsonlRecorder, LogPlayer, read_spat_log
+from spat_feed.plans import Plan
+from spat_feed.pump import SpatPump, run_every
+from spat_feed.scenarios import FeedScenario, spat_message_at
+from spat_feed.source import Clock, InProcessSpatSource, SpatStore, TimeRules
+
+from server.config import Settings
+
+log = logging.getLogger("server.spat")
 
 
 class TripSpat(Protocol):
     def readings(self, t_unix_s: float) -> dict[int, PlanReading]: ...
+
+    def status(self, intersection_id: int) -> str: ...
 
     def message(self) -> dict[str, Any]: ...
 
     async def close(self) -> None: ...
 
 
-class SimulatedSpat:
-    """The trip's scenario computed in process: always fresh."""
+class SpatHub:
+    """The process's SPaT: the store, its sources and their health (see the module docstring)."""
+
+    def __init__(self, settings: Settings, corridors: dict[str, Corridor], clock: Clock = time.time) -> None:
+        self.settings = settings
+        self.clock = clock
+        self.simulate = settings.spat_simulated
+        self.store = SpatStore(TimeRules(settings.spat_stale_after_s, settings.spat_clock_tolerance_s), clock)
+        self.needed = tuple(sorted(_live_ids(corridors.values(), self.simulate)))
+        """Intersections whose SPaT comes from the store (not simulated here)."""
+        self.client = (
+            SpatClient(settings.spat_feed_url.rstrip("/") + "/spat/intersections/stream", store=self.store, stale_after_s=settings.spat_stale_after_s, clock=clock, backoff_max_s=2.0)
+            if settings.spat_feed_url
+            else None
+        )
+        self.mqtt = MqttSubscriber(settings.spat_mqtt_url, self.store, self.needed or None) if settings.spat_mqtt_url else None
+        self.player = LogPlayer(read_spat_log(settings.spat_log), clock(), settings.spat_log_speedup, settings.spat_log_loop) if settings.spat_log else None
+        self.recorder = JsonlRecorder(settings.spat_record) if settings.spat_record else None
+        if self.recorder is not None:
+            self.store.observers.append(self.recorder)
+        self._tasks: list[asyncio.Task] = []
+        self.statuses: dict[int, str] = {}
+
+    @property
+    def description(self) -> str:
+        parts = ["in-process simulation"] if self.simulate else []
+        if self.client is not None:
+            parts.append(f"remote {self.settings.spat_feed_url}")
+        if self.mqtt is not None:
+            parts.append(f"mqtt {self.mqtt.target.host}:{self.mqtt.target.port}/{self.mqtt.target.prefix}")
+        if self.player is not None:
+            parts.append(f"log {self.settings.spat_log}")
+        return " + ".join(parts) or "none"
+
+    async def start(self) -> None:
+        if self.client is not None:
+            await self.client.start()
+        if self.mqtt is not None:
+            self.mqtt.start()
+        if self.player is not None:
+            pump = SpatPump(self.player.due, [self.store.offer], self.settings.spat_rate_hz, self.clock)
+            self._tasks.append(asyncio.create_task(pump.run(), name="spat log player"))
+        self._tasks.append(asyncio.create_task(run_every(1.0, self.sweep, "SPaT sweep"), name="spat sweep"))
+
+    def sweep(self) -> None:
+        """Once a second: every needed intersection's status (one WARNING per outage, in the store)."""
+        self.statuses = self.store.sweep(self.needed)
+
+    async def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._tasks.clear()
+        if self.client is not None:
+            await self.client.stop()
+        if self.mqtt is not None:
+            await asyncio.to_thread(self.mqtt.stop)
+        if self.recorder is not None:
+            self.recorder.close()
+
+    def sources(self) -> list[dict[str, Any]]:
+        """Each source: kind, whether it is connected (or playing), its counters."""
+        out: list[dict[str, Any]] = []
+        if self.simulate:
+            out.append({"kind": "simulator", "connected": True})
+        if self.client is not None:
+            out.append({"kind": "feed", "url": self.settings.spat_feed_url, "connected": self.client.connected, "reconnects": max(0, self.client.stats.connects - 1)})
+        if self.mqtt is not None:
+            t = self.mqtt.target
+            out.append({"kind": "mqtt", "url": f"mqtt://{t.host}:{t.port}/{t.prefix}", "connected": self.mqtt.connected.is_set(), "reconnects": max(0, self.mqtt.connects - 1)})
+        if self.player is not None:
+            out.append({"kind": "log", "file": str(self.settings.spat_log), "connected": not self.player.done, "passes": self.player.passes})
+        return out
+
+    def health(self) -> dict[str, Any]:
+        """Sources and every needed intersection's freshness; ``degraded`` when one is not ``ok`` or a source is down."""
+        sources = self.sources()
+        intersections = []
+        for ident in self.needed:
+            r = self.store.reading(ident)
+            intersections.append({"id": ident, "status": self.store.status(ident), "age_s": None if r is None else round(r.age_s, 3)})
+        ok = all(s["connected"] for s in sources) and all(i["status"] == "ok" for i in intersections)
+        return {"status": "ok" if ok else "degraded", "source": self.description, "sources": sources, "intersections": intersections}
+
+
+def _live_ids(corridors, simulate: bool) -> set[int]:
+    """Intersections read from the store: every one without simulation, else those with no fixed plan."""
+    from spat_feed.simulator import shared_scenario
+
+    out: set[int] = set()
+    for corridor in corridors:
+        plans = shared_scenario(corridor, 0.0).fixed_plans() if simulate else {}
+        out.update(ix.id for ix in corridor.intersections if not simulate or (ix.id, ix.signal_groups[0].id) not in plans)
+    return out
+
+
+class SharedSpat:
+    """A trip's view of the hub: simulated lights from their fixed plans, the others from the store."""
+
+    __slots__ = ("hub", "scenario", "_fixed", "_live")
+
+    def __init__(self, hub: SpatHub, scenario: FeedScenario) -> None:
+        self.hub = hub
+        self.scenario = scenario
+        plans = scenario.fixed_plans() if hub.simulate else {}
+        self._fixed: dict[int, PlanReading] = {}
+        self._live: list[tuple[int, int]] = []
+        for ix in scenario.corridor.intersections:
+            sg = ix.signal_groups[0].id
+            if (ix.id, sg) in plans:
+                self._fixed[ix.id] = PlanReading(plans[(ix.id, sg)])
+            else:
+                self._live.append((ix.id, sg))
+
+    @property
+    def live(self) -> bool:
+        """True when some light's SPaT comes from the store (its score then uses the observed phases)."""
+        return bool(self._live)
+
+    def readings(self, t_unix_s: float) -> dict[int, PlanReading]:
+        if not self._live:
+            return self._fixed
+        out = dict(self._fixed)
+        for ident, sg in self._live:
+            plan, reading = self.hub.store.plan(ident, sg)
+            out[ident] = PlanReading(None, fresh=False, age_s=float("inf")) if reading is None else PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s)
+        return out
+
+    def status(self, intersection_id: int) -> str:
+        return "ok" if intersection_id in self._fixed else self.hub.store.status(intersection_id)
+
+    def message(self) -> dict[str, Any]:
+        now = self.hub.clock()
+        items = spat_message_at(self.scenario, now).intersections if self._fixed else []
+        items = [ix for ix in items if ix.id in self._fixed]
+        fresh = {str(i): True for i in self._fixed}
+        for ident, _ in self._live:
+            r = self.hub.store.reading(ident)
+            fresh[str(ident)] = bool(r and r.fresh)
+            if r is not None:
+                items.append(r.intersection)
+        msg = SpatMessage(timestamp=from_unix_s(now), name=f"{self.scenario.corridor.name} shared", intersections=items[:32])
+        out = msg.model_dump(mode="json", by_alias=True, exclude_none=True)
+        out["fresh"] = fresh
+        return out
+
+    async def close(self) -> None:
+        return None
+
+
+class ScenarioSpat:
+    """A trip with its own ``timing`` (a paper scenario), simulated for it alone: always fresh."""
 
     __slots__ = ("scenario", "_fixed", "_clock")
 
@@ -49,6 +221,9 @@ class SimulatedSpat:
             return self._fixed
         return self._from_plans(self.scenario.plans_at(t_unix_s))
 
+    def status(self, intersection_id: int) -> str:
+        return "ok"
+
     def message(self) -> dict[str, Any]:
         msg = InProcessSpatSource(self.scenario, self._clock).message()
         return msg.model_dump(mode="json", by_alias=True, exclude_none=True)
@@ -57,85 +232,5 @@ class SimulatedSpat:
         return None
 
 
-def feed_params(scenario: FeedScenario) -> dict[str, Any]:
-    """The feed's query parameters for a scenario (``/spat/stream?corridor=...&timing=...``)."""
-    u = scenario.uncertainty
-    params: dict[str, Any] = {"corridor": scenario.corridor.name, "timing": scenario.timing.name, "entry_unix_s": scenario.entry_unix_s}
-    if not u.is_fixed:
-        params.update(early_s=u.early_s, late_s=u.late_s, confidence=u.confidence_frac)
-    return params
-
-
-class RemoteSpat:
-    """A trip's view of a shared :class:`SpatClient`; plans are parsed once per received state."""
-
-    __slots__ = ("feed", "key", "client", "scenario", "_cache")
-
-    def __init__(self, feed: RemoteFeed, key: tuple, client: SpatClient, scenario: FeedScenario) -> None:
-        self.feed, self.key, self.client, self.scenario = feed, key, client, scenario
-        self._cache: dict[int, tuple[object, Plan | None]] = {}
-
-    def readings(self, t_unix_s: float) -> dict[int, PlanReading]:
-        out: dict[int, PlanReading] = {}
-        for ix in self.scenario.corridor.intersections:
-            reading = self.client.reading(ix.id)
-            if reading is None:
-                out[ix.id] = PlanReading(None, fresh=False, age_s=float("inf"))
-                continue
-            cached = self._cache.get(ix.id)
-            if cached is None or cached[0] is not reading.intersection:
-                cached = (reading.intersection, reading.plan(ix.signal_groups[0].id))
-                self._cache[ix.id] = cached
-            out[ix.id] = PlanReading(cached[1], fresh=reading.fresh, age_s=reading.age_s)
-        return out
-
-    def message(self) -> dict[str, Any]:
-        readings = self.client.readings()
-        items = [readings[i].intersection for i in sorted(readings)]
-        stamp = from_unix_s(time.time())
-        msg = SpatMessage(timestamp=stamp, name=f"{self.scenario.corridor.name} {self.scenario.timing.name}", intersections=items)
-        out = msg.model_dump(mode="json", by_alias=True, exclude_none=True)
-        out["fresh"] = {str(i): r.fresh for i, r in readings.items()}
-        return out
-
-    async def close(self) -> None:
-        await self.feed.release(self.key)
-
-
-class RemoteFeed:
-    """Shared SPaT clients of a remote feed, one per scenario, reference-counted."""
-
-    def __init__(self, base_url: str, stale_after_s: float) -> None:
-        self.base_url = base_url
-        self.stale_after_s = stale_after_s
-        self._clients: dict[tuple, tuple[SpatClient, int]] = {}
-
-    async def subscribe(self, scenario: FeedScenario) -> RemoteSpat:
-        key = scenario.key
-        entry = self._clients.get(key)
-        if entry is None:
-            client = SpatClient(self.base_url, feed_params(scenario), stale_after_s=self.stale_after_s, backoff_max_s=2.0)
-            await client.start()
-            entry = (client, 0)
-        self._clients[key] = (entry[0], entry[1] + 1)
-        return RemoteSpat(self, key, entry[0], scenario)
-
-    async def release(self, key: tuple) -> None:
-        entry = self._clients.get(key)
-        if entry is None:
-            return
-        client, count = entry
-        if count <= 1:
-            del self._clients[key]
-            await client.stop()
-        else:
-            self._clients[key] = (client, count - 1)
-
-    @property
-    def connected(self) -> int:
-        return sum(1 for client, _ in self._clients.values() if client.connected)
-
-    async def close(self) -> None:
-        for client, _ in list(self._clients.values()):
-            await client.stop()
-        self._clients.clear()
+SimulatedSpat = ScenarioSpat
+"""The earlier name of :class:`ScenarioSpat`."""

@@ -27,7 +27,7 @@ from spat_feed.plans import (
     to_fixed_time_signal,
 )
 from spat_feed.scenarios import FeedScenario, Uncertainty, make_scenario, spat_message_at
-from spat_feed.source import InProcessSpatSource, LatestStore, SpatReading, SpatSource
+from spat_feed.source import InProcessSpatSource, LatestStore, SpatReading, SpatSource, SpatStore, TimeRules
 from spat_feed.timemark import timemark_to_unix, unix_to_timemark
 
 __all__ = [
@@ -43,6 +43,8 @@ __all__ = [
     "SpatMessage",
     "SpatReading",
     "SpatSource",
+    "SpatStore",
+    "TimeRules",
     "TimeToChange",
     "Timing",
     "UncertainPlan",

@@ -34,6 +34,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--n-events", type=int, default=3, help="events per signal group (current + coming)")
     parser.add_argument("--clock-start-unix-s", type=float, default=None, help="test hook: the feed's clock starts here")
     parser.add_argument("--fault-every", type=int, default=0, help="test hook: corrupt every N-th streamed message")
+    shared = parser.add_argument_group("the per-intersection stream (/spat/intersections/stream, MQTT)")
+    shared.add_argument("--corridors", default=None, help="comma-separated corridors whose intersections are simulated (default: every preset; 'none': none)")
+    shared.add_argument("--log", default=None, help="play a recorded SPaT log (.csv[.gz] as in ../shared/data/spat, or .jsonl[.gz] of our messages)")
+    shared.add_argument("--speedup", type=float, default=1.0, help="recorded seconds per second of play")
+    shared.add_argument("--loop", action="store_true", help="play the log again after its end, forever")
+    shared.add_argument("--mqtt", default=None, help="publish every intersection's state to mqtt://host[:port][/prefix] (topic <prefix>/<intersection id>)")
+    shared.add_argument("--record", default=None, help="append every intersection's state to a .jsonl[.gz] log")
     parser.add_argument("--log-level", default="warning")
     args = parser.parse_args(argv)
 
@@ -48,6 +55,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         rate_hz=args.rate_hz,
         n_events=args.n_events,
         fault_every=args.fault_every,
+        corridors=None if args.corridors is None else tuple(c for c in args.corridors.split(",") if c.strip() and c.strip() != "none"),
+        log=args.log,
+        speedup=args.speedup,
+        loop=args.loop,
+        mqtt=args.mqtt,
+        record=args.record,
     )
     clock = offset_clock(args.clock_start_unix_s) if args.clock_start_unix_s is not None else time.time
     app = create_app(settings, clock=clock)

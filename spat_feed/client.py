@@ -3,7 +3,7 @@
 :class:`SpatClient` runs one background task on the caller's event loop. It connects to the feed's
 ``/spat/stream`` WebSocket, validates every message intersection by intersection (a malformed one is
 logged and counted, the others are kept), and stores the newest state of each intersection in a
-:class:`~spat_feed.source.LatestStore`. When the connection drops, or goes silent for
+:class:`~spat_feed.source.SpatStore` (its own, or one shared with other sources: ``store=``). When the connection drops, or goes silent for
 ``silence_timeout_s``, it reconnects with exponential backoff and jitter. Readers ask
 ``fresh(intersection_id)``, which returns ``None`` once the data is older than ``stale_after_s``
 (default 2 s), whatever the connection is doing; ``reading(...)`` returns it with its age and a
@@ -28,7 +28,7 @@ import websockets
 from websockets.asyncio.client import connect
 
 from spat_feed.messages import IntersectionState, ParsedSpat, parse_spat_text
-from spat_feed.source import DEFAULT_STALE_AFTER_S, Clock, LatestStore, SpatReading
+from spat_feed.source import DEFAULT_STALE_AFTER_S, Clock, SpatReading, SpatStore, TimeRules
 
 log = logging.getLogger("spat_feed.client")
 
@@ -55,7 +55,7 @@ def stream_url(base_url: str, params: dict[str, Any] | None = None) -> str:
     parts = urlsplit(base_url)
     scheme = {"http": "ws", "https": "wss"}.get(parts.scheme, parts.scheme)
     path = parts.path.rstrip("/")
-    if not path.endswith("/spat/stream"):
+    if not path.endswith("/stream"):  # /spat/stream (a scenario) or /spat/intersections/stream (every intersection)
         path += "/spat/stream"
     query = urlencode({k: v for k, v in (params or {}).items() if v is not None})
     return urlunsplit((scheme, parts.netloc, path, query, ""))
@@ -97,11 +97,12 @@ class SpatClient:
         silence_timeout_s: float | None = None,
         open_timeout_s: float = 5.0,
         seed: int | None = None,
+        store: SpatStore | None = None,
     ) -> None:
         if not 0 < backoff_initial_s <= backoff_max_s:
             raise ValueError("need 0 < backoff_initial_s <= backoff_max_s")
         self.url = stream_url(base_url, params)
-        self.store = LatestStore(stale_after_s, clock)
+        self.store = store if store is not None else SpatStore(TimeRules(stale_after_s), clock)
         self.stats = ClientStats()
         self.connected = False
         self._backoff = (backoff_initial_s, backoff_max_s)
@@ -165,9 +166,12 @@ class SpatClient:
         parsed = parse_spat_text(text)
         for err in parsed.errors:
             self.stats.rejected += 1
+            self.store.reject("malformed", None, err)
             log.warning("rejected SPaT data from %s: %s", self.url, err)
         if parsed.intersections:
-            self.stats.intersections += self.store.update(parsed.intersections)
+            stored = self.store.offer_many(parsed.intersections)
+            self.stats.intersections += stored
+            self.stats.rejected += len(parsed.intersections) - stored
             self._update.set()
         return parsed
 

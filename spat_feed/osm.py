@@ -500,7 +500,9 @@ class ImportResult:
     notes: list[str]
 
 
-def corridors_from_osm(path: str | Path, street: str, *, name: str | None = None, units: str | None = None, direction: str | None = None) -> ImportResult:
+def corridors_from_osm(
+    path: str | Path, street: str, *, name: str | None = None, units: str | None = None, direction: str | None = None, first_id: int = 1
+) -> ImportResult:
     """Corridors along ``street`` in the OSM file ``path``, one per direction of travel (module docstring).
 
     ``name``: corridor name prefix (default: the street's, e.g. ``7th_street``), suffixed with the
@@ -535,7 +537,7 @@ def corridors_from_osm(path: str | Path, street: str, *, name: str | None = None
             row.append(match)
         ids.append(row)
     order = sorted(range(len(centres)), key=lambda k: (min(r.index(k) if k in r else 1e9 for r in ids), k))
-    number = {k: n + 1 for n, k in enumerate(order)}
+    number = {k: first_id + n for n, k in enumerate(order)}
     out: list[Corridor] = []
     for r_index, ((route, stations, lights), row) in enumerate(zip(results, ids)):
         heading_deg = _azimuth(data.nodes[route.nodes[0]], data.nodes[route.nodes[-1]])
@@ -569,7 +571,7 @@ def corridors_from_osm(path: str | Path, street: str, *, name: str | None = None
             frac = (light.stop_m - stations[i - 1]) / max(stations[i] - stations[i - 1], 1e-9)
             lon, lat, _ = WGS84.fwd(data.nodes[route.nodes[i - 1]][1], data.nodes[route.nodes[i - 1]][0], az, frac * (stations[i] - stations[i - 1]))
             cross = sorted({t.get("name", "") for _, refs, t in data.other_ways if light.node in refs and t.get("name")})
-            label = f"{street} & {' / '.join(cross)}" if cross else f"{street} signal {number[k]}"
+            label = f"{street} & {' / '.join(cross)}" if cross else f"{street} signal {number[k] - first_id + 1}"
             intersections.append(IntersectionSpec(
                 id=number[k], name=label, stop_line_m=stop, lat_deg=round(lat, 7), lon_deg=round(lon, 7), approach_heading_deg=round(az, 2) % 360.0,
                 signal_groups=(SignalGroupSpec(id=group, name=f"{bound} through"),)))  # fmt: skip

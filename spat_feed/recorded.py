@@ -26,7 +26,9 @@ from collections.abc import Iterable, Iterator, Mapping
 from datetime import datetime
 from pathlib import Path
 
-from spat_feed.messages import IntersectionState, MovementEvent, MovementState, TimeChangeDetails
+from pydantic import ValidationError
+
+from spat_feed.messages import IntersectionState, MovementState, _short
 from spat_feed.plans import J2735_STATE_NUMBERS
 
 CSV_COLUMNS = ("generated_utc", "intersection", "signal_group", "phase", "min_end_utc", "max_end_utc")
@@ -69,35 +71,56 @@ def iter_spat_csv(rows: Iterable[Mapping[str, str]], intersection_ids: Mapping[s
     Rows of one snapshot (same ``generated_utc`` and ``intersection``) must be consecutive, as in the
     shared recordings. Raises :class:`RecordedLogError` naming ``source`` and the line on a bad row.
     """
+    return _snapshots(([row.get(c) for c in CSV_COLUMNS] for row in rows), intersection_ids, source)
+
+
+def _snapshots(rows: Iterable[list], intersection_ids: Mapping[str, int] | None, source: str) -> Iterator[IntersectionState]:
+    """Rows as lists in :data:`CSV_COLUMNS` order -> snapshots, each validated in one call (a recorded day is
+    ~10^5 rows); a bad row is found again row by row so that the error names its line."""
     key = None
-    movements: list[MovementState] = []
-    stamp: datetime | None = None
-    name = ""
+    lines: list[tuple[int, list[str]]] = []
     for line_no, row in enumerate(rows, start=2):
-        try:
-            missing = [c for c in CSV_COLUMNS if not (row.get(c) or "").strip()]
-            if missing:
-                raise ValueError(f"missing {', '.join(missing)}")
-            number = int(row["phase"])
-            if not 0 <= number < len(J2735_STATE_NUMBERS):
-                raise ValueError(f"phase {number} is not a J2735 MovementPhaseState number (0..9)")
-            row_key = (row["generated_utc"].strip(), row["intersection"].strip())
-            if row_key != key:
-                if key is not None:
-                    yield _snapshot(name, stamp, movements, intersection_ids)
-                key, movements, stamp, name = row_key, [], _utc(row_key[0]), row_key[1]
-            timing = TimeChangeDetails(min_end_time=_utc(row["min_end_utc"]), max_end_time=_utc(row["max_end_utc"]))
-            event = MovementEvent(event_state=J2735_STATE_NUMBERS[number], timing=timing)
-            movements.append(MovementState(signal_group=int(row["signal_group"]), state_time_speed=[event]))
-        except ValueError as exc:  # pydantic's ValidationError is a ValueError
-            raise RecordedLogError(f"{source}, line {line_no}: {exc}") from exc
+        values = [(v or "").strip() for v in row]
+        missing = [c for c, v in zip(CSV_COLUMNS, values) if not v] + list(CSV_COLUMNS[len(values) :])
+        if missing:
+            raise RecordedLogError(f"{source}, line {line_no}: missing {', '.join(missing)}")
+        if (values[0], values[1]) != key:
+            if key is not None:
+                yield _snapshot(lines, intersection_ids, source)
+            key, lines = (values[0], values[1]), []
+        lines.append((line_no, values))
     if key is not None:
-        yield _snapshot(name, stamp, movements, intersection_ids)
+        yield _snapshot(lines, intersection_ids, source)
 
 
-def _snapshot(name: str, stamp: datetime | None, movements: list[MovementState], ids: Mapping[str, int] | None) -> IntersectionState:
-    ident = ids[name] if ids is not None and name in ids else default_intersection_id(name)
-    return IntersectionState(id=ident, name=name, timestamp=stamp, states=movements)
+def _movement(values: list[str]) -> dict:
+    number = int(values[3])
+    if not 0 <= number < len(J2735_STATE_NUMBERS):
+        raise ValueError(f"phase {number} is not a J2735 MovementPhaseState number (0..9)")
+    timing = {"min_end_time": values[4], "max_end_time": values[5]}
+    return {"signal_group": int(values[2]), "state_time_speed": [{"event_state": J2735_STATE_NUMBERS[number], "timing": timing}]}
+
+
+def _snapshot(lines: list[tuple[int, list[str]]], ids: Mapping[str, int] | None, source: str) -> IntersectionState:
+    first_line, first = lines[0]
+    name = first[1]
+    try:
+        ident = ids[name] if ids is not None and name in ids else default_intersection_id(name)
+        _utc(first[0])
+        movements = []
+        for line_no, values in lines:
+            first_line = line_no
+            movements.append(_movement(values))
+        return IntersectionState.model_validate({"id": ident, "name": name, "timestamp": first[0], "states": movements})
+    except ValidationError:  # find the row
+        for line_no, values in lines:
+            try:
+                MovementState.model_validate(_movement(values))
+            except ValidationError as exc:
+                raise RecordedLogError(f"{source}, line {line_no}: {_short(exc)}") from None
+        raise RecordedLogError(f"{source}, line {lines[0][0]}: snapshot of {name!r} at {first[0]} is not valid SPaT") from None
+    except ValueError as exc:
+        raise RecordedLogError(f"{source}, line {first_line}: {exc}") from exc
 
 
 def read_spat_csv(path: str | Path, intersection_ids: Mapping[str, int] | None = None) -> list[IntersectionState]:
@@ -107,10 +130,12 @@ def read_spat_csv(path: str | Path, intersection_ids: Mapping[str, int] | None =
     """
     path = Path(path)
     with _open_text(path) as fh:
-        reader = csv.DictReader(fh)
-        absent = [c for c in CSV_COLUMNS if c not in (reader.fieldnames or ())]
+        reader = csv.reader(fh)
+        header = [h.strip() for h in next(reader, [])]
+        absent = [c for c in CSV_COLUMNS if c not in header]
         if absent:
             raise RecordedLogError(f"{path}, line 1: missing column(s) {', '.join(absent)}; expected {', '.join(CSV_COLUMNS)}")
-        snapshots = list(iter_spat_csv(reader, intersection_ids, str(path)))
+        index = [header.index(c) for c in CSV_COLUMNS]
+        snapshots = list(_snapshots(([row[i] if i < len(row) else "" for i in index] for row in reader), intersection_ids, str(path)))
     snapshots.sort(key=lambda ix: ix.timestamp)  # stable: file order within a timestamp
     return snapshots

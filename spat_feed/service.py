@@ -7,12 +7,21 @@ Routes
 ``GET /timings``           timing presets
 ``GET /spat``              the SPaT message now (``format=j2735`` for TimeMarks)
 ``WS  /spat/stream``       the SPaT message pushed at ``rate_hz``
+``GET /spat/intersections``          the latest state of every intersection (simulated and played)
+``WS  /spat/intersections/stream``   every intersection's new states, one message per tick, shared by all
 
 ``/spat`` and ``/spat/stream`` take the scenario as query parameters, all optional, defaulting to the
 feed's settings: ``corridor``, ``timing`` (a preset, or ``trip`` to pick one of the paper's 16 from the
 entry time), ``entry_unix_s`` (the trip's zone-entry instant: the timing is relative to it),
 ``early_s``/``late_s``/``confidence`` (actuated-style change windows).
 
+**Per intersection** (what a city runs; the advisory service subscribes once): the simulator publishes every
+intersection of the served corridors under its shared timing (``spat_feed.simulator``), a recorded log plays
+on the present clock (``--log``, ``spat_feed.player``); each tick's states go to the shared stream, to an MQTT
+broker (``--mqtt``) and to a JSON-lines recording (``--record``). One text per tick whatever the number of
+subscribers.
+
+**Per scenario** (research and tests): ``/spat`` and ``/spat/stream`` with a scenario in the query.
 Streaming: subscribers with the same scenario share one group; each tick builds that group's message
 once (its ``timestamp`` is the build instant) and wakes the subscribers, each of which sends the latest
 text. A slow subscriber skips to the newest message instead of queueing old ones.
@@ -35,8 +44,12 @@ from fastapi import Depends, FastAPI, HTTPException, Query, WebSocket, WebSocket
 from fastapi.responses import JSONResponse
 
 from spat_feed.corridors import TIMING_PRESETS, load_corridor, preset_names
-from spat_feed.messages import from_unix_s, to_j2735
+from spat_feed.messages import IntersectionState, SpatMessage, from_unix_s, to_j2735
+from spat_feed.mqtt import MqttPublisher
+from spat_feed.player import JsonlRecorder, LogPlayer, read_spat_log
+from spat_feed.pump import SpatPump, run_every
 from spat_feed.scenarios import FeedScenario, Uncertainty, make_scenario, spat_message_at
+from spat_feed.simulator import IntersectionSimulator
 from spat_feed.source import Clock
 
 log = logging.getLogger("spat_feed.service")
@@ -56,6 +69,16 @@ class FeedSettings:
     n_events: int = 3
     fault_every: int = 0
     """Test hook: every ``fault_every``-th streamed message is corrupted (0: never); see :func:`_corrupt`."""
+    corridors: tuple[str, ...] | None = None
+    """Corridors whose intersections are simulated on the shared stream (None: every preset; () none)."""
+    log: str | None = None
+    """A recorded SPaT log (.csv[.gz] or .jsonl[.gz]) played on the shared stream."""
+    speedup: float = 1.0
+    loop: bool = False
+    mqtt: str | None = None
+    """Publish the shared stream to this broker (``mqtt://host:port[/prefix]``)."""
+    record: str | None = None
+    """Append the shared stream to this JSON-lines log."""
 
     def __post_init__(self) -> None:
         if not 0 < self.rate_hz <= 100:
@@ -65,21 +88,22 @@ class FeedSettings:
 
 
 class _Group:
-    """Subscribers of one scenario: the latest message text and a wake-up event."""
+    """Subscribers of one scenario (or of the shared stream): the latest message text (a tuple of texts for
+    the shared stream: one tick's messages) and a wake-up event."""
 
-    def __init__(self, scenario: FeedScenario) -> None:
+    def __init__(self, scenario: FeedScenario | None) -> None:
         self.scenario = scenario
         self.subscribers = 0
         self.seq = 0
-        self.text = ""
+        self.text: str | tuple[str, ...] = ""
         self._event = asyncio.Event()
 
-    def publish(self, text: str) -> None:
+    def publish(self, text: str | tuple[str, ...]) -> None:
         self.text, self.seq = text, self.seq + 1
         event, self._event = self._event, asyncio.Event()
         event.set()
 
-    async def next(self, last_seq: int) -> tuple[str, int]:
+    async def next(self, last_seq: int) -> tuple[str | tuple[str, ...], int]:
         """Wait for a message newer than ``last_seq``; returns (text, seq)."""
         while self.seq == last_seq:
             await self._event.wait()
@@ -121,21 +145,58 @@ class _Hub:
             group.publish(self.render(group, now))
         self.ticks += 1
 
-    async def run(self) -> None:
-        loop = asyncio.get_running_loop()
-        period_s = 1.0 / self.settings.rate_hz
-        next_s = loop.time()
-        while True:
-            next_s += period_s
-            delay_s = next_s - loop.time()
-            if delay_s < -period_s:  # fell behind by more than a tick: skip, do not burst
-                next_s = loop.time()
-                delay_s = 0.0
-            await asyncio.sleep(max(delay_s, 0.0))
-            try:
-                self.tick()
-            except Exception:  # pragma: no cover - keep the feed alive, log the bug
-                log.exception("tick failed")
+
+class _Shared:
+    """The per-intersection stream: producers (simulator, log player) -> latest states, subscribers, sinks."""
+
+    def __init__(self, settings: FeedSettings, clock: Clock) -> None:
+        self.clock = clock
+        names = preset_names() if settings.corridors is None else list(settings.corridors)
+        self.simulator = IntersectionSimulator([load_corridor(n) for n in names], settings.n_events) if names else None
+        self.player = LogPlayer(read_spat_log(settings.log), clock(), settings.speedup, settings.loop) if settings.log else None
+        self.latest: dict[int, IntersectionState] = {}
+        self.group = _Group(None)  # type: ignore[arg-type]
+        self.sinks: list = []
+        self.recorder = JsonlRecorder(settings.record) if settings.record else None
+        if self.recorder is not None:
+            self.sinks.append(self.recorder)
+        self.publisher = MqttPublisher(settings.mqtt) if settings.mqtt else None
+        if self.publisher is not None:
+            self.sinks.append(self.publisher)
+        self.pump = SpatPump(self.produce, [self.keep, *self.sinks], settings.rate_hz, clock)
+
+    def produce(self, now_unix_s: float) -> list[IntersectionState]:
+        states = self.simulator.states_at(now_unix_s) if self.simulator is not None else []
+        if self.player is not None:
+            states += self.player.due(now_unix_s)
+        return states
+
+    def keep(self, state: IntersectionState) -> None:
+        self.latest[state.id] = state
+
+    def tick(self) -> None:
+        """One round: new states to the sinks and, as one tick's texts (32 intersections a message, J2735's
+        limit), to every subscriber."""
+        states = self.pump.tick()
+        if states:
+            self.group.publish(self.texts(states))
+
+    def texts(self, states: list[IntersectionState]) -> tuple[str, ...]:
+        stamp = from_unix_s(self.clock())
+        return tuple(
+            SpatMessage(timestamp=stamp, name="ecodrive intersections", intersections=states[i : i + 32]).model_dump_json(by_alias=True, exclude_none=True)
+            for i in range(0, len(states), 32)
+        )
+
+    def start(self) -> None:
+        if self.publisher is not None:
+            self.publisher.start()
+
+    def stop(self) -> None:
+        if self.publisher is not None:
+            self.publisher.stop()
+        if self.recorder is not None:
+            self.recorder.close()
 
 
 def _corrupt(text: str, n: int) -> str:
@@ -175,19 +236,27 @@ def create_app(settings: FeedSettings | None = None, clock: Clock = time.time) -
     del for_validation
     started_s = clock()
     hub = _Hub(settings, clock)
+    shared = _Shared(settings, clock)
+
+    def tick() -> None:
+        hub.tick()
+        shared.tick()
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        task = asyncio.create_task(hub.run())
+        shared.start()
+        task = asyncio.create_task(run_every(settings.rate_hz, tick, "feed tick"))
         try:
             yield
         finally:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
+            shared.stop()
 
     app = FastAPI(title="ecodrive SPaT feed (simulated)", lifespan=lifespan)
     app.state.hub = hub
+    app.state.shared = shared
 
     def scenario_params(
         corridor: str | None = None,
@@ -202,7 +271,42 @@ def create_app(settings: FeedSettings | None = None, clock: Clock = time.time) -
     @app.get("/health")
     def health() -> dict[str, Any]:
         now = clock()
-        return {"status": "ok", "now": from_unix_s(now).isoformat().replace("+00:00", "Z"), "subscribers": sum(g.subscribers for g in hub.groups.values())}
+        out: dict[str, Any] = {
+            "status": "ok", "now": from_unix_s(now).isoformat().replace("+00:00", "Z"),
+            "subscribers": sum(g.subscribers for g in hub.groups.values()) + shared.group.subscribers,
+            "intersections": sorted(shared.latest), "states_sent": shared.pump.sent,
+        }  # fmt: skip
+        if shared.player is not None:
+            out["log"] = {"file": settings.log, "passes": shared.player.passes, "index": shared.player.index, "done": shared.player.done}
+        if shared.publisher is not None:
+            out["mqtt"] = {"url": settings.mqtt, "connected": shared.publisher.connected.is_set(), "published": shared.publisher.published}
+            if not shared.publisher.connected.is_set():
+                out["status"] = "degraded"
+        return out
+
+    @app.get("/spat/intersections")
+    def intersections() -> JSONResponse:
+        states = [shared.latest[i] for i in sorted(shared.latest)]
+        return JSONResponse([json.loads(t) for t in shared.texts(states)] if states else [])
+
+    @app.websocket("/spat/intersections/stream")
+    async def intersections_stream(ws: WebSocket) -> None:
+        await ws.accept()
+        group = shared.group
+        group.subscribers += 1
+        try:
+            if shared.latest:  # the latest state of each intersection first, then every tick's new ones
+                for text in shared.texts([shared.latest[i] for i in sorted(shared.latest)]):
+                    await ws.send_text(text)
+            seq = group.seq
+            while True:
+                texts, seq = await group.next(seq)
+                for text in texts:
+                    await ws.send_text(text)
+        except (WebSocketDisconnect, RuntimeError, OSError) as exc:
+            log.debug("subscriber left: %r", exc)
+        finally:
+            group.subscribers -= 1
 
     @app.get("/corridors")
     def corridors() -> list[str]:

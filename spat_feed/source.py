@@ -1,22 +1,32 @@
-"""Where the advisor gets SPaT: the common reading interface, the latest-value store, the in-process source.
+"""Where the advisor gets SPaT: the latest-value store with its time rules, and the in-process source.
 
-Every source answers ``reading(intersection_id)`` with a :class:`SpatReading` (the intersection's
-latest state, its age and whether it is fresh) and ``fresh(intersection_id)`` with the state only if
-it is fresh. :class:`InProcessSpatSource` computes messages from a scenario on demand, so the
-advisory service runs with no feed process (the embedded default); :class:`spat_feed.client.SpatClient`
-fills a :class:`LatestStore` from a remote feed.
+Real controllers publish SPaT per intersection. :class:`SpatStore` keeps the latest state of every
+(intersection, signal group) it is offered, from any source (the simulator, a recorded-log player, an MQTT
+subscriber, a remote feed), and answers readers with that state, its age and a status. Every trip on a
+corridor reads the same entries: the SPaT work per message does not grow with the number of trips.
 
-Age rule: ``age = now - min(sender timestamp, arrival time)``, i.e. the larger of the data's own age
-and the time since it arrived. Old data replayed by a sender, and data whose feed has gone quiet,
-both go stale; a sender clock ahead of ours cannot make data look younger than its arrival.
+Time rules (:class:`TimeRules`), judged on the controller's own timestamp:
+
+* **rejected** (counted per reason, never stored): ``malformed`` (not our schema), ``duplicate`` (the same
+  timestamp again), ``out_of_order`` (older than the one held), ``clock_ahead`` (dated more than
+  ``clock_tolerance_s`` after its arrival: it would look fresher than it is), ``unknown_intersection``
+  (a store told which intersections to keep, ``only=``).
+* **age** = now - the older of timestamp and arrival; older than ``stale_after_s`` (default 2 s): ``stale``.
+* **clock offset** = arrival - timestamp, its floor (the smallest over ``skew_window_s``, which strips the
+  network delay): beyond ``clock_tolerance_s`` either way the controller's clock is off ours, its windows
+  would put advice seconds into a red: ``clock_skew``, never served as fresh.
+
+Statuses: ``ok``, ``stale``, ``clock_skew``, ``no_spat`` (never heard). Only ``ok`` is fresh.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
+from collections import Counter, deque
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from spat_feed.messages import IntersectionState, SpatMessage, plan_from_movement, to_unix_s
@@ -27,17 +37,36 @@ Clock = Callable[[], float]
 """Returns Unix seconds. ``time.time`` by default; tests pass their own."""
 
 DEFAULT_STALE_AFTER_S = 2.0
+REJECT_REASONS = ("malformed", "duplicate", "out_of_order", "clock_ahead", "unknown_intersection")
+STATUSES = ("ok", "stale", "clock_skew", "no_spat")
+
+log = logging.getLogger("spat_feed.source")
+
+
+@dataclass(frozen=True, slots=True)
+class TimeRules:
+    """When SPaT is fresh. [s]"""
+
+    stale_after_s: float = DEFAULT_STALE_AFTER_S
+    clock_tolerance_s: float = 1.0
+    skew_window_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        if not (self.stale_after_s > 0 and self.clock_tolerance_s > 0 and self.skew_window_s > 0):
+            raise ValueError(f"time rules must be > 0: {self}")
 
 
 @dataclass(frozen=True, slots=True)
 class SpatReading:
-    """One intersection's latest state as seen at ``now``: with its age and freshness. [s]"""
+    """One intersection's latest state as seen at ``now``: its age, status and the controller's clock offset. [s]"""
 
     intersection: IntersectionState
     timestamp_unix_s: float
     received_unix_s: float
     age_s: float
     fresh: bool
+    status: str = "ok"
+    clock_offset_s: float = 0.0
 
     def plan(self, signal_group: int) -> UncertainPlan | None:
         """The signal group's plan on the Unix axis (see :func:`spat_feed.messages.plan_from_movement`)."""
@@ -49,8 +78,6 @@ class SpatSource(Protocol):
     """What the advisor needs from any SPaT source."""
 
     def reading(self, intersection_id: int) -> SpatReading | None: ...
-
-    def fresh(self, intersection_id: int) -> IntersectionState | None: ...
 
     def readings(self) -> dict[int, SpatReading]: ...
 
@@ -68,38 +95,133 @@ def data_age_s(timestamp_unix_s: float, received_unix_s: float, now_unix_s: floa
     return now_unix_s - min(timestamp_unix_s, received_unix_s)
 
 
-class LatestStore:
-    """Latest state per intersection, thread-safe; older or equal timestamps never replace newer ones."""
+@dataclass
+class IntersectionStats:
+    """Counters of one intersection since the store started."""
 
-    def __init__(self, stale_after_s: float = DEFAULT_STALE_AFTER_S, clock: Clock = time.time) -> None:
-        if not stale_after_s > 0:
-            raise ValueError("stale_after_s must be > 0")
-        self.stale_after_s = stale_after_s
+    messages: int = 0
+    rejected: Counter = field(default_factory=Counter)
+    stale_since_unix_s: float | None = None  # set while stale (for the one WARNING per outage)
+
+
+class _Entry:
+    """The latest state of one intersection, its plans parsed once per signal group, its clock offsets."""
+
+    __slots__ = ("state", "stamp", "received", "plans", "offsets", "ahead_unix_s")
+
+    def __init__(self) -> None:
+        self.state: IntersectionState | None = None
+        self.stamp = self.received = float("-inf")
+        self.plans: dict[int, UncertainPlan | None] = {}
+        self.offsets: deque[tuple[float, float]] = deque()  # (arrival, arrival - timestamp), offsets increasing
+        self.ahead_unix_s = float("-inf")  # arrival of the last message rejected as clock_ahead
+
+
+class SpatStore:
+    """Latest SPaT per (intersection, signal group) from any source; thread-safe; see the module docstring.
+
+    Parameters
+    ----------
+    rules : TimeRules
+        Stale age, clock tolerance, skew window.
+    clock : callable
+        Unix seconds (arrival times and ages); ``time.time`` by default.
+    only : iterable of int, optional
+        Keep these intersections only; others are rejected as ``unknown_intersection``.
+    """
+
+    def __init__(self, rules: TimeRules | None = None, clock: Clock = time.time, only: Iterable[int] | None = None, *, stale_after_s: float | None = None) -> None:
+        self.rules = rules or TimeRules(stale_after_s if stale_after_s is not None else DEFAULT_STALE_AFTER_S)
         self.clock = clock
+        self.only = None if only is None else frozenset(only)
+        self.stats: dict[int, IntersectionStats] = {}
+        self.rejected: Counter = Counter()  # by reason, all intersections (malformed texts have none)
+        self.observers: list[Callable[[IntersectionState], None]] = []  # called with every accepted state
         self._lock = threading.Lock()
-        self._latest: dict[int, tuple[IntersectionState, float, float]] = {}
+        self._entries: dict[int, _Entry] = {}
 
-    def update(self, items: Iterable[IntersectionState], received_unix_s: float | None = None) -> int:
-        """Store each intersection unless we hold a newer one; returns how many were stored."""
+    @property
+    def stale_after_s(self) -> float:
+        return self.rules.stale_after_s
+
+    # writing ------------------------------------------------------------------------------------
+
+    def reject(self, reason: str, intersection_id: int | None = None, detail: str = "") -> str:
+        """Count a rejected message (``malformed`` ones come from parsers); returns ``reason``."""
+        self.rejected[reason] += 1
+        if intersection_id is not None:
+            self.stats.setdefault(intersection_id, IntersectionStats()).rejected[reason] += 1
+        log.debug("rejected SPaT (%s) %s %s", reason, intersection_id, detail)
+        return reason
+
+    def offer(self, state: IntersectionState, received_unix_s: float | None = None) -> str:
+        """Store one intersection's state unless a time rule rejects it; returns ``"ok"`` or the reason."""
         received = self.clock() if received_unix_s is None else received_unix_s
-        stored = 0
+        ident = state.id
+        if self.only is not None and ident not in self.only:
+            return self.reject("unknown_intersection", None, str(ident))
+        stamp = to_unix_s(state.timestamp)
         with self._lock:
-            for ix in items:
-                stamp = to_unix_s(ix.timestamp)
-                old = self._latest.get(ix.id)
-                if old is None or stamp > old[1]:
-                    self._latest[ix.id] = (ix, stamp, received)
-                    stored += 1
-        return stored
+            entry = self._entries.get(ident)
+            if entry is None:
+                entry = self._entries[ident] = _Entry()
+            if stamp > received + self.rules.clock_tolerance_s:
+                entry.ahead_unix_s = received
+                verdict = "clock_ahead"
+            elif stamp == entry.stamp:
+                verdict = "duplicate"
+            elif stamp < entry.stamp:
+                verdict = "out_of_order"
+            else:
+                verdict = "ok"
+                entry.state, entry.stamp, entry.received, entry.plans = state, stamp, received, {}
+                offsets, offset = entry.offsets, received - stamp  # a monotonic deque: its head is the window's floor
+                while offsets and offsets[-1][1] >= offset:
+                    offsets.pop()
+                offsets.append((received, offset))
+                while offsets[0][0] < received - self.rules.skew_window_s:
+                    offsets.popleft()
+        if verdict != "ok":
+            return self.reject(verdict, ident)
+        self.stats.setdefault(ident, IntersectionStats()).messages += 1
+        for observer in self.observers:
+            observer(state)
+        return "ok"
+
+    def offer_many(self, states: Iterable[IntersectionState], received_unix_s: float | None = None) -> int:
+        """Offer each state; returns how many were stored."""
+        return sum(self.offer(s, received_unix_s) == "ok" for s in states)
+
+    # reading ------------------------------------------------------------------------------------
+
+    def _status(self, entry: _Entry, now: float) -> tuple[float, str, float]:
+        age = data_age_s(entry.stamp, entry.received, now)
+        offset = entry.offsets[0][1] if entry.offsets else 0.0
+        if abs(offset) > self.rules.clock_tolerance_s or entry.ahead_unix_s > entry.received:
+            return age, "clock_skew", offset
+        return age, ("ok" if age <= self.rules.stale_after_s else "stale"), offset
 
     def reading(self, intersection_id: int) -> SpatReading | None:
+        """The intersection's latest state with its age and status; ``None`` if never heard."""
         with self._lock:
-            entry = self._latest.get(intersection_id)
-        if entry is None:
-            return None
-        ix, stamp, received = entry
-        age = data_age_s(stamp, received, self.clock())
-        return SpatReading(ix, stamp, received, age, age <= self.stale_after_s)
+            entry = self._entries.get(intersection_id)
+            if entry is None or entry.state is None:
+                return None
+            age, status, offset = self._status(entry, self.clock())
+            return SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset)
+
+    def plan(self, intersection_id: int, signal_group: int) -> tuple[UncertainPlan | None, SpatReading | None]:
+        """The signal group's plan (parsed once per message) and the intersection's reading."""
+        with self._lock:
+            entry = self._entries.get(intersection_id)
+            if entry is None or entry.state is None:
+                return None, None
+            plan = entry.plans.get(signal_group, ...)
+            if plan is ...:
+                movement = entry.state.movement(signal_group)
+                plan = entry.plans[signal_group] = None if movement is None else plan_from_movement(movement, entry.stamp)
+            age, status, offset = self._status(entry, self.clock())
+            return plan, SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset)
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:
         r = self.reading(intersection_id)
@@ -107,8 +229,43 @@ class LatestStore:
 
     def readings(self) -> dict[int, SpatReading]:
         with self._lock:
-            ids = list(self._latest)
+            ids = list(self._entries)
         return {i: r for i in ids if (r := self.reading(i)) is not None}
+
+    def status(self, intersection_id: int) -> str:
+        """``ok``, ``stale``, ``clock_skew`` (also when every message so far came from a clock ahead) or ``no_spat``."""
+        with self._lock:
+            entry = self._entries.get(intersection_id)
+            if entry is None:
+                return "no_spat"
+            if entry.state is None:
+                return "clock_skew" if entry.ahead_unix_s > entry.received else "no_spat"
+            return self._status(entry, self.clock())[1]
+
+    def sweep(self, expected: Iterable[int] = ()) -> dict[int, str]:
+        """Status of every intersection held (and of ``expected`` ones); logs one WARNING when one goes
+        out of ``ok`` and one INFO when it is back. Call it about once a second."""
+        now = self.clock()
+        with self._lock:
+            ids = set(self._entries)
+        out = {i: self.status(i) for i in sorted(ids.union(expected))}
+        for i, status in out.items():
+            st = self.stats.setdefault(i, IntersectionStats())
+            if status != "ok" and st.stale_since_unix_s is None:
+                st.stale_since_unix_s = now
+                log.warning("SPaT of intersection %d: %s (no fresh data since %.1f s)", i, status, self._age(i, now))
+            elif status == "ok" and st.stale_since_unix_s is not None:
+                log.info("SPaT of intersection %d fresh again after %.1f s", i, now - st.stale_since_unix_s)
+                st.stale_since_unix_s = None
+        return out
+
+    def _age(self, intersection_id: int, now: float) -> float:
+        r = self.reading(intersection_id)
+        return float("inf") if r is None else r.age_s
+
+
+LatestStore = SpatStore
+"""The earlier name of :class:`SpatStore`."""
 
 
 class InProcessSpatSource:

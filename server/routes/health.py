@@ -8,19 +8,21 @@ from fastapi import APIRouter, Response
 
 from server.deps import EngineDep, MetricsAccessDep, MetricsDep, SettingsDep, SpeechDep
 from server.metrics import CONTENT_TYPE_LATEST
-from server.schemas import HealthOut
+from server.schemas import HealthOut, SpatHealthOut
 
 router = APIRouter(tags=["service"])
 
 
 @router.get("/health", response_model=HealthOut)
 async def health(engine: EngineDep, settings: SettingsDep, speech: SpeechDep) -> HealthOut:
-    """The service is up and its tables are loaded."""
+    """The service is up and its tables are loaded; each SPaT source's state and each intersection's freshness."""
+    spat = engine.spat.health()
     return HealthOut(
-        status="ok",
+        status=spat["status"],
         now_unix_s=time.time(),
         trips=len(engine.trips),
-        spat=f"remote {settings.spat_feed_url}" if settings.spat_feed_url else "in-process simulation",
+        spat=spat["source"],
+        spat_health=SpatHealthOut.model_validate({k: v for k, v in spat.items() if k != "status"}),
         tables=sorted(engine.tables),
         speech=speech.available,
     )

@@ -40,20 +40,6 @@ def service(tmp_path_factory) -> Iterator[Proc]:
     proc.kill()
 
 
-@pytest.fixture
-def start_proc(tmp_path) -> Iterator:
-    """``start_proc(Proc) -> Proc``; everything started is killed at the end of the test."""
-    procs: list[Proc] = []
-
-    def start(proc: Proc) -> Proc:
-        procs.append(proc)
-        return proc.start()
-
-    yield start
-    for proc in procs:
-        proc.kill()
-
-
 @pytest.fixture(scope="session")
 def s200():
     return load_corridor("paper_s200")

@@ -1,4 +1,4 @@
-"""docker-compose.yml: two services wired by URL, both health-checked (no Docker engine needed)."""
+"""docker-compose.yml: broker, SPaT player and service wired by URL, all health-checked (no Docker engine needed)."""
 
 from __future__ import annotations
 
@@ -14,11 +14,16 @@ REPO = Path(__file__).resolve().parents[2]
 
 def test_compose_wiring():
     spec = yaml.safe_load((REPO / "docker-compose.yml").read_text())
-    feed, svc = spec["services"]["spat-feed"], spec["services"]["advisory"]
-    assert "8765" in " ".join(feed["command"]) and "/health" in " ".join(feed["healthcheck"]["test"])
+    broker, feed, svc = spec["services"]["mqtt"], spec["services"]["spat-feed"], spec["services"]["advisory"]
+    assert "mosquitto" in " ".join(broker["command"]) and "1883" in " ".join(broker["healthcheck"]["test"])
+    assert "mosquitto" in (REPO / "Dockerfile").read_text()  # Debian's broker in our image
+    cmd = " ".join(feed["command"])
+    assert "8765" in cmd and "--mqtt mqtt://mqtt:1883" in cmd and "--log /data/spat/antwerp-2019-05-01.csv.gz" in cmd and "--loop" in cmd
+    assert any(v.endswith(":/data/spat:ro") for v in feed["volumes"]) and "/health" in " ".join(feed["healthcheck"]["test"])
     assert "/health" in " ".join(svc["healthcheck"]["test"])
-    assert svc["environment"]["ECO_SPAT_FEED_URL"] == "http://spat-feed:8765"
-    assert svc["depends_on"]["spat-feed"]["condition"] == "service_healthy"
+    assert svc["environment"]["ECO_SPAT_MQTT_URL"] == "mqtt://mqtt:1883" and svc["environment"]["ECO_CORRIDOR_DIR"].endswith("spat_feed/presets/live")
+    assert (REPO / "spat_feed" / "presets" / "live" / "antwerp_k648.json").exists()
+    assert svc["depends_on"]["mqtt"]["condition"] == feed["depends_on"]["mqtt"]["condition"] == "service_healthy"
     assert svc["command"][:2] == ["ecodrive", "serve"] and "0.0.0.0" in svc["command"]
     assert svc["environment"]["ECO_API_KEYS"].startswith("${ECO_API_KEYS:?")  # creation is never open in a deployment
 

@@ -184,9 +184,10 @@ def test_west_oakland_7th_street(tmp_path, capsys):
             assert WGS84.inv(lon, lat, ix.lon_deg, ix.lat_deg)[2] < 0.5
     assert west.intersections[0].id == east.intersections[0].id and "Wood Street" in west.intersections[0].name
     assert west.intersections[1].stop_line_m - west.intersections[0].stop_line_m > MERGE_M
-    # the shipped corridor is this import
+    # the shipped corridor is this import, its intersections numbered from 7001 (ids apart from the paper's 1 and 2)
     shipped = load_corridor("oakland_7th_westbound")
-    again = corridors_from_osm(OAKLAND, "7th Street", name="oakland_7th", direction="westbound").corridors[0]
+    again = corridors_from_osm(OAKLAND, "7th Street", name="oakland_7th", direction="westbound", first_id=7001).corridors[0]
+    assert [ix.id for ix in again.intersections] == [7001, 7002]
     assert shipped.model_copy(update={"plans": ()}) == again
     assert corridor_cli(["show", "oakland_7th_westbound", "--json"]) == 0
     shown = json.loads(capsys.readouterr().out)

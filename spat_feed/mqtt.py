@@ -1,0 +1,175 @@
+"""SPaT over MQTT: one topic per intersection, the latest state retained; a publisher and a subscriber (paho-mqtt).
+
+Cities publish live traffic-light data over MQTT (Hamburg's SensorThings/MQTT service, for one). Our layout:
+
+* **Topic** ``<prefix>/<intersection id>``, default prefix ``ecodrive/spat`` (e.g. ``ecodrive/spat/648``).
+* **Payload**: one :class:`~spat_feed.messages.IntersectionState` as JSON, camelCase, UTC times ending in
+  ``Z`` (the schema of ``GET /spat``'s items, docs/SPAT.md). A whole
+  :class:`~spat_feed.messages.SpatMessage` is accepted too.
+* **QoS 0, retained**: SPaT is a latest-value stream; a lost message is replaced by the next one (0.1-1 s), and
+  a new subscriber gets each intersection's last state at once (the store's time rules judge its age).
+
+URL: ``mqtt://[user:password@]host[:port][/prefix]`` (port 1883 by default).
+
+:class:`MqttSubscriber` runs paho's network thread (reconnecting with backoff by itself) and offers every
+state to a :class:`~spat_feed.source.SpatStore`, which is thread-safe; malformed payloads are counted there.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from urllib.parse import unquote, urlsplit
+
+import paho.mqtt.client as paho
+from pydantic import ValidationError
+
+from spat_feed.messages import IntersectionState, SpatMessage
+from spat_feed.source import SpatStore
+
+log = logging.getLogger("spat_feed.mqtt")
+
+DEFAULT_PREFIX = "ecodrive/spat"
+
+
+@dataclass(frozen=True, slots=True)
+class MqttTarget:
+    """Where the broker is and the topic prefix."""
+
+    host: str
+    port: int = 1883
+    prefix: str = DEFAULT_PREFIX
+    username: str | None = None
+    password: str | None = None
+
+    def topic(self, intersection_id: int | str) -> str:
+        return f"{self.prefix}/{intersection_id}"
+
+
+def parse_mqtt_url(url: str) -> MqttTarget:
+    """``mqtt://user:pw@host:1884/city/spat`` -> :class:`MqttTarget`.
+
+    Examples
+    --------
+    >>> parse_mqtt_url("mqtt://127.0.0.1:1884/city/spat")
+    MqttTarget(host='127.0.0.1', port=1884, prefix='city/spat', username=None, password=None)
+    >>> parse_mqtt_url("mqtt://broker").prefix
+    'ecodrive/spat'
+    """
+    parts = urlsplit(url)
+    if parts.scheme != "mqtt" or not parts.hostname:
+        raise ValueError(f"not an MQTT URL {url!r}: expected mqtt://host[:port][/prefix]")
+    prefix = parts.path.strip("/") or DEFAULT_PREFIX
+    if any(c in prefix for c in "+#"):
+        raise ValueError(f"the topic prefix {prefix!r} may not hold MQTT wildcards")
+    user = unquote(parts.username) if parts.username else None
+    password = unquote(parts.password) if parts.password else None
+    return MqttTarget(parts.hostname, parts.port or 1883, prefix, user, password)
+
+
+def _client(target: MqttTarget, name: str) -> paho.Client:
+    client = paho.Client(paho.CallbackAPIVersion.VERSION2, client_id=f"{name}-{threading.get_ident() % 100000}-{time.monotonic_ns() % 10**6}", protocol=paho.MQTTv311)
+    if target.username:
+        client.username_pw_set(target.username, target.password)
+    client.reconnect_delay_set(min_delay=1, max_delay=5)
+    return client
+
+
+def parse_payload(payload: bytes) -> list[IntersectionState]:
+    """The intersection states of one MQTT payload; ``ValueError`` with a short reason if it is none."""
+    try:
+        if payload.lstrip()[:1] == b"{" and b'"intersections"' in payload:
+            return list(SpatMessage.model_validate_json(payload).intersections)
+        return [IntersectionState.model_validate_json(payload)]
+    except ValidationError as exc:
+        raise ValueError("; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors(include_url=False)[:3])) from None
+
+
+class _Connection:
+    """paho's client with its network thread, connection state and counters."""
+
+    def __init__(self, url: str, name: str) -> None:
+        self.target = parse_mqtt_url(url)
+        self.url = url
+        self.client = _client(self.target, name)
+        self.connected = threading.Event()
+        self.connects = 0
+        self.disconnects = 0
+        self.client.on_connect = self._on_connect
+        self.client.on_disconnect = self._on_disconnect
+
+    def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
+        if reason_code.is_failure:
+            log.warning("MQTT broker %s refused the connection: %s", self.url, reason_code)
+            return
+        self.connects += 1
+        if self.connects > 1:
+            log.warning("MQTT broker %s: connected again", self.url)
+        self.connected.set()
+        self.on_connected()
+
+    def on_connected(self) -> None:
+        """Hook: (re)subscribe."""
+
+    def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:
+        if self.connected.is_set():
+            self.disconnects += 1
+            log.warning("MQTT broker %s: connection lost (%s); reconnecting", self.url, reason_code)
+        self.connected.clear()
+
+    def start(self) -> None:
+        self.client.connect_async(self.target.host, self.target.port, keepalive=10)
+        self.client.loop_start()
+
+    def stop(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+        self.connected.clear()
+
+    def wait_connected(self, timeout_s: float) -> bool:
+        return self.connected.wait(timeout_s)
+
+
+class MqttPublisher(_Connection):
+    """Publishes intersection states, each to its intersection's topic (QoS 0, retained)."""
+
+    def __init__(self, url: str) -> None:
+        super().__init__(url, "ecodrive-pub")
+        self.published = 0
+
+    def __call__(self, state: IntersectionState) -> None:
+        """Publish one state (dropped while disconnected: SPaT is a latest-value stream)."""
+        if not self.connected.is_set():
+            return
+        payload = state.model_dump_json(by_alias=True, exclude_none=True)
+        self.client.publish(self.target.topic(state.id), payload, qos=0, retain=True)
+        self.published += 1
+
+
+class MqttSubscriber(_Connection):
+    """Subscribes to ``<prefix>/<id>`` for each intersection in ``intersection_ids`` (all: ``<prefix>/+``)
+    and offers every state received to ``store``."""
+
+    def __init__(self, url: str, store: SpatStore, intersection_ids: tuple[int, ...] | None = None) -> None:
+        super().__init__(url, "ecodrive-sub")
+        self.store = store
+        self.topics = [self.target.topic(i) for i in intersection_ids] if intersection_ids else [self.target.topic("+")]
+        self.messages = 0
+        self.client.on_message = self._on_message
+
+    def on_connected(self) -> None:
+        self.client.subscribe([(t, 0) for t in self.topics])
+
+    def _on_message(self, client, userdata, msg) -> None:
+        self.messages += 1
+        received = self.store.clock()
+        try:
+            states = parse_payload(msg.payload)
+        except ValueError as exc:
+            self.store.reject("malformed", None, f"{msg.topic}: {exc}")
+            log.info("malformed SPaT on %s: %s", msg.topic, exc)
+            return
+        for state in states:
+            self.store.offer(state, received)

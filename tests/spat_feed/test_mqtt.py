@@ -1,0 +1,209 @@
+"""The city path on loopback: a recorded day played by the feed process into a real MQTT broker (mosquitto),
+the advisory service subscribed to it, trips on the Antwerp corridor reading the controller's SPaT.
+
+Needs ``mosquitto`` (``scripts/system-deps.sh`` installs it); skipped with the reason when it is missing.
+"""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from spat_feed.corridors import load_corridor_dir
+from spat_feed.messages import to_unix_s
+from spat_feed.mqtt import MqttPublisher
+from spat_feed.player import read_spat_log
+
+from tests.conftest import recorded_spat_slice
+from tests.procs import REPO, Proc, free_port
+
+LIVE_DIR = REPO / "spat_feed" / "presets" / "live"
+WAIT_S = 30.0  # bounds only: a broken path fails instead of hanging
+MOSQUITTO = shutil.which("mosquitto") or next((p for p in ("/usr/sbin/mosquitto",) if Path(p).exists()), None)
+
+pytestmark = pytest.mark.skipif(MOSQUITTO is None, reason="mosquitto not installed (sh scripts/system-deps.sh installs it)")
+
+
+class Broker:
+    """mosquitto on a loopback port, anonymous, no persistence; can be killed and started again on the same port."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder, self.port, self.proc = folder, free_port(), None
+        self.conf = folder / "mosquitto.conf"
+        self.conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
+
+    @property
+    def url(self) -> str:
+        return f"mqtt://127.0.0.1:{self.port}/test/spat"
+
+    def start(self) -> Broker:
+        log = (self.folder / "mosquitto.log").open("ab")
+        self.proc = subprocess.Popen([MOSQUITTO, "-c", str(self.conf)], stdout=log, stderr=subprocess.STDOUT)
+        log.close()
+        deadline = time.monotonic() + WAIT_S
+        while time.monotonic() < deadline:
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", self.port)) == 0:
+                    return self
+            time.sleep(0.05)
+        raise RuntimeError(f"mosquitto did not listen: {(self.folder / 'mosquitto.log').read_text()}")
+
+    def kill(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(timeout=10)
+        self.proc = None
+
+
+@pytest.fixture
+def broker(tmp_path):
+    b = Broker(tmp_path).start()
+    yield b
+    b.kill()
+
+
+def until(what, check, timeout_s: float = WAIT_S, every_s: float = 0.1):
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = check()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"not within {timeout_s} s: {what}")
+        time.sleep(every_s)
+
+
+def metric(text: str, name: str, **labels: str) -> float:
+    want = ",".join(f'{k}="{v}"' for k, v in labels.items())
+    for line in text.splitlines():
+        if line.startswith(f"{name}{{") and all(f'{k}="{v}"' in line for k, v in labels.items()):
+            return float(line.rsplit(" ", 1)[1])
+        if not labels and line.startswith(f"{name} "):
+            return float(line.rsplit(" ", 1)[1])
+    return 0.0 if want else float("nan")
+
+
+def test_recorded_day_through_mqtt_reaches_trips_and_survives_a_broker_restart(start_proc, tmp_path, broker):
+    log_path = recorded_spat_slice(tmp_path, 1200)
+    recorded = read_spat_log(log_path)
+    feed = start_proc(Proc(["-m", "spat_feed", "--corridors", "none", "--log", str(log_path), "--loop", "--mqtt", broker.url], tmp_path / "feed.log"))
+    svc = start_proc(Proc(["-m", "server", "--log-level", "info", "--no-access-log"], tmp_path / "service.log", {
+        "ECO_CORRIDORS": "paper_s200", "ECO_CORRIDOR_DIR": str(LIVE_DIR), "ECO_DEFAULT_CORRIDOR": "antwerp_k648",
+        "ECO_SPAT_MQTT_URL": broker.url, "ECO_TABLES": "false", "ECO_SPEECH": "false", "ECO_METRICS_ACCESS": "public",
+        "ECO_RATE_PER_S": "50", "ECO_RATE_BURST": "60"}))  # fmt: skip
+    corridor = load_corridor_dir(LIVE_DIR)["antwerp_k648"]
+    with httpx.Client(base_url=svc.base_url, timeout=10.0) as client:
+        r = client.post("/v1/trips", json={"corridor": "antwerp_k648"})
+        assert r.status_code == 201, r.text
+        trip_id, auth = r.json()["trip_id"], {"Authorization": f"Bearer {r.json()['token']}"}
+
+        def fix(station_m: float = 100.0) -> dict:
+            lat, lon = corridor.position(station_m)
+            r = client.post(f"/v1/trips/{trip_id}/fixes", json={"t_unix_s": time.time(), "lat_deg": lat, "lon_deg": lon, "speed_mps": 12.0}, headers=auth)
+            assert r.status_code == 200, r.text
+            return r.json()
+
+        def fix_when(fresh: bool):
+            advice = fix()
+            return advice if advice["spat_fresh"] is fresh else None
+
+        advice = until("fresh SPaT from the broker", lambda: fix_when(True))
+        assert advice["next_intersection_id"] == 648 and advice["reason"] not in ("no_spat", "stale_spat", "clock_skew")
+        health = client.get("/health").json()
+        assert health["status"] == "ok" and health["spat_health"]["intersections"] == [{"id": 648, "status": "ok", "age_s": pytest.approx(0.5, abs=1.5)}]
+        assert [s["kind"] for s in health["spat_health"]["sources"]] == ["simulator", "mqtt"]
+
+        # the trip sees the controller's states: the phases and windows of one recorded snapshot, moved onto now
+        spat = client.get(f"/v1/trips/{trip_id}/spat", headers=auth).json()
+        (seen,) = spat["intersections"]
+        assert seen["id"] == 648 and spat["fresh"] == {"648": True}
+        stamp = _unix(seen["timestamp"])
+        assert abs(stamp - time.time()) < 2.5
+
+        def shape(states, stamp_s):
+            out = []
+            for m in states:
+                ev = m["stateTimeSpeed"][0] if isinstance(m, dict) else m.state_time_speed[0]
+                if isinstance(m, dict):
+                    t = ev["timing"]
+                    out.append((m["signalGroup"], ev["eventState"], round(_unix(t["minEndTime"]) - stamp_s, 2), round(_unix(t["maxEndTime"]) - stamp_s, 2)))
+                else:
+                    out.append((m.signal_group, ev.event_state.value, round(to_unix_s(ev.timing.min_end_time) - stamp_s, 2), round(to_unix_s(ev.timing.max_end_time) - stamp_s, 2)))
+            return out
+
+        seen_shape = shape(seen["states"], stamp)
+        assert any(shape(rec.states, to_unix_s(rec.timestamp)) == seen_shape for rec in recorded), seen_shape
+
+        # the broker dies: stale within the stale age (2 s), said plainly; health degraded; one WARNING logged
+        last_fresh = fix()
+        messages_before_kill = metric(client.get("/metrics").text, "ecodrive_spat_messages_total", intersection="648")
+        broker.kill()
+        t_kill = time.monotonic()
+        advice = until("stale after the broker died", lambda: fix_when(False), every_s=0.05)
+        assert time.monotonic() - t_kill < 2.0 + 1.5  # stale age + one SPaT period and a request's slack
+        # no new speed advice on stale data: nothing, or the last fresh advice held through a short dropout
+        assert advice["reason"] == "stale_spat" and "Signal data" in advice["message"], advice
+        assert advice["action"] in ("none", last_fresh["action"]) and advice["target_speed_mps"] in (None, last_fresh["target_speed_mps"])
+        health = client.get("/health").json()
+        assert health["status"] == "degraded" and health["spat_health"]["intersections"][0]["status"] == "stale"
+        until("WARNING in the service log", lambda: "SPaT of intersection 648: stale" in (tmp_path / "service.log").read_text())
+
+        # back on the same port: publisher and subscriber reconnect by themselves, fresh again
+        broker.start()
+        until("fresh again after the broker restart", lambda: fix()["spat_fresh"], every_s=0.2)
+        until("health ok again", lambda: client.get("/health").json()["status"] == "ok")
+        metrics = client.get("/metrics").text
+        assert metric(metrics, "ecodrive_spat_source_reconnects_total", kind="mqtt") >= 1
+        assert metric(metrics, "ecodrive_spat_messages_total", intersection="648") > messages_before_kill >= 1
+        assert metric(metrics, "ecodrive_advice_total", reason="stale_spat") >= 1
+    feed.kill()
+
+
+def test_malformed_duplicate_out_of_order_and_skewed_messages_are_rejected_and_counted(start_proc, tmp_path, broker):
+    svc = start_proc(Proc(["-m", "server", "--log-level", "warning", "--no-access-log"], tmp_path / "service.log", {
+        "ECO_CORRIDORS": "paper_s200", "ECO_CORRIDOR_DIR": str(LIVE_DIR), "ECO_DEFAULT_CORRIDOR": "antwerp_k648",
+        "ECO_SPAT_MQTT_URL": broker.url, "ECO_TABLES": "false", "ECO_SPEECH": "false", "ECO_METRICS_ACCESS": "public"}))  # fmt: skip
+    log_path = recorded_spat_slice(tmp_path, 40)
+    recorded = read_spat_log(log_path)
+    until("the service subscribed", lambda: httpx.get(svc.base_url + "/health").json()["spat_health"]["sources"][-1]["connected"])
+    pub = MqttPublisher(broker.url)
+    pub.start()
+    assert pub.wait_connected(WAIT_S)
+    from spat_feed.player import map_times
+
+    now = time.time()
+    t0 = to_unix_s(recorded[0].timestamp)
+    good = map_times(recorded[0], now - t0, t0)
+    older = map_times(recorded[0], now - 1.0 - t0, t0)
+    ahead = map_times(recorded[1], now + 30.0 - t0, t0)
+    topic = pub.target.topic(648)
+    for payload in (good.model_dump_json(by_alias=True), good.model_dump_json(by_alias=True), older.model_dump_json(by_alias=True),
+                    ahead.model_dump_json(by_alias=True), b"{not json", b'{"id": 648, "timestamp": "yesterday"}'):  # fmt: skip
+        pub.client.publish(topic, payload, qos=1).wait_for_publish(5)
+    with httpx.Client(base_url=svc.base_url, timeout=10.0) as client:
+
+        def counts():
+            text = client.get("/metrics").text
+            return {reason: metric(text, "ecodrive_spat_rejected_total", reason=reason) for reason in ("duplicate", "out_of_order", "clock_ahead", "malformed")}
+
+        def all_counted():
+            c = counts()
+            return c if c["malformed"] >= 2 and c["clock_ahead"] >= 1 else None
+
+        got = until("every bad message counted", all_counted)
+        assert got == {"duplicate": 1.0, "out_of_order": 1.0, "clock_ahead": 1.0, "malformed": 2.0}
+        text = client.get("/metrics").text
+        assert metric(text, "ecodrive_spat_messages_total", intersection="648") == 1.0
+    pub.stop()
+
+
+def _unix(text: str) -> float:
+    from datetime import datetime
+
+    return datetime.fromisoformat(text.replace("Z", "+00:00")).timestamp()

@@ -1,0 +1,219 @@
+"""The shared SPaT store's time rules, the per-intersection simulator and the recorded-log player (pure, in process)."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import pytest
+
+from spat_feed.corridors import load_corridor, paper_corridor, preset_names
+from spat_feed.messages import UNKNOWN_MAX_END_S, to_unix_s
+from spat_feed.observe import light_view
+from spat_feed.player import JsonlRecorder, LogPlayer, read_spat_log
+from spat_feed.recorded import RecordedLogError
+from spat_feed.simulator import IntersectionSimulator, shared_scenario, simulated_plans
+from spat_feed.source import SpatStore, TimeRules
+
+from tests.conftest import recorded_spat_slice
+
+T0 = 1_790_000_000.0
+
+
+class Clock:
+    def __init__(self, t: float) -> None:
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def states(t: float, corridor_names=("paper_s200",)):
+    return IntersectionSimulator([load_corridor(n) for n in corridor_names]).states_at(t)
+
+
+def test_rejects_duplicate_out_of_order_and_clock_ahead_and_counts_them():
+    clock = Clock(T0)
+    store = SpatStore(TimeRules(stale_after_s=2.0, clock_tolerance_s=1.0), clock)
+    first = states(T0)[0]
+    assert store.offer(first) == "ok"
+    assert store.offer(first) == "duplicate"
+    assert store.offer(states(T0 - 0.5)[0]) == "out_of_order"
+    assert store.offer(states(T0 + 1.5)[0]) == "clock_ahead"  # dated 1.5 s after its arrival
+    assert store.offer(states(T0 + 0.8)[0]) == "ok"  # within the tolerance
+    assert store.stats[1].messages == 2
+    assert dict(store.stats[1].rejected) == {"duplicate": 1, "out_of_order": 1, "clock_ahead": 1}
+    assert SpatStore(only=[2], clock=clock).offer(first) == "unknown_intersection"
+
+
+def test_stale_after_the_stale_age_on_the_controllers_timestamp():
+    clock = Clock(T0)
+    store = SpatStore(TimeRules(stale_after_s=2.0), clock)
+    assert store.status(1) == "no_spat"
+    store.offer(states(T0)[0])
+    clock.t = T0 + 1.9
+    assert store.reading(1).fresh and store.status(1) == "ok"
+    clock.t = T0 + 2.1
+    r = store.reading(1)
+    assert not r.fresh and r.status == "stale" and r.age_s == pytest.approx(2.1)
+    # old data arriving now is as old as its timestamp says
+    store2 = SpatStore(TimeRules(stale_after_s=2.0, clock_tolerance_s=5.0), clock)
+    store2.offer(states(clock.t - 3.0)[0])
+    assert store2.status(1) == "stale"
+
+
+def test_a_controller_clock_off_ours_is_clock_skew_never_fresh():
+    clock = Clock(T0)
+    store = SpatStore(TimeRules(stale_after_s=2.0, clock_tolerance_s=1.0, skew_window_s=30.0), clock)
+    for k in range(10):  # the controller's clock runs 1.5 s behind ours: every state arrives 1.5 s "late"
+        clock.t = T0 + k
+        assert store.offer(states(T0 + k - 1.5)[0]) == "ok"
+    r = store.reading(1)
+    assert r.status == "clock_skew" and not r.fresh and r.clock_offset_s == pytest.approx(1.5)
+    # a clock that is right again, for a whole window, is trusted again
+    for k in range(10, 45):
+        clock.t = T0 + k
+        store.offer(states(T0 + k)[0])
+    assert store.status(1) == "ok"
+    # a controller whose clock runs ahead: every state rejected, the intersection reports the skew
+    ahead = SpatStore(TimeRules(clock_tolerance_s=1.0), clock)
+    assert ahead.offer(states(clock.t + 3.0)[0]) == "clock_ahead"
+    assert ahead.status(1) == "clock_skew"
+
+
+def test_network_delay_is_not_skew():
+    clock = Clock(T0)
+    store = SpatStore(TimeRules(clock_tolerance_s=1.0), clock)
+    for k in range(30):  # delays of 0.05-1.6 s: the floor (0.05 s) is the clock offset
+        clock.t = T0 + k + (0.05 if k % 3 == 0 else 1.6)
+        store.offer(states(T0 + k)[0])
+    assert store.reading(1).clock_offset_s == pytest.approx(0.05)
+
+
+def test_sweep_warns_once_per_outage(caplog):
+    clock = Clock(T0)
+    store = SpatStore(TimeRules(stale_after_s=2.0), clock)
+    store.offer(states(T0)[0])
+    with caplog.at_level(logging.INFO, logger="spat_feed.source"):
+        clock.t = T0 + 5
+        assert store.sweep([1, 9]) == {1: "stale", 9: "no_spat"}
+        store.sweep([1, 9])
+        clock.t = T0 + 6
+        store.offer(states(T0 + 6)[0])
+        store.sweep([1])
+    warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 2 and "intersection 1: stale" in warnings[0].getMessage()
+    assert any("fresh again" in r.getMessage() for r in caplog.records if r.levelno == logging.INFO)
+
+
+def test_simulator_publishes_each_intersection_once_with_the_shared_plans():
+    corridors = [load_corridor(n) for n in preset_names()]
+    sim = IntersectionSimulator(corridors)
+    out = sim.states_at(T0)
+    assert sorted(s.id for s in out) == [1, 2, 7001, 7002]  # the paper corridors share their lights 1 and 2
+    # what a trip entering now sees is what the simulator publishes
+    sc = shared_scenario(paper_corridor(400.0), T0)
+    plans = simulated_plans(corridors, T0)
+    assert sc.fixed_plans()[(2, 2)] == plans[(2, 2)]
+    # the message changes only in its timestamp between state changes (rendered once, reused)
+    a, b = sim.states_at(T0 + 0.1), sim.states_at(T0 + 0.2)
+    assert [x.states for x in a] == [x.states for x in b] and a[0].timestamp != b[0].timestamp
+    assert IntersectionSimulator(corridors).states_at(T0 + 0.2)[0].model_dump() == b[0].model_dump()
+
+
+def test_one_intersection_id_with_two_plans_is_refused(tmp_path):
+    from importlib import resources
+
+    from spat_feed.corridors import load_corridor_dir
+
+    presets = resources.files("spat_feed") / "presets"
+    corridor = (presets / "oakland_7th_westbound.json").read_text().replace('"id": 7001', '"id": 1').replace('"id": 7002', '"id": 2')
+    plan = (presets / "plans" / "oakland_7th_westbound_plausible.json").read_text().replace('"intersection_id": 7001', '"intersection_id": 1')
+    (tmp_path / "c.json").write_text(corridor)
+    (tmp_path / "p.json").write_text(plan.replace('"intersection_id": 7002', '"intersection_id": 2'))
+    oakland_as_1_2 = load_corridor_dir(tmp_path)["oakland_7th_westbound"]
+    with pytest.raises(ValueError, match="one intersection id is one controller"):
+        IntersectionSimulator([paper_corridor(200.0), oakland_as_1_2])
+
+
+def test_log_player_maps_the_recorded_clock_onto_now(tmp_path):
+    log = read_spat_log(recorded_spat_slice(tmp_path))
+    t_first = to_unix_s(log[0].timestamp)
+    player = LogPlayer(log, start_unix_s=T0, speedup=2.0)
+    assert player.due(T0 - 0.01) == []
+    first = player.due(T0)
+    assert len(first) == 1 and to_unix_s(first[0].timestamp) == pytest.approx(T0)
+    rec = log[10]
+    due = player.due(T0 + (to_unix_s(rec.timestamp) - t_first) / 2.0)
+    played = due[-1]
+    assert to_unix_s(played.timestamp) == pytest.approx(T0 + (to_unix_s(rec.timestamp) - t_first) / 2.0)
+    for m_rec, m_play in zip(rec.states, played.states):
+        assert m_rec.signal_group == m_play.signal_group and m_rec.state_time_speed[0].event_state == m_play.state_time_speed[0].event_state
+        tr, tp = m_rec.state_time_speed[0].timing, m_play.state_time_speed[0].timing
+        rel_min = to_unix_s(tr.min_end_time) - to_unix_s(rec.timestamp)
+        assert to_unix_s(tp.min_end_time) - to_unix_s(played.timestamp) == pytest.approx(rel_min / 2.0, abs=1e-3)
+        rel_max = to_unix_s(tr.max_end_time) - to_unix_s(rec.timestamp)
+        expect = rel_max if rel_max >= UNKNOWN_MAX_END_S else rel_max / 2.0  # "unknown" stays unknown at any speed
+        assert to_unix_s(tp.max_end_time) - to_unix_s(played.timestamp) == pytest.approx(expect, abs=1e-3)
+    # looping: the second pass plays one recorded second after the end, timestamps still increasing
+    looping = LogPlayer(log, start_unix_s=T0, speedup=10.0, loop=True)
+    span = (to_unix_s(log[-1].timestamp) - t_first + 1.0) / 10.0
+    got = looping.due(T0 + 2.5 * span)
+    assert looping.passes == 2 and len(got) > 2 * len(log)
+    stamps = [to_unix_s(s.timestamp) for s in got]
+    assert stamps == sorted(stamps)
+    once = LogPlayer(log, start_unix_s=T0, speedup=10.0)
+    once.due(T0 + 10 * span)
+    assert once.done
+
+
+def test_jsonl_log_round_trip_and_errors_name_the_line(tmp_path):
+    path = tmp_path / "rec.jsonl.gz"
+    rec = JsonlRecorder(path)
+    for k in range(5):
+        for s in states(T0 + k):
+            rec(s)
+    rec.close()
+    back = read_spat_log(path)
+    assert [s.model_dump() for s in back] == [s.model_dump() for k in range(5) for s in states(T0 + k)]
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text(json.dumps(states(T0)[0].model_dump(mode="json", by_alias=True)) + "\n{not json\n")
+    with pytest.raises(RecordedLogError, match=r"bad.jsonl, line 2"):
+        read_spat_log(bad)
+    with pytest.raises(RecordedLogError, match="unknown log format"):
+        (tmp_path / "x.txt").write_text("")
+        read_spat_log(tmp_path / "x.txt")
+
+
+def test_simulator_and_its_recording_give_identical_trip_views(tmp_path):
+    """The same timing from the simulator and from a log of it: every light's view is the same at every instant."""
+    corridor = load_corridor("paper_s400")
+    sim = IntersectionSimulator([corridor], n_events=3)
+    path = tmp_path / "sim.jsonl"
+    rec = JsonlRecorder(path)
+    for k in range(0, 1300):  # 130 s at 10 Hz
+        for s in sim.states_at(T0 + 0.1 * k):
+            rec(s)
+    rec.close()
+    clock = Clock(T0)
+    live, played = SpatStore(clock=clock), SpatStore(clock=clock)
+    player = LogPlayer(read_spat_log(path), start_unix_s=T0)
+    for k in range(0, 1300):
+        clock.t = T0 + 0.1 * k
+        live.offer_many(sim.states_at(clock.t))
+        played.offer_many(player.due(clock.t))
+        if k % 7:
+            continue
+        for ix in corridor.intersections:
+            sg = ix.signal_groups[0].id
+            (pa, ra), (pb, rb) = live.plan(ix.id, sg), played.plan(ix.id, sg)
+            assert pa == pb and ra.fresh and rb.fresh
+            view_a = light_view(ix, _reading(pa, ra), 50.0, clock.t)
+            view_b = light_view(ix, _reading(pb, rb), 50.0, clock.t)
+            assert view_a == view_b and view_a.red_windows_s
+
+
+def _reading(plan, r):
+    from spat_feed.observe import PlanReading
+
+    return PlanReading(plan, fresh=r.fresh, age_s=r.age_s)
