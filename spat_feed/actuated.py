@@ -135,12 +135,15 @@ class ActuatedLight:
     switches_s: tuple[float, ...]
     decide_s: float = 3.0  # the controller publishes the exact instant this long before the switch [s]
     late_push_s: float = 5.0  # a phase past its maxEnd is published with maxEnd this far ahead [s]
+    amber_s: float = 4.0  # the last seconds of each green show amber (at 88.5 km/h a car that cannot stop clears in it) [s]
 
     def truth(self) -> TimelineSignal:
-        """The light as it really switches."""
+        """The light as it really switches (amber: the last ``amber_s`` of a green, green for the rules)."""
         bounds = (-math.inf, *self.switches_s, math.inf)
         reds = [(bounds[i], bounds[i + 1]) for i, s in enumerate(self.states) if s in STOP_STATES]
-        return TimelineSignal(self.position_m, tuple((a, b) for a, b in reds))
+        ends = [-math.inf] + [b for _, b in reds]  # the green before each red began when the red before it ended
+        ambers = [(max(a - self.amber_s, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a)]
+        return TimelineSignal(self.position_m, tuple(reds), tuple(ambers))
 
     def plan_at(self, t_s: float) -> UncertainPlan:
         """What the controller publishes at ``t_s``: the state now and every change to come, windows narrowed."""

@@ -108,6 +108,7 @@ def simulate(
     overrides = stops = surprises = 0
     shown: list[Signal | None] = list(scenario.signals)  # the display's view of each light (perfect feed: the truth)
     surprised: set[int] = set()
+    green_since: dict[int, float] = {}
     max_advised = 0.0
     steps_per_advice = int(round(1.0 / dt_s))
     step = 0
@@ -117,6 +118,9 @@ def simulate(
             if feed is not None:
                 views = {lv.intersection_id: lv for lv in obs.lights}
                 shown = [belief(views.get(n + 1), t, s.position_m) if s.position_m > x else None for n, s in enumerate(scenario.signals)]
+                for n, d in enumerate(shown):  # since when the display has said green (the last red's end it announced)
+                    if d is not None and (d.is_red(t) or green_since.get(n, np.inf) > t):
+                        green_since[n] = d.next_green_start_s(t) if d.is_red(t) else t
             adv, memory = advise(obs, memory, advisor, tables)
             log.append((t, adv))
             if adv.target_speed_mps is not None:
@@ -155,13 +159,14 @@ def simulate(
                 # the next red to begin after any current one (green earlier than the display said: the one after its red)
                 next_red = display.next_red_start_s(display.next_green_start_s(green_at))
             amber = bool(getattr(light, "is_amber", lambda _: False)(t))
-            if n in committed and amber and n not in surprised:  # the regular driver's amber rule: stop if it would
+            if amber and n not in surprised:  # the regular driver's amber rule, wherever it is seen: stop if it would
                 surprised.add(n)  # not clear the line before the red and can stop at its hardest braking, else go on
                 if t + dist / max(v, 0.5) > light.next_red_start_s(t) and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
                     committed.discard(n)
                     surprises += 1
-            if n in committed and red_now and n not in surprised and (display is None or not display.is_red(t)):
-                surprises += 1  # committed, and the light shows red it was not expected to: stop if at all possible
+            overdue = display is None or (not display.is_red(t) and t - green_since.get(n, -np.inf) >= driver.reaction_s)
+            if n in committed and red_now and n not in surprised and overdue:
+                surprises += 1  # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at all possible
                 surprised.add(n)
                 if v * v / (2.0 * max(room, 1e-6)) <= driver.emergency_decel_mps2:
                     committed.discard(n)
