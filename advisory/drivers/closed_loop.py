@@ -107,7 +107,9 @@ def simulate(
     braking_for: int | None = None
     overrides = stops = surprises = 0
     shown: list[Signal | None] = list(scenario.signals)  # the display's view of each light (perfect feed: the truth)
-    surprised: set[int] = set()
+    surprised: dict[int, float] = {}  # light -> the red (by its end) that surprised the driver
+    amber_seen: dict[int, float] = {}  # light -> the red (by its start) whose amber the driver has decided on
+    amber_stop: set[int] = set()  # lights whose amber the driver stops for
     green_since: dict[int, float] = {}
     max_advised = 0.0
     steps_per_advice = int(round(1.0 / dt_s))
@@ -156,21 +158,26 @@ def simulate(
                 green_at, next_red = np.inf, np.inf
             else:
                 green_at = display.next_green_start_s(t) if red_now else t  # t itself when green
-                # the next red to begin after any current one (green earlier than the display said: the one after its red)
-                next_red = display.next_red_start_s(display.next_green_start_s(green_at))
+                # the next red to begin after any current one; green while the display says it may be red (a
+                # window already open): the eye and the amber rule decide
+                next_red = display.next_red_start_s(display.next_green_start_s(green_at)) if red_now or not display.is_red(t) else np.inf
             amber = bool(getattr(light, "is_amber", lambda _: False)(t))
-            if amber and n not in surprised:  # the regular driver's amber rule, wherever it is seen: stop if it would
-                surprised.add(n)  # not clear the line before the red and can stop at its hardest braking, else go on
-                if t + dist / max(v, 0.5) > light.next_red_start_s(t) and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+            red_at = light.next_red_start_s(t) if amber else None
+            if amber and amber_seen.get(n) != red_at:  # the regular driver's amber rule, wherever it is seen: stop if it
+                amber_seen[n] = red_at  # would not clear the line before the red and can stop at its hardest braking
+                if t + dist / max(v, 0.5) > red_at and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
                     committed.discard(n)
+                    amber_stop.add(n)
                     surprises += 1
+                else:
+                    amber_stop.discard(n)
             overdue = display is None or (not display.is_red(t) and t - green_since.get(n, -np.inf) >= driver.reaction_s)
-            if n in committed and red_now and n not in surprised and overdue:
+            if n in committed and red_now and surprised.get(n) != light.next_green_start_s(t) and overdue:
                 surprises += 1  # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at all possible
-                surprised.add(n)
+                surprised[n] = light.next_green_start_s(t)  # (once per red)
                 if v * v / (2.0 * max(room, 1e-6)) <= driver.emergency_decel_mps2:
                     committed.discard(n)
-            if amber and n in surprised and n not in committed:
+            if amber and n in amber_stop and n not in committed:
                 braking_for = n
             elif n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
                 # go only if the light will be green on arrival at the current speed (a red now must end
