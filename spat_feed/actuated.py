@@ -259,6 +259,27 @@ def actuated_scenario(scenario: Scenario, half_width_s: float, rng: np.random.Ge
     return truth, lights
 
 
+def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3.0, dropouts: bool = True):
+    """One randomized closed-loop case (the tests' and the bench's): two lights 150-1000 m apart, cycle 40-120 s,
+    red 30-70 %, actuated with windows up to ``±max_half_width_s`` (the real switch anywhere inside and up to
+    10 % beyond), up to two dropouts of 2-10 s in the first minute, a feed clock off by up to ``±max_skew_s``,
+    tracking noise up to 1 m/s. Returns ``(truth scenario, feed, tracking noise [m/s])``."""
+    from advisory.signals import paper_scenario
+
+    rng = np.random.default_rng(seed)
+    cycle = rng.uniform(40, 120)
+    share = rng.uniform(0.3, 0.7)
+    fixed = paper_scenario(rng.uniform(-cycle, cycle), rng.uniform(-cycle, cycle), rng.uniform(150, 1000),
+                           red_s=cycle * share, green_s=cycle * (1 - share))  # fmt: skip
+    truth, lights = actuated_scenario(fixed, rng.uniform(0, max_half_width_s), rng)
+    gaps = []
+    for _ in range(rng.integers(0, 3) if dropouts else 0):
+        start = rng.uniform(0, 60)
+        gaps.append((start, start + rng.uniform(2, 10)))
+    feed = ActuatedFeed(lights, fixed.speed_limit_mps, skew_s=rng.uniform(-max_skew_s, max_skew_s), dropouts_s=gaps)
+    return truth, feed, float(rng.uniform(0, 1.0))
+
+
 def recordings() -> list[str]:
     """The shared recordings (``../shared/data/spat``, or ``../../shared/data/spat`` from a worktree)."""
     repo = Path(__file__).resolve().parents[1]

@@ -161,7 +161,8 @@ def simulate(
                 # the next red to begin after any current one; green while the display says it may be red (a
                 # window already open): the eye and the amber rule decide
                 next_red = display.next_red_start_s(display.next_green_start_s(green_at)) if red_now or not display.is_red(t) else np.inf
-            amber = bool(getattr(light, "is_amber", lambda _: False)(t))
+            heeded_m = max(decision_m, v * v / (2.0 * driver.decel_mps2) + rules.stop_gap_m)  # where a comfortable stop begins
+            amber = dist <= heeded_m and bool(getattr(light, "is_amber", lambda _: False)(t))
             red_at = light.next_red_start_s(t) if amber else None
             if amber and amber_seen.get(n) != red_at:  # the regular driver's amber rule, wherever it is seen: stop if it
                 amber_seen[n] = red_at  # would not clear the line before the red and can stop at its hardest braking
