@@ -352,3 +352,53 @@ def test_leaving_the_zone_past_the_last_light_is_not_off_route():
     assert adv.reason == "past_lights" and adv.message == "Last light passed. Advice ends."
     lost = advise(observation(corridor, 50.0, 20.0, 0.0, {}, V, on_route=False))[0]
     assert lost.reason == "off_route" and lost.message == "Off the route. Advice paused."
+
+
+# -- advice under uncertainty (issue 13) -----------------------------------------------------------
+
+
+def test_through_a_short_dropout_the_last_advice_is_held_not_dropped_to_the_limit():
+    """Red for 25 s more, 400 m ahead: "ease off". Then the feed drops out: the last plan is re-checked on the last
+    SPaT and held ("Signal data delayed. Keep to X."), no new advice; after hold_stale_s, the plain "out of date".
+    When data returns the driver is still on that plan: kept, no new reaction delay, not spoken again as new."""
+    w = ((-5.0, 25.0), (55.0, 85.0))
+    first, mem = advise(Observation(V, V, (light(400, *w),)))
+    assert first.action in ("ease_off", "coast", "slow_down")
+    v1 = first.target_speed_mps
+    held, mem2 = advise(Observation(v1, V, (LightView(1, 380.0, False, 1.0, tuple((a - 2, b - 2) for a, b in w), age_s=2.0),)), mem)
+    assert (held.action, held.reason, held.target_speed_mps) == (first.action, "stale_spat", v1)
+    assert held.message == f"Signal data delayed. Keep to {round(v1 * 2.2369362920544):d} miles per hour." and held.speak
+    assert mem2.last == mem.last  # the plan the driver follows stays the reference
+    back = advise(Observation(v1, V, (light(360.0, *((a - 4, b - 4) for a, b in w)),)), mem2)[0]
+    assert (back.action, back.target_speed_mps) == (first.action, v1)
+    gone = advise(Observation(v1, V, (LightView(1, 200.0, False, 1.0, w, age_s=P.hold_stale_s + 1.0),)), mem)[0]
+    assert (gone.action, gone.reason, gone.message) == ("none", "stale_spat", "Signal data is out of date. Drive normally.")
+
+
+def test_a_dropout_never_makes_new_speed_advice():
+    """Nothing advised before the dropout: nothing to hold, and no speed from stale data."""
+    adv = advise(Observation(V, V, (LightView(1, 400.0, False, 1.0, ((-5.0, 25.0),), age_s=2.0),)))[0]
+    assert adv.target_speed_mps is None and adv.reason == "stale_spat"
+
+
+def test_an_actuated_red_aims_at_its_likely_end_never_before_min_end():
+    """A red now whose end is known only as a window: surely not before 20 s (minEnd), likely at 30 s, late at 150 s.
+    No speed reaches the line 600 m ahead after 150 s (+2 s), so the advisor aims at the likely end (+2 s margin): a
+    real plan instead of "prepare to stop", and never a crossing before minEnd."""
+    lit = LightView(1, 600.0, True, 0.9, ((0.0, 150.0),), likely_red_windows_s=((0.0, 30.0),), aim_red_windows_s=((0.0, 30.0),))
+    adv = advise(Observation(V, V, (lit,)))[0]
+    assert adv.action in KEEP_MODES and adv.light_red and adv.message.startswith("Green in 30 seconds.")
+    t = crossing_time_s(600, V, adv.target_speed_mps, P, KEEP_MODES[adv.action])
+    assert t >= 30.0 + P.green_margin_s and t >= 20.0
+    exact = advise(Observation(V, V, (light(600, (0.0, 150.0)),)))[0]
+    assert exact.action == "stop"  # the same red known to last 150 s: a stop
+
+
+def test_prepare_to_stop_only_when_a_stop_is_likely():
+    """Green now; it may end at 3 s (minEnd) but likely lasts until 10 s, and the car is there at ~6 s: no speed is
+    sure to make it, yet a stop is not likely, so no "prepare to stop" (it said so before)."""
+    lit = LightView(1, 150.0, True, 0.9, ((3.0, 60.0),), likely_red_windows_s=((10.0, 40.0),), aim_red_windows_s=((3.0, 40.0),))
+    adv = advise(Observation(V, V, (lit,)))[0]
+    assert adv.action != "stop" and "stop" not in adv.message.lower()
+    red_likely = LightView(1, 150.0, True, 0.9, ((3.0, 60.0),), likely_red_windows_s=((4.0, 40.0),), aim_red_windows_s=((3.0, 40.0),))
+    assert advise(Observation(V, V, (red_likely,)))[0].action == "stop"

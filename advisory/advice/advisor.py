@@ -45,6 +45,11 @@ class LightView:
     ``red_windows_s``: upcoming red intervals ``(start, end)`` relative to now, conservative: an uncertain
     change to red counts from its earliest possible time, a change to green from its latest. A window with
     ``start <= 0`` means red now. At least the windows of the next ~2 minutes.
+
+    Under uncertainty (an actuated light) two more views: ``likely_red_windows_s`` (each change at its likely
+    instant: what the countdown says, and whether a stop is likely) and ``aim_red_windows_s`` (a red from its
+    earliest start to its likely end: what a plan aims between when the conservative windows leave no speed).
+    Both contain every red that minEnd guarantees.
     """
 
     intersection_id: int
@@ -52,7 +57,8 @@ class LightView:
     fresh: bool = True
     confidence_frac: float = 1.0
     red_windows_s: tuple[tuple[float, float], ...] = ()
-    likely_red_windows_s: tuple[tuple[float, float], ...] | None = None  # at the likely changes; None: as red_windows_s
+    likely_red_windows_s: tuple[tuple[float, float], ...] | None = None  # every change at its likely time; None: as red_windows_s
+    aim_red_windows_s: tuple[tuple[float, float], ...] | None = None  # earliest start to likely end; None: as red_windows_s
     age_s: float = 0.0  # how old the SPaT behind this view is (a dropout: not fresh, windows of the last reading) [s]
 
     def likely_red_at(self, t_s: float) -> bool:
@@ -495,6 +501,8 @@ def phrase(advice: Advice, units: str = "mph") -> str:
 
 
 def _light_timing(light: LightView) -> tuple[bool, float | None]:
+    """Red now, and the seconds to the next change, as likely (an actuated green past its minEnd is still green)."""
+    light = _countdown_view(light)
     if light.red_now:
         return True, light.seconds_to_green()
     return False, light.seconds_to_red()
@@ -536,9 +544,19 @@ def _kept(lines: _Lines, usable: tuple[LightView, ...], obs: Observation, params
     )
 
 
-def _likely_view(light: LightView) -> LightView:
-    """The light with its changes at their likely times (the windows a plan under uncertainty aims between)."""
-    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or ())
+def _aim_view(light: LightView) -> LightView:
+    """The light as a plan under uncertainty sees it: each red from its earliest start to its likely end. A green
+    that may end early is never aimed at (a car meeting that red fast would brake hard); a red that lasts longer than
+    likely meets a car already slowed for it (a gentle stop). Its likely windows stay for the countdown."""
+    aim = light.red_windows_s if light.aim_red_windows_s is None else light.aim_red_windows_s
+    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, aim, light.likely_red_windows_s)
+
+
+def _countdown_view(light: LightView) -> LightView:
+    """The light with each change at its likely instant (what is said: "Green in 12 seconds")."""
+    if light.likely_red_windows_s is None:
+        return light
+    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s)
 
 
 def _held(obs: Observation, memory: AdvisorMemory, params: AdvisorParams) -> Advice | None:
@@ -578,10 +596,10 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             action = last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise"
             return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source)
     n_lines, mode, feasible = _search(both, obs, params)
-    if feasible.size == 0 and any(light.likely_red_windows_s is not None for light in usable):
-        # no speed makes the greens whenever the changes come: aim between the likely changes (never into a red
-        # that minEnd guarantees: the likely windows contain it); the driver's own eyes guard the rest
-        usable = tuple(_likely_view(light) for light in usable)
+    if feasible.size == 0 and any(light.aim_red_windows_s is not None for light in usable):
+        # no speed makes the greens whenever the changes come: aim at the likely end of each red (never into a red
+        # that minEnd guarantees: the aim windows contain it, and the after-red margin still applies)
+        usable = tuple(_aim_view(light) for light in usable)
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
     if feasible.size == 0:
