@@ -5,7 +5,9 @@ J2735 movement states (:func:`spat_feed.recorded.read_spat_csv`), each second's 
 (:func:`spat_feed.messages.plan_from_movement`) and a :class:`~spat_feed.observe.PlanReading` (fresh while
 the last snapshot is under ``stale_after_s`` old), the advisor's observation comes from
 :func:`spat_feed.observe.light_view`, and the virtual driver of :func:`advisory.drivers.closed_loop.simulate`
-follows the advice, seeing the light's real colour. The truth is the log itself: a phase switches midway
+follows the advice, seeing the light's real colour. The source has watched the log from its start: each
+group's :class:`~spat_feed.observe.PhaseHistory` (what the advisor knows of the phases after the published one)
+holds every snapshot up to the reading's. The truth is the log itself: a phase switches midway
 between the last snapshot in it and the first after it; red is every J2735 stop state (unavailable and dark
 are not red: one recording publishes the non-red state of some groups as unavailable). Amber (J2735 clearance)
 is green for the rules and a warning to the driver's eye, who stops at it if that takes at most 4 m/s²; a
@@ -51,7 +53,7 @@ from advisory.physics.params import model_params
 from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
 from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.messages import MovementState, plan_from_movement, to_unix_s
-from spat_feed.observe import PlanReading, light_view
+from spat_feed.observe import PhaseHistory, PlanReading, light_view
 from spat_feed.plans import STOP_STATES, PhaseClass, phase_class
 
 HINDSIGHT_GRID = GridSpec(stage_m=20.0)
@@ -81,15 +83,16 @@ class GroupLog:
     t_s: np.ndarray
     movements: list[MovementState]
     truth: TimelineSignal  # position 0: placed by the approach
+    plans: list = None  # each snapshot read as a receiver does (plan_from_movement)
+    cycles: list = None  # what the receiver had learnt of the group by then (PhaseHistory), one per snapshot
 
-    def reading(self, t_s: float, stale_after_s: float, cache: dict) -> PlanReading | None:
+    def reading(self, t_s: float, stale_after_s: float) -> PlanReading | None:
+        """What the SPaT source holds at ``t_s``: the latest snapshot, aged, with the history learnt so far."""
         i = int(np.searchsorted(self.t_s, t_s, side="right")) - 1
         if i < 0:
             return None
-        if i not in cache:
-            cache[i] = plan_from_movement(self.movements[i], float(self.t_s[i]))
         age = t_s - float(self.t_s[i])
-        return PlanReading(cache[i], fresh=age <= stale_after_s, age_s=age)
+        return PlanReading(self.plans[i], fresh=age <= stale_after_s, age_s=age, cycle=self.cycles[i])
 
 
 def group_logs(snapshots) -> list[GroupLog]:
@@ -121,7 +124,10 @@ def group_logs(snapshots) -> list[GroupLog]:
         if not amber.any():  # a group that never publishes its amber (its non-red state as unavailable): it had one
             ends = [-math.inf] + [b for _, b in reds]
             ambers = tuple((max(a - AMBER_S, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a))
-        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers)))
+        history = PhaseHistory()
+        plans = [plan_from_movement(m, float(u)) for u, (_, m) in zip(t, items)]
+        cycles = [history.update(float(u), p) for u, p in zip(t, plans)]
+        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers), plans, cycles))
     return out
 
 
@@ -155,13 +161,12 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     if any(not math.isfinite(s.next_green_start_s(setup.horizon_s)) for s in truths):
         return None
     scenario = Scenario("+".join(str(_LOGS[g].key[1]) for g in groups), truths, zone_m, v_lim, v_lim)
-    caches = [dict() for _ in groups]
 
     def feed(t_s: float, x_m: float, v_mps: float) -> Observation:
         views: list[LightView] = []
         for n, (g, p) in enumerate(zip(groups, positions)):
             if p > x_m and len(views) < 2:
-                reading = _LOGS[g].reading(entry_s + t_s, setup.stale_after_s, caches[n])
+                reading = _LOGS[g].reading(entry_s + t_s, setup.stale_after_s)
                 views.append(light_view(_spec(n, p), reading, x_m, entry_s + t_s))
         return Observation(v_mps, v_lim, tuple(views), position_m=x_m)
 

@@ -144,6 +144,8 @@ def simulate(
         rate_up, rate_down = driver.accel_mps2, driver.decel_mps2
         if active is not None and active.action == "brake_to":
             rate_down = advisor.firm_decel_mps2
+        if active is not None and active.action == "stop" and x < stop_line_m and v * v < 2.0 * driver.decel_mps2 * (stop_line_m - rules.stop_gap_m - x):
+            rate_down = coast_decel_mps2(v, advisor.vehicle)  # prepare to stop: lift off until a comfortable stop at the line needs braking
         # the driver's own eyes: decide once per light at the decision point, like the regular driver
         ahead = [(n, s) for n, s in enumerate(scenario.signals) if s.position_m > x + 1e-9]
         if ahead:
