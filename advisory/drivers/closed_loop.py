@@ -214,6 +214,9 @@ def simulate(
         if braking_for is None and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
             if v > driver.min_coast_mps:
                 v_cmd, rate_down = 0.0, coast_decel_mps2(v, advisor.vehicle)  # target reached: keep coasting
+            elif ahead and light.is_red(t):  # nobody coasts to a standstill: at a red, stop at the line
+                room = ahead[0][1].position_m - x - rules.stop_gap_m
+                v_cmd, rate_down = 0.0, (min(v * v / (2.0 * room), 4.0) if room > 1e-6 else 4.0)
             else:
                 v_cmd = v_lim  # nobody coasts to a standstill: drive on
         gap = v_cmd - v
