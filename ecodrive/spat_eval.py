@@ -24,10 +24,8 @@ driver), ``hindsight_saving_frac`` (the DP's), ``kept_frac`` (their ratio), ``wo
 costliest approach against the regular driver), ``advice_availability_frac`` (share of approach seconds with
 speed advice), ``time_lost_s`` (mean, against the regular driver), and the same per kind (single / pair).
 
-The hindsight DP (:mod:`advisory.optimizer.dp`) takes fixed-time lights: each light is given, as one fixed
-cycle, the first red that ends after the earliest possible arrival and the start of the red after it; its
-trajectory is then checked against the full truth and approaches where that fails are left out of the
-hindsight mean (``hindsight_invalid``). 20 m stages instead of the study's 10 m keep a recording within
+The hindsight DP is :func:`advisory.drivers.closed_loop.hindsight_optimum`; approaches where it fails are left out
+of the hindsight mean (``hindsight_invalid``). 20 m stages instead of the study's 10 m keep a recording within
 minutes on two cores; at 20 m the DP costs ~0.5 % more (a slightly lenient yardstick).
 """
 
@@ -45,12 +43,12 @@ from functools import lru_cache
 import numpy as np
 
 from advisory.advice.advisor import AdvisorParams, LightView, Observation
-from advisory.drivers.closed_loop import DriverModel, red_light_violations, simulate
+from advisory.drivers.closed_loop import DriverModel, hindsight_optimum, red_light_violations, simulate
 from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import score_in_end_state
-from advisory.optimizer.dp import GridSpec, InfeasibleError, solve, time_limit_s
+from advisory.optimizer.dp import GridSpec
 from advisory.physics.params import model_params
-from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
+from advisory.signals import Scenario, TimelineSignal
 from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.messages import MovementState, plan_from_movement, to_unix_s
 from spat_feed.observe import PhaseHistory, PlanReading, light_view
@@ -140,17 +138,6 @@ def _spec(n: int, position_m: float) -> IntersectionSpec:
                             approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
 
 
-def _hindsight_signal(truth: TimelineSignal, earliest_s: float) -> FixedTimeSignal:
-    """The truth as one fixed cycle around the first red that ends after ``earliest_s`` (see the module)."""
-    reds = [(a, b) for a, b in truth.reds_s if b > earliest_s]
-    if not reds:
-        return FixedTimeSignal(truth.position_m, -1e6, 1.0, 1e7)
-    a, b = reds[0]
-    a = max(a, earliest_s - 1e4)
-    nxt = reds[1][0] if len(reds) > 1 else b + 1e6
-    return FixedTimeSignal(truth.position_m, a, b - a, max(nxt - b, 1e-3))
-
-
 def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     """One approach: groups ``job[0]`` in series entered at Unix time ``job[1]``; None if the truth runs out."""
     groups, entry_s, setup = job
@@ -189,12 +176,8 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
         "approach_s": len(ahead),
         "hindsight_saving_frac": None,
     }
-    fixed = Scenario(scenario.name, tuple(_hindsight_signal(s, s.position_m / v_lim) for s in truths), zone_m, v_lim, v_lim)
-    try:
-        best = solve(fixed, params, HINDSIGHT_GRID, t_max_s=time_limit_s(regular, params, fixed, HINDSIGHT_GRID)).trajectory
-    except InfeasibleError:
-        return out
-    if not red_light_violations(best, scenario):
+    best = hindsight_optimum(scenario, params, HINDSIGHT_GRID, regular)
+    if best is not None:
         out["hindsight_saving_frac"] = 1.0 - score_in_end_state(best, params, v_lim).cost_usd / reg.cost_usd
     return out
 
