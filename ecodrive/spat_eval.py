@@ -68,7 +68,7 @@ class Setup:
     approach_m: float = 300.0
     spacing_m: float = 300.0
     exit_m: float = 100.0
-    every_s: float = 150.0  # single-light entries this far apart (pairs twice as far)
+    every_s: float = 180.0  # single-light entries this far apart (pairs twice as far)
     horizon_s: float = 240.0  # an approach needs this much recording after its entry
     stale_after_s: float = 3.0
 
