@@ -5,7 +5,9 @@ J2735 movement states (:func:`spat_feed.recorded.read_spat_csv`), each second's 
 (:func:`spat_feed.messages.plan_from_movement`) and a :class:`~spat_feed.observe.PlanReading` (fresh while
 the last snapshot is under ``stale_after_s`` old), the advisor's observation comes from
 :func:`spat_feed.observe.light_view`, and the virtual driver of :func:`advisory.drivers.closed_loop.simulate`
-follows the advice, seeing the light's real colour. The truth is the log itself: a phase switches midway
+follows the advice, seeing the light's real colour. The source has watched the log from its start: each
+group's :class:`~spat_feed.observe.PhaseHistory` (what the advisor knows of the phases after the published one)
+holds every snapshot up to the reading's. The truth is the log itself: a phase switches midway
 between the last snapshot in it and the first after it; red is every J2735 stop state (unavailable and dark
 are not red: one recording publishes the non-red state of some groups as unavailable). Amber (J2735 clearance)
 is green for the rules and a warning to the driver's eye, who stops at it if that takes at most 4 m/s²; a
@@ -22,10 +24,8 @@ driver), ``hindsight_saving_frac`` (the DP's), ``kept_frac`` (their ratio), ``wo
 costliest approach against the regular driver), ``advice_availability_frac`` (share of approach seconds with
 speed advice), ``time_lost_s`` (mean, against the regular driver), and the same per kind (single / pair).
 
-The hindsight DP (:mod:`advisory.optimizer.dp`) takes fixed-time lights: each light is given, as one fixed
-cycle, the first red that ends after the earliest possible arrival and the start of the red after it; its
-trajectory is then checked against the full truth and approaches where that fails are left out of the
-hindsight mean (``hindsight_invalid``). 20 m stages instead of the study's 10 m keep a recording within
+The hindsight DP is :func:`advisory.drivers.closed_loop.hindsight_optimum`; approaches where it fails are left out
+of the hindsight mean (``hindsight_invalid``). 20 m stages instead of the study's 10 m keep a recording within
 minutes on two cores; at 20 m the DP costs ~0.5 % more (a slightly lenient yardstick).
 """
 
@@ -43,15 +43,15 @@ from functools import lru_cache
 import numpy as np
 
 from advisory.advice.advisor import AdvisorParams, LightView, Observation
-from advisory.drivers.closed_loop import DriverModel, red_light_violations, simulate
+from advisory.drivers.closed_loop import DriverModel, hindsight_optimum, red_light_violations, simulate
 from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import score_in_end_state
-from advisory.optimizer.dp import GridSpec, InfeasibleError, solve, time_limit_s
+from advisory.optimizer.dp import GridSpec
 from advisory.physics.params import model_params
-from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
+from advisory.signals import Scenario, TimelineSignal
 from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.messages import MovementState, plan_from_movement, to_unix_s
-from spat_feed.observe import CycleStats, PhaseHistory, PlanReading, light_view
+from spat_feed.observe import PhaseHistory, PlanReading, light_view
 from spat_feed.plans import STOP_STATES, PhaseClass, phase_class
 
 HINDSIGHT_GRID = GridSpec(stage_m=20.0)
@@ -68,7 +68,7 @@ class Setup:
     approach_m: float = 300.0
     spacing_m: float = 300.0
     exit_m: float = 100.0
-    every_s: float = 150.0  # single-light entries this far apart (pairs twice as far)
+    every_s: float = 180.0  # single-light entries this far apart (pairs twice as far)
     horizon_s: float = 240.0  # an approach needs this much recording after its entry
     stale_after_s: float = 3.0
 
@@ -81,16 +81,16 @@ class GroupLog:
     t_s: np.ndarray
     movements: list[MovementState]
     truth: TimelineSignal  # position 0: placed by the approach
-    cycles: list[CycleStats] | None = None  # what the group had been seen to do at each snapshot (PhaseHistory)
+    plans: list = None  # each snapshot read as a receiver does (plan_from_movement)
+    cycles: list = None  # what the receiver had learnt of the group by then (PhaseHistory), one per snapshot
 
-    def reading(self, t_s: float, stale_after_s: float, cache: dict) -> PlanReading | None:
+    def reading(self, t_s: float, stale_after_s: float) -> PlanReading | None:
+        """What the SPaT source holds at ``t_s``: the latest snapshot, aged, with the history learnt so far."""
         i = int(np.searchsorted(self.t_s, t_s, side="right")) - 1
         if i < 0:
             return None
-        if i not in cache:
-            cache[i] = plan_from_movement(self.movements[i], float(self.t_s[i]))
         age = t_s - float(self.t_s[i])
-        return PlanReading(cache[i], fresh=age <= stale_after_s, age_s=age, cycle=self.cycles[i] if self.cycles else None)
+        return PlanReading(self.plans[i], fresh=age <= stale_after_s, age_s=age, cycle=self.cycles[i])
 
 
 def group_logs(snapshots) -> list[GroupLog]:
@@ -123,8 +123,9 @@ def group_logs(snapshots) -> list[GroupLog]:
             ends = [-math.inf] + [b for _, b in reds]
             ambers = tuple((max(a - AMBER_S, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a))
         history = PhaseHistory()
-        cycles = [history.update(float(tk), r[1].state_time_speed[0].event_state) for tk, r in zip(t, items)]
-        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers), cycles))
+        plans = [plan_from_movement(m, float(u)) for u, (_, m) in zip(t, items)]
+        cycles = [history.update(float(u), p) for u, p in zip(t, plans)]
+        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers), plans, cycles))
     return out
 
 
@@ -137,17 +138,6 @@ def _spec(n: int, position_m: float) -> IntersectionSpec:
                             approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
 
 
-def _hindsight_signal(truth: TimelineSignal, earliest_s: float) -> FixedTimeSignal:
-    """The truth as one fixed cycle around the first red that ends after ``earliest_s`` (see the module)."""
-    reds = [(a, b) for a, b in truth.reds_s if b > earliest_s]
-    if not reds:
-        return FixedTimeSignal(truth.position_m, -1e6, 1.0, 1e7)
-    a, b = reds[0]
-    a = max(a, earliest_s - 1e4)
-    nxt = reds[1][0] if len(reds) > 1 else b + 1e6
-    return FixedTimeSignal(truth.position_m, a, b - a, max(nxt - b, 1e-3))
-
-
 def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     """One approach: groups ``job[0]`` in series entered at Unix time ``job[1]``; None if the truth runs out."""
     groups, entry_s, setup = job
@@ -158,13 +148,12 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     if any(not math.isfinite(s.next_green_start_s(setup.horizon_s)) for s in truths):
         return None
     scenario = Scenario("+".join(str(_LOGS[g].key[1]) for g in groups), truths, zone_m, v_lim, v_lim)
-    caches = [dict() for _ in groups]
 
     def feed(t_s: float, x_m: float, v_mps: float) -> Observation:
         views: list[LightView] = []
         for n, (g, p) in enumerate(zip(groups, positions)):
             if p > x_m and len(views) < 2:
-                reading = _LOGS[g].reading(entry_s + t_s, setup.stale_after_s, caches[n])
+                reading = _LOGS[g].reading(entry_s + t_s, setup.stale_after_s)
                 views.append(light_view(_spec(n, p), reading, x_m, entry_s + t_s))
         return Observation(v_mps, v_lim, tuple(views), position_m=x_m)
 
@@ -187,12 +176,8 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
         "approach_s": len(ahead),
         "hindsight_saving_frac": None,
     }
-    fixed = Scenario(scenario.name, tuple(_hindsight_signal(s, s.position_m / v_lim) for s in truths), zone_m, v_lim, v_lim)
-    try:
-        best = solve(fixed, params, HINDSIGHT_GRID, t_max_s=time_limit_s(regular, params, fixed, HINDSIGHT_GRID)).trajectory
-    except InfeasibleError:
-        return out
-    if not red_light_violations(best, scenario):
+    best = hindsight_optimum(scenario, params, HINDSIGHT_GRID, regular)
+    if best is not None:
         out["hindsight_saving_frac"] = 1.0 - score_in_end_state(best, params, v_lim).cost_usd / reg.cost_usd
     return out
 

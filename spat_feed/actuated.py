@@ -19,7 +19,8 @@ Pure (no clock, no I/O except :func:`fit_switches`, which reads recordings). Thr
   that into J2735 events (:func:`spat_feed.messages.movement_events`), reads them back as a receiver does
   (:func:`spat_feed.messages.plan_from_movement`) and gives the advisor its
   :class:`~advisory.advice.advisor.Observation` through :func:`spat_feed.observe.light_view`, with dropouts
-  (no message: the last one ages and goes stale) and a skewed feed clock.
+  (no message: the last one ages and goes stale), a skewed feed clock (the receiver is told only a bound,
+  ``clock_uncertainty_s``) and what the receiver learnt of each light beforehand (``PhaseHistory``).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from advisory.advice.advisor import LightView, Observation
 from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
 from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.messages import MovementState, confidence_index, movement_events, plan_from_movement, to_unix_s
-from spat_feed.observe import PlanReading, light_view
+from spat_feed.observe import PhaseHistory, PlanReading, light_view
 from spat_feed.plans import GREEN, RED, STOP_STATES, ChangeWindow, MovementPhaseState, UncertainPlan
 
 SAMPLE_S = 1.0
@@ -135,12 +136,15 @@ class ActuatedLight:
     switches_s: tuple[float, ...]
     decide_s: float = 3.0  # the controller publishes the exact instant this long before the switch [s]
     late_push_s: float = 5.0  # a phase past its maxEnd is published with maxEnd this far ahead [s]
+    amber_s: float = 4.0  # the last seconds of each green show amber (at 88.5 km/h a car that cannot stop clears in it) [s]
 
     def truth(self) -> TimelineSignal:
-        """The light as it really switches."""
+        """The light as it really switches (amber: the last ``amber_s`` of a green, green for the rules)."""
         bounds = (-math.inf, *self.switches_s, math.inf)
         reds = [(bounds[i], bounds[i + 1]) for i, s in enumerate(self.states) if s in STOP_STATES]
-        return TimelineSignal(self.position_m, tuple((a, b) for a, b in reds))
+        ends = [-math.inf] + [b for _, b in reds]  # the green before each red began when the red before it ended
+        ambers = [(max(a - self.amber_s, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a)]
+        return TimelineSignal(self.position_m, tuple(reds), tuple(ambers))
 
     def plan_at(self, t_s: float) -> UncertainPlan:
         """What the controller publishes at ``t_s``: the state now and every change to come, windows narrowed."""
@@ -219,7 +223,10 @@ class ActuatedFeed:
     n_events: int = 3
     stale_after_s: float = 3.0
     epoch_unix_s: float = 1.7e9
+    clock_uncertainty_s: float = 0.0  # what the receiver is told of the skew: a bound, not the offset [s]
+    warm_up_s: float = 600.0  # the receiver has watched each light this long before the car enters (PhaseHistory) [s]
     _last: dict[int, tuple[float, object]] = field(default_factory=dict, repr=False)
+    _history: dict[int, PhaseHistory] = field(default_factory=dict, repr=False)
 
     def movement_at(self, n: int, t_s: float) -> MovementState:
         """Light ``n``'s J2735 movement as published at ``t_s`` (on the feed's skewed clock)."""
@@ -234,14 +241,21 @@ class ActuatedFeed:
         for n, light in enumerate(self.lights):
             if light.position_m <= x_m or len(views) == 2:
                 continue
+            if n not in self._history:  # what the receiver learnt of the light before the car came
+                self._history[n] = PhaseHistory()
+                for t in np.arange(t_s - self.warm_up_s, t_s, 1.0):
+                    self._history[n].update(float(t) + self.epoch_unix_s + self.skew_s, light.plan_at(float(t)).states[0])
             if not down:
                 movement = self.movement_at(n, t_s)
-                self._last[n] = (t_s, plan_from_movement(movement, t_s + self.epoch_unix_s + self.skew_s))
+                stamp = t_s + self.epoch_unix_s + self.skew_s
+                plan = plan_from_movement(movement, stamp)
+                self._last[n] = (t_s, plan, self._history[n].update(stamp, plan))
             received = self._last.get(n)
             reading = None
             if received is not None:
                 age = t_s - received[0]
-                reading = PlanReading(received[1], fresh=age <= self.stale_after_s, age_s=age)
+                reading = PlanReading(received[1], fresh=age <= self.stale_after_s, age_s=age, cycle=received[2],
+                                      clock_uncertainty_s=self.clock_uncertainty_s)  # fmt: skip
             spec = IntersectionSpec(id=n + 1, name=f"light {n + 1}", stop_line_m=light.position_m, lat_deg=0.0, lon_deg=0.0,
                                     approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
             views.append(light_view(spec, reading, x_m, t_s + self.epoch_unix_s))
@@ -254,6 +268,28 @@ def actuated_scenario(scenario: Scenario, half_width_s: float, rng: np.random.Ge
     truth = Scenario(scenario.name + f" ±{half_width_s:g} s", tuple(a.truth() for a in lights), scenario.zone_length_m,
                      scenario.speed_limit_mps, scenario.initial_speed_mps)  # fmt: skip
     return truth, lights
+
+
+def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3.0, dropouts: bool = True):
+    """One randomized closed-loop case (the tests' and the bench's): two lights 150-1000 m apart, cycle 40-120 s,
+    red 30-70 %, actuated with windows up to ``±max_half_width_s`` (the real switch anywhere inside and up to
+    10 % beyond), up to two dropouts of 2-10 s in the first minute, a feed clock off by up to ``±max_skew_s``,
+    tracking noise up to 1 m/s. Returns ``(truth scenario, feed, tracking noise [m/s])``."""
+    from advisory.signals import paper_scenario
+
+    rng = np.random.default_rng(seed)
+    cycle = rng.uniform(40, 120)
+    share = rng.uniform(0.3, 0.7)
+    fixed = paper_scenario(rng.uniform(-cycle, cycle), rng.uniform(-cycle, cycle), rng.uniform(150, 1000),
+                           red_s=cycle * share, green_s=cycle * (1 - share))  # fmt: skip
+    truth, lights = actuated_scenario(fixed, rng.uniform(0, max_half_width_s), rng)
+    gaps = []
+    for _ in range(rng.integers(0, 3) if dropouts else 0):
+        start = rng.uniform(0, 60)
+        gaps.append((start, start + rng.uniform(2, 10)))
+    feed = ActuatedFeed(lights, fixed.speed_limit_mps, skew_s=rng.uniform(-max_skew_s, max_skew_s), dropouts_s=gaps,
+                        clock_uncertainty_s=max_skew_s)  # fmt: skip
+    return truth, feed, float(rng.uniform(0, 1.0))
 
 
 def recordings() -> list[str]:
