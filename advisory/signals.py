@@ -7,7 +7,10 @@ turns green (the paper's eco-driver does exactly that), never while it is red.
 
 from __future__ import annotations
 
+import bisect
+import math
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -39,30 +42,126 @@ class FixedTimeSignal:
         """Seconds since the last red began, in [0, cycle). [s]"""
         return np.mod(np.asarray(t_s, dtype=float) - self.red_start_s, self.cycle_s)
 
+    def _cycle_index(self, t_s):
+        """The ``k`` whose cycle ``[red_start + k cycle, red_start + (k + 1) cycle)`` holds ``t_s``, as computed.
+
+        Every instant this class reports is one of ``red_start + k cycle`` (a red begins) or
+        ``(red_start + k cycle) + red_s`` (a green begins), and every answer compares ``t_s`` with those same
+        floating-point numbers: a light asked at the instant it reported for a green is green there, to the bit.
+        """
+        t = np.asarray(t_s, dtype=float)
+        k = np.floor((t - self.red_start_s) / self.cycle_s)
+        k = np.where(self.red_start_s + k * self.cycle_s > t, k - 1, k)
+        return np.where(self.red_start_s + (k + 1) * self.cycle_s <= t, k + 1, k)
+
     def is_red(self, t_s):
         """True where the light is red at ``t_s`` (scalar or array)."""
-        return self.phase_s(t_s) < self.red_s
+        k = self._cycle_index(t_s)
+        red = np.asarray(t_s, dtype=float) < (self.red_start_s + k * self.cycle_s) + self.red_s
+        return red if red.ndim else bool(red)
 
     def next_green_start_s(self, t_s: float) -> float:
         """``t_s`` itself if green now, else the instant the current red ends. [s]"""
-        phase = float(self.phase_s(t_s))
-        return t_s + (self.red_s - phase) if phase < self.red_s else t_s
+        k = float(self._cycle_index(t_s))
+        green_s = (self.red_start_s + k * self.cycle_s) + self.red_s
+        return float(green_s) if t_s < green_s else t_s
 
     def next_red_start_s(self, t_s: float) -> float:
         """``t_s`` itself if red now, else the instant the current green ends. [s]"""
-        phase = float(self.phase_s(t_s))
-        return t_s if phase < self.red_s else t_s + (self.cycle_s - phase)
+        k = float(self._cycle_index(t_s))
+        return t_s if t_s < (self.red_start_s + k * self.cycle_s) + self.red_s else float(self.red_start_s + (k + 1) * self.cycle_s)
 
     def red_intervals(self, t0_s: float, t1_s: float) -> list[tuple[float, float]]:
         """Red intervals ``[start, end)`` that overlap ``[t0_s, t1_s]``. [s]"""
-        k0 = int(np.floor((t0_s - self.red_start_s) / self.cycle_s)) - 1
+        k = int(np.floor((t0_s - self.red_start_s) / self.cycle_s)) - 1
         out = []
-        start = self.red_start_s + k0 * self.cycle_s
-        while start <= t1_s:
+        while (start := self.red_start_s + k * self.cycle_s) <= t1_s:
             if start + self.red_s > t0_s:
-                out.append((start, start + self.red_s))
-            start += self.cycle_s
+                out.append((float(start), float(start + self.red_s)))
+            k += 1
         return out
+
+
+@runtime_checkable
+class Signal(Protocol):
+    """A light's real timing, the truth at every instant: :class:`FixedTimeSignal`, :class:`TimelineSignal`.
+
+    Drivers and scoring take any of these; what a driver may *know* of it is the simulator's business (a
+    human sees only the present colour; the advisor only the published SPaT).
+    """
+
+    position_m: float
+
+    def is_red(self, t_s): ...
+
+    def next_green_start_s(self, t_s: float) -> float: ...
+
+    def next_red_start_s(self, t_s: float) -> float: ...
+
+    def red_intervals(self, t0_s: float, t1_s: float) -> list[tuple[float, float]]: ...
+
+
+@dataclass(frozen=True, slots=True)
+class TimelineSignal:
+    """A light whose reds are listed: ``reds_s`` are ``[start, end)`` intervals, sorted and disjoint; green
+    between them (amber counts as green, as in the paper). An end may be ``inf`` (red for good).
+
+    The truth of an actuated light, or a recorded one; also a driver's belief built from a display.
+
+    Examples
+    --------
+    >>> light = TimelineSignal(300.0, ((10.0, 40.0), (70.0, 95.0)))
+    >>> light.is_red(10.0), light.is_red(40.0), light.next_green_start_s(20.0), light.next_red_start_s(50.0)
+    (True, False, 40.0, 70.0)
+    """
+
+    position_m: float
+    reds_s: tuple[tuple[float, float], ...] = ()
+    ambers_s: tuple[tuple[float, float], ...] = ()  # clearance before a red: green for the rules, a warning to the eye
+
+    def is_amber(self, t_s: float) -> bool:
+        """True while the light shows amber (a car that can stop should)."""
+        return any(a <= t_s < b for a, b in self.ambers_s)
+
+    def __post_init__(self) -> None:
+        for (a, b), (c, _) in zip(self.reds_s, self.reds_s[1:]):
+            if not a < b <= c:
+                raise ValueError(f"reds must be sorted, disjoint and non-empty: {(a, b)} then {(c, _)}")
+        if self.reds_s and not self.reds_s[-1][0] < self.reds_s[-1][1]:
+            raise ValueError("a red must end after it begins")
+
+    def _index(self, t_s: float) -> int:
+        """Index of the last red that began at or before ``t_s`` (-1: none)."""
+        return bisect.bisect_right(self.reds_s, (t_s, math.inf)) - 1
+
+    def is_red(self, t_s):
+        if not isinstance(t_s, float | int):
+            t = np.asarray(t_s, dtype=float)
+            if t.ndim:
+                return np.array([self.is_red(float(x)) for x in t.ravel()], dtype=bool).reshape(t.shape)
+            t_s = float(t)
+        i = self._index(t_s)
+        return bool(i >= 0 and t_s < self.reds_s[i][1])
+
+    def next_green_start_s(self, t_s: float) -> float:
+        """``t_s`` itself if green now, else the instant the current red ends (``inf``: never). [s]"""
+        i = self._index(t_s)
+        return float(self.reds_s[i][1]) if i >= 0 and t_s < self.reds_s[i][1] else t_s
+
+    def next_red_start_s(self, t_s: float) -> float:
+        """``t_s`` itself if red now, else the instant the next red begins (``inf``: none known). [s]"""
+        i = self._index(t_s)
+        if i >= 0 and t_s < self.reds_s[i][1]:
+            return t_s
+        return float(self.reds_s[i + 1][0]) if i + 1 < len(self.reds_s) else math.inf
+
+    def red_intervals(self, t0_s: float, t1_s: float) -> list[tuple[float, float]]:
+        """Red intervals ``[start, end)`` that overlap ``[t0_s, t1_s]``. [s]"""
+        return [(a, b) for a, b in self.reds_s if b > t0_s and a <= t1_s]
+
+    def shifted(self, dt_s: float) -> TimelineSignal:
+        """The same light on an axis whose origin is ``dt_s`` later."""
+        return TimelineSignal(self.position_m, tuple((a - dt_s, b - dt_s) for a, b in self.reds_s), tuple((a - dt_s, b - dt_s) for a, b in self.ambers_s))
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,7 +169,7 @@ class Scenario:
     """A control zone: lights along a straight route from 0 to ``zone_length_m``, entered at t = 0."""
 
     name: str
-    signals: tuple[FixedTimeSignal, ...]
+    signals: tuple[Signal, ...]
     zone_length_m: float
     speed_limit_mps: float = SPEED_LIMIT_MPS
     initial_speed_mps: float = SPEED_LIMIT_MPS

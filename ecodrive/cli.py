@@ -1,7 +1,8 @@
 """`ecodrive <command>`: the project's commands by name, each dispatched to the module that implements it.
 
 Commands: ``study`` (the paper's study), ``score`` (same as ``replay``: score a trace), ``serve``, ``corridor``
-(corridor and plan files: ``from-osm``, ``show``, ``tables``, ``schema``).
+(corridor and plan files: ``from-osm``, ``show``, ``tables``, ``schema``), ``spat-eval`` (the advisor
+on a recorded SPaT log).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ COMMANDS = {
     "score": "replay.cli",
     "serve": "server.main",
     "corridor": "ecodrive.corridor",
+    "spat-eval": "ecodrive.spat_eval",
 }
 
 

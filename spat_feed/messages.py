@@ -31,6 +31,13 @@ from spat_feed.timemark import PAST_WINDOW_START_S, timemark_to_unix, unix_to_ti
 # J2735 DE_TimeIntervalConfidence: index -> probability that the change falls inside [minEnd, maxEnd].
 CONFIDENCE_FRAC = (0.21, 0.36, 0.47, 0.56, 0.62, 0.68, 0.73, 0.77, 0.81, 0.85, 0.88, 0.91, 0.94, 0.96, 0.98, 1.00)
 
+UNSTATED_CONFIDENCE_FRAC = 0.9
+"""A change window published without ``confidence`` (J2735 makes it optional): the message states no probability,
+so none is invented, neither J2735's lowest class (21 %, which silenced every red of a real controller) nor
+certainty. ``minEndTime`` stays a hard bound and ``maxEndTime`` a soft one (docs/SPAT.md); 0.9 is the ordinary
+reliability of such a window on a real actuated controller (the Antwerp changes ended inside it 88-94 % of the
+time), above the advisor's 0.5 gate. A stated low confidence still silences the advisor. [-]"""
+
 
 def confidence_index(confidence_frac: float) -> int:
     """The J2735 TimeIntervalConfidence index (0..15) for a probability, rounding down (conservative).
@@ -178,7 +185,7 @@ def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None =
     event (or an event without timing) nothing is known (``UNAVAILABLE``). A missing ``likelyTime`` is
     taken as the middle of the window (``minEndTime`` if the window is open-ended); a missing
     ``maxEndTime`` is unbounded on the last event and the next event's ``minEndTime`` otherwise;
-    a missing confidence counts as 0 (21 %). Windows that overlap a later one are cut to fit.
+    a missing confidence is not a low one: :data:`UNSTATED_CONFIDENCE_FRAC`. Windows that overlap a later one are cut to fit.
     """
     states = []
     changes: list[ChangeWindow] = []
@@ -203,7 +210,7 @@ def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None =
             likely_s = min(max(to_unix_s(ev.timing.likely_time), min_s), max_s)
         else:
             likely_s = min_s if math.isinf(max_s) else 0.5 * (min_s + max_s)
-        conf = CONFIDENCE_FRAC[ev.timing.confidence] if ev.timing.confidence is not None else CONFIDENCE_FRAC[0]
+        conf = CONFIDENCE_FRAC[ev.timing.confidence] if ev.timing.confidence is not None else UNSTATED_CONFIDENCE_FRAC
         changes.append(ChangeWindow(min_s, likely_s, max_s, conf))
     states.append(MovementPhaseState.UNAVAILABLE)
     if len(states) > len(changes) + 1:  # stopped at an event without timing: its state holds for good

@@ -10,16 +10,30 @@ Conversion of one light (:func:`light_view`):
   earliest instant its change window allows (``min_end_s`` of the change into red) and ends at the latest
   (``max_end_s`` of the change out of red). Unknown states (``unavailable``, ``dark``) count as red, so a
   speed is never advised that reaches a line after the plan's horizon. Windows are kept up to ``horizon_s``.
-* ``fresh``: the reading's flag; a light whose state is unknown *now* is reported as not fresh (no data).
+* ``fresh``: the reading's flag; a light whose published state is unknown is reported as not fresh (no data). A
+  phase past its ``minEndTime`` is still the published one (it may end any moment: a possible red, not no data).
 * ``confidence_frac``: the lowest confidence of the change windows that bound a red window within the horizon
   (1 for a fixed-time plan).
+* **After the published phases** (an actuated controller publishes the current phase only): what the signal
+  group has been seen to do (:class:`PhaseHistory`, passed as ``PlanReading.cycle``) bounds the phases that
+  follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the current phase ends
+  no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run),
+  late at their :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
+  9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the
+  next phases last their shortest / median / late durations seen. ``red_windows_s`` spans earliest start to late
+  end; ``likely_red_windows_s`` the likely ones (the countdown; "stop" only when a stop is likely);
+  ``late_red_windows_s`` latest start to late end (never slowed for a red that may not have begun on arrival;
+  what a driver's display may rely on). The first two contain every red that ``minEndTime`` guarantees.
+* **Clock**: a reading may carry the feed clock's estimated offset (subtracted) and its uncertainty (every
+  ``red_windows_s`` widened by it on both sides), so a few seconds of skew never put the advice into a red.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from advisory.advice.advisor import LightView, Observation
 from spat_feed.corridors import Corridor, IntersectionSpec
@@ -28,9 +42,10 @@ from spat_feed.plans import (
     UNKNOWN_STATES,
     FixedTimePlan,
     MovementPhaseState,
+    PhaseClass,
     Plan,
     UncertainPlan,
-    possible_states_at,
+    phase_class,
     uncertain_from_fixed,
 )
 
@@ -41,13 +56,107 @@ BLOCKING_STATES = STOP_STATES | UNKNOWN_STATES
 """States a car must not plan to cross in: red, and anything the plan does not know."""
 
 
+LATE_QUANTILE = 0.9
+"""A phase counts as "late" past this quantile of the durations seen: the soft end of a window, like maxEndTime
+(which real phases outlast 6-12 % of the time). [-]"""
+
+MIN_PHASES_SEEN = 3
+"""Durations of a phase class needed before they bound anything. [-]"""
+
+BLOCKING_CLASSES = frozenset({PhaseClass.RED, PhaseClass.UNKNOWN})
+
+
+@dataclass(frozen=True, slots=True)
+class CycleStats:
+    """What one signal group has been seen to do: a snapshot of a :class:`PhaseHistory`. Durations [s], sorted."""
+
+    durations_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)
+    following: Mapping[PhaseClass, PhaseClass] = field(default_factory=dict)  # the class seen after each class
+    current: PhaseClass | None = None
+    since_unix_s: float | None = None  # the latest instant the current phase can have begun (first seen)
+
+    def durations(self, cls: PhaseClass) -> tuple[float, ...]:
+        """The durations seen of ``cls`` if there are enough to go by, else ()."""
+        d = self.durations_s.get(cls, ())
+        return d if len(d) >= MIN_PHASES_SEEN else ()
+
+    @property
+    def cycle_s(self) -> float | None:
+        """Median cycle: the sum of the median durations around the cycle of classes seen (None if not closed)."""
+        cls, total, seen = self.current, 0.0, set()
+        while cls is not None and cls not in seen and (d := self.durations(cls)):
+            seen.add(cls)
+            total += _quantile(d, 0.5)
+            cls = self.following.get(cls)
+        return total if cls is not None and cls == self.current and seen else None
+
+
+def _quantile(sorted_s: Sequence[float], q: float) -> float:
+    """The ``q`` quantile of sorted samples (nearest rank, up: conservative for a late end)."""
+    return sorted_s[min(len(sorted_s) - 1, max(0, math.ceil(q * len(sorted_s)) - 1))]
+
+
+class PhaseHistory:
+    """Learns one (intersection, signal group) from successive readings: the durations of its phases, by class.
+
+    Feed it every accepted reading of the group (``update``); it keeps the last ``keep`` completed phases of
+    each class and the class that followed each. A change is dated at the first reading that shows it (the
+    feed's period is the error); across a gap longer than ``max_gap_s`` the phase in progress is not timed.
+    Pure: no clock, the caller passes the reading's instant (Unix seconds, the plan's axis).
+    """
+
+    __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t")
+
+    def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
+        self.keep, self.max_gap_s = keep, max_gap_s
+        self._durations: dict[PhaseClass, deque[float]] = {}
+        self._following: dict[PhaseClass, PhaseClass] = {}
+        self._current: PhaseClass | None = None
+        self._since: float | None = None  # the latest instant the current phase can have begun
+        self._exact = False  # whether that is when it began (its change seen, with no gap before)
+        self._last_t: float | None = None
+
+    def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
+        """Take one reading at ``t_unix_s``: the published plan (its state then) or the state itself."""
+        if plan is None or isinstance(plan, FixedTimePlan):
+            return self.stats()
+        if self._last_t is not None and t_unix_s <= self._last_t:
+            return self.stats()  # a repeat or an older reading
+        state = plan if isinstance(plan, MovementPhaseState) else published_state(plan, t_unix_s)
+        cls = phase_class(state)
+        gap = self._last_t is not None and t_unix_s - self._last_t > self.max_gap_s
+        changed = cls != self._current
+        if changed or gap:
+            if changed and not gap and self._current is not None:
+                if self._exact:
+                    self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
+                self._following[self._current] = cls
+            # first seen now: it began now or before (a start dated late makes its end late: the safe side for a red)
+            self._since, self._exact = t_unix_s, changed and not gap and self._current is not None
+            self._current = cls
+        self._last_t = t_unix_s
+        return self.stats()
+
+    def stats(self) -> CycleStats:
+        """A frozen snapshot to pass along with a reading (``PlanReading.cycle``)."""
+        return CycleStats({c: tuple(sorted(d)) for c, d in self._durations.items()}, dict(self._following), self._current, self._since)
+
+
 @dataclass(frozen=True, slots=True)
 class PlanReading:
-    """One light's plan (Unix axis) as read from a SPaT source, with the reading's freshness. ``plan`` None: no data."""
+    """One light's plan (Unix axis) as read from a SPaT source, with the reading's freshness. ``plan`` None: no data.
+
+    ``cycle``: what the signal group has been seen to do (:meth:`PhaseHistory.stats`), to bound the phases after
+    the published ones. ``clock_offset_s``: the feed clock minus ours, as estimated (subtracted from the plan's
+    instants); ``clock_uncertainty_s``: how far that estimate may be off (red windows widened by it). [s]
+    """
 
     plan: Plan | None
     fresh: bool = True
     age_s: float = 0.0
+    cycle: CycleStats | None = None
+    clock_offset_s: float = 0.0
+    clock_uncertainty_s: float = 0.0
 
 
 def as_uncertain(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> UncertainPlan:
@@ -58,11 +167,11 @@ def as_uncertain(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> U
     return uncertain_from_fixed(plan, t_unix_s - plan.cycle_s, t_unix_s + horizon_s + plan.cycle_s)
 
 
-def red_windows_s(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> tuple[tuple[float, float], ...]:
+def red_windows_s(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S, cycle: CycleStats | None = None) -> tuple[tuple[float, float], ...]:
     """Conservative blocking intervals ``(start, end)`` relative to ``t_unix_s``; ``start <= 0`` means now. [s]
 
     Windows that ended by ``t_unix_s`` or begin after ``t + horizon_s`` are left out; a start before now is
-    written as 0; an end may be ``inf`` (no change known).
+    written as 0; an end may be ``inf`` (no change known). ``cycle`` bounds the phases after the published ones.
 
     Examples
     --------
@@ -71,14 +180,70 @@ def red_windows_s(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> 
     """
     if isinstance(plan, FixedTimePlan):
         return _fixed_red_windows_s(plan, t_unix_s, horizon_s)
-    up = plan
+    return _windows(predicted_phases(plan, t_unix_s, horizon_s, cycle), t_unix_s, horizon_s, 0, 2)
+
+
+Bound = tuple[float, float, float]
+"""A change's (earliest, likely, late) instant on the plan's axis. [s]"""
+
+
+def published_state(plan: UncertainPlan, t_unix_s: float) -> MovementPhaseState:
+    """The state the plan says holds unless a change has surely come (the lowest possible index at ``t_unix_s``).
+    A phase past its ``minEndTime`` is still this state: it may end any moment, it is not unknown."""
+    return plan.states[sum(1 for c in plan.changes if c.max_end_s <= t_unix_s)]
+
+
+def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cycle: CycleStats | None) -> list[tuple[PhaseClass, Bound, Bound]]:
+    """(class, start, end) of each phase of the plan, each bound an (earliest, likely, late) triple on the plan's axis;
+    the open tail (a last "unavailable") bounded by ``cycle`` where the history can (module docstring)."""
+    inf = math.inf
+    out: list[tuple[PhaseClass, Bound, Bound]] = []
+    start: Bound = (-inf, -inf, -inf)
+    for i, state in enumerate(plan.states):
+        if i < len(plan.changes):
+            c = plan.changes[i]
+            end: Bound = (c.min_end_s, c.likely_s, c.max_end_s)
+        else:
+            end = (inf, inf, inf)
+        out.append((phase_class(state), start, end))
+        start = end
+    if cycle is None or len(out) < 2 or out[-1][0] is not PhaseClass.UNKNOWN:
+        return out
+    # the plan ends in "unavailable": its last known phase ends when such phases end, then the cycle goes on
+    cls, begun, (lo, likely, late) = out[-2]
+    since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
+    d = cycle.durations(cls)
+    if since is None or not d:
+        return out
+    after = max(t_unix_s, lo)
+    ends = [since + x for x in d if since + x >= after]
+    if not ends:  # running longer than any seen: nothing to go by
+        return out
+    # what this group has done beats what its controller predicts: maxEndTime was 9 s early or 2 minutes late
+    likely, late = max(_quantile(ends, 0.5), lo), max(_quantile(ends, LATE_QUANTILE), lo)
+    out[-2] = (cls, begun, (lo, max(likely, lo), max(late, likely, lo)))
+    del out[-1]
+    start = out[-1][2]
+    while start[0] < t_unix_s + horizon_s:
+        nxt = cycle.following.get(cls)
+        d = cycle.durations(nxt) if nxt is not None else ()
+        if not d:
+            break
+        cls = nxt
+        end = (start[0] + d[0], start[1] + _quantile(d, 0.5), start[2] + _quantile(d, LATE_QUANTILE))
+        out.append((cls, start, end))
+        start = end
+    out.append((PhaseClass.UNKNOWN, start, (inf, inf, inf)))
+    return out
+
+
+def _windows(phases, t_unix_s: float, horizon_s: float, lo: int, hi: int) -> tuple[tuple[float, float], ...]:
+    """Blocking phases as windows from their start's ``lo`` bound to their end's ``hi`` bound, relative, merged."""
     out: list[list[float]] = []
-    for i, state in enumerate(up.states):
-        if state not in BLOCKING_STATES:
+    for cls, start, end in phases:
+        if cls not in BLOCKING_CLASSES:
             continue
-        start = up.changes[i - 1].min_end_s if i > 0 else -math.inf
-        end = up.changes[i].max_end_s if i < len(up.changes) else math.inf
-        start_rel, end_rel = start - t_unix_s, end - t_unix_s
+        start_rel, end_rel = start[lo] - t_unix_s, end[hi] - t_unix_s
         if end_rel <= 0.0 or start_rel >= horizon_s:
             continue
         start_rel = max(start_rel, 0.0)
@@ -86,7 +251,7 @@ def red_windows_s(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> 
             out[-1][1] = max(out[-1][1], end_rel)
         else:
             out.append([start_rel, end_rel])
-    return tuple((float(s), float(e)) for s, e in out)
+    return tuple((float(a), float(b)) for a, b in out)
 
 
 def _fixed_red_windows_s(plan: FixedTimePlan, t_unix_s: float, horizon_s: float) -> tuple[tuple[float, float], ...]:
@@ -119,10 +284,25 @@ def confidence_frac(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -
 
 
 def unknown_now(plan: Plan, t_unix_s: float) -> bool:
-    """True when the plan cannot say the state at ``t_unix_s`` (possibly unavailable or dark)."""
+    """True when the plan cannot say the state at ``t_unix_s``: the published state (:func:`published_state`) is
+    unavailable or dark. A phase past its ``minEndTime``, which may turn unavailable any moment, is not unknown."""
     if isinstance(plan, FixedTimePlan):
         return False
-    return bool(possible_states_at(plan, t_unix_s) & UNKNOWN_STATES)
+    return published_state(plan, t_unix_s) in UNKNOWN_STATES
+
+
+def _widened(windows: tuple[tuple[float, float], ...], widen_s: float) -> tuple[tuple[float, float], ...]:
+    """Windows widened by ``widen_s`` on both sides (clipped at now), overlapping ones merged."""
+    if widen_s <= 0.0:
+        return windows
+    out: list[list[float]] = []
+    for a, b in windows:
+        a, b = max(a - widen_s, 0.0), b + widen_s
+        if out and a <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append([a, b])
+    return tuple((a, b) for a, b in out)
 
 
 def light_view(
@@ -130,14 +310,26 @@ def light_view(
 ) -> LightView:
     """The advisor's view of one light ahead at the fix time (see the module docstring)."""
     distance_m = float(intersection.stop_line_m - station_m)
-    if reading is None or reading.plan is None or unknown_now(reading.plan, t_unix_s):
-        return LightView(intersection.id, distance_m, fresh=False)
+    if reading is None or reading.plan is None or unknown_now(reading.plan, t_unix_s - reading.age_s):
+        return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s) if reading is not None else math.inf)
+    plan, t_feed = reading.plan, t_unix_s + reading.clock_offset_s  # our instant on the feed's clock
+    if isinstance(plan, FixedTimePlan):
+        windows = likely = late = red_windows_s(plan, t_feed, horizon_s)
+    else:
+        phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
+        windows, likely, late = (_windows(phases, t_feed, horizon_s, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
+    # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no chance)
+    u = reading.clock_uncertainty_s
+    windows, likely, late = _widened(windows, u), _widened(likely, u), _widened(late, u)
     return LightView(
         intersection.id,
         distance_m,
         fresh=bool(reading.fresh),
-        confidence_frac=confidence_frac(reading.plan, t_unix_s, horizon_s),
-        red_windows_s=red_windows_s(reading.plan, t_unix_s, horizon_s),
+        confidence_frac=confidence_frac(plan, t_feed, horizon_s),
+        red_windows_s=windows,
+        likely_red_windows_s=None if likely == windows else likely,
+        late_red_windows_s=None if late == windows else late,
+        age_s=float(reading.age_s),
     )
 
 

@@ -1,5 +1,7 @@
 """The advisor: suppression rules, feasibility (never red, never above the limit), hysteresis, voice, tables."""
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -306,6 +308,8 @@ def test_evaluation_against_the_dp_with_and_without_the_margin():
 def test_a_red_that_never_ends_gives_a_stop_without_a_countdown():
     """Reproducer from the real controller: a "stop" with seconds_to_change_s = inf raised OverflowError in phrase()."""
     adv = advise(Observation(13.89, 13.89, (LightView(1, 300.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
+    assert adv.reason == "red_ahead" and adv.message == "Red light ahead."  # far out: no stop asked for yet
+    adv = advise(Observation(13.89, 13.89, (LightView(1, 100.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
     assert adv.action == "stop" and adv.message == "Red light ahead. Prepare to stop."
     assert phrase(Advice("none", "too_close", None, True, float("inf"))) == ""
     assert phrase(Advice("cruise", "green_wave", V, False, float("inf"))) == "Hold 55 miles per hour."
@@ -352,3 +356,64 @@ def test_leaving_the_zone_past_the_last_light_is_not_off_route():
     assert adv.reason == "past_lights" and adv.message == "Last light passed. Advice ends."
     lost = advise(observation(corridor, 50.0, 20.0, 0.0, {}, V, on_route=False))[0]
     assert lost.reason == "off_route" and lost.message == "Off the route. Advice paused."
+
+
+# -- advice under uncertainty (issue 13) -----------------------------------------------------------
+
+
+def test_through_a_short_dropout_the_last_advice_is_held_not_dropped_to_the_limit():
+    """Red for 25 s more, 400 m ahead: "ease off". Then the feed drops out: the last plan is re-checked on the last
+    SPaT and held ("Signal data delayed. Keep to X."), no new advice; after hold_stale_s, the plain "out of date".
+    When data returns the driver is still on that plan: kept, no new reaction delay, not spoken again as new."""
+    w = ((-5.0, 25.0), (55.0, 85.0))
+    first, mem = advise(Observation(V, V, (light(400, *w),)))
+    assert first.action in ("ease_off", "coast", "slow_down")
+    v1 = first.target_speed_mps
+    held, mem2 = advise(Observation(v1, V, (LightView(1, 380.0, False, 1.0, tuple((a - 2, b - 2) for a, b in w), age_s=2.0),)), mem)
+    assert (held.action, held.reason, held.target_speed_mps) == (first.action, "stale_spat", v1)
+    assert held.message == f"Signal data delayed. Keep to {round(v1 * 2.2369362920544):d} miles per hour." and held.speak
+    assert mem2.last == mem.last  # the plan the driver follows stays the reference
+    back = advise(Observation(v1, V, (light(360.0, *((a - 4, b - 4) for a, b in w)),)), mem2)[0]
+    assert (back.action, back.target_speed_mps) == (first.action, v1)
+    gone = advise(Observation(v1, V, (LightView(1, 200.0, False, 1.0, w, age_s=P.hold_stale_s + 1.0),)), mem)[0]
+    assert (gone.action, gone.reason, gone.message) == ("none", "stale_spat", "Signal data is out of date. Drive normally.")
+
+
+def test_a_dropout_never_makes_new_speed_advice():
+    """Nothing advised before the dropout: nothing to hold, and no speed from stale data."""
+    adv = advise(Observation(V, V, (LightView(1, 400.0, False, 1.0, ((-5.0, 25.0),), age_s=2.0),)))[0]
+    assert adv.target_speed_mps is None and adv.reason == "stale_spat"
+
+
+def test_an_actuated_red_aims_at_its_likely_end_never_before_min_end():
+    """A red now whose end is known only as a window: surely not before 20 s (minEnd), likely at 30 s, late at 150 s.
+    No speed reaches the line 600 m ahead after 150 s (+2 s), so the advisor aims at the likely end (+2 s margin): a
+    real plan instead of "prepare to stop", and never a crossing before minEnd."""
+    lit = LightView(1, 600.0, True, 0.9, ((0.0, 150.0),), likely_red_windows_s=((0.0, 30.0),))
+    adv = advise(Observation(V, V, (lit,)))[0]
+    assert adv.action in KEEP_MODES and adv.light_red and adv.message.startswith("Green in 30 seconds.")
+    t = crossing_time_s(600, V, adv.target_speed_mps, P, KEEP_MODES[adv.action])
+    assert t >= 30.0 + P.green_margin_s and t >= 20.0
+    exact = advise(Observation(V, V, (light(600, (0.0, 150.0)),)))[0]
+    assert exact.action == "stop"  # the same red known to last 150 s: a stop (an early gentle one: its end is known)
+
+
+def test_prepare_to_stop_only_when_a_stop_is_likely():
+    """Green now; it may end at 3 s (minEnd) but likely lasts until 10 s, and the car is there at ~6 s: no speed is
+    sure to make it, yet a stop is not likely, so no "prepare to stop" (it said so before)."""
+    lit = LightView(1, 150.0, True, 0.9, ((3.0, 60.0),), likely_red_windows_s=((10.0, 40.0),))
+    adv = advise(Observation(V, V, (lit,)))[0]
+    assert adv.action != "stop" and "stop" not in adv.message.lower()
+    red_likely = LightView(1, 150.0, True, 0.9, ((3.0, 60.0),), likely_red_windows_s=((4.0, 40.0),))
+    assert advise(Observation(V, V, (red_likely,)))[0].action == "stop"
+
+
+def test_a_red_far_ahead_is_announced_and_the_stop_asked_for_when_it_is_near():
+    """A red of unknown end (no speed makes it) 300 m ahead at 50 km/h: "Red light ahead." and no speed (a "stop" there
+    halted the virtual driver 220 m short of the line); within a comfortable stop (+ reaction + 2 s): "prepare to stop"."""
+    v = 50 / 3.6
+    far = advise(Observation(v, v, (light(300, (0.0, math.inf)),)), params=AdvisorParams(units="kmh"))[0]
+    assert (far.action, far.reason, far.message, far.target_speed_mps) == ("none", "red_ahead", "Red light ahead.", None) and far.speak
+    near_m = v * (P.reaction_s + P.stop_lead_s) + v * v / (2 * P.comfort_decel_mps2)
+    near = advise(Observation(v, v, (light(near_m - 1.0, (0.0, math.inf)),)))[0]
+    assert near.action == "stop" and near.message == "Red light ahead. Prepare to stop."

@@ -14,7 +14,9 @@ How the advice is made (docs/ADVISOR.md):
    speeds within [min cruise speed, limit] are ever advised.
 3. **Target**: among feasible speeds, the DP lookup tables' target for this position, speed and signal
    phase when the tables match the live SPaT; otherwise the highest feasible speed (the rule-based closed
-   form). If no speed is feasible: prepare to stop.
+   form). If no speed is sure under an actuated light's windows: a plan on its likely changes (never faster
+   than now, never slowing for a red the car may beat as it is). If none: prepare to stop when a stop is
+   likely and near, "Red light ahead." when far.
 4. **Hysteresis**: the previous target is kept while it stays feasible and close; ``speak`` is raised only
    when the action changes, or the target moves by ``speak_change_mps``.
 """
@@ -45,6 +47,12 @@ class LightView:
     ``red_windows_s``: upcoming red intervals ``(start, end)`` relative to now, conservative: an uncertain
     change to red counts from its earliest possible time, a change to green from its latest. A window with
     ``start <= 0`` means red now. At least the windows of the next ~2 minutes.
+
+    Under uncertainty (an actuated light) two more views. ``likely_red_windows_s``: each change at its likely
+    instant (the countdown; whether a stop is likely; what a plan aims between when the conservative windows leave
+    no speed; it contains every red that minEnd guarantees). ``late_red_windows_s``: each change at its latest
+    instant: a car reaching the line inside a likely red but before such a red begins may still beat it as it is,
+    and is not slowed for the green after it; a driver's display may rely on a red lasting until then.
     """
 
     intersection_id: int
@@ -52,7 +60,8 @@ class LightView:
     fresh: bool = True
     confidence_frac: float = 1.0
     red_windows_s: tuple[tuple[float, float], ...] = ()
-    likely_red_windows_s: tuple[tuple[float, float], ...] | None = None  # at the likely changes; None: as red_windows_s
+    likely_red_windows_s: tuple[tuple[float, float], ...] | None = None  # every change at its likely time; None: as red_windows_s
+    late_red_windows_s: tuple[tuple[float, float], ...] | None = None  # every change at its latest; None: not known
     age_s: float = 0.0  # how old the SPaT behind this view is (a dropout: not fresh, windows of the last reading) [s]
 
     def likely_red_at(self, t_s: float) -> bool:
@@ -142,6 +151,7 @@ class AdvisorParams:
     too_close_m: float = 15.0
     short_wait_s: float = 3.0
     min_confidence_frac: float = 0.5
+    stop_lead_s: float = 2.0  # "prepare to stop" this long before a comfortable stop must begin (earlier: "Red light ahead.") [s]
     hold_stale_s: float = 10.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
     hysteresis_mps: float = 1.0
     speak_change_mps: float = 5 * 0.44704
@@ -467,6 +477,8 @@ def phrase(advice: Advice, units: str = "mph") -> str:
     if advice.reason == "stale_spat" and advice.action != "none":  # a dropout: the last advice, held
         return f"Signal data delayed. Keep to {speed}." if advice.action != "stop" else "Signal data delayed. Prepare to stop."
     if advice.action == "none":
+        if advice.reason == "red_ahead":
+            return f"Red light ahead. Green in {when}." if when else "Red light ahead."
         if advice.reason == "stale_spat" and advice.light_red is not None:
             return "Signal data delayed."  # a short dropout: no new advice, and no push back to the limit
         return {
@@ -495,6 +507,8 @@ def phrase(advice: Advice, units: str = "mph") -> str:
 
 
 def _light_timing(light: LightView) -> tuple[bool, float | None]:
+    """Red now, and the seconds to the next change, as likely (an actuated green past its minEnd is still green)."""
+    light = _countdown_view(light)
     if light.red_now:
         return True, light.seconds_to_green()
     return False, light.seconds_to_red()
@@ -536,9 +550,31 @@ def _kept(lines: _Lines, usable: tuple[LightView, ...], obs: Observation, params
     )
 
 
-def _likely_view(light: LightView) -> LightView:
-    """The light with its changes at their likely times (the windows a plan under uncertainty aims between)."""
-    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or ())
+def _likely_only(light: LightView) -> LightView:
+    """The light with each change at its likely instant, as a plan under uncertainty sees it."""
+    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or (), light.likely_red_windows_s)
+
+
+def _beats_maybe(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> bool:
+    """Holding its speed, the car reaches a line before a red's latest start but after its likely one: it may go
+    through as it is (the regular driver would try). Slowing for the green after that red cost a whole cycle
+    whenever the red came late; no speed makes the green for sure: no speed advice (issue 13, spat-eval)."""
+    if obs.speed_mps <= 0.0:
+        return False
+    for light in lights:
+        if light.late_red_windows_s is None or light.likely_red_windows_s is None:
+            continue
+        t = light.distance_m / obs.speed_mps
+        if any(a <= t < b for a, b in light.likely_red_windows_s) and not any(a <= t < b for a, b in light.late_red_windows_s):
+            return True
+    return False
+
+
+def _countdown_view(light: LightView) -> LightView:
+    """The light with each change at its likely instant (what is said: "Green in 12 seconds")."""
+    if light.likely_red_windows_s is None:
+        return light
+    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s)
 
 
 def _held(obs: Observation, memory: AdvisorMemory, params: AdvisorParams) -> Advice | None:
@@ -579,21 +615,32 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source)
     n_lines, mode, feasible = _search(both, obs, params)
     if feasible.size == 0 and any(light.likely_red_windows_s is not None for light in usable):
-        # no speed makes the greens whenever the changes come: aim between the likely changes (never into a red
-        # that minEnd guarantees: the likely windows contain it); the driver's own eyes guard the rest
-        usable = tuple(_likely_view(light) for light in usable)
+        # no speed makes the greens whenever the changes come: plan on the likely changes (never into a red that
+        # minEnd guarantees: the likely windows contain it; the after-red margin still applies), never faster than now
+        # (no racing an uncertain red), and never slowing for a red the car may beat as it is (_beats_maybe)
+        if _beats_maybe(usable, obs, params):
+            return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
+        usable = tuple(_likely_only(light) for light in usable)
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
+        feasible = feasible[feasible <= max(obs.speed_mps, params.min_cruise_speed_mps) + 1e-9]
     if feasible.size == 0:
         arrival = crossing_time_s(nxt.distance_m, obs.speed_mps, obs.speed_mps, params) if obs.speed_mps > 0 else np.inf
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)
         slowest = crossing_time_s(nxt.distance_m, obs.speed_mps, params.min_cruise_speed_mps, params, "brake")
-        if not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
+        uncertain = nxt.likely_red_windows_s is not None
+        if uncertain and not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
             # a stop is possible but not likely: no "prepare to stop" for a car that most likely goes through
             return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
-        return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red,
-                      seconds_to_change_s=nxt.seconds_to_green_after(min(arrival, slowest)))
+        v = obs.speed_mps
+        to_green = _countdown_view(nxt).seconds_to_green_after(min(arrival, slowest))
+        far = nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)
+        if far and (uncertain or not math.isfinite(to_green)):
+            # far from a red whose end is uncertain: say what is ahead, ask for nothing yet (a stop so far out halted
+            # the car 220 m short of the line). A known end keeps the early gentle stop: the advisor re-plans from it
+            return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_green)
+        return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_green)
     target, source = float(feasible.max()), "rules"
     if tables is not None:
         wanted = tables.target_speed_mps(obs)
@@ -624,7 +671,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
 
 def _meaningful_change(new: Advice, old: Advice | None, params: AdvisorParams) -> bool:
     if old is None:
-        return new.action != "none" or new.reason in ("no_spat", "stale_spat", "low_confidence", "off_route")
+        return new.action != "none" or new.reason in ("no_spat", "stale_spat", "low_confidence", "off_route", "red_ahead", "past_lights")
     if (new.action, new.reason) != (old.action, old.reason):
         return new.reason not in ("too_close", "short_wait")
     if new.target_speed_mps is not None and old.target_speed_mps is not None:
@@ -638,8 +685,10 @@ def advise(
     """
     The advisory for one observation, and the memory to pass with the next one.
 
-    Never advises a speed above the limit or one that reaches a stop line during (conservative) red;
-    with missing, stale or low-confidence SPaT it gives no speed advice and says so.
+    Never advises a speed above the limit or one that reaches a stop line during (conservative) red; when no
+    speed is sure (an actuated light), a plan on the likely changes that is never faster than now and never into
+    a red that minEnd guarantees (docs/ADVISOR.md, 1a). With missing or low-confidence SPaT it gives no speed
+    advice and says so; through a short dropout it holds the last advice, re-checked, and makes no new one.
     ``tables``: optional :class:`advisory.advice.tables.AdviceTables` (DP lookup); ``None`` uses the rules alone.
     """
     memory = memory or AdvisorMemory()

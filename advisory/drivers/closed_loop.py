@@ -12,13 +12,14 @@ the light is still red. Everything else comes from the advice (a "stop" only unt
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from advisory.advice.advisor import Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise, coast_decel_mps2
 from advisory.drivers.regular import DriverParams
-from advisory.signals import Scenario
+from advisory.signals import FixedTimeSignal, Scenario, Signal, TimelineSignal
 from advisory.trajectory import Trajectory
 
 
@@ -34,6 +35,7 @@ class DriverModel:
     noise_mps: float = 0.0  # standard deviation of the tracking error, redrawn every advice
     min_coast_mps: float = 2.0  # below this the driver stops coasting and drives on
     red_end_margin_s: float = 1.0  # a red seen at the decision point must end this long before arrival to go on
+    emergency_decel_mps2: float = 8.0  # a red the display did not announce: stop if this suffices, else go on
     coast_floor_frac: float = 0.7  # a coasting car keeps slowing past its target: plan with this share of it [-]
     seed: int = 0
 
@@ -45,6 +47,23 @@ class ClosedLoopResult:
     overrides: int
     stops: int
     max_advised_mps: float
+    surprises: int = 0  # reds the display did not announce (the light still red when its countdown said green, or an early red)
+
+
+Feed = Callable[[float, float, float], Observation]
+"""What the advisor is told at (t, x, v): the lights ahead as the SPaT source publishes them. ``LightView.intersection_id``
+is the light's index in the scenario plus one."""
+
+
+def belief(view: LightView | None, t_obs_s: float, position_m: float) -> TimelineSignal | None:
+    """What the driver's display says of one light after the observation at ``t_obs_s``: its red windows on the
+    scenario's axis, each change at its latest (a red that may not have begun is the driver's eyes' to judge, as
+    for the regular driver; a red is not relied on to end before its latest); a fixed-time light's exact windows;
+    None when it says nothing (no data, stale)."""
+    if view is None or not view.fresh:
+        return None
+    windows = view.red_windows_s if view.late_red_windows_s is None else view.late_red_windows_s
+    return TimelineSignal(position_m, tuple((t_obs_s + a, t_obs_s + b) for a, b in windows))
 
 
 def observe(scenario: Scenario, t_s: float, x_m: float, v_mps: float, horizon_s: float = 180.0) -> Observation:
@@ -64,8 +83,15 @@ def simulate(
     tables=None,
     driver: DriverModel | None = None,
     dt_s: float = 0.1,
+    feed: Feed | None = None,
 ) -> ClosedLoopResult:
-    """Drive ``scenario`` from entry to the zone end following the advisor; exact knots every ``dt_s``."""
+    """Drive ``scenario`` from entry to the zone end following the advisor; exact knots every ``dt_s``.
+
+    ``scenario.signals`` are the truth. ``feed`` is what the advisor and the driver's display are told (default:
+    a perfect fixed-time feed, :func:`observe`, so the display is the truth). The driver sees the light's present
+    colour and the display's countdowns, never the truth's future: a light still red when its display said green
+    (an actuated light switching late), or a red arriving before the display's earliest, is a *surprise*: the
+    driver stops if it can (up to ``emergency_decel_mps2``), else goes on (a red entry, counted by the checks)."""
     advisor = advisor or AdvisorParams()
     driver = driver or DriverModel()
     rules = DriverParams()
@@ -82,13 +108,25 @@ def simulate(
     log: list[tuple[float, Advice]] = []
     committed: set[int] = set()
     braking_for: int | None = None
-    overrides = stops = 0
+    overrides = stops = surprises = 0
+    shown: list[Signal | None] = list(scenario.signals)  # the display's view of each light (perfect feed: the truth)
+    surprised: dict[int, float] = {}  # light -> the red (by its end) that surprised the driver
+    amber_seen: dict[int, float] = {}  # light -> the red (by its start) whose amber the driver has decided on
+    amber_stop: set[int] = set()  # lights whose amber the driver stops for
+    green_since: dict[int, float] = {}
     max_advised = 0.0
     steps_per_advice = int(round(1.0 / dt_s))
     step = 0
     while x < scenario.zone_length_m - 1e-9 and t < 600.0:
         if step % steps_per_advice == 0:
-            adv, memory = advise(observe(scenario, t, x, v), memory, advisor, tables)
+            obs = observe(scenario, t, x, v) if feed is None else feed(t, x, v)
+            if feed is not None:
+                views = {lv.intersection_id: lv for lv in obs.lights}
+                shown = [belief(views.get(n + 1), t, s.position_m) if s.position_m > x else None for n, s in enumerate(scenario.signals)]
+                for n, d in enumerate(shown):  # since when the display has said green (the last red's end it announced)
+                    if d is not None and (d.is_red(t) or green_since.get(n, np.inf) > t):
+                        green_since[n] = d.next_green_start_s(t) if d.is_red(t) else t
+            adv, memory = advise(obs, memory, advisor, tables)
             log.append((t, adv))
             if adv.target_speed_mps is not None:
                 max_advised = max(max_advised, adv.target_speed_mps)
@@ -105,20 +143,49 @@ def simulate(
             v_cmd = 0.0 if x < stop_line_m else v_lim  # a "stop" is void once its line is behind (crossed on green)
         else:
             v_cmd = active.target_speed_mps + (driver.drift_mps if active.target_speed_mps < driver.low_speed_mps else 0.0)
-            v_cmd = float(np.clip(v_cmd + error, 0.0, v_lim))
+            v_cmd = min(max(v_cmd + error, 0.0), v_lim)
         rate_up, rate_down = driver.accel_mps2, driver.decel_mps2
         if active is not None and active.action == "brake_to":
             rate_down = advisor.firm_decel_mps2
+        if active is not None and active.action == "stop" and x < stop_line_m and v * v < 2.0 * driver.decel_mps2 * (stop_line_m - rules.stop_gap_m - x):
+            rate_down = coast_decel_mps2(v, advisor.vehicle)  # prepare to stop: lift off until a comfortable stop at the line needs braking
         # the driver's own eyes: decide once per light at the decision point, like the regular driver
         ahead = [(n, s) for n, s in enumerate(scenario.signals) if s.position_m > x + 1e-9]
         if ahead:
             n, light = ahead[0]
             dist = light.position_m - x
             room = dist - rules.stop_gap_m
-            red_now = light.is_red(t)
-            green_at = light.next_green_start_s(t)  # t itself when green
-            next_red = light.next_red_start_s(green_at)  # the next red to begin after any current one
-            if n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
+            red_now = bool(light.is_red(t))  # what the driver sees; the future only from the display
+            display = shown[n]
+            if display is None:  # nothing shown: a red lasts, a green holds (as far as the driver knows)
+                green_at, next_red = (np.inf, np.inf) if red_now else (t, np.inf)
+            elif red_now and not display.is_red(t):  # red although the display says green: when it ends is unknown
+                green_at, next_red = np.inf, np.inf
+            else:
+                green_at = display.next_green_start_s(t) if red_now else t  # t itself when green
+                # the next red to begin after any current one; green while the display says it may be red (a
+                # window already open): the eye and the amber rule decide
+                next_red = display.next_red_start_s(display.next_green_start_s(green_at)) if red_now or not display.is_red(t) else np.inf
+            heeded_m = max(decision_m, v * v / (2.0 * driver.decel_mps2) + rules.stop_gap_m)  # where a comfortable stop begins
+            amber = dist <= heeded_m and bool(getattr(light, "is_amber", lambda _: False)(t))
+            red_at = light.next_red_start_s(t) if amber else None
+            if amber and amber_seen.get(n) != red_at:  # the regular driver's amber rule, wherever it is seen: stop if it
+                amber_seen[n] = red_at  # would not clear the line before the red and can stop at its hardest braking
+                if t + dist / max(v, 0.5) > red_at and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+                    committed.discard(n)
+                    amber_stop.add(n)
+                    surprises += 1
+                else:
+                    amber_stop.discard(n)
+            overdue = display is None or (not display.is_red(t) and t - green_since.get(n, -np.inf) >= driver.reaction_s)
+            if n in committed and red_now and surprised.get(n) != light.next_green_start_s(t) and overdue:
+                surprises += 1  # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at all possible
+                surprised[n] = light.next_green_start_s(t)  # (once per red)
+                if v * v / (2.0 * max(room, 1e-6)) <= driver.emergency_decel_mps2:
+                    committed.discard(n)
+            if amber and n in amber_stop and n not in committed:
+                braking_for = n
+            elif n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
                 # go only if the light will be green on arrival at the current speed (a red now must end
                 # ``red_end_margin_s`` before) and no red can begin before the car is over the line
                 arrival = t + (dist / v if v > 0.1 else np.sqrt(2.0 * dist / driver.accel_mps2) + driver.reaction_s)
@@ -131,7 +198,7 @@ def simulate(
                     braking_for = None
             if braking_for == n:  # stop short of the line at the constant rate that gets there
                 v_cmd = 0.0
-                rate_down = min(v * v / (2.0 * room), 4.0) if room > 1e-6 else 4.0
+                rate_down = min(v * v / (2.0 * room), driver.emergency_decel_mps2 if n in surprised else 4.0) if room > 1e-6 else 4.0
             elif n in committed:
                 if red_now:  # committed while red: it turns green before arrival at this speed, not faster
                     v_cmd = min(v_cmd, v)
@@ -150,10 +217,13 @@ def simulate(
         if braking_for is None and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
             if v > driver.min_coast_mps:
                 v_cmd, rate_down = 0.0, coast_decel_mps2(v, advisor.vehicle)  # target reached: keep coasting
+            elif ahead and light.is_red(t):  # nobody coasts to a standstill: at a red, stop at the line
+                room = ahead[0][1].position_m - x - rules.stop_gap_m
+                v_cmd, rate_down = 0.0, (min(v * v / (2.0 * room), 4.0) if room > 1e-6 else 4.0)
             else:
                 v_cmd = v_lim  # nobody coasts to a standstill: drive on
         gap = v_cmd - v
-        a = float(np.clip(gap / dt_s, -rate_down, rate_up))
+        a = min(max(gap / dt_s, -rate_down), rate_up)
         if v + a * dt_s < 0.0:  # comes to rest within the step: a knot where it stops
             h = v / -a
             x += 0.5 * v * h
@@ -170,7 +240,7 @@ def simulate(
         knots.append((t, x, v))
         step += 1
     arr = np.array(knots)
-    return ClosedLoopResult(Trajectory(arr[:, 0], arr[:, 1], arr[:, 2]), log, overrides, stops, max_advised)
+    return ClosedLoopResult(Trajectory(arr[:, 0], arr[:, 1], arr[:, 2]), log, overrides, stops, max_advised, surprises)
 
 
 def _time_to_cover_s(dist_m: float, v_mps: float, v_to_mps: float, decel_mps2: float) -> float:
@@ -200,6 +270,8 @@ class Evaluation:
     violations: tuple[str, ...]
     optimum_same_time_usd: float  # the DP allowed the advised driver's own trip time (if longer than the regular's)
     optimum_margin_usd: float  # the DP held to the advisor's margin: every red ends green_margin_s later
+    optimum_limited_usd: float = float("nan")  # the DP held to the advised driver's limits: the margin and a reaction at entry
+    optimum_limited_s: float = float("nan")
 
     def _kept(self, optimum_usd: float) -> float | None:
         saving = self.regular_usd - optimum_usd
@@ -219,6 +291,12 @@ class Evaluation:
     def kept_margin_frac(self) -> float | None:
         """The same share against the DP that, like the advice, crosses no line within the margin after a red."""
         return self._kept(self.optimum_margin_usd)
+
+    @property
+    def kept_limited_frac(self) -> float | None:
+        """The yardstick of issue 13: the share against the DP held to the advised driver's own limits
+        (:func:`limited_optimum`)."""
+        return self._kept(self.optimum_limited_usd)
 
 
 def evaluate(scenario: Scenario, params, tables=None, advisor: AdvisorParams | None = None, driver: DriverModel | None = None, grid=None) -> Evaluation:
@@ -248,8 +326,70 @@ def evaluate(scenario: Scenario, params, tables=None, advisor: AdvisorParams | N
         margin = score_in_end_state(solve(held, params, grid, t_max_s=t_max).trajectory, params, v_lim)
     except InfeasibleError:  # the margin makes the regular driver's time unreachable: the advised driver's then
         margin = score_in_end_state(solve(held, params, grid, t_max_s=max(t_max, adv.time_s) + 1.0).trajectory, params, v_lim)
+    reaction_s = (advisor or AdvisorParams()).reaction_s
+    limited = limited_optimum(held, params, grid, t_max, reaction_s) or limited_optimum(held, params, grid, max(t_max, adv.time_s) + 1.0, reaction_s)
+    lim = score_in_end_state(limited, params, v_lim) if limited is not None else margin  # (as for the margin DP: the advised time if need be)
     return Evaluation(scenario.name, reg.cost_usd, adv.cost_usd, opt.cost_usd, reg.time_s, adv.time_s, opt.time_s,
-                      run.stops, run.overrides, tuple(red_light_violations(run.trajectory, scenario)), same.cost_usd, margin.cost_usd)
+                      run.stops, run.overrides, tuple(red_light_violations(run.trajectory, scenario)), same.cost_usd, margin.cost_usd,
+                      lim.cost_usd, lim.time_s)  # fmt: skip
+
+
+def limited_optimum(held: Scenario, params, grid, t_max_s: float, reaction_s: float) -> Trajectory | None:
+    """The DP held to the advised driver's limits: ``held`` already ends every red ``green_margin_s`` later; the
+    car also keeps its entry speed for the reaction time (like the advised driver, who acts on the first advice
+    1 s after entry). The hold is a whole number of DP stages, the nearest below ``v0 * reaction_s`` (20 m, 0.81 s
+    for the paper's 24.6 m/s and 10 m stages: a slightly quicker DP, a slightly stricter yardstick), one stage
+    less where the grid cannot stop in time from there (light 1 red at entry: 10 m). The DP then starts there,
+    its lights and reds shifted, within the same trip time. None if even no hold is feasible."""
+    from advisory.optimizer.dp import InfeasibleError, solve
+
+    v0 = held.initial_speed_mps
+    for hold_m in np.arange(np.floor(v0 * reaction_s / grid.stage_m + 1e-9) * grid.stage_m, -1e-9, -grid.stage_m):
+        hold_s = hold_m / v0 if v0 > 0 else 0.0
+        if any(s.position_m <= hold_m for s in held.signals):
+            continue
+        shifted = Scenario(held.name, tuple(replace(s, position_m=s.position_m - hold_m, red_start_s=s.red_start_s - hold_s) for s in held.signals),
+                           held.zone_length_m - hold_m, held.speed_limit_mps, v0)  # fmt: skip
+        try:
+            rest = solve(shifted, params, grid, t_max_s=t_max_s - hold_s).trajectory
+        except InfeasibleError:
+            continue
+        if hold_m <= 0:
+            return rest
+        return Trajectory(np.concatenate([[0.0], rest.t_s + hold_s]), np.concatenate([[0.0], rest.x_m + hold_m]), np.concatenate([[v0], rest.v_mps]))
+    return None
+
+
+def hindsight_optimum(truth: Scenario, params, grid, regular: Trajectory | None = None) -> Trajectory | None:
+    """The DP that knows the truth (any :class:`~advisory.signals.Signal`), within the regular driver's trip time.
+
+    The DP (:mod:`advisory.optimizer.dp`) takes fixed-time lights: each light is given, as one fixed cycle, the
+    first red that ends after the earliest possible arrival (at the limit from entry) and the start of the red
+    after it. The trajectory is then checked against the full truth; None where that fails (a later red the
+    cycle does not repeat) or nothing is feasible."""
+    from advisory.drivers.regular import regular_driver
+    from advisory.optimizer.dp import InfeasibleError, solve, time_limit_s
+
+    v_lim = truth.speed_limit_mps
+    signals = []
+    for light in truth.signals:
+        earliest = light.position_m / v_lim
+        reds = [(a, b) for a, b in light.red_intervals(earliest, earliest + 3600.0) if b > earliest]
+        if not reds:
+            signals.append(FixedTimeSignal(light.position_m, -1e6, 1.0, 1e7))
+            continue
+        a, b = max(reds[0][0], earliest - 1e4), reds[0][1]
+        if not np.isfinite(b):
+            return None
+        after = reds[1][0] if len(reds) > 1 else b + 1e6
+        signals.append(FixedTimeSignal(light.position_m, a, b - a, max(after - b, 1e-3)))
+    fixed = Scenario(truth.name, tuple(signals), truth.zone_length_m, v_lim, truth.initial_speed_mps)
+    regular = regular if regular is not None else regular_driver(truth)
+    try:
+        best = solve(fixed, params, grid, t_max_s=time_limit_s(regular, params, fixed, grid)).trajectory
+    except InfeasibleError:
+        return None
+    return None if red_light_violations(best, truth) else best
 
 
 def red_light_violations(traj: Trajectory, scenario: Scenario, tol_s: float = 1e-6) -> list[str]:

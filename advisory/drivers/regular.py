@@ -20,6 +20,13 @@ decided to go reaches the line while the light is still green: a green at the de
 arrival instant cannot hide a red in between, as a red lasts longer than the approach (76.57 m take at most
 8.7 s from standstill at 2 m/s²; reds last 30 s). A red onset the car could not stop for is therefore
 never met; the invariant tests check it on all 64 paper scenarios and on random timings.
+
+Lights whose future nobody knows
+--------------------------------
+For a :class:`~advisory.signals.TimelineSignal` (an actuated or a recorded light: the truth is known to the
+evaluation, not to a driver) the driver decides on what it sees (:meth:`_Sim.handle_seen`): red at the
+decision point, stop and go at green; otherwise go, and at an amber's onset stop if the car would not clear
+the line before the red and can stop at ``brake_max_mps2``, else go on (crossing in amber is legal).
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from advisory.signals import FixedTimeSignal, Scenario
+from advisory.signals import Scenario, Signal, TimelineSignal
 from advisory.trajectory import Trajectory
 
 _EPS = 1e-9
@@ -67,6 +74,18 @@ def time_to_cover_s(distance_m, v_mps, accel_mps2, v_max_mps):
     return t if t.ndim else float(t)
 
 
+def distance_in_s(dt_s: float, v_mps: float, accel_mps2: float, v_max_mps: float) -> float:
+    """Distance covered in ``dt_s`` from ``v_mps``, accelerating at ``accel_mps2`` up to ``v_max_mps``. [m]
+
+    >>> distance_in_s(10.0, 0.0, 2.0, 10.0)  # 5 s to reach 10 m/s (25 m), then 5 s at 10 m/s
+    75.0
+    """
+    t_acc = max(v_max_mps - v_mps, 0.0) / accel_mps2
+    if dt_s <= t_acc:
+        return v_mps * dt_s + 0.5 * accel_mps2 * dt_s * dt_s
+    return v_mps * t_acc + 0.5 * accel_mps2 * t_acc * t_acc + v_max_mps * (dt_s - t_acc)
+
+
 class _Sim:
     def __init__(self, scenario: Scenario, driver: DriverParams):
         self.sc, self.dr = scenario, driver
@@ -96,13 +115,38 @@ class _Sim:
         if self.x < x_target - _EPS:
             self.advance((x_target - self.x) / self.v_max, 0.0)
 
-    def handle(self, light: FixedTimeSignal) -> None:
-        stop_x = light.position_m - self.dr.stop_gap_m
+    def handle(self, light: Signal) -> None:
+        if getattr(light, "ambers_s", None) is not None:
+            return self.handle_seen(light)
         arrival = self.t + time_to_cover_s(light.position_m - self.x, self.v, self.dr.accel_mps2, self.v_max)
         red_now = bool(light.is_red(self.t))
         if not red_now and not bool(light.is_red(arrival)):
             return  # go: it reaches the line on green
-        green_at = light.next_green_start_s(self.t if red_now else light.next_red_start_s(arrival))
+        self.stop_until(light, light.next_green_start_s(self.t if red_now else light.next_red_start_s(arrival)))
+
+    def handle_seen(self, light: TimelineSignal) -> None:
+        """A light whose future the driver cannot know (actuated, recorded): it sees the colour. Red at the
+        decision point: stop, go at green. Otherwise go, unless an amber shows before the car is over the line
+        and, at its onset, the car would not clear the line before the red and can stop at ``brake_max_mps2``."""
+        if bool(light.is_red(self.t)):
+            return self.stop_until(light, light.next_green_start_s(self.t))
+        a = self.dr.accel_mps2
+        arrival = self.t + time_to_cover_s(light.position_m - self.x, self.v, a, self.v_max)
+        onset = next((max(s, self.t) for s, e in light.ambers_s if e > self.t and s < arrival), None)
+        if onset is None:
+            return  # green to the line (a red with no amber before it is a red entry, which the checks count)
+        x_on = self.x + distance_in_s(onset - self.t, self.v, a, self.v_max)
+        v_on = min(self.v + a * (onset - self.t), self.v_max)
+        red_at = light.next_red_start_s(onset)
+        room = light.position_m - self.dr.stop_gap_m - x_on
+        if onset + time_to_cover_s(light.position_m - x_on, v_on, a, self.v_max) <= red_at or v_on**2 > 2.0 * self.dr.brake_max_mps2 * max(room, 0.0):
+            return  # clears the line in the amber, or cannot stop for it: go
+        self.go_until(x_on)
+        self.stop_until(light, light.next_green_start_s(red_at))
+
+    def stop_until(self, light: Signal, green_at: float) -> None:
+        """Brake at the constant rate that halts the car ``stop_gap_m`` short of the line; go at ``green_at``."""
+        stop_x = light.position_m - self.dr.stop_gap_m
         decel = self.v**2 / (2.0 * (stop_x - self.x)) if self.v > 0 else 0.0
         t_stop = self.v / decel if decel > 0 else 0.0
         if green_at < self.t + t_stop:

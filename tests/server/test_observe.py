@@ -136,3 +136,151 @@ def test_server_doctests():
 
     for module in (spat_feed.observe, server.ratelimit):
         assert doctest.testmod(module).failed == 0
+
+
+# -- issue 13: what a real actuated controller publishes --------------------------------------------
+
+from spat_feed.observe import LATE_QUANTILE, PhaseHistory  # noqa: E402
+from spat_feed.plans import PhaseClass  # noqa: E402
+from spat_feed.messages import MovementEvent, MovementState, TimeChangeDetails, UNSTATED_CONFIDENCE_FRAC  # noqa: E402
+from spat_feed.messages import from_unix_s  # noqa: E402
+from advisory.advice.advisor import LightView, Observation, advise  # noqa: E402
+
+RED, GREEN = S.STOP_AND_REMAIN, S.PROTECTED_MOVEMENT_ALLOWED
+
+
+def published(state, min_end, max_end=None, confidence=None):
+    """What the Antwerp controller publishes: the current phase only, no likelyTime, no confidence."""
+    timing = TimeChangeDetails(min_end_time=from_unix_s(min_end), max_end_time=None if max_end is None else from_unix_s(max_end), confidence=confidence)
+    return plan_from_movement(MovementState(signal_group=1, state_time_speed=[MovementEvent(event_state=state, timing=timing)]))
+
+
+def test_a_missing_confidence_is_not_a_low_one():
+    corridor = make_scenario("paper_s400").corridor
+    ix = corridor.intersections[0]
+    plan = published(RED, T0 + 10, T0 + 90)
+    assert plan.changes[0].confidence_frac == UNSTATED_CONFIDENCE_FRAC
+    view = light_view(ix, PlanReading(plan), 0.0, T0)
+    assert advise(Observation(20.0, 24.0, (view,)))[0].reason != "low_confidence"
+    low = light_view(ix, PlanReading(published(RED, T0 + 10, T0 + 90, confidence=0)), 0.0, T0)
+    assert low.confidence_frac == pytest.approx(0.21) and advise(Observation(20.0, 24.0, (low,)))[0].reason == "low_confidence"
+
+
+def test_a_green_past_its_min_end_is_still_fresh():
+    """Was: past minEndTime the next state (unavailable) is possible, so the light read "no data"."""
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    view = light_view(ix, PlanReading(published(GREEN, T0 + 5, T0 + 30)), 0.0, T0 + 12.0)
+    assert view.fresh and view.red_windows_s[0][0] == 0.0  # it may end any moment: a red is possible now
+
+
+def feed(history, t0, phases):
+    """Readings once a second through ``phases`` [(state, duration)], the controller's windows published each second."""
+    t = t0
+    for state, dur in phases:
+        start = t
+        while t < start + dur - 1e-9:
+            history.update(t, published(state, max(start + 0.5 * dur, t), None))
+            t += 1.0
+    return t
+
+
+def test_history_bounds_the_phases_after_the_published_one_by_hand():
+    """A controller that repeats red 40 s, green 20 s exactly and says so (minEnd = the end): after a few cycles the
+    next green and red follow the red now, exactly (every duration seen is the same). With minEnd earlier, the next
+    red may begin that much earlier (minEnd is the only hard bound on the red now)."""
+    h = PhaseHistory()
+    t = feed(h, T0, [(RED, 40), (GREEN, 20)] * 5)  # ends at the start of a red
+    stats = h.update(t, published(RED, t + 5))
+    assert stats.current.value == "red" and stats.since_unix_s == t and stats.cycle_s == pytest.approx(60.0)
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    view = light_view(ix, PlanReading(published(RED, t + 40), cycle=stats), 0.0, t + 10.0)
+    assert [x for w in view.red_windows_s[:2] for x in w] == pytest.approx([0.0, 30.0, 50.0, 90.0])
+    assert view.likely_red_windows_s is None  # nothing uncertain left
+    early = light_view(ix, PlanReading(published(RED, t + 35), cycle=stats), 0.0, t + 10.0)
+    assert [x for w in early.red_windows_s[:2] for x in w] == pytest.approx([0.0, 30.0, 45.0, 90.0])
+    assert [x for w in early.likely_red_windows_s[:2] for x in w] == pytest.approx([0.0, 30.0, 50.0, 90.0])
+    # without the history, the red runs forever
+    bare = light_view(ix, PlanReading(published(RED, t + 40)), 0.0, t + 10.0)
+    assert bare.red_windows_s == ((0.0, math.inf),)
+
+
+def test_history_windows_keep_min_end_hard_and_spread_the_rest():
+    """Reds of 30..48 s: the window of a red now runs from now to its late end; never ends before minEnd; the likely
+    end is the median of the reds that have lasted this long; a red longer than any seen is endless again."""
+    h = PhaseHistory()
+    reds = [30, 36, 42, 48, 33, 39, 45]
+    t = T0
+    for r in reds:
+        t = feed(h, t, [(RED, r), (GREEN, 20)])
+    stats = h.update(t, published(RED, t + 5))
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    view = light_view(ix, PlanReading(published(RED, t + 35), cycle=stats), 0.0, t + 10.0)  # minEnd 35 s in
+    (start, end), *_ = view.red_windows_s
+    lasting = sorted(r for r in reds if r > 35)  # 36 39 42 45 48
+    assert start == 0.0 and end == pytest.approx(lasting[math.ceil(LATE_QUANTILE * len(lasting)) - 1] - 10.0)
+    assert view.likely_red_windows_s[0] == pytest.approx((0.0, 42.0 - 10.0))
+    assert view.red_windows_s[1][0] == pytest.approx(35.0 - 10.0 + 20.0)  # next red: earliest end + shortest green
+    soon = light_view(ix, PlanReading(published(RED, t + 35), cycle=stats), 0.0, t + 34.0)
+    assert soon.red_windows_s[0][1] >= 35.0 - 34.0  # minEnd is hard, whatever the history says
+    late = light_view(ix, PlanReading(published(RED, t + 60), cycle=stats), 0.0, t + 55.0)
+    assert late.red_windows_s[0] == (0.0, math.inf)
+
+
+def test_a_gap_in_the_readings_times_no_phase():
+    h = PhaseHistory(max_gap_s=5.0)
+    t = feed(h, T0, [(GREEN, 5), (RED, 40), (GREEN, 20)])
+    h.update(t + 30.0, published(GREEN, t + 40))  # 30 s without readings: this green may be another one
+    stats = h.update(t + 31.0, published(GREEN, t + 40))
+    assert stats.since_unix_s == t + 30.0  # begun then at the latest
+    assert stats.durations_s == {PhaseClass.RED: (40.0,)}  # the first green (seen mid-way) and the gapped one untimed
+
+
+def test_clock_uncertainty_widens_every_red():
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    plan = FixedTimePlan(30, 30, offset_s=T0)
+    view = light_view(ix, PlanReading(plan, clock_offset_s=2.0, clock_uncertainty_s=3.0), 0.0, T0 + 10.0)
+    # our T0 + 10 is the feed's T0 + 12: red until 18 s, then 48..78; each widened by 3 s
+    assert [x for w in view.red_windows_s[:2] for x in w] == pytest.approx([0.0, 21.0, 45.0, 81.0])
+
+
+def test_the_recorded_controller_through_the_history():
+    """Antwerp K648, first hour of 2019-05-01, every signal group showing red, after 15 minutes of history: the red's
+    end is bounded far more often than by the published maxEndTime; no red ends before minEndTime (hard); reds that
+    end after the late bound are few (soft, like maxEndTime, which real reds outlast 6-9 % of the time)."""
+    import csv
+    import gzip
+    from itertools import islice
+
+    from spat_feed.observe import predicted_phases
+    from spat_feed.recorded import iter_spat_csv
+    from tests.conftest import SHARED_DATA
+
+    path = SHARED_DATA / "spat" / "antwerp-2019-05-01.csv.gz"
+    if not path.exists():
+        pytest.skip("recorded SPaT not available")
+    hist: dict[int, PhaseHistory] = {}
+    seq: dict[int, list[tuple[float, object, object]]] = {}
+    with gzip.open(path, "rt", newline="") as fh:
+        snaps = list(islice(iter_spat_csv(csv.DictReader(fh)), 3600))  # about an hour, a snapshot a second
+    for snap in snaps:
+        t = snap.timestamp.timestamp()
+        for m in snap.states:
+            plan = plan_from_movement(m, t)
+            seq.setdefault(m.signal_group, []).append((t, plan, hist.setdefault(m.signal_group, PhaseHistory()).update(t, plan)))
+    reds = bounded = published_bound = late = early = 0
+    for items in seq.values():
+        for k, (t, plan, stats) in enumerate(items):
+            if plan.states[0] is not RED or t < items[0][0] + 900:
+                continue
+            true_end = next((u for u, p, _ in items[k:] if p.states[0] is not RED), None)
+            if true_end is None:
+                continue
+            reds += 1
+            lo, likely, late_end = predicted_phases(plan, t, 150.0, stats)[0][2]
+            published_bound += math.isfinite(plan.changes[0].max_end_s)
+            early += true_end < lo - 1e-6
+            if math.isfinite(late_end):
+                bounded += 1
+                late += true_end > late_end + 1.0  # a change is seen at the first reading after it: 1 s
+    assert reds > 1000 and early == 0
+    assert bounded / reds > 0.95 > published_bound / reds and late / bounded < 0.12, (bounded / reds, published_bound / reds, late / bounded)

@@ -1,0 +1,315 @@
+"""Actuated lights for simulation: when phases really end, what the controller publishes each second.
+
+Pure (no clock, no I/O except :func:`fit_switches`, which reads recordings). Three parts:
+
+* **The fit** (:func:`fit_switches`, ``python -m spat_feed.actuated [CSV ...]``): on recorded SPaT (the
+  ``../shared/data/spat`` format) every phase's *first* published window ``[minEnd, maxEnd]`` against the
+  instant it really ended (midway between the last snapshot in the phase and the first after it: the
+  recordings are 1 Hz). Per phase class (red, and not red): the share that ends after ``maxEnd``, the
+  quantiles of where inside the window the rest end, ``u = (end - minEnd) / (maxEnd - minEnd)``, and the mean
+  overshoot of the late ones. A phase never ends before its ``minEnd`` (within the 1 s sampling).
+* **The truth** (:func:`actuated_light`): a fixed-time light's changes become published windows of a given
+  half-width around the nominal instant; the real switch is drawn inside the window and, in a share of
+  cases, beyond it (uniform up to ``beyond_frac`` of the window past ``maxEnd``, or from a :class:`SwitchFit`).
+  Never before ``minEnd``. :meth:`ActuatedLight.truth` is an :class:`advisory.signals.TimelineSignal`.
+* **The feed** (:meth:`ActuatedLight.plan_at`, :class:`ActuatedFeed`): what an actuated controller publishes
+  at each instant: the windows narrow as time passes (``minEnd`` never in the past), become exact
+  ``decide_s`` before the switch (the controller has decided), and past ``maxEnd`` a late phase's
+  ``maxEnd`` is pushed ``late_push_s`` ahead, as the recorded controller does. :class:`ActuatedFeed` turns
+  that into J2735 events (:func:`spat_feed.messages.movement_events`), reads them back as a receiver does
+  (:func:`spat_feed.messages.plan_from_movement`) and gives the advisor its
+  :class:`~advisory.advice.advisor.Observation` through :func:`spat_feed.observe.light_view`, with dropouts
+  (no message: the last one ages and goes stale), a skewed feed clock (the receiver is told only a bound,
+  ``clock_uncertainty_s``) and what the receiver learnt of each light beforehand (``PhaseHistory``).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from advisory.advice.advisor import LightView, Observation
+from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
+from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
+from spat_feed.messages import MovementState, confidence_index, movement_events, plan_from_movement, to_unix_s
+from spat_feed.observe import PhaseHistory, PlanReading, light_view
+from spat_feed.plans import GREEN, RED, STOP_STATES, ChangeWindow, MovementPhaseState, UncertainPlan
+
+SAMPLE_S = 1.0
+"""The recordings' snapshot interval: a switch is known to within this. [s]"""
+QUANTILE_LEVELS = tuple(np.linspace(0.0, 1.0, 11))
+
+
+# --------------------------------------------------------------------------------------------------
+# The fit
+
+
+@dataclass(frozen=True, slots=True)
+class SwitchFit:
+    """When phases of one class really end, relative to their first published window. Units in names."""
+
+    phase: str  # "red" or "green" (every state not red)
+    n: int  # phases with a bounded window
+    before_min_n: int  # phases that ended before minEnd (more than the sampling): 0 on the recordings
+    late_frac: float  # share that ended after maxEnd
+    inside_quantiles: tuple[float, ...]  # of u = (end - min) / (max - min) for the others, at QUANTILE_LEVELS
+    late_mean_s: float  # mean of (end - maxEnd) over the late ones
+    median_width_s: float
+
+    def draw_s(self, min_s: float, max_s: float, rng: np.random.Generator) -> float:
+        """A switch instant for a window ``[min_s, max_s]``: late with ``late_frac`` (exponential overshoot),
+        else inside at a quantile drawn from ``inside_quantiles`` (linear between them). [s]"""
+        if rng.random() < self.late_frac:
+            return max_s + rng.exponential(self.late_mean_s)
+        u = float(np.interp(rng.random(), QUANTILE_LEVELS, self.inside_quantiles))
+        return min_s + u * (max_s - min_s)
+
+
+def switch_observations(snapshots) -> list[tuple[bool, float, float, float]]:
+    """``(red, minEnd, maxEnd, end)`` for every phase whose start and end the recording holds and whose first
+    window is bounded (a ``maxEnd`` about an hour ahead means unknown). [s, Unix]"""
+    from spat_feed.messages import UNKNOWN_MAX_END_S
+
+    series: dict[tuple[int, int], list[tuple[float, MovementPhaseState, float, float]]] = {}
+    for ix in snapshots:
+        t = to_unix_s(ix.timestamp)
+        for m in ix.states:
+            ev = m.state_time_speed[0]
+            if ev.timing is None or ev.timing.max_end_time is None:
+                continue
+            series.setdefault((ix.id, m.signal_group), []).append((t, ev.event_state, to_unix_s(ev.timing.min_end_time), to_unix_s(ev.timing.max_end_time)))
+    out = []
+    for rows in series.values():
+        starts = [i for i in range(1, len(rows)) if rows[i][1] != rows[i - 1][1]]
+        for i, j in zip(starts, starts[1:]):  # a phase from its first snapshot i to its last j - 1
+            t0, state, lo, hi = rows[i]
+            if hi - t0 >= UNKNOWN_MAX_END_S or rows[j][0] - rows[j - 1][0] > 2 * SAMPLE_S:
+                continue  # unknown bound, or a gap in the recording hides the switch
+            out.append((state in STOP_STATES, lo, hi, 0.5 * (rows[j - 1][0] + rows[j][0])))
+    return out
+
+
+def fit_switches(paths: Iterable[str | Path]) -> dict[str, SwitchFit]:
+    """Fit :class:`SwitchFit` for red and for green on the recorded SPaT CSVs at ``paths``."""
+    from spat_feed.recorded import read_spat_csv
+
+    obs = [o for p in paths for o in switch_observations(read_spat_csv(p))]
+    fits = {}
+    for name, red in (("red", True), ("green", False)):
+        rows = np.array([(lo, hi, end) for r, lo, hi, end in obs if r == red])
+        lo, hi, end = rows.T
+        late = end > hi + 0.5 * SAMPLE_S
+        inside = ~late & (hi - lo > 0)
+        u = np.clip((end[inside] - lo[inside]) / (hi[inside] - lo[inside]), 0.0, 1.0)
+        fits[name] = SwitchFit(
+            phase=name,
+            n=len(rows),
+            before_min_n=int(np.sum(end < lo - SAMPLE_S)),
+            late_frac=float(late.mean()),
+            inside_quantiles=tuple(float(q) for q in np.quantile(u, QUANTILE_LEVELS)),
+            late_mean_s=float(np.mean(end[late] - hi[late])) if late.any() else 0.0,
+            median_width_s=float(np.median(hi - lo)),
+        )
+    return fits
+
+
+# --------------------------------------------------------------------------------------------------
+# The truth and what the controller publishes
+
+
+@dataclass(frozen=True, slots=True)
+class ActuatedLight:
+    """One actuated light on a zone's time axis: each change's published window and its real instant.
+
+    ``states[i]`` holds until change ``i`` (window ``windows[i]``, real instant ``switches_s[i]``), then
+    ``states[i + 1]``; the last state holds after the last change.
+    """
+
+    position_m: float
+    states: tuple[MovementPhaseState, ...]
+    windows: tuple[ChangeWindow, ...]
+    switches_s: tuple[float, ...]
+    decide_s: float = 3.0  # the controller publishes the exact instant this long before the switch [s]
+    late_push_s: float = 5.0  # a phase past its maxEnd is published with maxEnd this far ahead [s]
+    amber_s: float = 4.0  # the last seconds of each green show amber (at 88.5 km/h a car that cannot stop clears in it) [s]
+
+    def truth(self) -> TimelineSignal:
+        """The light as it really switches (amber: the last ``amber_s`` of a green, green for the rules)."""
+        bounds = (-math.inf, *self.switches_s, math.inf)
+        reds = [(bounds[i], bounds[i + 1]) for i, s in enumerate(self.states) if s in STOP_STATES]
+        ends = [-math.inf] + [b for _, b in reds]  # the green before each red began when the red before it ended
+        ambers = [(max(a - self.amber_s, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a)]
+        return TimelineSignal(self.position_m, tuple(reds), tuple(ambers))
+
+    def plan_at(self, t_s: float) -> UncertainPlan:
+        """What the controller publishes at ``t_s``: the state now and every change to come, windows narrowed."""
+        k = int(np.searchsorted(self.switches_s, t_s, side="right"))  # changes already made
+        states, changes = [self.states[k]], []
+        floor_s = t_s
+        for i in range(k, len(self.windows)):
+            w, real = self.windows[i], self.switches_s[i]
+            if real - t_s <= self.decide_s:
+                lo = hi = likely = max(real, floor_s)
+                conf = 1.0
+            else:
+                lo = max(w.min_end_s, floor_s)
+                hi = max(w.max_end_s if w.max_end_s > t_s else t_s + self.late_push_s, lo)
+                likely, conf = min(max(w.likely_s, lo), hi), w.confidence_frac
+            changes.append(ChangeWindow(lo, likely, hi, conf))
+            states.append(self.states[i + 1])
+            floor_s = hi
+        return UncertainPlan(tuple(states), tuple(changes))
+
+
+def actuated_light(
+    light: FixedTimeSignal,
+    half_width_s: float,
+    rng: np.random.Generator,
+    t0_s: float = -200.0,
+    t1_s: float = 800.0,
+    *,
+    beyond_frac: float = 0.1,
+    fits: dict[str, SwitchFit] | None = None,
+    confidence_frac: float | None = None,
+) -> ActuatedLight:
+    """An actuated version of ``light`` over ``[t0_s, t1_s]``: each change at nominal ``T`` is published as
+    ``[T - w, T + w]`` (``w`` = ``half_width_s``, cut to 0.4 of the shorter neighbouring phase) with
+    ``likely = T``, and really happens uniformly in ``[T - w, T + w + beyond_frac * 2w]`` (or drawn from
+    ``fits``). Phases last at least 1 s. ``confidence_frac`` defaults to the share inside the window."""
+    reds = light.red_intervals(t0_s, t1_s)
+    nominal = sorted({x for r in reds for x in r if t0_s < x < t1_s})
+    states = [RED if light.is_red(t0_s) else GREEN]
+    windows, switches = [], []
+    conf = confidence_frac if confidence_frac is not None else (1.0 / (1.0 + beyond_frac) if half_width_s > 0 else 1.0)
+    previous = -math.inf
+    for i, t_nom in enumerate(nominal):
+        to_red = not light.is_red(t_nom - 1e-6) and light.is_red(t_nom)
+        phase_before = light.green_s if to_red else light.red_s
+        phase_after = light.red_s if to_red else light.green_s
+        w = min(half_width_s, 0.4 * phase_before, 0.4 * phase_after)
+        lo, hi = max(t_nom - w, previous + 1.0), t_nom + w
+        if fits is not None:
+            real = fits["green" if to_red else "red"].draw_s(lo, hi, rng)
+        else:
+            real = rng.uniform(lo, hi + beyond_frac * (hi - lo))
+        real = max(real, lo)
+        if i + 1 < len(nominal):
+            real = min(real, nominal[i + 1] - 0.4 * min(light.red_s, light.green_s) - 1.0)  # before the next window opens
+        windows.append(ChangeWindow(lo, min(max(t_nom, lo), hi), max(hi, lo), conf if w > 0 else 1.0))
+        switches.append(real)
+        states.append(RED if to_red else GREEN)
+        previous = real
+    return ActuatedLight(light.position_m, tuple(states), tuple(windows), tuple(switches))
+
+
+@dataclass
+class ActuatedFeed:
+    """The closed loop's SPaT source for actuated lights: ``feed(t, x, v) -> Observation`` (see the module).
+
+    ``epoch_unix_s`` places the zone's time 0 on the Unix axis. ``dropouts_s``: intervals ``[a, b)`` with no
+    message; the last one received ages and is stale after ``stale_after_s``. ``skew_s``: the feed's clock is
+    this far ahead of the car's. ``n_events``: events per movement (1 = the current phase only, as Antwerp).
+    """
+
+    lights: Sequence[ActuatedLight]
+    speed_limit_mps: float
+    skew_s: float = 0.0
+    dropouts_s: Sequence[tuple[float, float]] = ()
+    n_events: int = 3
+    stale_after_s: float = 3.0
+    epoch_unix_s: float = 1.7e9
+    clock_uncertainty_s: float = 0.0  # what the receiver is told of the skew: a bound, not the offset [s]
+    warm_up_s: float = 600.0  # the receiver has watched each light this long before the car enters (PhaseHistory) [s]
+    _last: dict[int, tuple[float, object]] = field(default_factory=dict, repr=False)
+    _history: dict[int, PhaseHistory] = field(default_factory=dict, repr=False)
+
+    def movement_at(self, n: int, t_s: float) -> MovementState:
+        """Light ``n``'s J2735 movement as published at ``t_s`` (on the feed's skewed clock)."""
+        plan = self.lights[n].plan_at(t_s)
+        shift = self.epoch_unix_s + self.skew_s
+        unix = UncertainPlan(plan.states, tuple(ChangeWindow(c.min_end_s + shift, c.likely_s + shift, c.max_end_s + shift, c.confidence_frac) for c in plan.changes))
+        return MovementState(signal_group=1, state_time_speed=movement_events(unix, t_s + shift, self.n_events))
+
+    def __call__(self, t_s: float, x_m: float, v_mps: float) -> Observation:
+        down = any(a <= t_s < b for a, b in self.dropouts_s)
+        views: list[LightView] = []
+        for n, light in enumerate(self.lights):
+            if light.position_m <= x_m or len(views) == 2:
+                continue
+            if n not in self._history:  # what the receiver learnt of the light before the car came
+                self._history[n] = PhaseHistory()
+                for t in np.arange(t_s - self.warm_up_s, t_s, 1.0):
+                    self._history[n].update(float(t) + self.epoch_unix_s + self.skew_s, light.plan_at(float(t)).states[0])
+            if not down:
+                movement = self.movement_at(n, t_s)
+                stamp = t_s + self.epoch_unix_s + self.skew_s
+                plan = plan_from_movement(movement, stamp)
+                self._last[n] = (t_s, plan, self._history[n].update(stamp, plan))
+            received = self._last.get(n)
+            reading = None
+            if received is not None:
+                age = t_s - received[0]
+                reading = PlanReading(received[1], fresh=age <= self.stale_after_s, age_s=age, cycle=received[2],
+                                      clock_uncertainty_s=self.clock_uncertainty_s)  # fmt: skip
+            spec = IntersectionSpec(id=n + 1, name=f"light {n + 1}", stop_line_m=light.position_m, lat_deg=0.0, lon_deg=0.0,
+                                    approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
+            views.append(light_view(spec, reading, x_m, t_s + self.epoch_unix_s))
+        return Observation(v_mps, self.speed_limit_mps, tuple(views), position_m=x_m)
+
+
+def actuated_scenario(scenario: Scenario, half_width_s: float, rng: np.random.Generator, **kwargs) -> tuple[Scenario, list[ActuatedLight]]:
+    """``scenario`` with every fixed-time light made actuated (:func:`actuated_light`): the truth scenario and its lights."""
+    lights = [actuated_light(s, half_width_s, rng, **kwargs) for s in scenario.signals]
+    truth = Scenario(scenario.name + f" ±{half_width_s:g} s", tuple(a.truth() for a in lights), scenario.zone_length_m,
+                     scenario.speed_limit_mps, scenario.initial_speed_mps)  # fmt: skip
+    return truth, lights
+
+
+def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3.0, dropouts: bool = True):
+    """One randomized closed-loop case (the tests' and the bench's): two lights 150-1000 m apart, cycle 40-120 s,
+    red 30-70 %, actuated with windows up to ``±max_half_width_s`` (the real switch anywhere inside and up to
+    10 % beyond), up to two dropouts of 2-10 s in the first minute, a feed clock off by up to ``±max_skew_s``,
+    tracking noise up to 1 m/s. Returns ``(truth scenario, feed, tracking noise [m/s])``."""
+    from advisory.signals import paper_scenario
+
+    rng = np.random.default_rng(seed)
+    cycle = rng.uniform(40, 120)
+    share = rng.uniform(0.3, 0.7)
+    fixed = paper_scenario(rng.uniform(-cycle, cycle), rng.uniform(-cycle, cycle), rng.uniform(150, 1000),
+                           red_s=cycle * share, green_s=cycle * (1 - share))  # fmt: skip
+    truth, lights = actuated_scenario(fixed, rng.uniform(0, max_half_width_s), rng)
+    gaps = []
+    for _ in range(rng.integers(0, 3) if dropouts else 0):
+        start = rng.uniform(0, 60)
+        gaps.append((start, start + rng.uniform(2, 10)))
+    feed = ActuatedFeed(lights, fixed.speed_limit_mps, skew_s=rng.uniform(-max_skew_s, max_skew_s), dropouts_s=gaps,
+                        clock_uncertainty_s=max_skew_s)  # fmt: skip
+    return truth, feed, float(rng.uniform(0, 1.0))
+
+
+def recordings() -> list[str]:
+    """The shared recordings (``../shared/data/spat``, or ``../../shared/data/spat`` from a worktree)."""
+    repo = Path(__file__).resolve().parents[1]
+    folder = next((p for p in (repo.parent / "shared", repo.parents[1] / "shared") if p.is_dir()), repo.parent / "shared")
+    return sorted(str(p) for p in (folder / "data" / "spat").glob("*.csv.gz"))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Print the fit on the given recordings (default: the shared Antwerp ones)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    paths = argv or recordings()
+    for fit in fit_switches(paths).values():
+        q = ", ".join(f"{x:.2f}" for x in fit.inside_quantiles)
+        print(f"{fit.phase}: {fit.n} phases with a bounded first window (median width {fit.median_width_s:.0f} s); "
+              f"ended before minEnd: {fit.before_min_n}; after maxEnd: {100 * fit.late_frac:.1f} % (mean overshoot "
+              f"{fit.late_mean_s:.1f} s); inside, u = (end - minEnd) / (maxEnd - minEnd) at deciles 0..1: {q}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,128 @@
+"""spat_feed.actuated: the switch-time fit on the recordings, actuated truth, and what the controller publishes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from advisory.signals import FixedTimeSignal, paper_scenario
+from spat_feed.actuated import ActuatedFeed, SwitchFit, actuated_light, actuated_scenario, fit_switches, switch_observations
+from spat_feed.messages import to_unix_s
+
+from tests.conftest import SHARED_DATA
+
+RECORDINGS = sorted((SHARED_DATA / "spat").glob("*.csv.gz"))
+
+
+@pytest.mark.skipif(not RECORDINGS, reason="shared/data/spat not present")
+def test_fit_on_a_real_recording():
+    """README: windows red 80-97 s / green 18 s wide, never ended before minEnd, after maxEnd 6-12 % of the time."""
+    fits = fit_switches(RECORDINGS[-1:])
+    red, green = fits["red"], fits["green"]
+    assert red.n > 300 and green.n > 1000
+    assert red.before_min_n == 0 and green.before_min_n == 0
+    assert 60 <= red.median_width_s <= 110 and 10 <= green.median_width_s <= 25
+    assert 0.03 < green.late_frac < 0.3 and 0.03 < red.late_frac < 0.4
+    for fit in fits.values():
+        q = np.array(fit.inside_quantiles)
+        assert q[0] >= 0 and q[-1] <= 1 and np.all(np.diff(q) >= 0)
+        assert 0 < fit.late_mean_s < 30
+
+
+def test_draws_follow_the_fit():
+    fit = SwitchFit("green", 100, 0, 0.2, tuple(np.linspace(0, 1, 11) ** 2), 5.0, 15.0)
+    rng = np.random.default_rng(1)
+    draws = np.array([fit.draw_s(100.0, 115.0, rng) for _ in range(20_000)])
+    assert draws.min() >= 100.0
+    assert np.mean(draws > 115.0) == pytest.approx(0.2, abs=0.015)
+    assert np.mean(draws[draws > 115.0] - 115.0) == pytest.approx(5.0, rel=0.08)
+    inside = (draws[draws <= 115.0] - 100.0) / 15.0
+    assert np.median(inside) == pytest.approx(0.25, abs=0.03)  # u = p² at p = 0.5
+
+
+def _random_lights(n, seed=0, **kwargs):
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        cycle = rng.uniform(40, 120)
+        share = rng.uniform(0.3, 0.7)
+        fixed = FixedTimeSignal(300.0, rng.uniform(-cycle, cycle), cycle * share, cycle * (1 - share))
+        yield fixed, actuated_light(fixed, rng.uniform(0, 15), rng, **kwargs)
+
+
+def test_real_switches_lie_in_their_window_or_up_to_ten_percent_beyond():
+    beyond = 0
+    for _, light in _random_lights(300):
+        for w, s in zip(light.windows, light.switches_s):
+            width = w.max_end_s - w.min_end_s
+            assert w.min_end_s <= s <= w.max_end_s + 0.1 * width + 1e-9
+            beyond += s > w.max_end_s
+        assert list(light.switches_s) == sorted(light.switches_s)
+        truth = light.truth()
+        for a, b in truth.reds_s:
+            assert math.isinf(a) or a in light.switches_s
+        for s in light.switches_s[:-1]:
+            assert truth.is_red(s + 1e-6) != truth.is_red(s - 1e-6)  # every switch changes the colour
+    assert beyond > 100  # some really are late
+
+
+def test_published_windows_narrow_and_become_exact_before_the_switch():
+    for _, light in _random_lights(100, seed=2):
+        previous = None
+        for t in np.arange(-50.0, 300.0, 1.0):
+            plan = light.plan_at(t)
+            k = int(np.searchsorted(light.switches_s, t, side="right"))
+            assert plan.states[0] == light.states[k]  # the state published now is the real one
+            for c in plan.changes:
+                assert c.min_end_s >= t - 1e-9  # never a change in the past
+            if plan.changes:
+                c, real = plan.changes[0], light.switches_s[k]
+                assert c.min_end_s <= real  # minEnd is hard
+                if real - t <= light.decide_s:
+                    assert c.min_end_s == c.max_end_s == real
+                if previous is not None and previous[0] == k and t < light.windows[k].max_end_s:
+                    assert c.max_end_s - c.min_end_s <= previous[1] + 1e-9  # narrowing
+                previous = (k, c.max_end_s - c.min_end_s)
+
+
+def test_the_feed_carries_the_truth_through_j2735_and_the_observation():
+    """No late switches, no skew: every red of the truth within the horizon lies inside the advisor's red windows."""
+    sc = paper_scenario(-12.0, 20.0, 400.0, red_s=40.0, green_s=35.0)
+    truth, lights = actuated_scenario(sc, 10.0, np.random.default_rng(3), beyond_frac=0.0)
+    feed = ActuatedFeed(lights, sc.speed_limit_mps, n_events=3)
+    for t in np.arange(0.0, 60.0, 1.0):
+        obs = feed(float(t), 0.0, 20.0)
+        assert [lv.intersection_id for lv in obs.lights] == [1, 2]
+        for lv, light in zip(obs.lights, truth.signals):
+            assert lv.fresh and lv.distance_m == light.position_m
+            for tau in np.arange(0.0, 100.0, 0.5):
+                if light.is_red(t + tau):
+                    assert lv.is_red_at(tau), (t, tau, lv.red_windows_s)
+
+
+def test_dropouts_age_the_last_message_and_skew_shifts_the_times():
+    sc = paper_scenario(-12.0, 20.0, 400.0)
+    _, lights = actuated_scenario(sc, 0.0, np.random.default_rng(4))
+    plain = ActuatedFeed(lights, sc.speed_limit_mps)
+    skewed = ActuatedFeed(lights, sc.speed_limit_mps, skew_s=2.5)
+    a, b = plain(10.0, 0.0, 20.0).lights[0], skewed(10.0, 0.0, 20.0).lights[0]
+    assert [s + 2.5 for s, _ in a.red_windows_s[1:]] == pytest.approx([s for s, _ in b.red_windows_s[1:]], abs=2e-3)
+    dropped = ActuatedFeed(lights, sc.speed_limit_mps, dropouts_s=[(11.0, 20.0)])
+    assert dropped(10.0, 0.0, 20.0).lights[0].fresh
+    assert dropped(13.0, 0.0, 20.0).lights[0].fresh  # 3 s old: still fresh
+    assert not dropped(14.0, 0.0, 20.0).lights[0].fresh
+    assert dropped(20.0, 0.0, 20.0).lights[0].fresh
+
+
+@pytest.mark.skipif(not RECORDINGS, reason="shared/data/spat not present")
+def test_switch_observations_match_the_raw_rows():
+    from ecodrive.spat_eval import _read_head
+
+    head = _read_head(str(RECORDINGS[0]), 600.0)
+    obs = switch_observations(head)
+    assert obs
+    for red, lo, hi, end in obs:
+        assert lo <= hi and end >= lo - 1.0  # never before minEnd (within the 1 s sampling)
+        assert to_unix_s(head[0].timestamp) < end < to_unix_s(head[-1].timestamp)
+    assert any(r for r, *_ in obs) and not all(r for r, *_ in obs)

@@ -1,0 +1,76 @@
+"""Randomized closed-loop runs with actuated lights, dropouts and clock skew: the truth hidden from advisor and driver."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from advisory.drivers.closed_loop import DriverModel, red_light_violations, simulate
+from advisory.drivers.regular import regular_driver
+from advisory.signals import Scenario
+from spat_feed.actuated import random_case
+
+HARD_BRAKE_MPS2 = 4.0
+
+
+def _run(seed: int, max_skew_s: float):
+    truth, feed, noise = random_case(seed, max_skew_s=max_skew_s)
+    run = simulate(truth, driver=DriverModel(noise_mps=noise, seed=seed), feed=feed)
+    return truth, run
+
+
+def _check(seeds, max_skew_s):
+    red, hard, above = [], [], []
+    for seed in seeds:
+        truth, run = _run(seed, max_skew_s)
+        if red_light_violations(run.trajectory, truth):
+            red.append(seed)
+        if run.trajectory.accel_mps2.min() < -HARD_BRAKE_MPS2 - 1e-9:
+            hard.append(seed)
+        if run.max_advised_mps > truth.speed_limit_mps + 1e-9 or run.trajectory.v_mps.max() > truth.speed_limit_mps + 1e-9:
+            above.append(seed)
+        assert run.trajectory.x_m[-1] >= truth.zone_length_m - 1e-6  # every run ends
+    return red, hard, above
+
+
+def test_actuated_lights_and_dropouts_no_red_entry_no_hard_brake():
+    """100 runs: windows up to ±15 s, real switch anywhere inside and up to 10 % beyond, dropouts; no skew."""
+    red, hard, above = _check(range(100), 0.0)
+    assert (red, hard, above) == ([], [], [])
+
+
+def test_the_regular_driver_sees_only_colours_and_stays_legal():
+    """The paper's regular driver on actuated truth decides on the colour and the amber: never in a red, never > 4 m/s²."""
+    for seed in range(100):
+        truth, _, _ = random_case(seed)
+        traj = regular_driver(truth)
+        assert red_light_violations(traj, truth) == []
+        assert traj.accel_mps2.min() >= -HARD_BRAKE_MPS2 - 1e-9
+
+
+def test_the_driver_never_sees_the_future():
+    """Two truths alike until T and the feed alike until T (a switch moved that is published only after T): the
+    advisor and the driver act alike until T, and the truth's future is all that differs."""
+    truth, feed, noise = random_case(7, max_skew_s=0.0, dropouts=False)
+    horizon_s = 25.0
+    moved = []
+    for light in feed.lights:
+        switches = tuple(s + 3.0 if s > horizon_s + light.decide_s else s for s in light.switches_s)
+        moved.append(replace(light, switches_s=switches))
+    other = Scenario(truth.name, tuple(a.truth() for a in moved), truth.zone_length_m, truth.speed_limit_mps, truth.initial_speed_mps)
+    assert any(a.reds_s != b.reds_s for a, b in zip(truth.signals, other.signals))
+    runs = [simulate(sc, driver=DriverModel(noise_mps=noise, seed=7), feed=replace(feed, lights=lights, _last={}))
+            for sc, lights in ((truth, feed.lights), (other, moved))]  # fmt: skip
+    a, b = (r.trajectory for r in runs)
+    ea, eb = a.t_s <= horizon_s, b.t_s <= horizon_s
+    assert np.array_equal(a.x_m[ea], b.x_m[eb]) and np.array_equal(a.v_mps[ea], b.v_mps[eb])
+    assert [x.message for t, x in runs[0].advice if t <= horizon_s] == [x.message for t, x in runs[1].advice if t <= horizon_s]
+
+
+@pytest.mark.parametrize("block", range(2))
+def test_with_clock_skew(block):
+    """±3 s of feed-clock skew on top (the issue's full randomization)."""
+    red, hard, above = _check(range(1000 + 50 * block, 1050 + 50 * block), 3.0)
+    assert (red, hard, above) == ([], [], [])
