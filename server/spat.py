@@ -179,8 +179,7 @@ class SharedSpat:
             return self._fixed
         out = dict(self._fixed)
         for ident, sg in self._live:
-            plan, reading = self.hub.store.plan(ident, sg)
-            out[ident] = PlanReading(None, fresh=False, age_s=float("inf")) if reading is None else PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s)
+            out[ident] = self.hub.store.plan_reading(ident, sg)
         return out
 
     def status(self, intersection_id: int) -> str:

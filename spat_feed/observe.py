@@ -117,11 +117,17 @@ class PhaseHistory:
         self._last_t: float | None = None
 
     def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
-        """Take one reading at ``t_unix_s``: the published plan (its state then) or the state itself."""
+        """Take one reading at ``t_unix_s`` (:meth:`record`) and return the :meth:`stats` after it."""
+        self.record(t_unix_s, plan)
+        return self.stats()
+
+    def record(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> bool:
+        """Take one reading at ``t_unix_s``: the published plan (its state then) or the state itself. Returns
+        whether the history changed (a new phase seen: the :meth:`stats` of before are out of date)."""
         if plan is None or isinstance(plan, FixedTimePlan):
-            return self.stats()
+            return False
         if self._last_t is not None and t_unix_s <= self._last_t:
-            return self.stats()  # a repeat or an older reading
+            return False  # a repeat or an older reading
         state = plan if isinstance(plan, MovementPhaseState) else published_state(plan, t_unix_s)
         cls = phase_class(state)
         gap = self._last_t is not None and t_unix_s - self._last_t > self.max_gap_s
@@ -135,7 +141,7 @@ class PhaseHistory:
             self._since, self._exact = t_unix_s, changed and not gap and self._current is not None
             self._current = cls
         self._last_t = t_unix_s
-        return self.stats()
+        return changed or gap
 
     def stats(self) -> CycleStats:
         """A frozen snapshot to pass along with a reading (``PlanReading.cycle``)."""

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from spat_feed.messages import IntersectionState, SpatMessage, plan_from_movement, to_unix_s
+from spat_feed.observe import CycleStats, PhaseHistory, PlanReading
 from spat_feed.plans import UncertainPlan
 from spat_feed.scenarios import FeedScenario, spat_message_at
 
@@ -105,9 +106,10 @@ class IntersectionStats:
 
 
 class _Entry:
-    """The latest state of one intersection, its plans parsed once per signal group, its clock offsets."""
+    """The latest state of one intersection, its plans parsed once per signal group, its clock offsets, and
+    per signal group what it has been seen to do (:class:`~spat_feed.observe.PhaseHistory`)."""
 
-    __slots__ = ("state", "stamp", "received", "plans", "offsets", "ahead_unix_s")
+    __slots__ = ("state", "stamp", "received", "plans", "offsets", "ahead_unix_s", "histories", "cycles")
 
     def __init__(self) -> None:
         self.state: IntersectionState | None = None
@@ -115,6 +117,8 @@ class _Entry:
         self.plans: dict[int, UncertainPlan | None] = {}
         self.offsets: deque[tuple[float, float]] = deque()  # (arrival, arrival - timestamp), offsets increasing
         self.ahead_unix_s = float("-inf")  # arrival of the last message rejected as clock_ahead
+        self.histories: dict[int, PhaseHistory] = {}
+        self.cycles: dict[int, CycleStats] = {}  # the histories' snapshots, taken when read after a change
 
 
 class SpatStore:
@@ -175,6 +179,12 @@ class SpatStore:
             else:
                 verdict = "ok"
                 entry.state, entry.stamp, entry.received, entry.plans = state, stamp, received, {}
+                for movement in state.states:  # the published (current) state of each group: its phase durations
+                    history = entry.histories.get(movement.signal_group)
+                    if history is None:
+                        history = entry.histories[movement.signal_group] = PhaseHistory()
+                    if history.record(stamp, movement.state_time_speed[0].event_state):
+                        entry.cycles.pop(movement.signal_group, None)
                 offsets, offset = entry.offsets, received - stamp  # a monotonic deque: its head is the window's floor
                 while offsets and offsets[-1][1] >= offset:
                     offsets.pop()
@@ -222,6 +232,20 @@ class SpatStore:
                 plan = entry.plans[signal_group] = None if movement is None else plan_from_movement(movement, entry.stamp)
             age, status, offset = self._status(entry, self.clock())
             return plan, SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset)
+
+    def plan_reading(self, intersection_id: int, signal_group: int) -> PlanReading:
+        """What the advisor's observation needs of one light (:class:`~spat_feed.observe.PlanReading`): the plan,
+        freshness and age, what the group has been seen to do (bounds the phases after the published one), and
+        the controller's clock offset (within the tolerance; beyond it the reading is not fresh anyway)."""
+        plan, reading = self.plan(intersection_id, signal_group)
+        if reading is None:
+            return PlanReading(None, fresh=False, age_s=float("inf"))
+        with self._lock:
+            entry = self._entries[intersection_id]
+            cycle = entry.cycles.get(signal_group)
+            if cycle is None and (history := entry.histories.get(signal_group)) is not None:
+                cycle = entry.cycles[signal_group] = history.stats()
+        return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s)
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:
         r = self.reading(intersection_id)

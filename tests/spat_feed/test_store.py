@@ -217,3 +217,25 @@ def _reading(plan, r):
     from spat_feed.observe import PlanReading
 
     return PlanReading(plan, fresh=r.fresh, age_s=r.age_s)
+
+
+def test_the_store_learns_each_group_and_hands_it_to_the_observation(tmp_path):
+    """What a group has been seen to do travels with its reading (PlanReading.cycle), as a receiver fed the
+    same states directly learns it; the controller's clock offset comes along (feed minus ours)."""
+    from spat_feed.observe import PhaseHistory
+
+    log = read_spat_log(recorded_spat_slice(tmp_path, 5000))
+    clock = Clock(T0)
+    store = SpatStore(TimeRules(clock_tolerance_s=1.0), clock)
+    direct = PhaseHistory()
+    player = LogPlayer(log, start_unix_s=T0, speedup=1.0)
+    for played_at, state in player:
+        clock.t = played_at + 0.6  # every state arrives 0.6 s after its timestamp: a controller 0.6 s behind
+        assert store.offer(state) == "ok"
+        if (movement := state.movement(1)) is not None:
+            direct.update(to_unix_s(state.timestamp), movement.state_time_speed[0].event_state)
+    reading = store.plan_reading(648, 1)
+    assert reading.fresh and reading.plan is not None
+    assert reading.cycle == direct.stats() and reading.cycle.cycle_s is not None and len(reading.cycle.durations_s) >= 2
+    assert reading.clock_offset_s == pytest.approx(-0.6)
+    assert store.plan_reading(648, 99).plan is None and store.plan_reading(9, 1).fresh is False
