@@ -113,6 +113,7 @@ def simulate(
     surprised: dict[int, float] = {}  # light -> the red (by its end) that surprised the driver
     amber_seen: dict[int, float] = {}  # light -> the red (by its start) whose amber the driver has decided on
     amber_stop: set[int] = set()  # lights whose amber the driver stops for
+    amber_go: set[int] = set()  # lights whose amber the driver has decided to clear
     green_since: dict[int, float] = {}
     max_advised = 0.0
     steps_per_advice = int(round(1.0 / dt_s))
@@ -175,8 +176,10 @@ def simulate(
                     committed.discard(n)
                     amber_stop.add(n)
                     surprises += 1
-                else:
+                else:  # clears it in the amber: no slowing down until over the line
                     amber_stop.discard(n)
+                    amber_go.add(n)
+                    committed.add(n)
             overdue = display is None or (not display.is_red(t) and t - green_since.get(n, -np.inf) >= driver.reaction_s)
             if n in committed and red_now and surprised.get(n) != light.next_green_start_s(t) and overdue:
                 surprises += 1  # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at all possible
@@ -212,6 +215,8 @@ def simulate(
                     rate = coast_decel_mps2(v, advisor.vehicle) if active is not None and active.action in ("ease_off", "cruise") else rate_down
                     if next_red <= t + _time_to_cover_s(dist, v, v_to, rate) + 1.0:
                         v_cmd = v
+        if ahead and ahead[0][0] in amber_go and braking_for != ahead[0][0] and not light.is_red(t):
+            v_cmd = max(v_cmd, v)  # clearing an amber: no slowing down before the line
         if braking_for is None and active is not None and active.action in ("ease_off", "cruise") and v_cmd < v:
             rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast
         if braking_for is None and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
