@@ -288,3 +288,12 @@ def test_random_timings_feasible_and_no_worse_than_regular(x, y, s, red, green):
     eco = score_in_end_state(sol.trajectory, params, sc.speed_limit_mps)
     reg = score_in_end_state(regular_driver(sc), params, sc.speed_limit_mps)
     assert eco.cost_usd <= reg.cost_usd * (1 + 1e-9)
+
+
+def test_a_launch_from_a_halt_never_crosses_the_next_light_in_its_red():
+    """Found by the property test above: a launch arc from the halt before light 1 reached a node past light 2,
+    crossing it at 54.2 s in its red [13, 58) (the arc was checked only where it landed)."""
+    sc = paper_scenario(32.0, 13.0, 200.0, red_s=45.0, green_s=20.0)
+    sol = solve(sc, model_params(), COARSE)
+    assert violations(sol.trajectory, sc) == []
+    assert sol.cost_usd <= score_in_end_state(regular_driver(sc), model_params(), sc.speed_limit_mps).cost_usd + 1e-9

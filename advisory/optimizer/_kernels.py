@@ -165,9 +165,10 @@ def forward_pass(
                     continue
                 t0 = s_time_s[l, b]
                 code = -(2 + l * n_bins + b)
+                k_end = n_stage if l + 1 == n_light else light_stage[l + 1]  # a launch never crosses the next light
                 for m in range(n_launch):
                     k2 = k + 1 + m
-                    if k2 > n_stage:
+                    if k2 > k_end:
                         break
                     for j in range(n_v):
                         dt = launch_dt_s[m, j]
