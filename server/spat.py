@@ -33,6 +33,7 @@ from spat_feed.player import JsonlRecorder, LogPlayer, read_spat_log
 from spat_feed.plans import Plan
 from spat_feed.pump import SpatPump, run_every
 from spat_feed.scenarios import FeedScenario, spat_message_at
+from spat_feed.simulator import shared_scenario
 from spat_feed.source import Clock, InProcessSpatSource, SpatStore, TimeRules
 
 from server.config import Settings
@@ -141,8 +142,6 @@ class SpatHub:
 
 def _live_ids(corridors, simulate: bool) -> set[int]:
     """Intersections read from the store: every one without simulation, else those with no fixed plan."""
-    from spat_feed.simulator import shared_scenario
-
     out: set[int] = set()
     for corridor in corridors:
         plans = shared_scenario(corridor, 0.0).fixed_plans() if simulate else {}

@@ -16,17 +16,12 @@ Pure: the instant is handed in; no clock, no I/O.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from collections.abc import Iterable
+from dataclasses import replace
 
 from spat_feed.corridors import TIMING_PRESETS, Corridor
 from spat_feed.messages import IntersectionState, MovementState, from_unix_s, movement_events
 from spat_feed.plans import FixedTimePlan, next_changes
-
-
-def next_change_s(plan: FixedTimePlan, t_unix_s: float) -> float:
-    """The first state change of ``plan`` after ``t_unix_s``. [s]"""
-    return next_changes(plan, t_unix_s, 1)[0].likely_s
 from spat_feed.scenarios import FeedScenario
 from spat_feed.signal_plans import light_plans_at
 
@@ -55,6 +50,11 @@ def shared_scenario(corridor: Corridor, entry_unix_s: float) -> FeedScenario:
         return FeedScenario(corridor, plan, 0.0)
     timing = TIMING_PRESETS[SHARED_TIMING]  # every light of any number turns red at 15 s past each minute
     return FeedScenario(corridor, replace(timing, red_starts_s=(timing.red_starts_s[0],) * len(corridor.intersections)), 0.0)
+
+
+def next_change_s(plan: FixedTimePlan, t_unix_s: float) -> float:
+    """The first state change of ``plan`` after ``t_unix_s``. [s]"""
+    return next_changes(plan, t_unix_s, 1)[0].likely_s
 
 
 def simulated_plans(corridors: Iterable[Corridor], t_unix_s: float) -> dict[tuple[int, int], FixedTimePlan]:
