@@ -70,20 +70,21 @@ def _error(exc: ApiError) -> str:
 
 @router.websocket("/{trip_id}/stream")
 async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: MetricsDep, settings: SettingsDep) -> None:
-    await ws.accept()
     counts: StreamCounts = ws.app.state.streams  # or server.store.RedisStreams
     client = client_address(ws)
     token = bearer_token(ws, allow_query=True)
-    try:
+    try:  # the slot is taken before the handshake completes: a client whose handshake is done holds it
         trip = await engine.trips.authorize(trip_id, token)
         handle = await counts.open(trip.id, client, settings.ws_max_per_trip, settings.ws_max_per_client)
     except ApiError as exc:
+        await ws.accept()
         await ws.send_text(_error(exc))
         await ws.close(code=4000 + exc.status, reason=exc.error)
         return
     metrics.ws_open.inc()
     limit = settings.ws_max_message_bytes
     try:
+        await ws.accept()
         while True:
             message = await ws.receive()
             if message["type"] == "websocket.disconnect":
