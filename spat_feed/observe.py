@@ -10,7 +10,9 @@ Conversion of one light (:func:`light_view`):
   earliest instant its change window allows (``min_end_s`` of the change into red) and ends at the latest
   (``max_end_s`` of the change out of red). Unknown states (``unavailable``, ``dark``) count as red, so a
   speed is never advised that reaches a line after the plan's horizon. Windows are kept up to ``horizon_s``.
-* ``fresh``: the reading's flag; a light whose published state is unknown is reported as not fresh (no data). A
+* ``fresh``: the reading's flag; a light whose published state is unknown is reported as not fresh (no data),
+  unless the group's history says its unknown phases come between green and red and how long they last (a
+  controller that publishes its amber as ``unavailable``): then it is blocking now and the cycle goes on from there. A
   phase past its ``minEndTime`` is still the published one (it may end any moment: a possible red, not no data).
 * ``confidence_frac``: the lowest confidence of the change windows that bound a red window within the horizon
   (1 for a fixed-time plan).
@@ -213,24 +215,40 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
             end = (inf, inf, inf)
         out.append((phase_class(state), start, end))
         start = end
-    if cycle is None or len(out) < 2 or out[-1][0] is not PhaseClass.UNKNOWN:
+    if cycle is None or out[-1][0] is not PhaseClass.UNKNOWN:
         return out
+    if len(out) == 1:  # unknown now, in a group whose unknown phases lead from green into red: as its history says
+        if not _clearance(cycle):
+            return out
+        return _continued(PhaseClass.UNKNOWN, cycle.since_unix_s, (-inf,) * 3, t_unix_s, horizon_s, cycle) or out
     # the plan ends in "unavailable": its last known phase ends when such phases end, then the cycle goes on
-    cls, begun, (lo, likely, late) = out[-2]
+    cls, begun, (lo, _, _) = out[-2]
     since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
-    d = cycle.durations(cls)
-    if since is None or not d:
-        return out
-    after = max(t_unix_s, lo)
-    ends = [since + x for x in d if since + x >= after]
-    if not ends:  # running longer than any seen: nothing to go by
-        return out
+    rest = _continued(cls, since, begun, max(t_unix_s, lo), horizon_s, cycle) if since is not None else None
+    return out if rest is None else out[:-2] + rest
+
+
+def _clearance(cycle: CycleStats | None) -> bool:
+    """The group is in an unknown phase, and its unknown phases come between green and red: a clearance interval
+    (a controller that publishes its amber as "unavailable"), whose end and what follows the history can tell. An
+    unknown phase between reds (a controller that publishes its green as "unavailable") stays unknown: no data."""
+    return (cycle is not None and cycle.current is PhaseClass.UNKNOWN and cycle.since_unix_s is not None
+            and cycle.following.get(PhaseClass.GREEN) is PhaseClass.UNKNOWN and cycle.following.get(PhaseClass.UNKNOWN) is PhaseClass.RED)  # fmt: skip
+
+
+def _continued(cls: PhaseClass, since_unix_s: float, begun: Bound, after_s: float, horizon_s: float, cycle: CycleStats) -> list | None:
+    """The phase of class ``cls`` that began at ``since_unix_s`` (``begun``: its start bounds), ending no earlier
+    than ``after_s``, when such phases have ended (given how long it has run), then the classes that followed it
+    for ``horizon_s``, then the unknown; None when the history cannot say (too few seen, or longer than any)."""
+    inf = math.inf
+    ends = [since_unix_s + x for x in cycle.durations(cls) if since_unix_s + x >= after_s]
+    if not ends:  # too few seen, or running longer than any seen: nothing to go by
+        return None
     # what this group has done beats what its controller predicts: maxEndTime was 9 s early or 2 minutes late
-    likely, late = max(_quantile(ends, 0.5), lo), max(_quantile(ends, LATE_QUANTILE), lo)
-    out[-2] = (cls, begun, (lo, max(likely, lo), max(late, likely, lo)))
-    del out[-1]
-    start = out[-1][2]
-    while start[0] < t_unix_s + horizon_s:
+    likely, late = max(_quantile(ends, 0.5), after_s), max(_quantile(ends, LATE_QUANTILE), after_s)
+    start: Bound = (after_s, likely, max(late, likely))
+    out: list[tuple[PhaseClass, Bound, Bound]] = [(cls, begun, start)]
+    while start[0] < after_s + horizon_s:
         nxt = cycle.following.get(cls)
         d = cycle.durations(nxt) if nxt is not None else ()
         if not d:
@@ -316,12 +334,14 @@ def light_view(
 ) -> LightView:
     """The advisor's view of one light ahead at the fix time (see the module docstring)."""
     distance_m = float(intersection.stop_line_m - station_m)
-    if reading is None or reading.plan is None or unknown_now(reading.plan, t_unix_s - reading.age_s):
+    if reading is None or reading.plan is None:
         return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s) if reading is not None else math.inf)
     plan, t_feed = reading.plan, t_unix_s + reading.clock_offset_s  # our instant on the feed's clock
     if isinstance(plan, FixedTimePlan):
         windows = likely = late = red_windows_s(plan, t_feed, horizon_s)
     else:
+        if unknown_now(plan, t_unix_s - reading.age_s) and not _clearance(reading.cycle):
+            return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
         windows, likely, late = (_windows(phases, t_feed, horizon_s, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
     # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no chance)

@@ -308,7 +308,8 @@ def test_evaluation_against_the_dp_with_and_without_the_margin():
 def test_a_red_that_never_ends_gives_a_stop_without_a_countdown():
     """Reproducer from the real controller: a "stop" with seconds_to_change_s = inf raised OverflowError in phrase()."""
     adv = advise(Observation(13.89, 13.89, (LightView(1, 300.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
-    assert adv.reason == "red_ahead" and adv.message == "Red light ahead."  # far out: no stop asked for yet
+    assert (adv.action, adv.reason) == ("coast", "red_ahead")  # far out: no stop asked for yet, but lift off
+    assert adv.message == "Red light ahead. Lift off and coast." and adv.target_speed_mps == pytest.approx(13.89)
     adv = advise(Observation(13.89, 13.89, (LightView(1, 100.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
     assert adv.action == "stop" and adv.message == "Red light ahead. Prepare to stop."
     assert phrase(Advice("none", "too_close", None, True, float("inf"))) == ""
@@ -409,11 +410,14 @@ def test_prepare_to_stop_only_when_a_stop_is_likely():
 
 
 def test_a_red_far_ahead_is_announced_and_the_stop_asked_for_when_it_is_near():
-    """A red of unknown end (no speed makes it) 300 m ahead at 50 km/h: "Red light ahead." and no speed (a "stop" there
-    halted the virtual driver 220 m short of the line); within a comfortable stop (+ reaction + 2 s): "prepare to stop"."""
+    """A red of unknown end (no speed makes it) 300 m ahead at 50 km/h: "Red light ahead." and lift off, no stop yet (a
+    "stop" there halted the virtual driver 220 m short of the line; holding the speed towards the red wasted what the
+    stop then braked away); within a comfortable stop (+ reaction + 2 s): "prepare to stop"."""
     v = 50 / 3.6
-    far = advise(Observation(v, v, (light(300, (0.0, math.inf)),)), params=AdvisorParams(units="kmh"))[0]
-    assert (far.action, far.reason, far.message, far.target_speed_mps) == ("none", "red_ahead", "Red light ahead.", None) and far.speak
+    far, memory = advise(Observation(v, v, (light(300, (0.0, math.inf)),)), params=AdvisorParams(units="kmh"))
+    assert (far.action, far.reason, far.message, far.target_speed_mps) == ("coast", "red_ahead", "Red light ahead. Lift off and coast.", v) and far.speak
+    later = advise(Observation(v - 1.0, v, (light(280, (0.0, math.inf)),)), memory, AdvisorParams(units="kmh"))[0]
+    assert (later.action, later.target_speed_mps, later.speak) == ("coast", v, False)  # the same advice, not said again as the car slows
     near_m = v * (P.reaction_s + P.stop_lead_s) + v * v / (2 * P.comfort_decel_mps2)
     near = advise(Observation(v, v, (light(near_m - 1.0, (0.0, math.inf)),)))[0]
     assert near.action == "stop" and near.message == "Red light ahead. Prepare to stop."

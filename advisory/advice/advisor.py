@@ -152,7 +152,7 @@ class AdvisorParams:
     short_wait_s: float = 3.0
     min_confidence_frac: float = 0.5
     stop_lead_s: float = 2.0  # "prepare to stop" this long before a comfortable stop must begin (earlier: "Red light ahead.") [s]
-    hold_stale_s: float = 10.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
+    hold_stale_s: float = 30.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
     hysteresis_mps: float = 1.0
     speak_change_mps: float = 5 * 0.44704
     speed_step_mps: float = 0.44704  # candidates in whole mph: the spoken number is the advised one
@@ -498,6 +498,8 @@ def phrase(advice: Advice, units: str = "mph") -> str:
     if advice.action == "resume":
         return f"Last light passed. Resume {speed}."
     if advice.action == "coast":
+        if advice.reason == "red_ahead":  # a red whose end is uncertain, far ahead: lift off, no stop yet
+            return f"Red light ahead. Green in {when}. Lift off and coast." if when else "Red light ahead. Lift off and coast."
         speed_now = advice.current_speed_mps if advice.current_speed_mps is not None else np.inf
         if advice.target_speed_mps is not None and advice.target_speed_mps < SLOW_FIRST_FRAC * speed_now:
             return f"{light}Slow to {speed}, then coast."
@@ -637,9 +639,11 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         to_green = _countdown_view(nxt).seconds_to_green_after(min(arrival, slowest))
         far = nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)
         if far and (uncertain or not math.isfinite(to_green)):
-            # far from a red whose end is uncertain: say what is ahead, ask for nothing yet (a stop so far out halted
-            # the car 220 m short of the line). A known end keeps the early gentle stop: the advisor re-plans from it
-            return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_green)
+            # far from a red whose end is uncertain: no stop asked for yet (a stop so far out halted the car 220 m
+            # short of the line), but lift off: arriving later only helps (the red may end first), and what coasting
+            # sheds the stop would have braked away anyway. A known end keeps the early gentle stop (re-planned from)
+            keep = last is not None and last.action == "coast" and last.reason == "red_ahead" and last.target_speed_mps is not None
+            return Advice("coast", "red_ahead", last.target_speed_mps if keep else v, red, to_green)
         return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_green)
     target, source = float(feasible.max()), "rules"
     if tables is not None:

@@ -135,10 +135,12 @@ def simulate(
             pending.append((t + driver.reaction_s, adv, rng.normal(0.0, driver.noise_mps) if driver.noise_mps else 0.0, line))
         while pending and pending[0][0] <= t + 1e-9:
             _, new, err, line = pending.pop(0)
-            if not (new.action == "none" and new.reason in ("too_close", "short_wait")):
+            if not _silent(new):
                 active, error, stop_line_m = new, err, line
         # what the advice asks for
-        if active is None or active.target_speed_mps is None or active.action in ("none", "resume"):
+        if active is not None and active.action == "none" and active.reason == "red_ahead":
+            v_cmd = min(v, v_lim)  # "Red light ahead. Green in N seconds.": nobody speeds up towards a red they are told of
+        elif active is None or active.target_speed_mps is None or active.action in ("none", "resume"):
             v_cmd = v_lim  # no speed advice: drive normally
         elif active.action == "stop":
             v_cmd = 0.0 if x < stop_line_m else v_lim  # a "stop" is void once its line is behind (crossed on green)
@@ -246,6 +248,12 @@ def simulate(
         step += 1
     arr = np.array(knots)
     return ClosedLoopResult(Trajectory(arr[:, 0], arr[:, 1], arr[:, 2]), log, overrides, stops, max_advised, surprises)
+
+
+def _silent(advice: Advice) -> bool:
+    """Advice that asks nothing new: the driver goes on with what it was told (too close to act, a short wait, or
+    "Signal data delayed." through a short dropout)."""
+    return advice.action == "none" and (advice.reason in ("too_close", "short_wait") or (advice.reason == "stale_spat" and advice.light_red is not None))
 
 
 def _time_to_cover_s(dist_m: float, v_mps: float, v_to_mps: float, decel_mps2: float) -> float:
