@@ -74,3 +74,29 @@ def test_with_clock_skew(block):
     """±3 s of feed-clock skew on top (the issue's full randomization)."""
     red, hard, above = _check(range(1000 + 50 * block, 1050 + 50 * block), 3.0)
     assert (red, hard, above) == ([], [], [])
+
+
+def test_through_a_dropout_the_driver_keeps_its_plan_and_never_speeds_up_towards_the_red():
+    """A red 400 m ahead ends in 40 s (exactly published); the feed goes silent 5 s after entry. The advisor holds
+    its plan ("Signal data delayed. Keep to X." or just "Signal data delayed."): the driver goes on with what it was
+    told, and never climbs back towards the limit while the red lasts (it did, on "Signal data delayed.": the saving
+    was gone and the red met at speed)."""
+    from advisory.advice.advisor import LightView, Observation
+    from advisory.signals import FixedTimeSignal
+
+    v_lim = 50 / 3.6
+    truth = Scenario("dropout", (FixedTimeSignal(400.0, -10.0, 50.0, 50.0),), 500.0, v_lim, v_lim)
+
+    def feed(t_s, x_m, v_mps):
+        seen = min(t_s, 5.0)  # the last reading
+        windows = tuple((max(a - t_s, 0.0), b - t_s) for a, b in ((-10.0, 40.0), (90.0, 140.0)) if b > t_s)
+        lights = (LightView(1, 400.0 - x_m, t_s <= 5.0, 1.0, windows, age_s=t_s - seen),) if x_m < 400.0 else ()
+        return Observation(v_mps, v_lim, lights, position_m=x_m)
+
+    run = simulate(truth, driver=DriverModel(), feed=feed)
+    said = [a for t, a in run.advice if 6.0 <= t < 30.0]
+    assert said and all(a.reason == "stale_spat" for a in said)
+    tr = run.trajectory
+    stale = (tr.t_s >= 7.0) & (tr.t_s < 35.0)  # after the reaction to the first stale advice, while the red lasts
+    assert tr.v_mps[stale].max() <= tr.v_mps[np.searchsorted(tr.t_s, 7.0)] + 0.05
+    assert not red_light_violations(tr, truth)

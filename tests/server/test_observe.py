@@ -284,3 +284,29 @@ def test_the_recorded_controller_through_the_history():
                 late += true_end > late_end + 1.0  # a change is seen at the first reading after it: 1 s
     assert reds > 1000 and early == 0
     assert bounded / reds > 0.95 > published_bound / reds and late / bounded < 0.12, (bounded / reds, published_bound / reds, late / bounded)
+
+
+UNAVAILABLE = S.UNAVAILABLE
+
+
+def test_an_amber_published_as_unavailable_goes_on_as_the_history_says():
+    """2019-05-01 publishes each amber as "unavailable" between green and red: after a few cycles such a phase is a
+    clearance interval, blocking now, its red and the green after it bounded by what the group has done (was: "no
+    data" in the middle of every approach, and the driver told to drive normally). A group whose unknown phases come
+    between reds (2019-05-17 publishes greens so) stays "no data": an unknown phase is never read as a green."""
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    h = PhaseHistory()
+    t = feed(h, T0, [(GREEN, 20), (UNAVAILABLE, 3), (RED, 40)] * 4 + [(GREEN, 20)])
+    stats = h.update(t + 1.0, published(UNAVAILABLE, t + 1.0))  # the amber has begun
+    view = light_view(ix, PlanReading(published(UNAVAILABLE, t + 1.0), cycle=stats), 0.0, t + 2.0)
+    assert view.fresh
+    (start, end), *_ = view.red_windows_s
+    assert start == 0.0 and end == pytest.approx(t + 1.0 + 3.0 + 40.0 - (t + 2.0))  # clearance, then the red seen each cycle
+    assert view.red_windows_s[1][0] == pytest.approx(40.0 + 20.0)  # earliest next red: the clearance may end now, then red, green
+    h2 = PhaseHistory()
+    t2 = feed(h2, T0, [(RED, 40), (UNAVAILABLE, 20)] * 4 + [(RED, 40)])
+    stats2 = h2.update(t2 + 1.0, published(UNAVAILABLE, t2 + 1.0))
+    between_reds = light_view(ix, PlanReading(published(UNAVAILABLE, t2 + 1.0), cycle=stats2), 0.0, t2 + 2.0)
+    assert not between_reds.fresh and between_reds.red_windows_s == ()
+    bare = light_view(ix, PlanReading(published(UNAVAILABLE, t + 1.0)), 0.0, t + 2.0)  # no history: no data, as before
+    assert not bare.fresh
