@@ -228,12 +228,24 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
     return out if rest is None else out[:-2] + rest
 
 
+CLEARANCE_MAX_S = 6.0
+"""The longest amber (yellow change interval) of real signals: 3-6 s (MUTCD 4D.26; Belgian urban signals 3 s). An
+unknown phase between green and red that lasts no longer is that group's amber, published as "unavailable". [s]"""
+
+
+def _unknown_is_amber(cycle: CycleStats | None) -> bool:
+    """The group's unknown phases come between green and red and last no longer than an amber: its clearance
+    interval, published as "unavailable" (2019-05-01 does so). Passable as an amber is; how long it lasts and what
+    follows, the history tells. An unknown between reds (a green published so) or a long one stays unknown."""
+    if cycle is None or cycle.following.get(PhaseClass.GREEN) is not PhaseClass.UNKNOWN or cycle.following.get(PhaseClass.UNKNOWN) is not PhaseClass.RED:
+        return False
+    d = cycle.durations(PhaseClass.UNKNOWN)
+    return bool(d) and _quantile(d, LATE_QUANTILE) <= CLEARANCE_MAX_S
+
+
 def _clearance(cycle: CycleStats | None) -> bool:
-    """The group is in an unknown phase, and its unknown phases come between green and red: a clearance interval
-    (a controller that publishes its amber as "unavailable"), whose end and what follows the history can tell. An
-    unknown phase between reds (a controller that publishes its green as "unavailable") stays unknown: no data."""
-    return (cycle is not None and cycle.current is PhaseClass.UNKNOWN and cycle.since_unix_s is not None
-            and cycle.following.get(PhaseClass.GREEN) is PhaseClass.UNKNOWN and cycle.following.get(PhaseClass.UNKNOWN) is PhaseClass.RED)  # fmt: skip
+    """In such a clearance interval now (:func:`_unknown_is_amber`)."""
+    return cycle is not None and cycle.current is PhaseClass.UNKNOWN and cycle.since_unix_s is not None and _unknown_is_amber(cycle)
 
 
 def _continued(cls: PhaseClass, since_unix_s: float, begun: Bound, after_s: float, horizon_s: float, cycle: CycleStats) -> list | None:
@@ -247,7 +259,8 @@ def _continued(cls: PhaseClass, since_unix_s: float, begun: Bound, after_s: floa
     # what this group has done beats what its controller predicts: maxEndTime was 9 s early or 2 minutes late
     likely, late = max(_quantile(ends, 0.5), after_s), max(_quantile(ends, LATE_QUANTILE), after_s)
     start: Bound = (after_s, likely, max(late, likely))
-    out: list[tuple[PhaseClass, Bound, Bound]] = [(cls, begun, start)]
+    amber = _unknown_is_amber(cycle)  # the group's clearance published as "unavailable": an amber
+    out: list[tuple[PhaseClass, Bound, Bound]] = [(PhaseClass.AMBER if amber and cls is PhaseClass.UNKNOWN else cls, begun, start)]
     while start[0] < after_s + horizon_s:
         nxt = cycle.following.get(cls)
         d = cycle.durations(nxt) if nxt is not None else ()
@@ -255,7 +268,7 @@ def _continued(cls: PhaseClass, since_unix_s: float, begun: Bound, after_s: floa
             break
         cls = nxt
         end = (start[0] + d[0], start[1] + _quantile(d, 0.5), start[2] + _quantile(d, LATE_QUANTILE))
-        out.append((cls, start, end))
+        out.append((PhaseClass.AMBER if amber and cls is PhaseClass.UNKNOWN else cls, start, end))
         start = end
     out.append((PhaseClass.UNKNOWN, start, (inf, inf, inf)))
     return out

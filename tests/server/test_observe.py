@@ -290,10 +290,11 @@ UNAVAILABLE = S.UNAVAILABLE
 
 
 def test_an_amber_published_as_unavailable_goes_on_as_the_history_says():
-    """2019-05-01 publishes each amber as "unavailable" between green and red: after a few cycles such a phase is a
-    clearance interval, blocking now, its red and the green after it bounded by what the group has done (was: "no
-    data" in the middle of every approach, and the driver told to drive normally). A group whose unknown phases come
-    between reds (2019-05-17 publishes greens so) stays "no data": an unknown phase is never read as a green."""
+    """2019-05-01 publishes each amber as "unavailable" between green and red: after a few cycles such a short phase
+    is the group's amber (passable, as an amber is), its red and the green after it bounded by what the group has done
+    (was: "no data" in the middle of every approach, the driver told to drive normally, and a car due in the amber
+    slowed for the next green). A group whose unknown phases come between reds (2019-05-17 publishes greens so), or
+    last longer than an amber, stays "no data": an unknown phase is never read as a green."""
     ix = make_scenario("paper_s400").corridor.intersections[0]
     h = PhaseHistory()
     t = feed(h, T0, [(GREEN, 20), (UNAVAILABLE, 3), (RED, 40)] * 4 + [(GREEN, 20)])
@@ -301,8 +302,13 @@ def test_an_amber_published_as_unavailable_goes_on_as_the_history_says():
     view = light_view(ix, PlanReading(published(UNAVAILABLE, t + 1.0), cycle=stats), 0.0, t + 2.0)
     assert view.fresh
     (start, end), *_ = view.red_windows_s
-    assert start == 0.0 and end == pytest.approx(t + 1.0 + 3.0 + 40.0 - (t + 2.0))  # clearance, then the red seen each cycle
-    assert view.red_windows_s[1][0] == pytest.approx(40.0 + 20.0)  # earliest next red: the clearance may end now, then red, green
+    assert start == 0.0 and end == pytest.approx(t + 1.0 + 3.0 + 40.0 - (t + 2.0))  # the red may begin now; ends as reds did
+    assert view.likely_red_windows_s[0] == pytest.approx((2.0, 42.0))  # likely: after the amber's 3 s
+    assert view.red_windows_s[1][0] == pytest.approx(40.0 + 20.0 + 3.0)  # earliest next red: red, green, amber (passable)
+    long = PhaseHistory()
+    t3 = feed(long, T0, [(GREEN, 20), (UNAVAILABLE, 12), (RED, 40)] * 4 + [(GREEN, 20)])
+    stats3 = long.update(t3 + 1.0, published(UNAVAILABLE, t3 + 1.0))
+    assert not light_view(ix, PlanReading(published(UNAVAILABLE, t3 + 1.0), cycle=stats3), 0.0, t3 + 2.0).fresh  # 12 s: no amber
     h2 = PhaseHistory()
     t2 = feed(h2, T0, [(RED, 40), (UNAVAILABLE, 20)] * 4 + [(RED, 40)])
     stats2 = h2.update(t2 + 1.0, published(UNAVAILABLE, t2 + 1.0))
