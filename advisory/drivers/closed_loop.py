@@ -139,7 +139,7 @@ def simulate(
                 active, error, stop_line_m = new, err, line
         # what the advice asks for
         if active is not None and active.action == "none" and active.reason == "red_ahead":
-            v_cmd = min(v, v_lim)  # "Red light ahead. Green in N seconds.": nobody speeds up towards a red they are told of
+            v_cmd = min(max(v, advisor.min_cruise_speed_mps), v_lim)  # "Red light ahead.": no speeding up towards it (nor a crawl)
         elif active is None or active.target_speed_mps is None or active.action in ("none", "resume"):
             v_cmd = v_lim  # no speed advice: drive normally
         elif active.action == "stop":
