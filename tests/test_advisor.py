@@ -421,3 +421,15 @@ def test_a_red_far_ahead_is_announced_and_the_stop_asked_for_when_it_is_near():
     near_m = v * (P.reaction_s + P.stop_lead_s) + v * v / (2 * P.comfort_decel_mps2)
     near = advise(Observation(v, v, (light(near_m - 1.0, (0.0, math.inf)),)))[0]
     assert near.action == "stop" and near.message == "Red light ahead. Prepare to stop."
+
+
+def test_a_red_the_car_may_beat_at_the_second_light_does_not_void_the_plan_for_the_first():
+    """Light 1 is red now and likely green in 20 s (surely by 150 s); light 2, 300 m further, may turn red before the
+    car gets there but likely not before it has passed. The plan for light 1 stands (the recorded controller: "drive
+    normally" here sped the car up into light 1's red, and the see-saw cost up to +80 %)."""
+    lights = (LightView(1, 250.0, True, 0.9, ((0.0, 150.0),), likely_red_windows_s=((0.0, 20.0),), late_red_windows_s=((0.0, 150.0),)),
+              LightView(2, 550.0, True, 0.9, ((15.0, 200.0),), likely_red_windows_s=((20.0, 90.0),), late_red_windows_s=((40.0, 110.0),)))  # fmt: skip
+    assert 20.0 < 550.0 / V < 40.0  # at its speed the car reaches light 2 after its likely red begins, before its latest
+    adv = advise(Observation(V, V, lights))[0]
+    assert adv.target_speed_mps is not None and adv.action in KEEP_MODES and adv.reason == "green_wave"
+    assert crossing_time_s(250.0, V, adv.target_speed_mps, P, KEEP_MODES[adv.action]) >= 20.0 + P.green_margin_s

@@ -620,7 +620,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         # no speed makes the greens whenever the changes come: plan on the likely changes (never into a red that
         # minEnd guarantees: the likely windows contain it; the after-red margin still applies), never faster than now
         # (no racing an uncertain red), and never slowing for a red the car may beat as it is (_beats_maybe)
-        if _beats_maybe(usable, obs, params):
+        if _beats_maybe(usable[:1], obs, params):  # (the next light: a red at the one after it does not void the plan for this one)
             return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
         usable = tuple(_likely_only(light) for light in usable)
         both = _Lines.of(usable)
