@@ -53,6 +53,7 @@ def test_spat_eval_on_a_slice_of_a_real_recording(head, monkeypatch):
     assert 0.0 <= out["advice_availability_frac"] <= 1.0
     assert out["hindsight_saving_frac"] > 0.1  # knowing the truth pays on an actuated controller (issue: 24-39 %)
     assert out["worst_cost_frac"] < 0.5 and out["hindsight_invalid"] < 0.25 * out["approaches"]
+    assert out["saving_frac"] > 0.03  # the advice pays on the real controller (it was ~0 before the see-saw was fixed)
 
 
 def test_the_regular_driver_and_the_hindsight_dp_never_cross_a_recorded_red(head):
