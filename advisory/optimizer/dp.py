@@ -36,7 +36,7 @@ import numpy as np
 
 from advisory.evaluation.endstate import reacceleration_penalty
 from advisory.physics.model import I_AUX, arc_cost_usd, pack, step_cost_usd, step_wheel_power_w
-from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, forward_pass
+from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, cost_to_go_bounds, count_labels, forward_pass
 from advisory.physics.params import ModelParams, VehicleParams
 from advisory.drivers.regular import time_to_cover_s
 from advisory.signals import Scenario
@@ -162,7 +162,7 @@ class DPProblem:
     rest_dt_s: np.ndarray
     rest_usd: np.ndarray
     lower_bound_usd: np.ndarray
-    upper_bound_usd: float = np.inf
+    halt_bound_usd: np.ndarray
 
     @property
     def n_stages(self) -> int:
@@ -210,6 +210,12 @@ def build_problem(
         raise InfeasibleError(f"time limit {t_max_s:.3f} s is below the fastest possible {scenario.zone_length_m / v_lim:.3f} s")
     pen = reacceleration_penalty(speed, params, v_lim, grid.accel_max_mps2)
     arcs = _stop_arcs(scenario, params, grid, speed, n_stage) if grid.stop_arcs else _no_arcs(speed.size)
+    p, rates, pref = pack(params)
+    grade = np.zeros(n_stage)
+    lb, halt_lb = cost_to_go_bounds(
+        speed, band_lo, band_hi, ds, grade, is_stop, grid.step_substeps, p, rates, pref, np.asarray(pen.cost_usd, dtype=float),
+        arcs["light_stage"], arcs["arc_k_lo"], arcs["stop_usd"], arcs["launch_usd"], arcs["rest_usd"],
+    )
     return DPProblem(
         scenario=scenario,
         grid=grid,
@@ -217,7 +223,7 @@ def build_problem(
         speed_mps=speed,
         band_lo=band_lo,
         band_hi=band_hi,
-        grade_frac=np.zeros(n_stage),
+        grade_frac=grade,
         stop_red_start_s=red_start,
         stop_red_s=red_s,
         stop_cycle_s=cycle,
@@ -230,7 +236,8 @@ def build_problem(
         terminal_cost_usd=np.asarray(pen.cost_usd),
         terminal_time_s=np.asarray(pen.time_s),
         **arcs,
-        lower_bound_usd=np.zeros((n_stage + 1, speed.size)),
+        lower_bound_usd=lb - 1e-9 * np.abs(lb),  # a hair below, against rounding in the sums
+        halt_bound_usd=halt_lb - 1e-9 * np.abs(halt_lb),
     )
 
 
@@ -297,10 +304,14 @@ class DPSolution:
 
 
 def _empty_tables(prob: DPProblem):
+    """The kernel's tables: (stage, speed, bin) ones uninitialised (valid over each row's range in use,
+    ``occ_lo..occ_hi``, which the kernel fills), the halts' ones empty."""
     shape = (prob.n_stages + 1, prob.speed_mps.size, prob.n_bins)
     s_shape = (prob.n_lights, prob.n_bins)
-    return (np.full(shape, np.inf), np.full(shape, np.nan), np.full(shape, -1, dtype=np.int64),
-            np.full(s_shape, np.inf), np.full(s_shape, np.nan), np.full(s_shape, -1, dtype=np.int64))
+    occ_lo = np.full(shape[:2], prob.n_bins, dtype=np.int64)
+    occ_hi = np.full(shape[:2], -1, dtype=np.int64)
+    return (np.empty(shape), np.empty(shape), np.empty(shape, dtype=np.int64),
+            np.full(s_shape, np.inf), np.full(s_shape, np.nan), np.full(s_shape, -1, dtype=np.int64), occ_lo, occ_hi)
 
 
 def _kernel_args(prob: DPProblem):
@@ -314,12 +325,19 @@ def _kernel_args(prob: DPProblem):
     )
 
 
-def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=None) -> DPSolution:
-    total = cost[-1] + prob.terminal_cost_usd[:, None]
-    late = time[-1] + prob.terminal_time_s[:, None] > prob.t_max_s + LATE_TOL_S
-    total = np.where(late | ~np.isfinite(cost[-1]), np.inf, total)
+def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=None, occ=None, upper_bound_usd=np.inf) -> DPSolution | None:
+    """The optimum from the kernel's tables (``occ``: their rows' ranges in use, None when fully initialised);
+    None when it exceeds ``upper_bound_usd`` (the pruned tables then do not hold the unpruned optimum)."""
+    bins = np.arange(prob.n_bins)
+    valid = np.ones(cost[-1].shape, dtype=bool) if occ is None else (bins >= occ[0][-1][:, None]) & (bins <= occ[1][-1][:, None])
+    last_cost = np.where(valid, cost[-1], np.inf)
+    total = last_cost + prob.terminal_cost_usd[:, None]
+    late = np.where(valid, time[-1], 0.0) + prob.terminal_time_s[:, None] > prob.t_max_s + LATE_TOL_S
+    total = np.where(late | ~np.isfinite(last_cost), np.inf, total)
     flat = int(np.argmin(total))
     best = float(total.flat[flat])
+    if np.isfinite(upper_bound_usd) and not best <= upper_bound_usd:
+        return None
     if not np.isfinite(best):
         raise InfeasibleError(
             f"{prob.scenario.name}: no path reaches the end state by {prob.t_max_s:.3f} s on this grid "
@@ -351,14 +369,31 @@ def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=No
     knots = knots[::-1]
     keep = [0] + [n for n in range(1, len(knots)) if knots[n][0] > knots[n - 1][0]]  # a launch without a wait
     t, x, v = (np.array([knots[n][c] for n in keep], dtype=float) for c in range(3))
-    return DPSolution(prob, Trajectory(t, x, v), best, float(t[-1]), int(np.isfinite(cost).sum()))
+    n_labels = int(np.isfinite(cost).sum()) if occ is None else count_labels(cost, *occ)
+    return DPSolution(prob, Trajectory(t, x, v), best, float(t[-1]), n_labels)
 
 
-def solve_problem(prob: DPProblem) -> DPSolution:
-    """Run the numba forward pass on a built problem and read off the optimal trajectory."""
-    cost, time, parent, s_cost, s_time, s_parent = _empty_tables(prob)
-    forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd, prob.upper_bound_usd)
-    return _read_solution(prob, cost, time, parent, s_time, s_parent)
+PRUNE_MARGINS = (0.05, 0.3, 1.0)
+"""Pruning limits tried in turn, as fractions above the bound on the whole trip: the first whose optimum lies
+within its limit is the exact optimum (``_kernels.forward_pass``), else the next one, and finally no limit."""
+
+
+def solve_problem(prob: DPProblem, prune: bool = True) -> DPSolution:
+    """Run the numba forward pass on a built problem and read off the optimal trajectory.
+
+    With ``prune``, labels that cannot finish within a limit on the total cost are dropped (exact: the result
+    is the same as without; see ``PRUNE_MARGINS``).
+    """
+    bound0 = float(prob.lower_bound_usd[0, prob.i_start])
+    limits = [bound0 + m * abs(bound0) for m in PRUNE_MARGINS] if prune and np.isfinite(bound0) else []
+    for limit in [*limits, np.inf]:
+        cost, time, parent, s_cost, s_time, s_parent, occ_lo, occ_hi = _empty_tables(prob)
+        forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd,
+                     prob.halt_bound_usd, min(limit, np.finfo(float).max), occ_lo, occ_hi)
+        sol = _read_solution(prob, cost, time, parent, s_time, s_parent, (occ_lo, occ_hi), limit)
+        if sol is not None:
+            return sol
+    raise AssertionError("unreachable: the unpruned pass always returns")
 
 
 def time_limit_s(regular: Trajectory, params: ModelParams, scenario: Scenario, grid: GridSpec) -> float:
@@ -386,7 +421,8 @@ def solve_numpy(prob: DPProblem) -> DPSolution:
     """The same forward recursion as ``forward_pass`` in plain NumPy/Python (reference and benchmark), without stop arcs."""
     if prob.n_lights and prob.grid.stop_arcs:
         raise ValueError("solve_numpy has no stop arcs: build the problem with GridSpec(stop_arcs=False)")
-    cost, time, parent, *_ = _empty_tables(prob)
+    shape = (prob.n_stages + 1, prob.speed_mps.size, prob.n_bins)
+    cost, time, parent = np.full(shape, np.inf), np.full(shape, np.nan), np.full(shape, -1, dtype=np.int64)
     p, rates, pref = pack(prob.params)
     g = prob.grid
     nb = prob.n_bins
