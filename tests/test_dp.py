@@ -297,3 +297,61 @@ def test_a_launch_from_a_halt_never_crosses_the_next_light_in_its_red():
     sol = solve(sc, model_params(), COARSE)
     assert violations(sol.trajectory, sc) == []
     assert sol.cost_usd <= score_in_end_state(regular_driver(sc), model_params(), sc.speed_limit_mps).cost_usd + 1e-9
+
+
+def _paper_problem(case, grid):
+    sc = paper_scenario(*case)
+    params = model_params()
+    return build_problem(sc, params, grid, time_limit_s(regular_driver(sc), params, sc, grid))
+
+
+PRUNE_GRID = GridSpec(stage_m=20.0, time_bin_s=0.25, dwell_s=0.5)
+
+
+@pytest.mark.parametrize("case", [(15, 15, 800), (0, 0, 800), (-15, 15, 400), (-30, 0, 200), (0, -15, 400), (15, -30, 800)])
+def test_pruning_is_exact(case):
+    """Pruning (bound + limit from the coarser-bin problems) returns the unpruned optimum to the last bit."""
+    prob = _paper_problem(case, PRUNE_GRID)
+    fast, full = solve_problem(prob), solve_problem(prob, prune=False)
+    assert fast.cost_usd == full.cost_usd
+    for a, b in ((fast.trajectory.t_s, full.trajectory.t_s), (fast.trajectory.x_m, full.trajectory.x_m), (fast.trajectory.v_mps, full.trajectory.v_mps)):
+        np.testing.assert_array_equal(a, b)
+    assert fast.n_labels < full.n_labels  # and it did prune
+    assert violations(fast.trajectory, prob.scenario) == []
+
+
+def test_pruning_falls_back_when_the_limit_is_below_the_optimum():
+    """A limit below the optimum prunes it away: the pass says so and a looser limit (finally none) takes over."""
+    from advisory.optimizer.dp import _pass, _solve_pruned
+
+    prob = _paper_problem((0, 0, 400), PRUNE_GRID)
+    full = solve_problem(prob, prune=False)
+    assert _pass(prob, full.cost_usd * (1 - 1e-6)) is None
+    for estimate in (None, full.cost_usd * 0.5, full.cost_usd * (1 - 1e-6), full.cost_usd, full.cost_usd * 3):
+        assert _solve_pruned(prob, estimate).cost_usd == full.cost_usd
+
+
+def test_cost_to_go_bound_is_consistent_along_every_move():
+    """The pruning bound, checked move by move with costs priced here: never above a move plus the bound after it
+    (stages, stop arcs, launches from the halt, timed launches), nor above the terminal cost; hence below the
+    cost of every completion, and below the optimum at the start."""
+    prob = _paper_problem((0, 0, 400), PRUNE_GRID)
+    grid, v, lb, halt = prob.grid, prob.speed_mps, prob.lower_bound_usd, prob.halt_bound_usd
+    p, rates, pref = pack(prob.params)
+    tol = 1e-9 * np.abs(lb[np.isfinite(lb)]).max()
+    assert np.all(lb[-1] <= prob.terminal_cost_usd + tol)
+    for k in range(prob.n_stages):
+        for i in range(v.size):
+            j = np.arange(prob.band_lo[i], prob.band_hi[i] + 1)
+            j = j[v[i] + v[j] > 0]
+            step = arc_cost_usd(v[i], v[j], 2 * grid.stage_m / (v[i] + v[j]), 0.0, grid.step_substeps, p, rates, pref)
+            assert np.all(lb[k, i] <= step + lb[k + 1, j] + tol)
+    for l, kl in enumerate(prob.light_stage):
+        k_end = prob.n_stages if l + 1 == prob.n_lights else prob.light_stage[l + 1]
+        for k in range(prob.arc_k_lo[l], kl):
+            assert np.all(lb[k] <= prob.stop_usd[kl - k - 1] + halt[l] + tol)
+            for k2 in range(kl + 1, min(k_end, k + prob.rest_usd.shape[0]) + 1):
+                assert np.all(lb[k, 0] <= prob.rest_usd[k2 - k - 1, 1:] + lb[k2, 1:] + tol)
+        for k2 in range(kl + 1, min(k_end, kl + prob.launch_usd.shape[0]) + 1):
+            assert np.all(halt[l] <= prob.launch_usd[k2 - kl - 1] + lb[k2] + tol)
+    assert lb[0, prob.i_start] <= solve_problem(prob, prune=False).cost_usd

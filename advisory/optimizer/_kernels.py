@@ -59,7 +59,7 @@ def _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k, i, b, c, t, code):
 def step_tables(speed_mps, band_lo, band_hi, stage_m, grade_frac, step_substeps, p, m_c_rates, m_prefactor, step_dt, step_usd):
     """Duration and cost of every move of one stage (grade ``grade_frac``): from node i to node ``band_lo[i] + j``.
 
-    Fills ``step_dt``/``step_usd`` (n_v, max band); a move between two standstills gets an infinite duration.
+    Fills ``step_dt``/``step_usd`` (n_v, widest band); a move between two standstills gets an infinite duration.
     """
     for i in range(speed_mps.shape[0]):
         for j in range(band_hi[i] - band_lo[i] + 1):
@@ -74,17 +74,8 @@ def step_tables(speed_mps, band_lo, band_hi, stage_m, grade_frac, step_substeps,
 
 
 @njit(cache=True)
-def _max_band(band_lo, band_hi):
-    out = 0
-    for i in range(band_lo.shape[0]):
-        out = max(out, band_hi[i] - band_lo[i] + 1)
-    return out
-
-
-@njit(cache=True)
 def cost_to_go_bounds(
-    speed_mps, band_lo, band_hi, stage_m, grade_frac, is_stop, step_substeps, p, m_c_rates, m_prefactor,
-    terminal_cost_usd, light_stage, arc_k_lo, stop_usd, launch_usd, rest_usd,
+    band_lo, band_hi, stage_grade, step_usd, is_stop, terminal_cost_usd, light_stage, arc_k_lo, stop_usd, launch_usd, rest_usd,
 ):
     """
     Lower bounds on the cost still to pay, for the pruning of ``forward_pass``: ``(lb (K + 1, n_v), halt_lb (n_l,))``.
@@ -95,22 +86,18 @@ def cost_to_go_bounds(
     ``halt_lb[l]`` is the same from the halt before light l. A relaxation of the DP, hence a valid bound,
     and consistent along every move (a backward DP on the same moves), which makes pruning with it exact.
     """
-    n_stage = grade_frac.shape[0]
-    n_v = speed_mps.shape[0]
+    n_stage = stage_grade.shape[0]
+    n_v = band_lo.shape[0]
     n_light = light_stage.shape[0]
     n_launch = launch_usd.shape[0]
     lb = np.full((n_stage + 1, n_v), np.inf)
     halt_lb = np.full(n_light, np.inf)
     lb[n_stage] = terminal_cost_usd
-    width = _max_band(band_lo, band_hi)
-    step_dt = np.empty((n_v, width))
-    step_usd = np.empty((n_v, width))
     light_of = np.full(n_stage + 1, -1, dtype=np.int64)
     for l in range(n_light):
         light_of[light_stage[l]] = l
     for k in range(n_stage - 1, -1, -1):
-        if k == n_stage - 1 or grade_frac[k] != grade_frac[k + 1]:
-            step_tables(speed_mps, band_lo, band_hi, stage_m, grade_frac[k], step_substeps, p, m_c_rates, m_prefactor, step_dt, step_usd)
+        g = stage_grade[k]
         l = light_of[k + 1]
         if l >= 0:  # every stage past light l is done: the halt before it launches to any of them within reach
             kl = k + 1
@@ -123,7 +110,7 @@ def cost_to_go_bounds(
         for i in range(n_v):
             best = np.inf
             for j in range(band_hi[i] - band_lo[i] + 1):
-                best = min(best, step_usd[i, j] + lb[k + 1, band_lo[i] + j])
+                best = min(best, step_usd[g, i, j] + lb[k + 1, band_lo[i] + j])
             lb[k, i] = best
         for l in range(n_light):
             kl = light_stage[l]
@@ -157,7 +144,9 @@ def forward_pass(
     band_lo,
     band_hi,
     stage_m,
-    grade_frac,
+    stage_grade,
+    step_dt_s,
+    step_usd,
     stop_red_start_s,
     stop_red_s,
     stop_cycle_s,
@@ -166,7 +155,6 @@ def forward_pass(
     bin_s,
     dwell_s,
     allow_dwell,
-    step_substeps,
     t_max_s,
     t_rem_min_s,
     i_start,
@@ -197,10 +185,9 @@ def forward_pass(
     """
     Forward DP over distance stages with labels carrying exact arrival times, plus exact stop arcs.
 
-    Each transition is priced in ``step_substeps`` equal time steps (``arc_cost_usd``).
-
     Shapes: ``speed_mps`` (n_v,); ``band_lo/band_hi`` (n_v,) next-speed index range allowed by the
-    acceleration limits; ``grade_frac`` (K,); ``stop_*``/``is_stop``/``t_lo_s`` (K + 1,);
+    acceleration limits; ``step_dt_s``/``step_usd`` (n_grades, n_v, widest band) the moves of a stage
+    (``step_tables``), ``stage_grade`` (K,) which of them each stage uses; ``stop_*``/``is_stop``/``t_lo_s`` (K + 1,);
     ``t_rem_min_s`` (K + 1, n_v); outputs ``cost_usd``, ``time_s``, ``parent`` (K + 1, n_v, n_bins).
 
     Only the bins ``[occ_lo[k, i], occ_hi[k, i]]`` of a row are valid (the caller passes ``cost_usd``, ``time_s``,
@@ -228,7 +215,7 @@ def forward_pass(
     bounds every cell then holds exactly what it holds without pruning, or nothing when that label's cost
     plus its bound exceeds the limit: if the optimum found is <= ``upper_bound_usd`` it is the unpruned optimum.
     """
-    n_stage = cost_usd.shape[0] - 1
+    n_stage = stage_grade.shape[0]
     n_v = speed_mps.shape[0]
     n_bins = cost_usd.shape[2]
     n_light = light_stage.shape[0]
@@ -238,15 +225,11 @@ def forward_pass(
     # standstill: only accessories draw power (linear in time)
     idle_cost = step_cost_usd(p[I_AUX], dwell_s, p, m_c_rates, m_prefactor)
     idle_per_s = step_cost_usd(p[I_AUX], 1.0, p, m_c_rates, m_prefactor)
-    max_band = _max_band(band_lo, band_hi)
-    step_dt = np.empty((n_v, max_band))
-    step_usd = np.empty((n_v, max_band))
     light_of = np.full(n_stage + 1, -1, dtype=np.int64)
     for l in range(n_light):
         light_of[light_stage[l]] = l
     for k in range(n_stage):
-        if k == 0 or grade_frac[k] != grade_frac[k - 1]:  # transition table: once per distinct grade
-            step_tables(speed_mps, band_lo, band_hi, stage_m, grade_frac[k], step_substeps, p, m_c_rates, m_prefactor, step_dt, step_usd)
+        step_dt, step_cost = step_dt_s[stage_grade[k]], step_usd[stage_grade[k]]
         # a light at this stage: its standstill is complete; wait there, then launch past the line
         l = light_of[k]
         if l >= 0:
@@ -381,7 +364,7 @@ def forward_pass(
                 if dt == np.inf:
                     continue
                 i2 = band_lo[i] + j
-                step = step_usd[i, j]
+                step = step_cost[i, j]
                 slack = t_max_s + LATE_TOL_S - t_rem_min_s[k2, i2]
                 bound = upper_bound_usd - lower_bound_usd[k2, i2] - step
                 cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]

@@ -36,7 +36,7 @@ import numpy as np
 
 from advisory.evaluation.endstate import reacceleration_penalty
 from advisory.physics.model import I_AUX, arc_cost_usd, pack, step_cost_usd, step_wheel_power_w
-from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, cost_to_go_bounds, count_labels, forward_pass
+from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, cost_to_go_bounds, count_labels, forward_pass, step_tables
 from advisory.physics.params import ModelParams, VehicleParams
 from advisory.drivers.regular import time_to_cover_s
 from advisory.signals import Scenario
@@ -141,6 +141,9 @@ class DPProblem:
     band_lo: np.ndarray
     band_hi: np.ndarray
     grade_frac: np.ndarray
+    stage_grade: np.ndarray
+    step_dt_s: np.ndarray
+    step_usd: np.ndarray
     stop_red_start_s: np.ndarray
     stop_red_s: np.ndarray
     stop_cycle_s: np.ndarray
@@ -191,9 +194,7 @@ def build_problem(
     speed = np.unique(np.append(speed_nodes_mps, scenario.initial_speed_mps))
     if speed[0] < 0 or speed[-1] > v_lim + 1e-12:
         raise ValueError("speed nodes must lie in [0, speed limit]")
-    v2 = speed**2
-    band_lo = np.searchsorted(v2, v2 - 2 * grid.brake_max_mps2 * ds - 1e-9, side="left").astype(np.int64)
-    band_hi = (np.searchsorted(v2, v2 + 2 * grid.accel_max_mps2 * ds + 1e-9, side="right") - 1).astype(np.int64)
+    band_lo, band_hi = _bands(speed, grid)
     red_start, red_s, cycle = np.zeros(n_stage + 1), np.ones(n_stage + 1), np.full(n_stage + 1, 2.0)
     is_stop = np.zeros(n_stage + 1, dtype=np.bool_)
     for light in scenario.signals:
@@ -205,15 +206,17 @@ def build_problem(
     t_lo = x / v_lim - 1e-9
     remaining = scenario.zone_length_m - x
     t_rem = time_to_cover_s(remaining[:, None], speed[None, :], grid.accel_max_mps2, v_lim)
-    n_bins = int(np.ceil((t_max_s - scenario.zone_length_m / v_lim) / grid.time_bin_s)) + 2
+    n_bins = _n_bins(scenario, t_max_s, grid)
     if n_bins < 2:
         raise InfeasibleError(f"time limit {t_max_s:.3f} s is below the fastest possible {scenario.zone_length_m / v_lim:.3f} s")
     pen = reacceleration_penalty(speed, params, v_lim, grid.accel_max_mps2)
     arcs = _stop_arcs(scenario, params, grid, speed, n_stage) if grid.stop_arcs else _no_arcs(speed.size)
-    p, rates, pref = pack(params)
     grade = np.zeros(n_stage)
+    grades, stage_grade = np.unique(grade, return_inverse=True)
+    moves = [_step_tables(params, grid, tuple(speed), float(g)) for g in grades]
+    step_dt, step_usd = np.stack([m[0] for m in moves]), np.stack([m[1] for m in moves])
     lb, halt_lb = cost_to_go_bounds(
-        speed, band_lo, band_hi, ds, grade, is_stop, grid.step_substeps, p, rates, pref, np.asarray(pen.cost_usd, dtype=float),
+        band_lo, band_hi, stage_grade, step_usd, is_stop, np.asarray(pen.cost_usd, dtype=float),
         arcs["light_stage"], arcs["arc_k_lo"], arcs["stop_usd"], arcs["launch_usd"], arcs["rest_usd"],
     )
     return DPProblem(
@@ -224,6 +227,9 @@ def build_problem(
         band_lo=band_lo,
         band_hi=band_hi,
         grade_frac=grade,
+        stage_grade=stage_grade.astype(np.int64),
+        step_dt_s=step_dt,
+        step_usd=step_usd,
         stop_red_start_s=red_start,
         stop_red_s=red_s,
         stop_cycle_s=cycle,
@@ -241,6 +247,11 @@ def build_problem(
     )
 
 
+def _n_bins(scenario: Scenario, t_max_s: float, grid: GridSpec) -> int:
+    """Time bins from the fastest possible arrival to the time limit (at every stage), with a spare one."""
+    return int(np.ceil((t_max_s - scenario.zone_length_m / scenario.speed_limit_mps) / grid.time_bin_s)) + 2
+
+
 def arc_table(v0_mps, v1_mps, distance_m, params: ModelParams, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
     """
     Duration [s] and cost [$] of constant-acceleration arcs from ``v0`` to ``v1`` over ``distance_m`` (broadcast).
@@ -254,6 +265,27 @@ def arc_table(v0_mps, v1_mps, distance_m, params: ModelParams, n_steps: int) -> 
     p, rates, pref = pack(params)
     cost = arc_cost_usd(v0, v1, np.where(moving, total, 1.0), 0.0, n_steps, p, rates, pref)
     return total, np.where(moving, cost, np.inf)
+
+
+def _bands(speed: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Index range of the next speeds reachable over one stage within the acceleration limits, per speed node."""
+    v2, ds = speed**2, grid.stage_m
+    band_lo = np.searchsorted(v2, v2 - 2 * grid.brake_max_mps2 * ds - 1e-9, side="left").astype(np.int64)
+    band_hi = (np.searchsorted(v2, v2 + 2 * grid.accel_max_mps2 * ds + 1e-9, side="right") - 1).astype(np.int64)
+    return band_lo, band_hi
+
+
+@lru_cache(maxsize=32)
+def _step_tables(params: ModelParams, grid: GridSpec, speed: tuple[float, ...], grade_frac: float) -> tuple[np.ndarray, np.ndarray]:
+    """Duration [s] and cost [$] of every stage move on this grade, (n_v, widest band): computed once and shared
+    by the cases of a study that use the same vehicle and grid (the physics does not depend on the lights)."""
+    v = np.asarray(speed)
+    band_lo, band_hi = _bands(v, grid)
+    width = int((band_hi - band_lo).max()) + 1
+    step_dt, step_usd = np.full((v.size, width), np.inf), np.full((v.size, width), np.inf)
+    p, rates, pref = pack(params)
+    step_tables(v, band_lo, band_hi, grid.stage_m, grade_frac, grid.step_substeps, p, rates, pref, step_dt, step_usd)
+    return step_dt, step_usd
 
 
 def _no_arcs(n_v: int) -> dict:
@@ -318,8 +350,8 @@ def _kernel_args(prob: DPProblem):
     p, rates, pref = pack(prob.params)
     g = prob.grid
     return (
-        prob.speed_mps, prob.band_lo, prob.band_hi, g.stage_m, prob.grade_frac, prob.stop_red_start_s,
-        prob.stop_red_s, prob.stop_cycle_s, prob.is_stop, prob.t_lo_s, g.time_bin_s, g.dwell_s, g.allow_dwell, g.step_substeps,
+        prob.speed_mps, prob.band_lo, prob.band_hi, g.stage_m, prob.stage_grade, prob.step_dt_s, prob.step_usd, prob.stop_red_start_s,
+        prob.stop_red_s, prob.stop_cycle_s, prob.is_stop, prob.t_lo_s, g.time_bin_s, g.dwell_s, g.allow_dwell,
         prob.t_max_s, prob.t_rem_min_s, prob.i_start, p, rates, pref, prob.light_stage, prob.arc_k_lo,
         prob.stop_dt_s, prob.stop_usd, prob.launch_dt_s, prob.launch_usd, prob.launch_cross_s, prob.rest_dt_s, prob.rest_usd,
     )
@@ -374,26 +406,60 @@ def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=No
 
 
 PRUNE_MARGINS = (0.05, 0.3, 1.0)
-"""Pruning limits tried in turn, as fractions above the bound on the whole trip: the first whose optimum lies
-within its limit is the exact optimum (``_kernels.forward_pass``), else the next one, and finally no limit."""
+"""Pruning limits tried in turn when no estimate of the optimum is at hand, as fractions above the bound on the
+whole trip; the first whose optimum lies within its limit is the exact optimum, else the next one, then none."""
+
+COARSE_LEVELS = 2
+"""Estimates of the optimum come from the same problem with time bins (and dwell) 2, 4, ... 2^COARSE_LEVELS
+times wider, solved coarsest first (each estimating the next): a few per cent of the work of the full pass."""
+
+
+def _pass(prob: DPProblem, limit_usd: float) -> DPSolution | None:
+    """One forward pass pruned at ``limit_usd`` (total cost); None when its optimum is not within the limit."""
+    cost, time, parent, s_cost, s_time, s_parent, occ_lo, occ_hi = _empty_tables(prob)
+    forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd,
+                 prob.halt_bound_usd, min(limit_usd, np.finfo(float).max), occ_lo, occ_hi)
+    return _read_solution(prob, cost, time, parent, s_time, s_parent, (occ_lo, occ_hi), limit_usd)
+
+
+def _solve_pruned(prob: DPProblem, estimate_usd: float | None) -> DPSolution:
+    """Exact optimum, pruning at ``estimate_usd`` first (if given), then at the limits of ``PRUNE_MARGINS``, then none."""
+    bound0 = float(prob.lower_bound_usd[0, prob.i_start])
+    limits = [bound0 + m * abs(bound0) for m in PRUNE_MARGINS] if np.isfinite(bound0) else []
+    if estimate_usd is not None:
+        limits = [estimate_usd * (1 + 1e-9)] + [x for x in limits if x > estimate_usd]
+    for limit in [*limits, np.inf]:
+        sol = _pass(prob, limit)
+        if sol is not None:
+            return sol
+    raise AssertionError("unreachable: the unpruned pass always returns")
+
+
+def _coarser(prob: DPProblem, factor: int) -> DPProblem:
+    """The same problem with time bins and dwell ``factor`` times wider (everything else shared)."""
+    grid = replace(prob.grid, time_bin_s=prob.grid.time_bin_s * factor, dwell_s=prob.grid.dwell_s * factor)
+    return replace(prob, grid=grid, n_bins=_n_bins(prob.scenario, prob.t_max_s, grid))
 
 
 def solve_problem(prob: DPProblem, prune: bool = True) -> DPSolution:
     """Run the numba forward pass on a built problem and read off the optimal trajectory.
 
-    With ``prune``, labels that cannot finish within a limit on the total cost are dropped (exact: the result
-    is the same as without; see ``PRUNE_MARGINS``).
+    With ``prune`` (exact: the result is that of the full pass), labels that cannot finish within a limit on the
+    total cost are dropped; the limit is the optimum of the problem with coarser time bins (``COARSE_LEVELS``),
+    which is almost always a little above this one's, and falls back to looser limits when it is not.
     """
-    bound0 = float(prob.lower_bound_usd[0, prob.i_start])
-    limits = [bound0 + m * abs(bound0) for m in PRUNE_MARGINS] if prune and np.isfinite(bound0) else []
-    for limit in [*limits, np.inf]:
-        cost, time, parent, s_cost, s_time, s_parent, occ_lo, occ_hi = _empty_tables(prob)
-        forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd,
-                     prob.halt_bound_usd, min(limit, np.finfo(float).max), occ_lo, occ_hi)
-        sol = _read_solution(prob, cost, time, parent, s_time, s_parent, (occ_lo, occ_hi), limit)
-        if sol is not None:
-            return sol
-    raise AssertionError("unreachable: the unpruned pass always returns")
+    if not prune:
+        return _pass(prob, np.inf)
+    estimate = None
+    for level in range(COARSE_LEVELS, 0, -1):
+        coarse = _coarser(prob, 2**level)
+        if coarse.n_bins < 4:
+            continue
+        try:
+            estimate = _solve_pruned(coarse, estimate).cost_usd
+        except InfeasibleError:  # too coarse to find a path along the time limit: no estimate from it
+            estimate = None
+    return _solve_pruned(prob, estimate)
 
 
 def time_limit_s(regular: Trajectory, params: ModelParams, scenario: Scenario, grid: GridSpec) -> float:
