@@ -358,6 +358,9 @@ def forward_pass(
                 continue
             b_lo, b_hi = occ_lo[k, i], occ_hi[k, i] + 1
             cost_row, time_row = cost_usd[k, i], time_s[k, i]
+            row_min = np.inf
+            for b in range(b_lo, b_hi):
+                row_min = min(row_min, cost_row[b])
             base = (k * n_v + i) * n_bins
             for j in range(band_hi[i] - band_lo[i] + 1):
                 dt = step_dt[i, j]
@@ -367,20 +370,22 @@ def forward_pass(
                 step = step_cost[i, j]
                 slack = t_max_s + LATE_TOL_S - t_rem_min_s[k2, i2]
                 bound = upper_bound_usd - lower_bound_usd[k2, i2] - step
+                if row_min > bound:  # no label of this row can finish within the limit this way
+                    continue
                 cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]
                 lo2, hi2 = occ_lo[k2, i2], occ_hi[k2, i2]
-                for b in range(b_lo, b_hi):
+                for b in range(b_lo, b_hi):  # times ascend with the bins: past the time limit, stop
                     c0 = cost_row[b]
                     if c0 > bound:  # also skips empty cells (inf)
                         continue
                     t2 = time_row[b] + dt
                     if t2 > slack:
-                        continue
+                        break
                     if stop_next and is_red(t2, red_start, red_len, cycle):
                         continue
                     b2 = int((t2 - t_lo2) * inv_bin)
                     if b2 >= n_bins:
-                        continue
+                        break
                     if hi2 < 0:  # open the cell (see ``_open``)
                         cost_next[b2] = np.inf
                         lo2 = hi2 = b2
