@@ -247,6 +247,11 @@ def build_problem(
     )
 
 
+def _divides(scenario: Scenario, stage_m: float) -> bool:
+    """Whether stages of ``stage_m`` fit the zone and put every stop line on a stage."""
+    return all(abs(x / stage_m - round(x / stage_m)) < 1e-9 for x in (scenario.zone_length_m, *(s.position_m for s in scenario.signals)))
+
+
 def _n_bins(scenario: Scenario, t_max_s: float, grid: GridSpec) -> int:
     """Time bins from the fastest possible arrival to the time limit (at every stage), with a spare one."""
     return int(np.ceil((t_max_s - scenario.zone_length_m / scenario.speed_limit_mps) / grid.time_bin_s)) + 2
@@ -451,6 +456,12 @@ def solve_problem(prob: DPProblem, prune: bool = True) -> DPSolution:
     if not prune:
         return _pass(prob, np.inf)
     estimate = None
+    coarse_stage = replace(prob.grid, stage_m=2 * prob.grid.stage_m)
+    if _divides(prob.scenario, coarse_stage.stage_m):  # the problem on stages twice as long: a close estimate, cheaply
+        try:
+            return _solve_pruned(prob, solve_problem(build_problem(prob.scenario, prob.params, coarse_stage, prob.t_max_s)).cost_usd)
+        except InfeasibleError:
+            pass
     for level in range(COARSE_LEVELS, 0, -1):
         coarse = _coarser(prob, 2**level)
         if coarse.n_bins < 4:
