@@ -73,57 +73,81 @@ def step_tables(speed_mps, band_lo, band_hi, stage_m, grade_frac, step_substeps,
             step_usd[i, j] = arc_cost_usd(v, v2, dt, grade_frac, step_substeps, p, m_c_rates, m_prefactor)
 
 
+@njit(cache=True, inline="always")
+def _priced(usd, dt_s, lam):
+    """Cost of a move plus ``lam`` per second of it (inf stays inf, also with ``lam`` = 0)."""
+    return usd + lam * dt_s if usd < np.inf else np.inf
+
+
 @njit(cache=True)
 def cost_to_go_bounds(
-    band_lo, band_hi, stage_grade, step_usd, is_stop, terminal_cost_usd, light_stage, arc_k_lo, stop_usd, launch_usd, rest_usd,
+    band_lo, band_hi, stage_grade, step_dt_s, step_usd, terminal_cost_usd, terminal_time_s, is_stop, light_stage, arc_k_lo,
+    stop_dt_s, stop_usd, launch_dt_s, launch_usd, rest_dt_s, rest_usd, lam_usd_per_s,
 ):
     """
-    Lower bounds on the cost still to pay, for the pruning of ``forward_pass``: ``(lb (K + 1, n_v), halt_lb (n_l,))``.
+    Bounds on the cost still to pay, for the pruning of ``forward_pass``: ``(w (n_lam, K + 1, n_v), halt_w (n_lam, n_l))``.
 
-    ``lb[k, i]`` is the cheapest completion from stage k at speed i to the end state (terminal cost included)
-    over every move ``forward_pass`` allows (stage moves, stop arcs, launches, timed launches) with time, red
-    lights and the trip-time limit ignored; waits are left out (they cost >= 0: accessories only).
-    ``halt_lb[l]`` is the same from the halt before light l. A relaxation of the DP, hence a valid bound,
-    and consistent along every move (a backward DP on the same moves), which makes pruning with it exact.
+    ``w[n, k, i]`` is the cheapest completion from stage k at speed i to the end state of cost + ``lam[n]`` x its
+    duration (terminal cost and time included), over every move ``forward_pass`` allows (stage moves, stop arcs,
+    launches, timed launches) with red lights and the trip-time limit ignored and waits left out (they cost and
+    last >= 0); ``halt_w[n, l]`` the same from the halt before light l. A completion of duration D costs at least
+    ``w - lam D`` (Lagrangian relaxation of the time limit), so a label at time t, which has at most
+    ``t_max - t`` left, still has to pay at least ``max_n (w[n] - lam[n] (t_max - t))``; with ``lam = 0`` this is
+    the time-free bound. A backward DP on the same moves: consistent along every move.
     """
+    n_lam = lam_usd_per_s.shape[0]
     n_stage = stage_grade.shape[0]
     n_v = band_lo.shape[0]
     n_light = light_stage.shape[0]
     n_launch = launch_usd.shape[0]
-    lb = np.full((n_stage + 1, n_v), np.inf)
-    halt_lb = np.full(n_light, np.inf)
-    lb[n_stage] = terminal_cost_usd
+    lb = np.full((n_lam, n_stage + 1, n_v), np.inf)
+    halt_lb = np.full((n_lam, n_light), np.inf)
     light_of = np.full(n_stage + 1, -1, dtype=np.int64)
     for l in range(n_light):
         light_of[light_stage[l]] = l
-    for k in range(n_stage - 1, -1, -1):
-        g = stage_grade[k]
-        l = light_of[k + 1]
-        if l >= 0:  # every stage past light l is done: the halt before it launches to any of them within reach
-            kl = k + 1
-            k_end = n_stage if l + 1 == n_light else light_stage[l + 1]
-            for m in range(n_launch):
-                if kl + 1 + m > k_end:
-                    break
-                for j in range(n_v):
-                    halt_lb[l] = min(halt_lb[l], launch_usd[m, j] + lb[kl + 1 + m, j])
+    for n in range(n_lam):
+        lam = lam_usd_per_s[n]
+        w, halt_w = lb[n], halt_lb[n]
         for i in range(n_v):
-            best = np.inf
-            for j in range(band_hi[i] - band_lo[i] + 1):
-                best = min(best, step_usd[g, i, j] + lb[k + 1, band_lo[i] + j])
-            lb[k, i] = best
-        for l in range(n_light):
-            kl = light_stage[l]
-            if not (arc_k_lo[l] <= k < kl):
-                continue
-            for i in range(n_v):  # a stop arc to the halt
-                lb[k, i] = min(lb[k, i], stop_usd[kl - k - 1, i] + halt_lb[l])
-            if not is_stop[k]:  # a timed launch from a standstill here
+            w[n_stage, i] = _priced(terminal_cost_usd[i], terminal_time_s[i], lam)
+        for k in range(n_stage - 1, -1, -1):
+            g = stage_grade[k]
+            l = light_of[k + 1]
+            if l >= 0:  # every stage past light l is done: the halt before it launches to any of them within reach
+                kl = k + 1
                 k_end = n_stage if l + 1 == n_light else light_stage[l + 1]
-                for k2 in range(kl + 1, min(k_end, k + rest_usd.shape[0]) + 1):
-                    for j in range(1, n_v):
-                        lb[k, 0] = min(lb[k, 0], rest_usd[k2 - k - 1, j] + lb[k2, j])
+                for m in range(n_launch):
+                    if kl + 1 + m > k_end:
+                        break
+                    for j in range(n_v):
+                        halt_w[l] = min(halt_w[l], _priced(launch_usd[m, j], launch_dt_s[m, j], lam) + w[kl + 1 + m, j])
+            for i in range(n_v):
+                best = np.inf
+                for j in range(band_hi[i] - band_lo[i] + 1):
+                    best = min(best, _priced(step_usd[g, i, j], step_dt_s[g, i, j], lam) + w[k + 1, band_lo[i] + j])
+                w[k, i] = best
+            for l in range(n_light):
+                kl = light_stage[l]
+                if not (arc_k_lo[l] <= k < kl):
+                    continue
+                for i in range(n_v):  # a stop arc to the halt
+                    w[k, i] = min(w[k, i], _priced(stop_usd[kl - k - 1, i], stop_dt_s[kl - k - 1, i], lam) + halt_w[l])
+                if not is_stop[k]:  # a timed launch from a standstill here
+                    k_end = n_stage if l + 1 == n_light else light_stage[l + 1]
+                    for k2 in range(kl + 1, min(k_end, k + rest_usd.shape[0]) + 1):
+                        for j in range(1, n_v):
+                            w[k, 0] = min(w[k, 0], _priced(rest_usd[k2 - k - 1, j], rest_dt_s[k2 - k - 1, j], lam) + w[k2, j])
     return lb, halt_lb
+
+
+@njit(cache=True, inline="always")
+def _beyond(c, t, bound, k, i, lam_usd_per_s, t_max_s, limit_usd):
+    """Whether a label (cost c, time t) at (k, i) cannot finish within ``limit_usd``, by the bounds
+    ``bound[n, k, i] - lam[n] (t_max - t)`` of ``cost_to_go_bounds``."""
+    for n in range(lam_usd_per_s.shape[0]):
+        if c + bound[n, k, i] - lam_usd_per_s[n] * (t_max_s + LATE_TOL_S - t) > limit_usd:
+            return True
+    return False
 
 
 @njit(cache=True)
@@ -178,6 +202,7 @@ def forward_pass(
     s_parent,
     lower_bound_usd,
     halt_bound_usd,
+    lam_usd_per_s,
     upper_bound_usd,
     occ_lo,
     occ_hi,
@@ -210,10 +235,10 @@ def forward_pass(
     (``rest_dt_s``/``rest_usd`` (N, n_v): from rest over k2 - k stages), so a car that halts early crosses the
     line with speed exactly as it turns green. Red checks and the time limit use exact times throughout.
 
-    **Pruning**: a label whose cost plus ``lower_bound_usd[k, i]`` (``halt_bound_usd[l]`` at a halt; the cheapest
-    completion, see ``cost_to_go_bounds``) exceeds ``upper_bound_usd`` (finite) is dropped. With consistent
-    bounds every cell then holds exactly what it holds without pruning, or nothing when that label's cost
-    plus its bound exceeds the limit: if the optimum found is <= ``upper_bound_usd`` it is the unpruned optimum.
+    **Pruning**: a label at time t whose cost plus ``max_n lower_bound_usd[n, k, i] - lam[n] (t_max - t)``
+    (``halt_bound_usd[n, l]`` at a halt; see ``cost_to_go_bounds``) exceeds ``upper_bound_usd`` (finite) cannot
+    finish within it and is dropped. No path within the limit is lost; as labels are binned, a bin may then
+    keep another of its labels than it would without pruning (one whose bound, at an earlier time, is lower).
     """
     n_stage = stage_grade.shape[0]
     n_v = speed_mps.shape[0]
@@ -221,6 +246,8 @@ def forward_pass(
     n_light = light_stage.shape[0]
     n_launch = launch_dt_s.shape[0]
     inv_bin = 1.0 / bin_s
+    n_lam = lam_usd_per_s.shape[0]
+    halt_b = halt_bound_usd.reshape((n_lam, n_light, 1))  # indexed like lower_bound_usd
     _relax(cost_usd, time_s, parent, occ_lo, occ_hi, 0, i_start, 0, 0.0, 0.0, -1)
     # standstill: only accessories draw power (linear in time)
     idle_cost = step_cost_usd(p[I_AUX], dwell_s, p, m_c_rates, m_prefactor)
@@ -240,7 +267,7 @@ def forward_pass(
                     continue
                 t2 = s_time_s[l, b] + dwell_s
                 b2 = int((t2 - t_lo_s[k]) * inv_bin)
-                if c0 + idle_cost + halt_bound_usd[l] > upper_bound_usd:
+                if _beyond(c0 + idle_cost, t2, halt_b, l, 0, lam_usd_per_s, t_max_s, upper_bound_usd):
                     continue
                 if b2 < n_bins and t2 + t_rem_min_s[k, 0] <= t_max_s + LATE_TOL_S and c0 + idle_cost < s_cost_usd[l, b2]:
                     s_cost_usd[l, b2] = c0 + idle_cost
@@ -269,7 +296,7 @@ def forward_pass(
                         if is_stop[k2] and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
                             continue
                         c2 = c0 + wait * idle_per_s + launch_usd[m, j]
-                        if c2 + lower_bound_usd[k2, j] > upper_bound_usd:
+                        if _beyond(c2, t2, lower_bound_usd, k2, j, lam_usd_per_s, t_max_s, upper_bound_usd):
                             continue
                         b2 = int((t2 - t_lo_s[k2]) * inv_bin)
                         if b2 < n_bins:
@@ -281,7 +308,9 @@ def forward_pass(
                 c0 = cost_usd[k, 0, b]
                 if c0 < np.inf:
                     t2 = time_s[k, 0, b] + dwell_s
-                    if t2 + t_rem_min_s[k, 0] <= t_max_s + LATE_TOL_S and c0 + idle_cost + lower_bound_usd[k, 0] <= upper_bound_usd:
+                    if t2 + t_rem_min_s[k, 0] <= t_max_s + LATE_TOL_S and not _beyond(
+                        c0 + idle_cost, t2, lower_bound_usd, k, 0, lam_usd_per_s, t_max_s, upper_bound_usd
+                    ):
                         b2 = int((t2 - t_lo_s[k]) * inv_bin)
                         if b2 < n_bins:
                             _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k, 0, b2, c0 + idle_cost, t2, (k * n_v) * n_bins + b)
@@ -317,7 +346,7 @@ def forward_pass(
                             if is_stop[k2] and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
                                 continue
                             c2 = c0 + wait * idle_per_s + rest_usd[k2 - k - 1, j]
-                            if c2 + lower_bound_usd[k2, j] > upper_bound_usd:
+                            if _beyond(c2, t2, lower_bound_usd, k2, j, lam_usd_per_s, t_max_s, upper_bound_usd):
                                 continue
                             b2 = int((t2 - t_lo_s[k2]) * inv_bin)
                             if b2 < n_bins:
@@ -342,7 +371,7 @@ def forward_pass(
                     if t2 + t_rem_min_s[kl, 0] > t_max_s + LATE_TOL_S:
                         continue
                     c2 = c0 + step
-                    if c2 + halt_bound_usd[l] > upper_bound_usd:
+                    if _beyond(c2, t2, halt_b, l, 0, lam_usd_per_s, t_max_s, upper_bound_usd):
                         continue
                     b2 = int((t2 - t_lo_s[kl]) * inv_bin)
                     if b2 < n_bins and c2 < s_cost_usd[l, b2]:
@@ -369,7 +398,7 @@ def forward_pass(
                 i2 = band_lo[i] + j
                 step = step_cost[i, j]
                 slack = t_max_s + LATE_TOL_S - t_rem_min_s[k2, i2]
-                bound = upper_bound_usd - lower_bound_usd[k2, i2] - step
+                bound = upper_bound_usd - lower_bound_usd[0, k2, i2] - step  # the time-free bound (lam[0] = 0)
                 if row_min > bound:  # no label of this row can finish within the limit this way
                     continue
                 cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]
@@ -382,6 +411,8 @@ def forward_pass(
                     if t2 > slack:
                         break
                     if stop_next and is_red(t2, red_start, red_len, cycle):
+                        continue
+                    if n_lam > 1 and _beyond(c0 + step, t2, lower_bound_usd, k2, i2, lam_usd_per_s, t_max_s, upper_bound_usd):
                         continue
                     b2 = int((t2 - t_lo2) * inv_bin)
                     if b2 >= n_bins:

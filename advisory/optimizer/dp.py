@@ -130,6 +130,12 @@ class InfeasibleError(RuntimeError):
     """No path on the grid meets the constraints (with the reason)."""
 
 
+TIME_PRICES_USD_PER_S = np.array([0.0, 2e-5, 1e-4, 5e-4, 2.5e-3])
+"""Prices of time in the pruning bounds (Lagrangian relaxation of the trip-time limit, ``_kernels.cost_to_go_bounds``):
+0 gives the time-free bound; the others let a label that has little time left be bounded by the cost of hurrying.
+[$/s] (the accessories alone cost ~1e-5 $/s)"""
+
+
 @dataclass(frozen=True, slots=True)
 class DPProblem:
     """A scenario laid on a grid: everything the kernel needs, plus what is needed to read its result."""
@@ -166,6 +172,10 @@ class DPProblem:
     rest_usd: np.ndarray
     lower_bound_usd: np.ndarray
     halt_bound_usd: np.ndarray
+
+    def bound_at_usd(self, k: int, i: int, t_s: float) -> float:
+        """Least cost still to pay from stage k at speed i at time ``t_s`` (``_kernels.cost_to_go_bounds``)."""
+        return float(np.max(self.lower_bound_usd[:, k, i] - TIME_PRICES_USD_PER_S * (self.t_max_s + LATE_TOL_S - t_s)))
 
     @property
     def n_stages(self) -> int:
@@ -216,8 +226,9 @@ def build_problem(
     moves = [_step_tables(params, grid, tuple(speed), float(g)) for g in grades]
     step_dt, step_usd = np.stack([m[0] for m in moves]), np.stack([m[1] for m in moves])
     lb, halt_lb = cost_to_go_bounds(
-        band_lo, band_hi, stage_grade, step_usd, is_stop, np.asarray(pen.cost_usd, dtype=float),
-        arcs["light_stage"], arcs["arc_k_lo"], arcs["stop_usd"], arcs["launch_usd"], arcs["rest_usd"],
+        band_lo, band_hi, stage_grade, step_dt, step_usd, np.asarray(pen.cost_usd, dtype=float), np.asarray(pen.time_s, dtype=float),
+        is_stop, arcs["light_stage"], arcs["arc_k_lo"], arcs["stop_dt_s"], arcs["stop_usd"], arcs["launch_dt_s"],
+        arcs["launch_usd"], arcs["rest_dt_s"], arcs["rest_usd"], TIME_PRICES_USD_PER_S,
     )
     return DPProblem(
         scenario=scenario,
@@ -422,14 +433,15 @@ times wider, solved coarsest first (each estimating the next): a few per cent of
 def _pass(prob: DPProblem, limit_usd: float) -> DPSolution | None:
     """One forward pass pruned at ``limit_usd`` (total cost); None when its optimum is not within the limit."""
     cost, time, parent, s_cost, s_time, s_parent, occ_lo, occ_hi = _empty_tables(prob)
-    forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd,
-                 prob.halt_bound_usd, min(limit_usd, np.finfo(float).max), occ_lo, occ_hi)
+    n = TIME_PRICES_USD_PER_S.size if np.isfinite(limit_usd) else 1  # no limit: no bounds to check
+    forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd[:n],
+                 prob.halt_bound_usd[:n], TIME_PRICES_USD_PER_S[:n], min(limit_usd, np.finfo(float).max), occ_lo, occ_hi)
     return _read_solution(prob, cost, time, parent, s_time, s_parent, (occ_lo, occ_hi), limit_usd)
 
 
 def _solve_pruned(prob: DPProblem, estimate_usd: float | None) -> DPSolution:
     """Exact optimum, pruning at ``estimate_usd`` first (if given), then at the limits of ``PRUNE_MARGINS``, then none."""
-    bound0 = float(prob.lower_bound_usd[0, prob.i_start])
+    bound0 = prob.bound_at_usd(0, prob.i_start, 0.0)
     limits = [bound0 + m * abs(bound0) for m in PRUNE_MARGINS] if np.isfinite(bound0) else []
     if estimate_usd is not None:
         limits = [estimate_usd * (1 + 1e-9)] + [x for x in limits if x > estimate_usd]
