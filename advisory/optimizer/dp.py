@@ -19,6 +19,14 @@ Formulation
   decide which of two paths to keep. A stop line may be crossed only at an exact time outside red, and
   the trip-time limit is checked on exact times: no rounding of time can let a path cheat a red light,
   and paths that run along the speed-limit boundary (the regular driver barely brakes) stay representable.
+* **Pruning**: a backward DP on the same moves, with lights and waits left out, bounds what a label still has to
+  pay, at several prices of time (a Lagrangian relaxation of the trip-time limit: a label with little time
+  left must hurry, which costs); a label that cannot finish within a limit on the total cost is dropped. The
+  limit is the optimum of the same problem on stages twice as long (or with coarser time bins), which lies a
+  little above this one's; when no path is found within it, looser limits follow, finally none. No path within
+  the limit is lost; a time bin then keeps its cheapest label that can still finish, which may differ from
+  the cheapest label of all (doomed by the time limit), so the result may differ from the unpruned DP's at
+  the level of the binning (within 0.05 % up, 0.2 % down on the study; ``solve_problem(prune=False)``).
 * **End state**: both drivers are compared back at the speed limit (``advisory.evaluation.endstate``): the terminal
   cost is the re-acceleration penalty, and its time part counts against the trip-time limit
   ``(T_regular + penalty time of the regular driver) · (1 + time_buffer_frac)``.
@@ -186,6 +194,10 @@ class DPProblem:
         return self.light_stage.shape[0]
 
 
+_BOUNDS: dict = {}
+"""Pruning bounds by vehicle, grid and geometry (``build_problem``)."""
+
+
 def build_problem(
     scenario: Scenario, params: ModelParams, grid: GridSpec, t_max_s: float, speed_nodes_mps: np.ndarray | None = None
 ) -> DPProblem:
@@ -225,11 +237,17 @@ def build_problem(
     grades, stage_grade = np.unique(grade, return_inverse=True)
     moves = [_step_tables(params, grid, tuple(speed), float(g)) for g in grades]
     step_dt, step_usd = np.stack([m[0] for m in moves]), np.stack([m[1] for m in moves])
-    lb, halt_lb = cost_to_go_bounds(
-        band_lo, band_hi, stage_grade, step_dt, step_usd, np.asarray(pen.cost_usd, dtype=float), np.asarray(pen.time_s, dtype=float),
-        is_stop, arcs["light_stage"], arcs["arc_k_lo"], arcs["stop_dt_s"], arcs["stop_usd"], arcs["launch_dt_s"],
-        arcs["launch_usd"], arcs["rest_dt_s"], arcs["rest_usd"], TIME_PRICES_USD_PER_S,
-    )
+    # the bounds do not depend on the lights' timings: cases that differ only there share them
+    key = (params, grid, speed.tobytes(), v_lim, grade.tobytes(), tuple(arcs["light_stage"]))
+    if key not in _BOUNDS:
+        if len(_BOUNDS) >= 64:
+            _BOUNDS.clear()
+        _BOUNDS[key] = cost_to_go_bounds(
+            band_lo, band_hi, stage_grade, step_dt, step_usd, np.asarray(pen.cost_usd, dtype=float), np.asarray(pen.time_s, dtype=float),
+            is_stop, arcs["light_stage"], arcs["arc_k_lo"], arcs["stop_dt_s"], arcs["stop_usd"], arcs["launch_dt_s"],
+            arcs["launch_usd"], arcs["rest_dt_s"], arcs["rest_usd"], TIME_PRICES_USD_PER_S,
+        )
+    lb, halt_lb = _BOUNDS[key]
     return DPProblem(
         scenario=scenario,
         grid=grid,
@@ -421,7 +439,7 @@ def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=No
     return DPSolution(prob, Trajectory(t, x, v), best, float(t[-1]), n_labels)
 
 
-PRUNE_MARGINS = (0.05, 0.3, 1.0)
+PRUNE_MARGINS = (0.1, 0.25, 0.45, 0.7, 1.0, 1.4, 2.0, 3.0)
 """Pruning limits tried in turn when no estimate of the optimum is at hand, as fractions above the bound on the
 whole trip; the first whose optimum lies within its limit is the exact optimum, else the next one, then none."""
 
