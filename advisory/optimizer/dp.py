@@ -458,11 +458,13 @@ def _pass(prob: DPProblem, limit_usd: float) -> DPSolution | None:
 
 
 def _solve_pruned(prob: DPProblem, estimate_usd: float | None) -> DPSolution:
-    """Exact optimum, pruning at ``estimate_usd`` first (if given), then at the limits of ``PRUNE_MARGINS``, then none."""
+    """The optimum, pruning at ``estimate_usd`` (if given) and a little above it first, then at the limits of
+    ``PRUNE_MARGINS``, then not at all: the first pass that finds a path within its limit answers."""
     bound0 = prob.bound_at_usd(0, prob.i_start, 0.0)
     limits = [bound0 + m * abs(bound0) for m in PRUNE_MARGINS] if np.isfinite(bound0) else []
     if estimate_usd is not None:
-        limits = [estimate_usd * (1 + 1e-9)] + [x for x in limits if x > estimate_usd]
+        near = [estimate_usd * (1 + m) for m in (1e-9, 3e-3, 1e-2, 3e-2)]  # the estimate is rarely far below
+        limits = near + [x for x in limits if x > near[-1]]
     for limit in [*limits, np.inf]:
         sol = _pass(prob, limit)
         if sol is not None:
