@@ -312,11 +312,11 @@ PRUNE_GRID = GridSpec(stage_m=20.0, time_bin_s=0.25, dwell_s=0.5)
 @pytest.mark.parametrize("case", [(15, 15, 800), (0, 0, 800), (-15, 15, 400), (-30, 0, 200), (0, -15, 400), (15, -30, 800)])
 def test_pruning_keeps_the_optimum(case):
     """Pruning drops only labels that cannot finish within the limit: the optimum is the unpruned one, or (where a
-    time bin then keeps another of its labels, one that can still finish) within 0.05 % above, 0.3 % below;
+    time bin then keeps another of its labels, one that can still finish) within 0.1 % above, 0.3 % below;
     the path obeys every constraint."""
     prob = _paper_problem(case, PRUNE_GRID)
     fast, full = solve_problem(prob), solve_problem(prob, prune=False)
-    assert full.cost_usd * (1 - 3e-3) <= fast.cost_usd <= full.cost_usd * (1 + 5e-4)
+    assert full.cost_usd * (1 - 3e-3) <= fast.cost_usd <= full.cost_usd * (1 + 1e-3)
     assert fast.n_labels < full.n_labels / 3  # and it did prune
     assert violations(fast.trajectory, prob.scenario) == []
     tr = fast.trajectory
@@ -332,7 +332,7 @@ def test_pruning_falls_back_when_the_limit_is_below_the_optimum():
     full = solve_problem(prob, prune=False)
     assert _pass(prob, full.cost_usd * 0.99) is None
     for estimate in (None, full.cost_usd * 0.5, full.cost_usd * 0.99, full.cost_usd, full.cost_usd * 3):
-        assert full.cost_usd * (1 - 3e-3) <= _solve_pruned(prob, estimate).cost_usd <= full.cost_usd * (1 + 5e-4)
+        assert full.cost_usd * (1 - 3e-3) <= _solve_pruned(prob, estimate).cost_usd <= full.cost_usd * (1 + 1e-3)
 
 
 @pytest.mark.parametrize("n", range(len(TIME_PRICES_USD_PER_S)))
