@@ -271,9 +271,14 @@ def build_problem(
         terminal_cost_usd=np.asarray(pen.cost_usd),
         terminal_time_s=np.asarray(pen.time_s),
         **arcs,
-        lower_bound_usd=lb - 1e-9 * np.abs(lb),  # a hair below, against rounding in the sums
-        halt_bound_usd=halt_lb - 1e-9 * np.abs(halt_lb),
+        lower_bound_usd=_a_hair_below(lb),
+        halt_bound_usd=_a_hair_below(halt_lb),
     )
+
+
+def _a_hair_below(bound: np.ndarray) -> np.ndarray:
+    """Bounds lowered by 1e-9 of themselves, against rounding in the sums (inf stays inf: no completion)."""
+    return np.where(np.isfinite(bound), bound - 1e-9 * np.abs(bound), bound)
 
 
 def _divides(scenario: Scenario, stage_m: float) -> bool:
