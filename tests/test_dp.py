@@ -367,3 +367,14 @@ def test_cost_to_go_bound_is_consistent_along_every_move(n):
             assert np.all(halt[l] <= priced(prob.launch_usd[k2 - kl - 1], prob.launch_dt_s[k2 - kl - 1]) + lb[k2] + tol)
     full = solve_problem(prob, prune=False)
     assert prob.bound_at_usd(0, prob.i_start, 0.0) <= full.cost_usd
+
+
+def test_bounds_of_states_that_cannot_finish_are_inf_not_nan():
+    """From rest, 10 m/s is out of reach in one 10 m stage at 2 m/s²: no completion, an infinite bound (a NaN would
+    silently turn pruning off), and the DP still solves."""
+    green = Scenario("green", (FixedTimeSignal(30.0, 10.0, 4.5, 20.0),), zone_length_m=50.0, speed_limit_mps=10.0, initial_speed_mps=10.0)
+    prob = build_problem(green, model_params(), GridSpec(stage_m=10.0, time_bin_s=1e-3, stop_arcs=False), 12.0,
+                         speed_nodes_mps=np.array([0.0, 8.0, 10.0]))
+    assert not np.isnan(prob.lower_bound_usd).any() and not np.isnan(prob.halt_bound_usd).any()
+    assert np.isinf(prob.lower_bound_usd[:, :-1, 0]).all()
+    assert solve_problem(prob).cost_usd == pytest.approx(solve_problem(prob, prune=False).cost_usd, rel=1e-12)

@@ -278,7 +278,10 @@ def build_problem(
 
 def _a_hair_below(bound: np.ndarray) -> np.ndarray:
     """Bounds lowered by 1e-9 of themselves, against rounding in the sums (inf stays inf: no completion)."""
-    return np.where(np.isfinite(bound), bound - 1e-9 * np.abs(bound), bound)
+    finite = np.isfinite(bound)
+    out = bound.copy()
+    out[finite] -= 1e-9 * np.abs(bound[finite])
+    return out
 
 
 def _divides(scenario: Scenario, stage_m: float) -> bool:
