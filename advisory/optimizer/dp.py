@@ -240,7 +240,7 @@ def build_problem(
     # the bounds do not depend on the lights' timings: cases that differ only there share them
     key = (params, grid, speed.tobytes(), v_lim, grade.tobytes(), tuple(arcs["light_stage"]))
     if key not in _BOUNDS:
-        if len(_BOUNDS) >= 64:
+        if len(_BOUNDS) >= 32:  # ~1 MB each at the study grid
             _BOUNDS.clear()
         _BOUNDS[key] = cost_to_go_bounds(
             band_lo, band_hi, stage_grade, step_dt, step_usd, np.asarray(pen.cost_usd, dtype=float), np.asarray(pen.time_s, dtype=float),
