@@ -7,13 +7,16 @@ Run: .venv/bin/python bench/bench_dp.py [--quick]
   ([0 0], s = 800 m) and a cell that slows for light 1 ([-15 15], s = 400 m). The finest grid (stage 5 m) is
   the reference ("converged"; the next halving needs ~10 GB of tables).
 * Matched accuracy: for [15 15] and [0 0] at s = 800 m, the cheapest grid of a ladder whose optimum is within
-  0.3 % of the reference, and its solve time (best of 3 after JIT, one core). Target < 0.1 s.
+  0.3 % of the reference, and its solve time (best of 5 after JIT, one core), pruned (the default) and as one
+  unpruned pass (the recursion alone, as before pruning), with their ratio. Target < 0.1 s.
 * The full study (64 cases x 3 variants) at the study grid on 2 processes (target < 10 s), its distance from
   the reference on the two cells above (target < 0.5 %), the DP tables of one solve and the peak RSS of a
   worker-sized process (target < 200 MB per solve).
-* The same problem solved by ``solve_numpy`` (the recursion in plain NumPy/Python, without stop arcs): ratio.
+* The same problem solved by ``solve_numpy`` (the recursion in plain NumPy/Python, without stop arcs or pruning)
+  and by one unpruned numba pass: ratio.
 
-The machine is shared (2 cores, 5 engineers): times vary by 2x from run to run.
+The machine is shared (2 cores, 3 engineers): times vary by 2x from run to run; the load average is printed
+beside the timings.
 """
 
 from __future__ import annotations
@@ -52,6 +55,10 @@ def problem(case, grid):
     return build_problem(sc, params, grid, time_limit_s(regular_driver(sc), params, sc, grid))
 
 
+def load() -> str:
+    return "load average %.1f" % os.getloadavg()[0]
+
+
 def best_time(fn, repeats=3):
     best, out = float("inf"), None
     for _ in range(repeats):
@@ -75,7 +82,7 @@ def main() -> None:
     solve_problem(problem(COASTING, COARSE))  # JIT / cache load
     factors = (1, 2) if quick else (1, 2, 4)
     ref: dict = {}
-    print("Convergence (cost in thousandths of a dollar; change vs the coarser grid; one core):")
+    print(f"Convergence (cost in thousandths of a dollar; change vs the coarser grid; one core; {load()}):")
     print(f"  {'case':18} {'stage m':>7} {'speeds':>6} {'bin s':>6} {'cost m$':>9} {'change':>8} {'solve s':>8} {'tables MB':>9}")
     for c in (COASTING, STOPPING, SLOWING):
         prev = None
@@ -88,14 +95,17 @@ def main() -> None:
             prev = ref[c] = s.cost_usd
     print(f"  reference ('converged') = the stage {COARSE.stage_m / factors[-1]:g} m row of each case")
 
-    print("\nMatched accuracy (within 0.3 % of the reference), one solve, best of 3 after JIT, one core (target < 0.1 s):")
+    print(f"\nMatched accuracy (within 0.3 % of the reference), one solve, best of 5 after JIT, one core (target < 0.1 s; {load()}):")
     for c in (COASTING, STOPPING):
         for g in LADDER:
             p = problem(c, g)
-            t, s = best_time(lambda p=p: solve_problem(p))
+            s = solve_problem(p)
             off = 100 * (s.cost_usd / ref[c] - 1)
             if abs(off) <= 0.3 or g is LADDER[-1]:
-                print(f"  {name(c):18} stage {g.stage_m:g} m, bins {g.time_bin_s:g} s: {off:+.2f} % from the reference in {t:.3f} s ({table_mb(p):.0f} MB of tables)")
+                t, s = best_time(lambda p=p: solve_problem(p), repeats=5)
+                t_full, full = best_time(lambda p=p: solve_problem(p, prune=False), repeats=5)
+                print(f"  {name(c):18} stage {g.stage_m:g} m, bins {g.time_bin_s:g} s: {off:+.2f} % from the reference in {t:.3f} s "
+                      f"(one unpruned pass {t_full:.3f} s, {t_full / t:.1f}x, {100 * (full.cost_usd / ref[c] - 1):+.2f} %; {table_mb(p):.0f} MB of tables)")
                 break
 
     print(f"\nStudy grid (stage {STUDY_GRID.stage_m:g} m, bins {STUDY_GRID.time_bin_s:g} s) against the reference (target < 0.5 %):")
@@ -104,18 +114,19 @@ def main() -> None:
         print(f"  {name(c):18} {100 * (solve_problem(p).cost_usd / ref[c] - 1):+.2f} %, tables {table_mb(p):.0f} MB")
 
     prob = problem(SLOWING, replace(COARSE, stop_arcs=False))
-    t_fast, sol = best_time(lambda: solve_problem(prob))
+    t_fast, sol = best_time(lambda: solve_problem(prob, prune=False))
     t0 = time.perf_counter()
     slow = solve_numpy(prob)
     t_numpy = time.perf_counter() - t0
-    print(f"\nnumba vs plain NumPy ({name(SLOWING)}, stage {COARSE.stage_m:g} m, no stop arcs): {t_fast * 1e3:.0f} ms vs "
+    print(f"\nnumba vs plain NumPy, one unpruned pass each ({name(SLOWING)}, stage {COARSE.stage_m:g} m, no stop arcs): {t_fast * 1e3:.0f} ms vs "
           f"{t_numpy * 1e3:.0f} ms, {t_numpy / t_fast:.0f}x; same cost: {abs(slow.cost_usd - sol.cost_usd) < 1e-12}")
 
     if not quick:
         cases = paper_cases()
         t0 = time.perf_counter()
         run_study(cases, STUDY_GRID, 2, progress=False)
-        print(f"\nFull study: {len(cases)} cases (64 x 3 variants) at the study grid on 2 processes: {time.perf_counter() - t0:.1f} s (target < 10 s)")
+        print(f"\nFull study: {len(cases)} cases (64 x 3 variants) at the study grid on 2 processes: {time.perf_counter() - t0:.1f} s "
+              f"(target < 10 s; {load()})")
     print(f"Peak RSS of this process (largest solve above included): {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 

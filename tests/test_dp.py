@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from advisory.evaluation.endstate import reacceleration_penalty, score_in_end_state
 from advisory.physics.model import arc_cost_usd, pack, step_cost_usd, step_wheel_power_w
 from advisory.optimizer.dp import (
+    TIME_PRICES_USD_PER_S,
     GridSpec,
     InfeasibleError,
     build_problem,
@@ -211,7 +212,7 @@ def test_numba_and_numpy_recursions_agree(case):
     params = model_params()
     grid = GridSpec(stage_m=20.0, time_bin_s=0.5, dwell_s=1.0, stop_arcs=False)
     prob = build_problem(sc, params, grid, time_limit_s(regular_driver(sc), params, sc, grid))
-    fast, slow = solve_problem(prob), solve_numpy(prob)
+    fast, slow = solve_problem(prob, prune=False), solve_numpy(prob)
     assert fast.cost_usd == pytest.approx(slow.cost_usd, rel=1e-12)
     np.testing.assert_allclose(fast.trajectory.t_s, slow.trajectory.t_s, rtol=1e-12)
     np.testing.assert_array_equal(fast.trajectory.v_mps, slow.trajectory.v_mps)
@@ -297,3 +298,83 @@ def test_a_launch_from_a_halt_never_crosses_the_next_light_in_its_red():
     sol = solve(sc, model_params(), COARSE)
     assert violations(sol.trajectory, sc) == []
     assert sol.cost_usd <= score_in_end_state(regular_driver(sc), model_params(), sc.speed_limit_mps).cost_usd + 1e-9
+
+
+def _paper_problem(case, grid):
+    sc = paper_scenario(*case)
+    params = model_params()
+    return build_problem(sc, params, grid, time_limit_s(regular_driver(sc), params, sc, grid))
+
+
+PRUNE_GRID = GridSpec(stage_m=20.0, time_bin_s=0.25, dwell_s=0.5)
+
+
+@pytest.mark.parametrize("case", [(15, 15, 800), (0, 0, 800), (-15, 15, 400), (-30, 0, 200), (0, -15, 400), (15, -30, 800)])
+def test_pruning_keeps_the_optimum(case):
+    """Pruning drops only labels that cannot finish within the limit: the optimum is the unpruned one, or (where a
+    time bin then keeps another of its labels, one that can still finish) within 0.1 % above, 0.3 % below;
+    the path obeys every constraint."""
+    prob = _paper_problem(case, PRUNE_GRID)
+    fast, full = solve_problem(prob), solve_problem(prob, prune=False)
+    assert full.cost_usd * (1 - 3e-3) <= fast.cost_usd <= full.cost_usd * (1 + 1e-3)
+    assert fast.n_labels < full.n_labels / 3  # and it did prune
+    assert violations(fast.trajectory, prob.scenario) == []
+    tr = fast.trajectory
+    assert np.all(np.diff(tr.t_s) > 0) and np.all(np.abs(tr.accel_mps2) <= prob.grid.brake_max_mps2 + 1e-9)
+    assert tr.t_s[-1] <= prob.t_max_s
+
+
+def test_pruning_falls_back_when_the_limit_is_below_the_optimum():
+    """A limit below the optimum prunes every path away: the pass says so and a looser limit (finally none) takes over."""
+    from advisory.optimizer.dp import _pass, _solve_pruned
+
+    prob = _paper_problem((0, 0, 400), PRUNE_GRID)
+    full = solve_problem(prob, prune=False)
+    assert _pass(prob, full.cost_usd * 0.99) is None
+    for estimate in (None, full.cost_usd * 0.5, full.cost_usd * 0.99, full.cost_usd, full.cost_usd * 3):
+        assert full.cost_usd * (1 - 3e-3) <= _solve_pruned(prob, estimate).cost_usd <= full.cost_usd * (1 + 1e-3)
+
+
+@pytest.mark.parametrize("n", range(len(TIME_PRICES_USD_PER_S)))
+def test_cost_to_go_bound_is_consistent_along_every_move(n):
+    """The pruning bounds, checked move by move with costs priced here (cost + lam x duration, lam the n-th price of
+    time): never above a move plus the bound after it (stages, stop arcs, launches from the halt, timed launches),
+    nor above the terminal cost and time; hence below the cost + lam x duration of every completion."""
+    prob = _paper_problem((0, 0, 400), PRUNE_GRID)
+    lam = TIME_PRICES_USD_PER_S[n]
+    grid, v, lb, halt = prob.grid, prob.speed_mps, prob.lower_bound_usd[n], prob.halt_bound_usd[n]
+    p, rates, pref = pack(prob.params)
+    tol = 1e-9 * np.abs(lb[np.isfinite(lb)]).max()
+
+    def priced(usd, dt):
+        return np.where(np.isfinite(usd), usd + lam * np.where(np.isfinite(dt), dt, 0.0), np.inf)
+
+    assert np.all(lb[-1] <= prob.terminal_cost_usd + lam * prob.terminal_time_s + tol)
+    for k in range(prob.n_stages):
+        for i in range(v.size):
+            j = np.arange(prob.band_lo[i], prob.band_hi[i] + 1)
+            j = j[v[i] + v[j] > 0]
+            dt = 2 * grid.stage_m / (v[i] + v[j])
+            step = arc_cost_usd(v[i], v[j], dt, 0.0, grid.step_substeps, p, rates, pref)
+            assert np.all(lb[k, i] <= step + lam * dt + lb[k + 1, j] + tol)
+    for l, kl in enumerate(prob.light_stage):
+        k_end = prob.n_stages if l + 1 == prob.n_lights else prob.light_stage[l + 1]
+        for k in range(prob.arc_k_lo[l], kl):
+            assert np.all(lb[k] <= priced(prob.stop_usd[kl - k - 1], prob.stop_dt_s[kl - k - 1]) + halt[l] + tol)
+            for k2 in range(kl + 1, min(k_end, k + prob.rest_usd.shape[0]) + 1):
+                assert np.all(lb[k, 0] <= priced(prob.rest_usd[k2 - k - 1, 1:], prob.rest_dt_s[k2 - k - 1, 1:]) + lb[k2, 1:] + tol)
+        for k2 in range(kl + 1, min(k_end, kl + prob.launch_usd.shape[0]) + 1):
+            assert np.all(halt[l] <= priced(prob.launch_usd[k2 - kl - 1], prob.launch_dt_s[k2 - kl - 1]) + lb[k2] + tol)
+    full = solve_problem(prob, prune=False)
+    assert prob.bound_at_usd(0, prob.i_start, 0.0) <= full.cost_usd
+
+
+def test_bounds_of_states_that_cannot_finish_are_inf_not_nan():
+    """From rest, 10 m/s is out of reach in one 10 m stage at 2 m/s²: no completion, an infinite bound (a NaN would
+    silently turn pruning off), and the DP still solves."""
+    green = Scenario("green", (FixedTimeSignal(30.0, 10.0, 4.5, 20.0),), zone_length_m=50.0, speed_limit_mps=10.0, initial_speed_mps=10.0)
+    prob = build_problem(green, model_params(), GridSpec(stage_m=10.0, time_bin_s=1e-3, stop_arcs=False), 12.0,
+                         speed_nodes_mps=np.array([0.0, 8.0, 10.0]))
+    assert not np.isnan(prob.lower_bound_usd).any() and not np.isnan(prob.halt_bound_usd).any()
+    assert np.isinf(prob.lower_bound_usd[:, :-1, 0]).all()
+    assert solve_problem(prob).cost_usd == pytest.approx(solve_problem(prob, prune=False).cost_usd, rel=1e-12)

@@ -29,16 +29,137 @@ def red_left_s(t_s, red_start_s, red_s, cycle_s):
 
 
 @njit(cache=True, inline="always")
+def _open(cost_usd, occ_lo, occ_hi, k, i, b):
+    """Make cell (k, i, b) usable: a (stage, speed) row is initialised (to inf) only over the bins in use,
+    ``[occ_lo, occ_hi]``, so the rest of the tables is never written (nor paged in)."""
+    lo, hi = occ_lo[k, i], occ_hi[k, i]
+    if hi < 0:
+        cost_usd[k, i, b] = np.inf
+        occ_lo[k, i] = b
+        occ_hi[k, i] = b
+    elif b < lo:
+        cost_usd[k, i, b:lo] = np.inf
+        occ_lo[k, i] = b
+    elif b > hi:
+        cost_usd[k, i, hi + 1 : b + 1] = np.inf
+        occ_hi[k, i] = b
+
+
+@njit(cache=True, inline="always")
 def _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k, i, b, c, t, code):
     """Keep label (cost c, exact time t, parent code) in cell (k, i, b) if it is cheaper."""
+    _open(cost_usd, occ_lo, occ_hi, k, i, b)
     if c < cost_usd[k, i, b]:
         cost_usd[k, i, b] = c
         time_s[k, i, b] = t
         parent[k, i, b] = code
-        if b < occ_lo[k, i]:
-            occ_lo[k, i] = b
-        if b > occ_hi[k, i]:
-            occ_hi[k, i] = b
+
+
+@njit(cache=True)
+def step_tables(speed_mps, band_lo, band_hi, stage_m, grade_frac, step_substeps, p, m_c_rates, m_prefactor, step_dt, step_usd):
+    """Duration and cost of every move of one stage (grade ``grade_frac``): from node i to node ``band_lo[i] + j``.
+
+    Fills ``step_dt``/``step_usd`` (n_v, widest band); a move between two standstills gets an infinite duration.
+    """
+    for i in range(speed_mps.shape[0]):
+        for j in range(band_hi[i] - band_lo[i] + 1):
+            v, v2 = speed_mps[i], speed_mps[band_lo[i] + j]
+            if v + v2 <= 0.0:
+                step_dt[i, j] = np.inf
+                step_usd[i, j] = np.inf
+                continue
+            dt = 2.0 * stage_m / (v + v2)
+            step_dt[i, j] = dt
+            step_usd[i, j] = arc_cost_usd(v, v2, dt, grade_frac, step_substeps, p, m_c_rates, m_prefactor)
+
+
+@njit(cache=True, inline="always")
+def _priced(usd, dt_s, lam):
+    """Cost of a move plus ``lam`` per second of it (inf stays inf, also with ``lam`` = 0)."""
+    return usd + lam * dt_s if usd < np.inf else np.inf
+
+
+@njit(cache=True)
+def cost_to_go_bounds(
+    band_lo, band_hi, stage_grade, step_dt_s, step_usd, terminal_cost_usd, terminal_time_s, is_stop, light_stage, arc_k_lo,
+    stop_dt_s, stop_usd, launch_dt_s, launch_usd, rest_dt_s, rest_usd, lam_usd_per_s,
+):
+    """
+    Bounds on the cost still to pay, for the pruning of ``forward_pass``: ``(w (n_lam, K + 1, n_v), halt_w (n_lam, n_l))``.
+
+    ``w[n, k, i]`` is the cheapest completion from stage k at speed i to the end state of cost + ``lam[n]`` x its
+    duration (terminal cost and time included), over every move ``forward_pass`` allows (stage moves, stop arcs,
+    launches, timed launches) with red lights and the trip-time limit ignored and waits left out (they cost and
+    last >= 0); ``halt_w[n, l]`` the same from the halt before light l. A completion of duration D costs at least
+    ``w - lam D`` (Lagrangian relaxation of the time limit), so a label at time t, which has at most
+    ``t_max - t`` left, still has to pay at least ``max_n (w[n] - lam[n] (t_max - t))``; with ``lam = 0`` this is
+    the time-free bound. A backward DP on the same moves: consistent along every move.
+    """
+    n_lam = lam_usd_per_s.shape[0]
+    n_stage = stage_grade.shape[0]
+    n_v = band_lo.shape[0]
+    n_light = light_stage.shape[0]
+    n_launch = launch_usd.shape[0]
+    lb = np.full((n_lam, n_stage + 1, n_v), np.inf)
+    halt_lb = np.full((n_lam, n_light), np.inf)
+    light_of = np.full(n_stage + 1, -1, dtype=np.int64)
+    for l in range(n_light):
+        light_of[light_stage[l]] = l
+    for n in range(n_lam):
+        lam = lam_usd_per_s[n]
+        w, halt_w = lb[n], halt_lb[n]
+        for i in range(n_v):
+            w[n_stage, i] = _priced(terminal_cost_usd[i], terminal_time_s[i], lam)
+        for k in range(n_stage - 1, -1, -1):
+            g = stage_grade[k]
+            l = light_of[k + 1]
+            if l >= 0:  # every stage past light l is done: the halt before it launches to any of them within reach
+                kl = k + 1
+                k_end = n_stage if l + 1 == n_light else light_stage[l + 1]
+                for m in range(n_launch):
+                    if kl + 1 + m > k_end:
+                        break
+                    for j in range(n_v):
+                        halt_w[l] = min(halt_w[l], _priced(launch_usd[m, j], launch_dt_s[m, j], lam) + w[kl + 1 + m, j])
+            for i in range(n_v):
+                best = np.inf
+                for j in range(band_hi[i] - band_lo[i] + 1):
+                    best = min(best, _priced(step_usd[g, i, j], step_dt_s[g, i, j], lam) + w[k + 1, band_lo[i] + j])
+                w[k, i] = best
+            for l in range(n_light):
+                kl = light_stage[l]
+                if not (arc_k_lo[l] <= k < kl):
+                    continue
+                for i in range(n_v):  # a stop arc to the halt
+                    w[k, i] = min(w[k, i], _priced(stop_usd[kl - k - 1, i], stop_dt_s[kl - k - 1, i], lam) + halt_w[l])
+                if not is_stop[k]:  # a timed launch from a standstill here
+                    k_end = n_stage if l + 1 == n_light else light_stage[l + 1]
+                    for k2 in range(kl + 1, min(k_end, k + rest_usd.shape[0]) + 1):
+                        for j in range(1, n_v):
+                            w[k, 0] = min(w[k, 0], _priced(rest_usd[k2 - k - 1, j], rest_dt_s[k2 - k - 1, j], lam) + w[k2, j])
+    return lb, halt_lb
+
+
+@njit(cache=True, inline="always")
+def _beyond(c, t, bound, k, i, lam_usd_per_s, t_max_s, limit_usd):
+    """Whether a label (cost c, time t) at (k, i) cannot finish within ``limit_usd``, by the bounds
+    ``bound[n, k, i] - lam[n] (t_max - t)`` of ``cost_to_go_bounds``."""
+    for n in range(lam_usd_per_s.shape[0]):
+        if c + bound[n, k, i] - lam_usd_per_s[n] * (t_max_s + LATE_TOL_S - t) > limit_usd:
+            return True
+    return False
+
+
+@njit(cache=True)
+def count_labels(cost_usd, occ_lo, occ_hi):
+    """Cells holding a label (the tables are valid only over each row's range in use)."""
+    n = 0
+    for k in range(cost_usd.shape[0]):
+        for i in range(cost_usd.shape[1]):
+            for b in range(occ_lo[k, i], occ_hi[k, i] + 1):
+                if cost_usd[k, i, b] < np.inf:
+                    n += 1
+    return n
 
 
 @njit(cache=True)
@@ -47,7 +168,9 @@ def forward_pass(
     band_lo,
     band_hi,
     stage_m,
-    grade_frac,
+    stage_grade,
+    step_dt_s,
+    step_usd,
     stop_red_start_s,
     stop_red_s,
     stop_cycle_s,
@@ -56,7 +179,6 @@ def forward_pass(
     bin_s,
     dwell_s,
     allow_dwell,
-    step_substeps,
     t_max_s,
     t_rem_min_s,
     i_start,
@@ -79,17 +201,22 @@ def forward_pass(
     s_time_s,
     s_parent,
     lower_bound_usd,
+    halt_bound_usd,
+    lam_usd_per_s,
     upper_bound_usd,
+    occ_lo,
+    occ_hi,
 ):
     """
     Forward DP over distance stages with labels carrying exact arrival times, plus exact stop arcs.
 
-    Each transition is priced in ``step_substeps`` equal time steps (``arc_cost_usd``).
-
     Shapes: ``speed_mps`` (n_v,); ``band_lo/band_hi`` (n_v,) next-speed index range allowed by the
-    acceleration limits; ``grade_frac`` (K,); ``stop_*``/``is_stop``/``t_lo_s`` (K + 1,);
+    acceleration limits; ``step_dt_s``/``step_usd`` (n_grades, n_v, widest band) the moves of a stage
+    (``step_tables``), ``stage_grade`` (K,) which of them each stage uses; ``stop_*``/``is_stop``/``t_lo_s`` (K + 1,);
     ``t_rem_min_s`` (K + 1, n_v); outputs ``cost_usd``, ``time_s``, ``parent`` (K + 1, n_v, n_bins).
 
+    Only the bins ``[occ_lo[k, i], occ_hi[k, i]]`` of a row are valid (the caller passes ``cost_usd``, ``time_s``,
+    ``parent`` uninitialised, ``occ_lo`` = n_bins and ``occ_hi`` = -1; rows are initialised as they fill).
     Cell (k, i, b) holds the cheapest path found that reaches stage k at speed i at an exact time in
     ``[t_lo[k] + b bin_s, t_lo[k] + (b + 1) bin_s)``, with that exact time. ``parent`` >= 0 is the flat index
     of the previous cell (a stage transition, or a dwell at standstill in the same stage); -1 the start;
@@ -108,43 +235,28 @@ def forward_pass(
     (``rest_dt_s``/``rest_usd`` (N, n_v): from rest over k2 - k stages), so a car that halts early crosses the
     line with speed exactly as it turns green. Red checks and the time limit use exact times throughout.
 
-    **Pruning**: a label whose cost plus ``lower_bound_usd[k, i]`` (cheapest completion, no time or lights)
-    exceeds ``upper_bound_usd`` is dropped; ``inf`` turns pruning off.
+    **Pruning**: a label at time t whose cost plus ``max_n lower_bound_usd[n, k, i] - lam[n] (t_max - t)``
+    (``halt_bound_usd[n, l]`` at a halt; see ``cost_to_go_bounds``) exceeds ``upper_bound_usd`` (finite) cannot
+    finish within it and is dropped. No path within the limit is lost; as labels are binned, a bin may then
+    keep another of its labels than it would without pruning (one whose bound, at an earlier time, is lower).
     """
-    n_stage = cost_usd.shape[0] - 1
+    n_stage = stage_grade.shape[0]
     n_v = speed_mps.shape[0]
     n_bins = cost_usd.shape[2]
     n_light = light_stage.shape[0]
     n_launch = launch_dt_s.shape[0]
-    occ_lo = np.full((n_stage + 1, n_v), n_bins, dtype=np.int64)
-    occ_hi = np.full((n_stage + 1, n_v), -1, dtype=np.int64)
-    cost_usd[0, i_start, 0] = 0.0
-    time_s[0, i_start, 0] = 0.0
-    parent[0, i_start, 0] = -1
-    occ_lo[0, i_start] = 0
-    occ_hi[0, i_start] = 0
+    inv_bin = 1.0 / bin_s
+    n_lam = lam_usd_per_s.shape[0]
+    halt_b = halt_bound_usd.reshape((n_lam, n_light, 1))  # indexed like lower_bound_usd
+    _relax(cost_usd, time_s, parent, occ_lo, occ_hi, 0, i_start, 0, 0.0, 0.0, -1)
     # standstill: only accessories draw power (linear in time)
     idle_cost = step_cost_usd(p[I_AUX], dwell_s, p, m_c_rates, m_prefactor)
     idle_per_s = step_cost_usd(p[I_AUX], 1.0, p, m_c_rates, m_prefactor)
-    max_band = 0
-    for i in range(n_v):
-        max_band = max(max_band, band_hi[i] - band_lo[i] + 1)
-    step_dt = np.empty((n_v, max_band))
-    step_usd = np.empty((n_v, max_band))
     light_of = np.full(n_stage + 1, -1, dtype=np.int64)
     for l in range(n_light):
         light_of[light_stage[l]] = l
     for k in range(n_stage):
-        if k == 0 or grade_frac[k] != grade_frac[k - 1]:  # transition table: once per distinct grade
-            for i in range(n_v):
-                for j in range(band_hi[i] - band_lo[i] + 1):
-                    v, v2 = speed_mps[i], speed_mps[band_lo[i] + j]
-                    if v + v2 <= 0.0:
-                        step_dt[i, j] = np.inf
-                        continue
-                    dt = 2.0 * stage_m / (v + v2)
-                    step_dt[i, j] = dt
-                    step_usd[i, j] = arc_cost_usd(v, v2, dt, grade_frac[k], step_substeps, p, m_c_rates, m_prefactor)
+        step_dt, step_cost = step_dt_s[stage_grade[k]], step_usd[stage_grade[k]]
         # a light at this stage: its standstill is complete; wait there, then launch past the line
         l = light_of[k]
         if l >= 0:
@@ -154,7 +266,9 @@ def forward_pass(
                 if c0 == np.inf:
                     continue
                 t2 = s_time_s[l, b] + dwell_s
-                b2 = int((t2 - t_lo_s[k]) / bin_s)
+                b2 = int((t2 - t_lo_s[k]) * inv_bin)
+                if _beyond(c0 + idle_cost, t2, halt_b, l, 0, lam_usd_per_s, t_max_s, upper_bound_usd):
+                    continue
                 if b2 < n_bins and t2 + t_rem_min_s[k, 0] <= t_max_s + LATE_TOL_S and c0 + idle_cost < s_cost_usd[l, b2]:
                     s_cost_usd[l, b2] = c0 + idle_cost
                     s_time_s[l, b2] = t2
@@ -182,9 +296,9 @@ def forward_pass(
                         if is_stop[k2] and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
                             continue
                         c2 = c0 + wait * idle_per_s + launch_usd[m, j]
-                        if c2 + lower_bound_usd[k2, j] > upper_bound_usd:
+                        if _beyond(c2, t2, lower_bound_usd, k2, j, lam_usd_per_s, t_max_s, upper_bound_usd):
                             continue
-                        b2 = int((t2 - t_lo_s[k2]) / bin_s)
+                        b2 = int((t2 - t_lo_s[k2]) * inv_bin)
                         if b2 < n_bins:
                             _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k2, j, b2, c2, t2, code)
         # dwell at standstill (never on a stop line), bins in ascending order so waits chain
@@ -194,8 +308,10 @@ def forward_pass(
                 c0 = cost_usd[k, 0, b]
                 if c0 < np.inf:
                     t2 = time_s[k, 0, b] + dwell_s
-                    if t2 + t_rem_min_s[k, 0] <= t_max_s + LATE_TOL_S:
-                        b2 = int((t2 - t_lo_s[k]) / bin_s)
+                    if t2 + t_rem_min_s[k, 0] <= t_max_s + LATE_TOL_S and not _beyond(
+                        c0 + idle_cost, t2, lower_bound_usd, k, 0, lam_usd_per_s, t_max_s, upper_bound_usd
+                    ):
+                        b2 = int((t2 - t_lo_s[k]) * inv_bin)
                         if b2 < n_bins:
                             _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k, 0, b2, c0 + idle_cost, t2, (k * n_v) * n_bins + b)
                 b += 1
@@ -230,7 +346,9 @@ def forward_pass(
                             if is_stop[k2] and is_red(t2, stop_red_start_s[k2], stop_red_s[k2], stop_cycle_s[k2]):
                                 continue
                             c2 = c0 + wait * idle_per_s + rest_usd[k2 - k - 1, j]
-                            b2 = int((t2 - t_lo_s[k2]) / bin_s)
+                            if _beyond(c2, t2, lower_bound_usd, k2, j, lam_usd_per_s, t_max_s, upper_bound_usd):
+                                continue
+                            b2 = int((t2 - t_lo_s[k2]) * inv_bin)
                             if b2 < n_bins:
                                 _relax(cost_usd, time_s, parent, occ_lo, occ_hi, k2, j, b2, c2, t2, code)
         # stop arcs from this stage to the standstill before each light ahead within reach
@@ -253,9 +371,9 @@ def forward_pass(
                     if t2 + t_rem_min_s[kl, 0] > t_max_s + LATE_TOL_S:
                         continue
                     c2 = c0 + step
-                    if c2 + lower_bound_usd[kl, 0] > upper_bound_usd:
+                    if _beyond(c2, t2, halt_b, l, 0, lam_usd_per_s, t_max_s, upper_bound_usd):
                         continue
-                    b2 = int((t2 - t_lo_s[kl]) / bin_s)
+                    b2 = int((t2 - t_lo_s[kl]) * inv_bin)
                     if b2 < n_bins and c2 < s_cost_usd[l, b2]:
                         s_cost_usd[l, b2] = c2
                         s_time_s[l, b2] = t2
@@ -269,36 +387,48 @@ def forward_pass(
                 continue
             b_lo, b_hi = occ_lo[k, i], occ_hi[k, i] + 1
             cost_row, time_row = cost_usd[k, i], time_s[k, i]
+            row_min = np.inf
+            for b in range(b_lo, b_hi):
+                row_min = min(row_min, cost_row[b])
             base = (k * n_v + i) * n_bins
             for j in range(band_hi[i] - band_lo[i] + 1):
                 dt = step_dt[i, j]
                 if dt == np.inf:
                     continue
                 i2 = band_lo[i] + j
-                step = step_usd[i, j]
+                step = step_cost[i, j]
                 slack = t_max_s + LATE_TOL_S - t_rem_min_s[k2, i2]
-                bound = upper_bound_usd - lower_bound_usd[k2, i2] - step
+                bound = upper_bound_usd - lower_bound_usd[0, k2, i2] - step  # the time-free bound (lam[0] = 0)
+                if row_min > bound:  # no label of this row can finish within the limit this way
+                    continue
                 cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]
                 lo2, hi2 = occ_lo[k2, i2], occ_hi[k2, i2]
-                for b in range(b_lo, b_hi):
+                for b in range(b_lo, b_hi):  # times ascend with the bins: past the time limit, stop
                     c0 = cost_row[b]
                     if c0 > bound:  # also skips empty cells (inf)
                         continue
                     t2 = time_row[b] + dt
                     if t2 > slack:
-                        continue
+                        break
                     if stop_next and is_red(t2, red_start, red_len, cycle):
                         continue
-                    b2 = int((t2 - t_lo2) / bin_s)
-                    if b2 >= n_bins:
+                    if n_lam > 1 and _beyond(c0 + step, t2, lower_bound_usd, k2, i2, lam_usd_per_s, t_max_s, upper_bound_usd):
                         continue
+                    b2 = int((t2 - t_lo2) * inv_bin)
+                    if b2 >= n_bins:
+                        break
+                    if hi2 < 0:  # open the cell (see ``_open``)
+                        cost_next[b2] = np.inf
+                        lo2 = hi2 = b2
+                    elif b2 < lo2:
+                        cost_next[b2:lo2] = np.inf
+                        lo2 = b2
+                    elif b2 > hi2:
+                        cost_next[hi2 + 1 : b2 + 1] = np.inf
+                        hi2 = b2
                     c2 = c0 + step
                     if c2 < cost_next[b2]:
                         cost_next[b2] = c2
                         time_next[b2] = t2
                         parent_next[b2] = base + b
-                        if b2 < lo2:
-                            lo2 = b2
-                        if b2 > hi2:
-                            hi2 = b2
                 occ_lo[k2, i2], occ_hi[k2, i2] = lo2, hi2
