@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import json
 import os
 import shutil
 import subprocess
@@ -39,7 +40,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from bench._procs import cpu_seconds, free_port  # noqa: E402
-from bench.bench_server import CORRIDOR, create_trips, http_phase  # noqa: E402
+from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
 from server.advising import Engine  # noqa: E402
 from server.config import Settings  # noqa: E402
 from server.gps import Fix  # noqa: E402
@@ -156,9 +157,26 @@ def tree_cpu_s(pid: int) -> float:
     return total
 
 
+def load(port: int, trips, positions, warmup_s: float, seconds: float, mark) -> dict:
+    """Run the load generator (``bench/_loadgen.py``, its own process) against ``port``; ``mark()`` is called
+    when its measured window opens and when it closes (the caller samples CPU there)."""
+    job = {"port": port, "trips": trips, "positions": positions, "warmup_s": warmup_s, "seconds": seconds}
+    gen = subprocess.Popen([sys.executable, str(REPO / "bench" / "_loadgen.py")], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    gen.stdin.write(json.dumps(job))
+    gen.stdin.close()
+    for line in gen.stdout:
+        if line.strip() in ("start", "stop"):
+            mark()
+        elif line.startswith("{"):
+            gen.wait(timeout=30)
+            return json.loads(line)
+    raise RuntimeError(f"the load generator exited with {gen.wait()}")
+
+
 def http_part(redis: RedisServer, conns: int, seconds: float, folder: Path) -> None:
     corridor = load_corridor(CORRIDOR)
-    positions = [corridor.position(s) for s in np.r_[np.arange(0.0, corridor.length_m, 18.0), np.arange(corridor.length_m, 0.0, -18.0)]]
+    there = [corridor.position(float(s)) for s in range(int(corridor.length_m))]
+    positions = there + there[::-1]  # 1 m apart, there and back
     rows = []
     for name, env, workers in (("in-process store, 1 worker", {}, 1), ("Redis, 1 worker", {"ECO_STORE_URL": redis.url}, 1),
                                ("Redis, 2 workers", {"ECO_STORE_URL": redis.url}, 2)):  # fmt: skip
@@ -166,21 +184,24 @@ def http_part(redis: RedisServer, conns: int, seconds: float, folder: Path) -> N
         proc = start_service(port, folder / f"service-{workers}-{bool(env)}.log", env, workers)
         try:
             trips = asyncio.run(create_trips(port, conns))
-            asyncio.run(http_phase(port, conns, 1.0, "fix", trips, positions))  # warm-up
-            c0, r0 = tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid)
-            rps, lat, errors = asyncio.run(http_phase(port, conns, seconds, "fix", trips, positions))
-            c1, r1 = tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid)
+            marks = []
+            load_avg = os.getloadavg()[0]
+            out = load(port, trips, positions, 2.0, seconds, lambda: marks.append((time.perf_counter(), tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid))))
         finally:
             proc.terminate()
             with contextlib.suppress(subprocess.TimeoutExpired):
                 proc.wait(timeout=20)
             if proc.poll() is None:
                 proc.kill()
-        cpu = (c1 - c0) / seconds
+        (t0, c0, r0), (t1, c1, r1) = marks
+        rps, lat, wall = out["n"] / out["elapsed_s"], out["lat_s"], t1 - t0
+        cpu, cpu_redis, cpu_gen = (c1 - c0) / wall, (r1 - r0) / wall, out["cpu_s"] / out["elapsed_s"]
         rows.append(rps)
-        print(f"   {name:28s} {rps:7.0f} fixes/s  p50 {pct_ms(lat, 50):6.1f} ms  p99 {pct_ms(lat, 99):7.1f} ms  errors {errors}  "
-              f"workers CPU {100 * cpu:4.0f} %  Redis CPU {100 * (r1 - r0) / seconds:3.0f} %  ({1e3 * cpu / max(rps, 1):.2f} worker-ms per fix)")  # fmt: skip
+        print(f"   {name:27s} {rps:6.0f} fixes/s  p50 {pct_ms(lat, 50):6.1f} ms  p99 {pct_ms(lat, 99):6.1f} ms  errors {out['errors']}  "
+              f"CPU: workers {100 * cpu:3.0f} %, Redis {100 * cpu_redis:3.0f} %, generator {100 * cpu_gen:3.0f} % ({1e6 * cpu_gen / max(rps, 1):.0f} us/fix)  "
+              f"{1e3 * cpu / max(rps, 1):.2f} worker-ms/fix  load avg {load_avg:.2f}")  # fmt: skip
     print(f"   ratio 2 workers / 1 worker on Redis: {rows[2] / rows[1]:.2f}  (issue target >= 1.6 on 2 free cores); Redis 1 worker / in-process: {rows[1] / rows[0]:.2f}")
+    print(f"   CPU %: of one core, over the measured window; load avg: 1-minute, just before the run ({os.cpu_count()} CPUs)")
 
 
 async def memory_part(redis_url: str, n_trips: int, n_fixes: int) -> None:
@@ -225,7 +246,9 @@ def main() -> int:
     ap.add_argument("--lat-fixes", type=int, default=30)
     ap.add_argument("--trips", type=int, default=20_000)
     ap.add_argument("--fixes", type=int, default=5)
+    ap.add_argument("--parts", default="latency,http,memory", help="which parts to run (comma-separated)")
     args = ap.parse_args()
+    parts = set(args.parts.split(","))
     if shutil.which("redis-server") is None:
         print("redis-server is not installed: sh scripts/system-deps.sh (as root) installs it")
         return 1
@@ -235,10 +258,14 @@ def main() -> int:
         (folder / "redis").mkdir()
         redis = RedisServer(folder / "redis", fsync="everysec").start()
         try:
-            asyncio.run(latency_part(redis.url, args.lat_trips, args.lat_fixes))
-            print(f"2. HTTP, {args.conns} concurrent keep-alive clients (one trip each) posting fixes, {args.http_s:g} s each")
-            http_part(redis, args.conns, args.http_s, folder)
-            asyncio.run(memory_part(redis.url, args.trips, args.fixes))
+            if "latency" in parts:
+                asyncio.run(latency_part(redis.url, args.lat_trips, args.lat_fixes))
+            if "http" in parts:
+                print(f"2. HTTP, {args.conns} keep-alive clients (one trip each, one fix in flight each), {args.http_s:g} s each after 2 s warm-up;"
+                      " load generator: bench/_loadgen.py, its own process")
+                http_part(redis, args.conns, args.http_s, folder)
+            if "memory" in parts:
+                asyncio.run(memory_part(redis.url, args.trips, args.fixes))
         finally:
             redis.kill()
     return 0
