@@ -15,12 +15,13 @@ Both answer the same calls, all ``async``:
 * ``samples(trip)``: the trip's score samples ``(t, v, x)``; ``remove(trip_id)``: the trip is ended.
 
 **Redis layout** (prefix ``ECO_STORE_PREFIX``, default ``eco``), every key expiring ``trip_idle_ttl_s`` after
-the trip's last request:
+the trip's last request (up to ``touch_every_s`` later: the idle clock is reset at most that often):
 
 * ``eco:t:<id>``, a hash: ``meta`` (JSON, written once: corridor, timing, entry time, vehicle, units, client;
   any worker rebuilds the trip and its SPaT view from it), ``state`` (JSON, rewritten per fix, ~1-2 kB:
   track, advisor memory, last advice, counters), ``v`` (version, +1 per write), ``tok`` (SHA-256 of the
-  token), ``client``, ``bt``/``bs`` (the trip's request bucket: tokens, stamp);
+  token), ``client``, ``bt``/``bs`` (the trip's request bucket: tokens, stamp), ``ts`` (the idle clock's last
+  reset);
 * ``eco:t:<id>:tr``: the score samples, 24 bytes per accepted fix (``t, v, x`` as little-endian doubles)
   appended per fix, at most ``max_trace_fixes`` of them;
 * ``eco:k:<token hash>`` -> id (tells "another trip's token", 403, from an invalid one, 401);
@@ -29,7 +30,7 @@ the trip's last request:
 * ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets;
 * ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`RedisStreams`, leases).
 
-Each call is one round trip (a Lua script, atomic in Redis). A worker keeps the trips it served in a small
+Each call is one round trip (a Lua script, atomic in Redis; a fix's write is 3 commands in it). A worker keeps the trips it served in a small
 cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
 version it was computed from (one round trip); a trip not cached, or whose version moved (another worker
 served it), is read first (two). Within a worker, fixes of one trip are serialised (:meth:`RedisTrips.hold`);
@@ -222,7 +223,7 @@ local function count(key, oldest)
 end
 """
 
-# KEYS: open, client zset, client bucket, create bucket. ARGV: now, ttl_s, max_trips, max_per_client,
+# KEYS: open, client zset, client bucket, create bucket. ARGV: now, keep_s, max_trips, max_per_client,
 # client rate, client burst, create rate, create burst.
 # -> {0} admitted, {1, wait} client rate, {2} client full, {3} service full, {4, wait} service rate
 _ADMIT = _TAKE + """
@@ -238,14 +239,14 @@ if wait > 0 then return {4, tostring(wait)} end
 return {0}
 """
 
-# KEYS: trip, open, client zset, token key. ARGV: now, ttl_s, max_trips, max_per_client, id, token hash,
+# KEYS: trip, open, client zset, token key. ARGV: now, keep_s, max_trips, max_per_client, id, token hash,
 # client, burst, meta, state. -> 0 added, 2 client full, 3 service full
 _ADD = _TAKE + """
 local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
 if tonumber(ARGV[4]) > 0 and count(KEYS[3], now - ttl) >= tonumber(ARGV[4]) then return 2 end
 if count(KEYS[2], now - ttl) >= tonumber(ARGV[3]) then return 3 end
 local ms = math.ceil(ttl * 1000)
-redis.call('HSET', KEYS[1], 'v', '1', 'tok', ARGV[6], 'client', ARGV[7], 'bt', ARGV[8], 'bs', ARGV[1], 'meta', ARGV[9], 'state', ARGV[10])
+redis.call('HSET', KEYS[1], 'v', '1', 'tok', ARGV[6], 'client', ARGV[7], 'bt', ARGV[8], 'bs', ARGV[1], 'ts', ARGV[1], 'meta', ARGV[9], 'state', ARGV[10])
 redis.call('PEXPIRE', KEYS[1], ms)
 redis.call('SET', KEYS[4], ARGV[5], 'PX', ms)
 redis.call('ZADD', KEYS[2], now, ARGV[5])
@@ -254,62 +255,106 @@ redis.call('PEXPIRE', KEYS[3], ms)
 return 0
 """
 
-_TOUCH = """
-local function touch(key, tok, client, ttl_s, now, p, id)
-  local ms = math.ceil(ttl_s * 1000)
+# The trip's hash is read once per call (HMGET of TRIP_FIELDS) and written once (HSET of what changed).
+# ``touch``: the idle clock (the keys' expiry, the open-trip sets' scores) is reset when it was last reset
+# ``every`` seconds ago or more (a tenth of the TTL, at most 10 s), not per request: 6 commands saved on most
+# fixes. The keys then live ``keep`` = TTL + every after a reset, so a trip lives at least its TTL after its
+# last request, and the caps count a trip until ``keep`` after its last reset (never too few).
+# ``bucket``: the trip's request bucket from the fields read; its new tokens and stamp go with the write.
+_TRIP = """
+local function touch(key, h, keep, every, now, p, id, out)
+  if now - (tonumber(h[6]) or 0) < every then return end
+  local ms = math.ceil(keep * 1000)
   redis.call('PEXPIRE', key, ms)
   redis.call('PEXPIRE', key .. ':tr', ms)
-  redis.call('PEXPIRE', p .. ':k:' .. tok, ms)
+  redis.call('PEXPIRE', p .. ':k:' .. h[2], ms)
   redis.call('ZADD', p .. ':open', now, id)
-  redis.call('ZADD', p .. ':c:' .. client, now, id)
-  redis.call('PEXPIRE', p .. ':c:' .. client, ms)
+  redis.call('ZADD', p .. ':c:' .. h[3], now, id)
+  redis.call('PEXPIRE', p .. ':c:' .. h[3], ms)
+  out[#out + 1] = 'ts'
+  out[#out + 1] = string.format('%.17g', now)
+end
+local function bucket(h, rate, burst, now, out)
+  local n = tonumber(h[4]) or burst
+  local s = tonumber(h[5]) or now
+  n = math.min(burst, n + math.max(0, now - s) * rate)
+  if n < 1 then return (1 - n) / rate end
+  out[#out + 1] = 'bt'
+  out[#out + 1] = string.format('%.17g', n - 1)
+  out[#out + 1] = 'bs'
+  out[#out + 1] = string.format('%.17g', now)
+  return 0
+end
+local function write(key, out)
+  if #out > 0 then redis.call('HSET', key, unpack(out)) end
 end
 """
+TRIP_FIELDS = ("v", "tok", "client", "bt", "bs", "ts")
 
 # KEYS: trip. ARGV: token hash, version held ('' none), meta wanted (0/1), take (0/1), now, rate, burst,
-# ttl_s, prefix, id.
+# keep_s, every_s, prefix, id.
 # -> {0} unknown, {1} bad token, {2} another trip's token, {3, wait} rate limited,
 #    {4, version, state or nil, meta or nil}
-_LOAD = _TAKE + _TOUCH + """
-local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client')
+_LOAD = _TRIP + """
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts')
 if not h[1] then return {0} end
-local p = ARGV[9]
+local p = ARGV[10]
 if h[2] ~= ARGV[1] then
   if redis.call('EXISTS', p .. ':k:' .. ARGV[1]) == 1 then return {2} end
   return {1}
 end
-local now = tonumber(ARGV[5])
-touch(KEYS[1], h[2], h[3], tonumber(ARGV[8]), now, p, ARGV[10])
+local now, out = tonumber(ARGV[5]), {}
+touch(KEYS[1], h, tonumber(ARGV[8]), tonumber(ARGV[9]), now, p, ARGV[11], out)
 if ARGV[4] == '1' then
-  local wait = take(KEYS[1], 'bt', 'bs', tonumber(ARGV[6]), tonumber(ARGV[7]), now)
-  if wait > 0 then return {3, tostring(wait)} end
+  local wait = bucket(h, tonumber(ARGV[6]), tonumber(ARGV[7]), now, out)
+  if wait > 0 then
+    write(KEYS[1], out)
+    return {3, tostring(wait)}
+  end
 end
+write(KEYS[1], out)
 local state, meta = false, false
-if h[1] ~= ARGV[2] then state = redis.call('HGET', KEYS[1], 'state') end
-if ARGV[3] == '1' then meta = redis.call('HGET', KEYS[1], 'meta') end
+if h[1] ~= ARGV[2] and ARGV[3] == '1' then
+  local sm = redis.call('HMGET', KEYS[1], 'state', 'meta')
+  state, meta = sm[1], sm[2]
+elseif h[1] ~= ARGV[2] then
+  state = redis.call('HGET', KEYS[1], 'state')
+elseif ARGV[3] == '1' then
+  meta = redis.call('HGET', KEYS[1], 'meta')
+end
 return {4, h[1], state, meta}
 """
 
-# KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), ttl_s, token hash, take (0/1),
-# now, rate, burst, prefix, id. The trip's token is checked, its idle clock reset, a token of its bucket
-# taken (when asked), then the state written if the trip is still at the version it was computed from.
+# KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), keep_s, token hash, take (0/1),
+# now, rate, burst, prefix, id, every_s. The trip's token is checked, its idle clock reset, a token of its
+# bucket taken (when asked), then the state written if the trip is still at the version it was computed from:
+# 3 commands (HMGET, HSET, APPEND) on most fixes.
 # -> {new version}, {0, version, state} the trip moved meanwhile, {-1} gone, {-2} not its token, {-3, wait} rate limited
-_SAVE = _TAKE + _TOUCH + """
-local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client')
+_SAVE = _TRIP + """
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts')
 if not h[1] then return {-1} end
 if h[2] ~= ARGV[5] then return {-2} end
-local now = tonumber(ARGV[7])
-touch(KEYS[1], h[2], h[3], tonumber(ARGV[4]), now, ARGV[10], ARGV[11])
+local now, keep, out = tonumber(ARGV[7]), tonumber(ARGV[4]), {}
+touch(KEYS[1], h, keep, tonumber(ARGV[12]), now, ARGV[10], ARGV[11], out)
 if ARGV[6] == '1' then
-  local wait = take(KEYS[1], 'bt', 'bs', tonumber(ARGV[8]), tonumber(ARGV[9]), now)
-  if wait > 0 then return {-3, tostring(wait)} end
+  local wait = bucket(h, tonumber(ARGV[8]), tonumber(ARGV[9]), now, out)
+  if wait > 0 then
+    write(KEYS[1], out)
+    return {-3, tostring(wait)}
+  end
 end
-if h[1] ~= ARGV[1] then return {0, h[1], redis.call('HGET', KEYS[1], 'state')} end
+if h[1] ~= ARGV[1] then
+  write(KEYS[1], out)
+  return {0, h[1], redis.call('HGET', KEYS[1], 'state')}
+end
 local nv = tonumber(h[1]) + 1
-redis.call('HSET', KEYS[1], 'v', tostring(nv), 'state', ARGV[2])
-if #ARGV[3] > 0 then
-  redis.call('APPEND', KEYS[2], ARGV[3])
-  redis.call('PEXPIRE', KEYS[2], math.ceil(tonumber(ARGV[4]) * 1000))
+out[#out + 1] = 'v'
+out[#out + 1] = tostring(nv)
+out[#out + 1] = 'state'
+out[#out + 1] = ARGV[2]
+write(KEYS[1], out)
+if #ARGV[3] > 0 and redis.call('APPEND', KEYS[2], ARGV[3]) == #ARGV[3] then  -- a new key: its expiry
+  redis.call('PEXPIRE', KEYS[2], math.ceil(keep * 1000))
 end
 return {nv}
 """
@@ -364,6 +409,10 @@ class RedisTrips:
         self._load = self.redis.register_script(_LOAD)
         self._save = self.redis.register_script(_SAVE)
         self._remove = self.redis.register_script(_REMOVE)
+        self.touch_every_s = min(10.0, settings.trip_idle_ttl_s / 10)
+        """A trip's idle clock is reset at most this often (each request did it before: 6 more commands). [s]"""
+        self.keep_s = settings.trip_idle_ttl_s + self.touch_every_s
+        """A trip's keys live this long after its idle clock's last reset: at least the TTL after its last request. [s]"""
         self._cache: dict[str, tuple[Trip, float]] = {}  # id -> (trip, last used, monotonic)
         self._locks: dict[str, list] = {}  # id -> [lock, holders and waiters]
         self._count = 0
@@ -388,7 +437,7 @@ class RedisTrips:
 
     async def count(self) -> int:
         async with self._reach():
-            await self.redis.zremrangebyscore(f"{self.p}:open", "-inf", f"({self.clock() - self.s.trip_idle_ttl_s}")
+            await self.redis.zremrangebyscore(f"{self.p}:open", "-inf", f"({self.clock() - self.keep_s}")
             self._count = int(await self.redis.zcard(f"{self.p}:open"))
         return self._count
 
@@ -397,7 +446,7 @@ class RedisTrips:
         async with self._reach():
             r = await self._admit(
                 keys=[f"{self.p}:open", f"{self.p}:c:{client}", f"{self.p}:rl:c:{client}", f"{self.p}:rl:create"],
-                args=[repr(self.clock()), s.trip_idle_ttl_s, s.max_trips, s.max_trips_per_client, s.create_rate_per_client_per_s,
+                args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, s.create_rate_per_client_per_s,
                       s.create_burst_per_client, s.create_rate_per_s, s.create_burst],
             )  # fmt: skip
         code = int(r[0])
@@ -415,7 +464,7 @@ class RedisTrips:
         async with self._reach():
             code = await self._add(
                 keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash],
-                args=[repr(self.clock()), s.trip_idle_ttl_s, s.max_trips, s.max_trips_per_client, trip.id, trip.token_hash, trip.client,
+                args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, trip.id, trip.token_hash, trip.client,
                       s.rate_burst, _json(trip.meta()), _json(trip.state())],
             )  # fmt: skip
         if code == 2:
@@ -453,7 +502,7 @@ class RedisTrips:
             r = await self._load(
                 keys=[self._key(trip_id)],
                 args=[digest, "" if trip is None else str(trip.version), 0 if trip is not None else 1, 1 if take else 0, repr(self.clock()),
-                      s.rate_per_s, s.rate_burst, s.trip_idle_ttl_s, self.p, trip_id],
+                      s.rate_per_s, s.rate_burst, self.keep_s, self.touch_every_s, self.p, trip_id],
             )  # fmt: skip
         code = int(r[0])
         if code == 0:
@@ -500,8 +549,8 @@ class RedisTrips:
             async with self._reach():
                 r = await self._save(
                     keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
-                    args=[str(trip.version), _json(trip.state()), samples, s.trip_idle_ttl_s, trip.token_hash, 1 if take else 0,
-                          repr(self.clock()), s.rate_per_s, s.rate_burst, self.p, trip.id],
+                    args=[str(trip.version), _json(trip.state()), samples, self.keep_s, trip.token_hash, 1 if take else 0,
+                          repr(self.clock()), s.rate_per_s, s.rate_burst, self.p, trip.id, self.touch_every_s],
                 )  # fmt: skip
         except ApiError:
             trip.version = -1  # not known to be written: the copy may be ahead of the store, reload its state
