@@ -30,7 +30,8 @@ the trip's last request (up to ``touch_every_s`` later: the idle clock is reset 
 * ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets;
 * ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`RedisStreams`, leases).
 
-Each call is one round trip (a Lua script, atomic in Redis; a fix's write is 3 commands in it). A worker keeps the trips it served in a small
+Each call is one round trip (a Lua script, atomic in Redis; a fix's write is 3 commands in it) over the worker's
+one pipelined connection (:class:`server.redispipe.RedisPipe`: the calls of one event-loop turn in one write). A worker keeps the trips it served in a small
 cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
 version it was computed from (one round trip); a trip not cached, or whose version moved (another worker
 served it), is read first (two). Within a worker, fixes of one trip are serialised (:meth:`RedisTrips.hold`);
@@ -57,6 +58,7 @@ from pydantic_core import from_json, to_json
 from server.config import Settings
 from server.errors import ApiError
 from server.ratelimit import KeyedBuckets, TokenBucket
+from server.redispipe import RedisPipe, Script
 from server.trips import Trip, token_hash
 
 log = logging.getLogger("server")
@@ -226,7 +228,7 @@ end
 # KEYS: open, client zset, client bucket, create bucket. ARGV: now, keep_s, max_trips, max_per_client,
 # client rate, client burst, create rate, create burst.
 # -> {0} admitted, {1, wait} client rate, {2} client full, {3} service full, {4, wait} service rate
-_ADMIT = _TAKE + """
+_ADMIT = Script(_TAKE + """
 local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
 local wait = take(KEYS[3], 'n', 's', tonumber(ARGV[5]), tonumber(ARGV[6]), now)
 redis.call('PEXPIRE', KEYS[3], math.ceil(1000 * (tonumber(ARGV[6]) / tonumber(ARGV[5]) + 1)))
@@ -237,11 +239,11 @@ wait = take(KEYS[4], 'n', 's', tonumber(ARGV[7]), tonumber(ARGV[8]), now)
 redis.call('PEXPIRE', KEYS[4], math.ceil(1000 * (tonumber(ARGV[8]) / tonumber(ARGV[7]) + 1)))
 if wait > 0 then return {4, tostring(wait)} end
 return {0}
-"""
+""")
 
 # KEYS: trip, open, client zset, token key. ARGV: now, keep_s, max_trips, max_per_client, id, token hash,
 # client, burst, meta, state. -> 0 added, 2 client full, 3 service full
-_ADD = _TAKE + """
+_ADD = Script(_TAKE + """
 local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
 if tonumber(ARGV[4]) > 0 and count(KEYS[3], now - ttl) >= tonumber(ARGV[4]) then return 2 end
 if count(KEYS[2], now - ttl) >= tonumber(ARGV[3]) then return 3 end
@@ -253,7 +255,7 @@ redis.call('ZADD', KEYS[2], now, ARGV[5])
 redis.call('ZADD', KEYS[3], now, ARGV[5])
 redis.call('PEXPIRE', KEYS[3], ms)
 return 0
-"""
+""")
 
 # The trip's hash is read once per call (HMGET of TRIP_FIELDS) and written once (HSET of what changed).
 # ``touch``: the idle clock (the keys' expiry, the open-trip sets' scores) is reset when it was last reset
@@ -295,7 +297,7 @@ TRIP_FIELDS = ("v", "tok", "client", "bt", "bs", "ts")
 # keep_s, every_s, prefix, id.
 # -> {0} unknown, {1} bad token, {2} another trip's token, {3, wait} rate limited,
 #    {4, version, state or nil, meta or nil}
-_LOAD = _TRIP + """
+_LOAD = Script(_TRIP + """
 local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts')
 if not h[1] then return {0} end
 local p = ARGV[10]
@@ -323,14 +325,14 @@ elseif ARGV[3] == '1' then
   meta = redis.call('HGET', KEYS[1], 'meta')
 end
 return {4, h[1], state, meta}
-"""
+""")
 
 # KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), keep_s, token hash, take (0/1),
 # now, rate, burst, prefix, id, every_s. The trip's token is checked, its idle clock reset, a token of its
 # bucket taken (when asked), then the state written if the trip is still at the version it was computed from:
 # 3 commands (HMGET, HSET, APPEND) on most fixes.
 # -> {new version}, {0, version, state} the trip moved meanwhile, {-1} gone, {-2} not its token, {-3, wait} rate limited
-_SAVE = _TRIP + """
+_SAVE = Script(_TRIP + """
 local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts')
 if not h[1] then return {-1} end
 if h[2] ~= ARGV[5] then return {-2} end
@@ -357,10 +359,10 @@ if #ARGV[3] > 0 and redis.call('APPEND', KEYS[2], ARGV[3]) == #ARGV[3] then  -- 
   redis.call('PEXPIRE', KEYS[2], math.ceil(keep * 1000))
 end
 return {nv}
-"""
+""")
 
 # KEYS: trip, samples. ARGV: prefix, id. -> 1 removed, 0 already gone
-_REMOVE = """
+_REMOVE = Script("""
 local h = redis.call('HMGET', KEYS[1], 'tok', 'client')
 if not h[1] then return 0 end
 local p = ARGV[1]
@@ -368,7 +370,7 @@ redis.call('DEL', KEYS[1], KEYS[2], p .. ':k:' .. h[1])
 redis.call('ZREM', p .. ':open', ARGV[2])
 redis.call('ZREM', p .. ':c:' .. h[2], ARGV[2])
 return 1
-"""
+""")
 
 SAMPLE = np.dtype("<f8")
 """A score sample's fields (t, v, x) as stored: little-endian doubles, 24 bytes a fix."""
@@ -388,27 +390,15 @@ class RedisTrips:
 
     def __init__(
         self, settings: Settings, limits: Limits, build: Callable[[dict], Awaitable[Trip]],
-        release: Callable[[Trip], Awaitable[None]] | None = None, clock: Callable[[], float] = time.time, client=None,
+        release: Callable[[Trip], Awaitable[None]] | None = None, clock: Callable[[], float] = time.time,
     ) -> None:  # fmt: skip
-        import redis.asyncio as aioredis
-
         self.s = settings
         self.limits = limits
         self.build = build
         self.release = release
         self.clock = clock
         self.p = settings.store_prefix
-        # a connection per concurrent call, up to store_max_connections (redis-py's blocking pool, which makes
-        # calls wait for a free connection, starved some waiters for seconds under 200 concurrent trips)
-        self.redis = client or aioredis.Redis.from_url(
-            settings.store_url, socket_timeout=settings.store_timeout_s, socket_connect_timeout=settings.store_timeout_s,
-            health_check_interval=30, max_connections=settings.store_max_connections,
-        )  # fmt: skip
-        self._admit = self.redis.register_script(_ADMIT)
-        self._add = self.redis.register_script(_ADD)
-        self._load = self.redis.register_script(_LOAD)
-        self._save = self.redis.register_script(_SAVE)
-        self._remove = self.redis.register_script(_REMOVE)
+        self.redis = RedisPipe(settings.store_url, settings.store_timeout_s)  # one pipelined connection per worker
         self.touch_every_s = min(10.0, settings.trip_idle_ttl_s / 10)
         """A trip's idle clock is reset at most this often (each request did it before: 6 more commands). [s]"""
         self.keep_s = settings.trip_idle_ttl_s + self.touch_every_s
@@ -437,15 +427,15 @@ class RedisTrips:
 
     async def count(self) -> int:
         async with self._reach():
-            await self.redis.zremrangebyscore(f"{self.p}:open", "-inf", f"({self.clock() - self.keep_s}")
-            self._count = int(await self.redis.zcard(f"{self.p}:open"))
+            await self.redis.call("ZREMRANGEBYSCORE", f"{self.p}:open", "-inf", f"({self.clock() - self.keep_s!r}")
+            self._count = int(await self.redis.call("ZCARD", f"{self.p}:open"))
         return self._count
 
     async def admit(self, client: str) -> None:
         s = self.s
         async with self._reach():
-            r = await self._admit(
-                keys=[f"{self.p}:open", f"{self.p}:c:{client}", f"{self.p}:rl:c:{client}", f"{self.p}:rl:create"],
+            r = await self.redis.run(
+                _ADMIT, keys=[f"{self.p}:open", f"{self.p}:c:{client}", f"{self.p}:rl:c:{client}", f"{self.p}:rl:create"],
                 args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, s.create_rate_per_client_per_s,
                       s.create_burst_per_client, s.create_rate_per_s, s.create_burst],
             )  # fmt: skip
@@ -462,8 +452,8 @@ class RedisTrips:
     async def add(self, trip: Trip) -> None:
         s = self.s
         async with self._reach():
-            code = await self._add(
-                keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash],
+            code = await self.redis.run(
+                _ADD, keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash],
                 args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, trip.id, trip.token_hash, trip.client,
                       s.rate_burst, _json(trip.meta()), _json(trip.state())],
             )  # fmt: skip
@@ -499,8 +489,8 @@ class RedisTrips:
         trip = cached[0] if cached is not None else None
         digest = token_hash(token)
         async with self._reach():
-            r = await self._load(
-                keys=[self._key(trip_id)],
+            r = await self.redis.run(
+                _LOAD, keys=[self._key(trip_id)],
                 args=[digest, "" if trip is None else str(trip.version), 0 if trip is not None else 1, 1 if take else 0, repr(self.clock()),
                       s.rate_per_s, s.rate_burst, self.keep_s, self.touch_every_s, self.p, trip_id],
             )  # fmt: skip
@@ -524,7 +514,7 @@ class RedisTrips:
 
     async def _exists(self, trip_id: str) -> bool:
         async with self._reach():
-            return bool(await self.redis.exists(self._key(trip_id)))
+            return bool(await self.redis.call("EXISTS", self._key(trip_id)))
 
     async def for_fix(self, trip_id: str, token: str | None) -> Trip:
         """The trip to apply a fix to: this worker's copy when it has one and ``token`` is its token (no round
@@ -547,8 +537,8 @@ class RedisTrips:
         s = self.s
         try:
             async with self._reach():
-                r = await self._save(
-                    keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
+                r = await self.redis.run(
+                    _SAVE, keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
                     args=[str(trip.version), _json(trip.state()), samples, self.keep_s, trip.token_hash, 1 if take else 0,
                           repr(self.clock()), s.rate_per_s, s.rate_burst, self.p, trip.id, self.touch_every_s],
                 )  # fmt: skip
@@ -576,7 +566,7 @@ class RedisTrips:
 
     async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         async with self._reach():
-            data = await self.redis.get(self._key(trip.id) + ":tr") or b""
+            data = await self.redis.call("GET", self._key(trip.id) + ":tr") or b""
         rows = np.frombuffer(data, dtype=SAMPLE)[: 3 * (len(data) // (3 * SAMPLE.itemsize))].reshape(-1, 3)
         pending = np.column_stack([np.frombuffer(a, dtype=np.float64) for a in (trip.trace_t, trip.trace_v, trip.trace_x)]).reshape(-1, 3)
         rows = np.concatenate([rows, pending]) if pending.size else rows
@@ -585,7 +575,7 @@ class RedisTrips:
     async def remove(self, trip_id: str) -> Trip:
         cached = self._cache.get(trip_id)
         async with self._reach():
-            gone = not await self._remove(keys=[self._key(trip_id), self._key(trip_id) + ":tr"], args=[self.p, trip_id])
+            gone = not await self.redis.run(_REMOVE, keys=[self._key(trip_id), self._key(trip_id) + ":tr"], args=[self.p, trip_id])
         trip = self._forget(trip_id, release=False) or (cached[0] if cached else None)  # the caller closes its SPaT
         if gone or trip is None:  # another call ended it first
             if trip is not None and self.release is not None:
@@ -616,12 +606,12 @@ class RedisTrips:
     async def close(self) -> None:
         for trip_id in list(self._cache):
             self._forget(trip_id)
-        await self.redis.aclose()
+        await self.redis.close()
 
 
 # KEYS: the trip's and the client's stream sets. ARGV: now, stream id, per trip, per client (0: none), lease_s.
 # -> 0 opened, 1 the trip's streams are full, 2 the client's
-_STREAM_OPEN = """
+_STREAM_OPEN = Script("""
 local now, lease = tonumber(ARGV[1]), tonumber(ARGV[5])
 redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now)
 redis.call('ZREMRANGEBYSCORE', KEYS[2], '-inf', now)
@@ -632,10 +622,10 @@ for i = 1, 2 do
   redis.call('PEXPIRE', KEYS[i], math.ceil(lease * 1000))
 end
 return 0
-"""
+""")
 
 # KEYS: as above. ARGV: now, stream id, lease_s (0: the stream closed)
-_STREAM_RENEW = """
+_STREAM_RENEW = Script("""
 for i = 1, 2 do
   if tonumber(ARGV[3]) > 0 then
     redis.call('ZADD', KEYS[i], 'XX', tonumber(ARGV[1]) + tonumber(ARGV[3]), ARGV[2])
@@ -645,7 +635,7 @@ for i = 1, 2 do
   end
 end
 return 0
-"""
+""")
 
 
 class RedisStreams:
@@ -657,8 +647,6 @@ class RedisStreams:
 
     def __init__(self, store: RedisTrips) -> None:
         self.store = store
-        self._open = store.redis.register_script(_STREAM_OPEN)
-        self._renew = store.redis.register_script(_STREAM_RENEW)
 
     def _keys(self, trip_id: str, client: str) -> list[str]:
         return [f"{self.store.p}:ws:t:{trip_id}", f"{self.store.p}:ws:c:{client}"]
@@ -668,7 +656,7 @@ class RedisStreams:
         sid = uuid.uuid4().hex
         now = self.store.clock()
         async with self.store._reach():
-            code = await self._open(keys=self._keys(trip_id, client), args=[repr(now), sid, per_trip, per_client, self.LEASE_S])
+            code = await self.store.redis.run(_STREAM_OPEN, keys=self._keys(trip_id, client), args=[repr(now), sid, per_trip, per_client, self.LEASE_S])
         if code == 1:
             raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
         if code == 2:
@@ -681,12 +669,12 @@ class RedisStreams:
         if now >= handle[3]:
             handle[3] = now + self.LEASE_S / 3
             async with self.store._reach():
-                await self._renew(keys=self._keys(handle[0], handle[1]), args=[repr(now), handle[2], self.LEASE_S])
+                await self.store.redis.run(_STREAM_RENEW, keys=self._keys(handle[0], handle[1]), args=[repr(now), handle[2], self.LEASE_S])
 
     async def close(self, handle: list) -> None:
         with contextlib.suppress(ApiError):
             async with self.store._reach():
-                await self._renew(keys=self._keys(handle[0], handle[1]), args=[repr(self.store.clock()), handle[2], 0])
+                await self.store.redis.run(_STREAM_RENEW, keys=self._keys(handle[0], handle[1]), args=[repr(self.store.clock()), handle[2], 0])
 
 
 def make_store(settings: Settings, limits: Limits, build, release, clock) -> MemoryTrips | RedisTrips:
