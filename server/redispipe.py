@@ -25,7 +25,7 @@ from redis.exceptions import TimeoutError as ReplyTimeout
 
 
 class Script:
-    """A Lua script, called by its SHA-1 (``EVALSHA``; sent whole once when Redis does not know it yet)."""
+    """A Lua script, called by its SHA-1 (``EVALSHA``; loaded once when Redis does not know it yet)."""
 
     def __init__(self, source: str) -> None:
         self.source = source
@@ -100,6 +100,7 @@ class RedisPipe:
         self._conn: _Connection | None = None
         self._connecting: asyncio.Task | None = None
         self._watch: asyncio.TimerHandle | None = None
+        self._loading: dict[str, asyncio.Future] = {}  # script SHA-1 -> its SCRIPT LOAD
 
     async def _connect(self) -> _Connection:
         loop = asyncio.get_running_loop()
@@ -165,8 +166,12 @@ class RedisPipe:
         """``script``'s reply for ``keys`` and ``args`` (``EVALSHA``; ``EVAL`` the first time Redis lacks it)."""
         try:
             return await self.call("EVALSHA", script.sha, len(keys), *keys, *args)
-        except NoScriptError:
-            return await self.call("EVAL", script.source, len(keys), *keys, *args)
+        except NoScriptError:  # the calls of a burst all fail at once: one SCRIPT LOAD serves them all
+            loading = self._loading.get(script.sha)
+            if loading is None or loading.done():
+                loading = self._loading[script.sha] = asyncio.ensure_future(self.call("SCRIPT", "LOAD", script.source))
+            await asyncio.shield(loading)
+            return await self.call("EVALSHA", script.sha, len(keys), *keys, *args)
 
     async def close(self) -> None:
         if self._watch is not None:

@@ -54,6 +54,9 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 
 import numpy as np
 from pydantic_core import from_json, to_json
+from redis.exceptions import BusyLoadingError
+from redis.exceptions import ConnectionError as RedisConnectionError
+from redis.exceptions import TimeoutError as RedisTimeoutError
 
 from server.config import Settings
 from server.errors import ApiError
@@ -380,6 +383,23 @@ def _json(data) -> bytes:
     return to_json(data, inf_nan_mode="constants")  # advisories may hold infinite seconds
 
 
+class _Reach:
+    """``with REACH:`` Redis unreachable (down, silent, loading) as 503 ``store_unavailable`` (the trip is not gone: retry)."""
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind, exc, tb) -> bool:
+        if exc is None or not isinstance(exc, (RedisConnectionError, RedisTimeoutError, BusyLoadingError, OSError)):
+            return False
+        log.warning("trip store unreachable: %r", exc)
+        raise ApiError(503, "store_unavailable", f"the trip store is unreachable ({type(exc).__name__}); the trip is kept: retry in {RETRY_AFTER_S} s",
+                       headers={"Retry-After": str(RETRY_AFTER_S)}) from None  # fmt: skip
+
+
+REACH = _Reach()
+
+
 class RedisTrips:
     """Trips in Redis, shared by every worker (see the module docstring). ``build(meta)`` makes a trip from its
     meta (``Engine.trip_from_meta``); ``release(trip)`` closes what a cached trip holds (its SPaT view)."""
@@ -413,27 +433,15 @@ class RedisTrips:
     def _key(self, trip_id: str) -> str:
         return f"{self.p}:t:{trip_id}"
 
-    @contextlib.asynccontextmanager
-    async def _reach(self) -> AsyncIterator[None]:
-        """Redis errors as 503 (the trip is not gone: retry)."""
-        from redis.exceptions import ConnectionError, TimeoutError, BusyLoadingError
-
-        try:
-            yield
-        except (ConnectionError, TimeoutError, BusyLoadingError, OSError) as exc:
-            log.warning("trip store unreachable: %r", exc)
-            raise ApiError(503, "store_unavailable", f"the trip store is unreachable ({type(exc).__name__}); the trip is kept: retry in {RETRY_AFTER_S} s",
-                           headers={"Retry-After": str(RETRY_AFTER_S)}) from None  # fmt: skip
-
     async def count(self) -> int:
-        async with self._reach():
+        with REACH:
             await self.redis.call("ZREMRANGEBYSCORE", f"{self.p}:open", "-inf", f"({self.clock() - self.keep_s!r}")
             self._count = int(await self.redis.call("ZCARD", f"{self.p}:open"))
         return self._count
 
     async def admit(self, client: str) -> None:
         s = self.s
-        async with self._reach():
+        with REACH:
             r = await self.redis.run(
                 _ADMIT, keys=[f"{self.p}:open", f"{self.p}:c:{client}", f"{self.p}:rl:c:{client}", f"{self.p}:rl:create"],
                 args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, s.create_rate_per_client_per_s,
@@ -451,7 +459,7 @@ class RedisTrips:
 
     async def add(self, trip: Trip) -> None:
         s = self.s
-        async with self._reach():
+        with REACH:
             code = await self.redis.run(
                 _ADD, keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash],
                 args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, trip.id, trip.token_hash, trip.client,
@@ -488,7 +496,7 @@ class RedisTrips:
         cached = self._cache.get(trip_id)
         trip = cached[0] if cached is not None else None
         digest = token_hash(token)
-        async with self._reach():
+        with REACH:
             r = await self.redis.run(
                 _LOAD, keys=[self._key(trip_id)],
                 args=[digest, "" if trip is None else str(trip.version), 0 if trip is not None else 1, 1 if take else 0, repr(self.clock()),
@@ -513,15 +521,20 @@ class RedisTrips:
         return trip
 
     async def _exists(self, trip_id: str) -> bool:
-        async with self._reach():
+        with REACH:
             return bool(await self.redis.call("EXISTS", self._key(trip_id)))
 
     async def for_fix(self, trip_id: str, token: str | None) -> Trip:
         """The trip to apply a fix to: this worker's copy when it has one and ``token`` is its token (no round
         trip: :meth:`save` finds out whether the copy was current), else :meth:`authorize` (no bucket token)."""
         cached = self._cache.get(trip_id)
-        if cached is not None and cached[0].version > 0 and token and hmac.compare_digest(token_hash(token), cached[0].token_hash):
-            return cached[0]
+        if cached is not None and cached[0].version > 0 and token:
+            trip = cached[0]
+            if trip.token is not None and hmac.compare_digest(token.encode(), trip.token.encode()):
+                return trip  # the token this worker already checked against the hash (no SHA-256 per fix)
+            if hmac.compare_digest(token_hash(token), trip.token_hash):
+                trip.token = token
+                return trip
         return await self.authorize(trip_id, token)
 
     async def save(self, trip: Trip, take: bool = False) -> bool:
@@ -536,7 +549,7 @@ class RedisTrips:
             samples = rows.tobytes()
         s = self.s
         try:
-            async with self._reach():
+            with REACH:
                 r = await self.redis.run(
                     _SAVE, keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
                     args=[str(trip.version), _json(trip.state()), samples, self.keep_s, trip.token_hash, 1 if take else 0,
@@ -565,7 +578,7 @@ class RedisTrips:
         return True
 
     async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        async with self._reach():
+        with REACH:
             data = await self.redis.call("GET", self._key(trip.id) + ":tr") or b""
         rows = np.frombuffer(data, dtype=SAMPLE)[: 3 * (len(data) // (3 * SAMPLE.itemsize))].reshape(-1, 3)
         pending = np.column_stack([np.frombuffer(a, dtype=np.float64) for a in (trip.trace_t, trip.trace_v, trip.trace_x)]).reshape(-1, 3)
@@ -574,7 +587,7 @@ class RedisTrips:
 
     async def remove(self, trip_id: str) -> Trip:
         cached = self._cache.get(trip_id)
-        async with self._reach():
+        with REACH:
             gone = not await self.redis.run(_REMOVE, keys=[self._key(trip_id), self._key(trip_id) + ":tr"], args=[self.p, trip_id])
         trip = self._forget(trip_id, release=False) or (cached[0] if cached else None)  # the caller closes its SPaT
         if gone or trip is None:  # another call ended it first
@@ -655,7 +668,7 @@ class RedisStreams:
         """A handle for :meth:`renew` and :meth:`close`; 429 ``too_many_streams`` beyond the caps."""
         sid = uuid.uuid4().hex
         now = self.store.clock()
-        async with self.store._reach():
+        with REACH:
             code = await self.store.redis.run(_STREAM_OPEN, keys=self._keys(trip_id, client), args=[repr(now), sid, per_trip, per_client, self.LEASE_S])
         if code == 1:
             raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
@@ -668,12 +681,12 @@ class RedisStreams:
         now = self.store.clock()
         if now >= handle[3]:
             handle[3] = now + self.LEASE_S / 3
-            async with self.store._reach():
+            with REACH:
                 await self.store.redis.run(_STREAM_RENEW, keys=self._keys(handle[0], handle[1]), args=[repr(now), handle[2], self.LEASE_S])
 
     async def close(self, handle: list) -> None:
         with contextlib.suppress(ApiError):
-            async with self.store._reach():
+            with REACH:
                 await self.store.redis.run(_STREAM_RENEW, keys=self._keys(handle[0], handle[1]), args=[repr(self.store.clock()), handle[2], 0])
 
 

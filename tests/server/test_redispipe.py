@@ -54,8 +54,12 @@ def test_scripts_are_sent_whole_when_redis_does_not_know_them(store):
     async def run() -> None:
         pipe = RedisPipe(store.url, 10.0)
         assert await pipe.run(script, keys=["a"], args=[41]) == [b"a", 42]
-        await pipe.call("SCRIPT", "FLUSH")  # as after a Redis restart without persistence of scripts
-        assert await pipe.run(script, keys=["b"], args=[1]) == [b"b", 2]
+        await pipe.call("SCRIPT", "FLUSH")  # as after a Redis restart (scripts are not persisted)
+        await pipe.call("CONFIG", "RESETSTAT")
+        replies = await asyncio.gather(*(pipe.run(script, keys=[f"b{i}"], args=[i]) for i in range(50)))
+        assert replies == [[f"b{i}".encode(), i + 1] for i in range(50)]
+        stats = (await pipe.call("INFO", "commandstats")).decode()
+        assert "cmdstat_script|load:calls=1," in stats and "cmdstat_eval:" not in stats  # a burst of NOSCRIPT: one load
         await pipe.close()
 
     asyncio.run(run())
