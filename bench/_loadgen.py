@@ -9,10 +9,11 @@ positions 1 m apart), so every fix is plausible, in order and goes through the w
 Plain ``asyncio.Protocol`` callbacks (no streams, no coroutine per request), on uvloop when installed.
 
 Reads a JSON job on stdin: ``{"port", "trips": [[id, token], ...], "positions": [[lat, lon], ...] (1 m
-apart, there and back), "warmup_s", "seconds"}``. Writes ``start`` when the measured window opens, ``stop``
-when it closes (the caller samples the servers' CPU at those lines), then one JSON line: ``{"n", "errors",
-"elapsed_s", "cpu_s", "lat_s": [...]}`` (the requests completed in the window, non-200 answers among them,
-the window's length, this process's CPU seconds in it, and each request's latency).
+apart, there and back), "warmup_s", "seconds", "out"}``. Writes ``start`` to stdout when the measured window
+opens, ``stop`` when it closes (the caller samples the servers' CPU at those lines), then ``done`` once the
+file ``out`` holds ``{"n", "errors", "elapsed_s", "cpu_s", "lat_s": [...]}`` (the requests completed in the
+window, non-200 answers among them, the window's length, this process's CPU seconds in it, and each
+request's latency).
 """
 
 from __future__ import annotations
@@ -138,7 +139,9 @@ def main() -> int:
     except ImportError:
         runner = asyncio.run
     out = runner(Run(job).main())
-    print(json.dumps(out), flush=True)
+    with open(job["out"], "w") as f:
+        json.dump(out, f)
+    print("done", flush=True)
     return 0
 
 

@@ -39,7 +39,7 @@ from tqdm import tqdm
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from bench._procs import cpu_seconds, free_port  # noqa: E402
+from bench._procs import cpu_seconds, free_port, machine_cpu_s  # noqa: E402
 from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
 from server.advising import Engine  # noqa: E402
 from server.config import Settings  # noqa: E402
@@ -157,19 +157,19 @@ def tree_cpu_s(pid: int) -> float:
     return total
 
 
-def load(port: int, trips, positions, warmup_s: float, seconds: float, mark) -> dict:
+def load(port: int, trips, positions, warmup_s: float, seconds: float, mark, out: Path) -> dict:
     """Run the load generator (``bench/_loadgen.py``, its own process) against ``port``; ``mark()`` is called
-    when its measured window opens and when it closes (the caller samples CPU there)."""
-    job = {"port": port, "trips": trips, "positions": positions, "warmup_s": warmup_s, "seconds": seconds}
+    when its measured window opens and when it closes (the caller samples CPU there); ``out``: its results."""
+    job = {"port": port, "trips": trips, "positions": positions, "warmup_s": warmup_s, "seconds": seconds, "out": str(out)}
     gen = subprocess.Popen([sys.executable, str(REPO / "bench" / "_loadgen.py")], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     gen.stdin.write(json.dumps(job))
     gen.stdin.close()
     for line in gen.stdout:
         if line.strip() in ("start", "stop"):
             mark()
-        elif line.startswith("{"):
+        elif line.strip() == "done":
             gen.wait(timeout=30)
-            return json.loads(line)
+            return json.loads(out.read_text())
     raise RuntimeError(f"the load generator exited with {gen.wait()}")
 
 
@@ -186,22 +186,29 @@ def http_part(redis: RedisServer, conns: int, seconds: float, folder: Path) -> N
             trips = asyncio.run(create_trips(port, conns))
             marks = []
             load_avg = os.getloadavg()[0]
-            out = load(port, trips, positions, 2.0, seconds, lambda: marks.append((time.perf_counter(), tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid))))
+            out = load(port, trips, positions, 2.0, seconds, lambda: marks.append((time.perf_counter(), tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s())),
+                       folder / "load.json")  # fmt: skip
         finally:
             proc.terminate()
             with contextlib.suppress(subprocess.TimeoutExpired):
                 proc.wait(timeout=20)
             if proc.poll() is None:
                 proc.kill()
-        (t0, c0, r0), (t1, c1, r1) = marks
+        (t0, c0, r0, m0), (t1, c1, r1, m1) = marks
         rps, lat, wall = out["n"] / out["elapsed_s"], out["lat_s"], t1 - t0
         cpu, cpu_redis, cpu_gen = (c1 - c0) / wall, (r1 - r0) / wall, out["cpu_s"] / out["elapsed_s"]
-        rows.append(rps)
+        machine = {k: (m1[k] - m0[k]) / wall for k in m0}
+        others = machine["busy"] - cpu - cpu_redis - cpu_gen
+        rows.append((rps, cpu))
         print(f"   {name:27s} {rps:6.0f} fixes/s  p50 {pct_ms(lat, 50):6.1f} ms  p99 {pct_ms(lat, 99):6.1f} ms  errors {out['errors']}  "
-              f"CPU: workers {100 * cpu:3.0f} %, Redis {100 * cpu_redis:3.0f} %, generator {100 * cpu_gen:3.0f} % ({1e6 * cpu_gen / max(rps, 1):.0f} us/fix)  "
-              f"{1e3 * cpu / max(rps, 1):.2f} worker-ms/fix  load avg {load_avg:.2f}")  # fmt: skip
-    print(f"   ratio 2 workers / 1 worker on Redis: {rows[2] / rows[1]:.2f}  (issue target >= 1.6 on 2 free cores); Redis 1 worker / in-process: {rows[1] / rows[0]:.2f}")
-    print(f"   CPU %: of one core, over the measured window; load avg: 1-minute, just before the run ({os.cpu_count()} CPUs)")
+              f"CPU: workers {100 * cpu:3.0f} %, Redis {100 * cpu_redis:3.0f} %, generator {100 * cpu_gen:3.0f} % ({1e6 * cpu_gen / max(rps, 1):.0f} us/fix), "
+              f"{1e3 * cpu / max(rps, 1):.2f} worker-ms/fix;  machine: others {100 * others:3.0f} %, steal {100 * machine['steal']:3.0f} %, "
+              f"idle {100 * machine['idle']:3.0f} %;  load avg {load_avg:.2f}")  # fmt: skip
+    (_, _), (r1, c1), (r2, c2) = rows
+    print(f"   ratio 2 workers / 1 worker on Redis: {r2 / r1:.2f}  (issue target >= 1.6 on 2 free cores); Redis 1 worker / in-process: {r1 / rows[0][0]:.2f}")
+    print(f"   the workers' CPU, 2 / 1: {c2 / c1:.2f}; fixes per worker-CPU-second, 2 / 1: {(r2 / c2) / (r1 / c1):.2f} (1.00: a second worker costs nothing per fix)")
+    print(f"   CPU %: of one core, over the measured window (others: the machine's busy time not ours; steal: taken by the hypervisor);"
+          f" load avg: 1-minute, just before the run ({os.cpu_count()} CPUs)")
 
 
 async def memory_part(redis_url: str, n_trips: int, n_fixes: int) -> None:
