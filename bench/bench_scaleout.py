@@ -7,15 +7,21 @@ scripts/system-deps.sh) on a free loopback port in a temporary folder. Prints, i
    the store's own time per fix (``authorize`` = load + rate limit, ``save``) on Redis, p50/p99 (target
    p99 < 2 ms); once with the worker's cache warm (a WebSocket, or one worker) and once with every fix
    reloading the trip's state (REST round robin over workers: the state changed elsewhere).
-2. **HTTP fixes/s**: ``--conns`` keep-alive clients (default 200, one trip each) POST fixes for ``--http-s``
-   each to: the in-process store (1 worker), Redis with 1 worker, Redis with ``--workers 2``; fixes/s, p50/p99,
-   and the ratio 2 workers / 1 worker. The load generator runs in this process, on the same cores.
+2. **HTTP fixes/s**: ``--conns`` keep-alive clients (default 200, one trip each, one fix in flight each) POST
+   fixes for ``--http-s`` each to: the in-process store (1 worker), Redis with 1 worker, Redis with
+   ``--workers 2``; fixes/s, p50/p99, the ratio 2 workers / 1 worker, and beside each run the CPU (of one
+   core) of the workers, Redis and the load generator, the machine's CPU taken by other jobs, stolen by the
+   hypervisor and idle, and the load average. The load generator (``bench/_loadgen.py``) is its own process,
+   lean (~50 us of CPU per fix): on 2 cores the second worker needs the CPU that other jobs do not take.
+   ``--rounds N`` repeats the three runs.
 3. **Memory**: ``--trips`` (default 20,000) open trips with ``--fixes`` fixes each in Redis (``used_memory``
    before and after): bytes per trip, and per further fix (the score samples, 24 bytes).
 
-    .venv/bin/python bench/bench_scaleout.py [--conns 200] [--http-s 8] [--trips 20000] [--fixes 5]
+    .venv/bin/python bench/bench_scaleout.py [--conns 200] [--http-s 8] [--rounds 1] [--trips 20000] [--fixes 5]
+                                             [--parts latency,http,memory]
 
-Figures on a shared 2-core machine are indicative: the workers, Redis and the load generator share the cores.
+Figures on a shared 2-core machine are indicative: the workers, Redis and the load generator share the cores
+with whatever else runs (the "others" column says how much).
 """
 
 from __future__ import annotations
