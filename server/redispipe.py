@@ -105,15 +105,23 @@ class RedisPipe:
     async def _connect(self) -> _Connection:
         loop = asyncio.get_running_loop()
         o = self.options
-        async with asyncio.timeout(self.timeout_s):
-            if "path" in o:
-                _, conn = await loop.create_unix_connection(_Connection, o["path"])
-            else:
-                _, conn = await loop.create_connection(_Connection, o.get("host", "localhost"), o.get("port", 6379), ssl=self.tls or None)
-            if o.get("password"):
-                await self._reply(conn.send(loop, hiredis.pack_command(("AUTH", *([o["username"]] if o.get("username") else []), o["password"]))))
-            if o.get("db"):
-                await self._reply(conn.send(loop, hiredis.pack_command(("SELECT", o["db"]))))
+        conn = None
+        try:
+            async with asyncio.timeout(self.timeout_s):
+                if "path" in o:
+                    _, conn = await loop.create_unix_connection(_Connection, o["path"])
+                else:
+                    _, conn = await loop.create_connection(_Connection, o.get("host", "localhost"), o.get("port", 6379), ssl=self.tls or None)
+                if o.get("password"):
+                    await self._reply(conn.send(loop, hiredis.pack_command(("AUTH", *([o["username"]] if o.get("username") else []), o["password"]))))
+                if o.get("db"):
+                    await self._reply(conn.send(loop, hiredis.pack_command(("SELECT", o["db"]))))
+        except BaseException as exc:
+            if conn is not None:
+                conn.fail(ConnectionError("connection set-up failed"))
+            if isinstance(exc, ResponseError):  # a wrong password or database: unreachable as configured
+                raise ConnectionError(f"Redis refused the connection's set-up: {exc}") from None
+            raise
         self._conn = conn
         return conn
 

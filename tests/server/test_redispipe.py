@@ -86,3 +86,20 @@ def test_a_silent_redis_times_out_a_dead_one_fails_and_a_restarted_one_serves(st
         await pipe.close()
 
     asyncio.run(run())
+
+
+def test_password_and_database_from_the_url_and_a_wrong_password_is_unreachable(store):
+    async def run() -> None:
+        admin = RedisPipe(store.url, 10.0)
+        await admin.call("CONFIG", "SET", "requirepass", "s3cret")
+        good = RedisPipe(f"redis://:s3cret@127.0.0.1:{store.port}/2", 10.0)
+        assert await good.call("SET", "k", "in db 2") == b"OK"
+        assert b" db=2 " in await good.call("CLIENT", "INFO")
+        bad = RedisPipe(f"redis://:wrong@127.0.0.1:{store.port}/0", 10.0)
+        with pytest.raises(ConnectionError, match="set-up"):
+            await bad.call("GET", "k")
+        await good.call("CONFIG", "SET", "requirepass", "")
+        for pipe in (admin, good, bad):
+            await pipe.close()
+
+    asyncio.run(run())
