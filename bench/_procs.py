@@ -25,3 +25,12 @@ def rss_mib(pid: int) -> float:
         if line.startswith("VmRSS:"):
             return int(line.split()[1]) / 1024
     return float("nan")
+
+
+def machine_cpu_s() -> dict[str, float]:
+    """CPU seconds of the whole machine since boot, summed over its CPUs (Linux /proc/stat): ``busy`` (user,
+    nice, system, irq, softirq), ``idle`` (idle, iowait) and ``steal`` (taken by the hypervisor for other guests)."""
+    ticks = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
+    hz = os.sysconf("SC_CLK_TCK")
+    user, nice, system, idle, iowait, irq, softirq, steal = ticks
+    return {"busy": (user + nice + system + irq + softirq) / hz, "idle": (idle + iowait) / hz, "steal": steal / hz}

@@ -64,7 +64,6 @@ class Settings(BaseSettings):
     store_url: str | None = Field(default=None, description="Redis holding the open trips, shared by every worker (redis://host:6379/0); None = in this process (one worker; a restart loses them)")
     store_prefix: str = Field(default="eco", min_length=1, description="prefix of the store's Redis keys (several services on one Redis)")
     store_timeout_s: float = Field(default=2.0, gt=0, description="a Redis call failing for this long answers 503 + Retry-After [s]")
-    store_max_connections: int = Field(default=1024, ge=1, description="Redis connections per worker, at most (one per concurrent call; beyond: 503)")
 
     # limits
     max_trips: int = Field(default=20_000, ge=1)

@@ -15,12 +15,13 @@ Both answer the same calls, all ``async``:
 * ``samples(trip)``: the trip's score samples ``(t, v, x)``; ``remove(trip_id)``: the trip is ended.
 
 **Redis layout** (prefix ``ECO_STORE_PREFIX``, default ``eco``), every key expiring ``trip_idle_ttl_s`` after
-the trip's last request:
+the trip's last request (up to ``touch_every_s`` later: the idle clock is reset at most that often):
 
 * ``eco:t:<id>``, a hash: ``meta`` (JSON, written once: corridor, timing, entry time, vehicle, units, client;
   any worker rebuilds the trip and its SPaT view from it), ``state`` (JSON, rewritten per fix, ~1-2 kB:
   track, advisor memory, last advice, counters), ``v`` (version, +1 per write), ``tok`` (SHA-256 of the
-  token), ``client``, ``bt``/``bs`` (the trip's request bucket: tokens, stamp);
+  token), ``client``, ``bt``/``bs`` (the trip's request bucket: tokens, stamp), ``ts`` (the idle clock's last
+  reset);
 * ``eco:t:<id>:tr``: the score samples, 24 bytes per accepted fix (``t, v, x`` as little-endian doubles)
   appended per fix, at most ``max_trace_fixes`` of them;
 * ``eco:k:<token hash>`` -> id (tells "another trip's token", 403, from an invalid one, 401);
@@ -29,7 +30,8 @@ the trip's last request:
 * ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets;
 * ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`RedisStreams`, leases).
 
-Each call is one round trip (a Lua script, atomic in Redis). A worker keeps the trips it served in a small
+Each call is one round trip (a Lua script, atomic in Redis; a fix's write is 3 commands in it) over the worker's
+one pipelined connection (:class:`server.redispipe.RedisPipe`: the calls of one event-loop turn in one write). A worker keeps the trips it served in a small
 cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
 version it was computed from (one round trip); a trip not cached, or whose version moved (another worker
 served it), is read first (two). Within a worker, fixes of one trip are serialised (:meth:`RedisTrips.hold`);
@@ -52,10 +54,14 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 
 import numpy as np
 from pydantic_core import from_json, to_json
+from redis.exceptions import BusyLoadingError
+from redis.exceptions import ConnectionError as RedisConnectionError
+from redis.exceptions import TimeoutError as RedisTimeoutError
 
 from server.config import Settings
 from server.errors import ApiError
 from server.ratelimit import KeyedBuckets, TokenBucket
+from server.redispipe import RedisPipe, Script
 from server.trips import Trip, token_hash
 
 log = logging.getLogger("server")
@@ -222,10 +228,10 @@ local function count(key, oldest)
 end
 """
 
-# KEYS: open, client zset, client bucket, create bucket. ARGV: now, ttl_s, max_trips, max_per_client,
+# KEYS: open, client zset, client bucket, create bucket. ARGV: now, keep_s, max_trips, max_per_client,
 # client rate, client burst, create rate, create burst.
 # -> {0} admitted, {1, wait} client rate, {2} client full, {3} service full, {4, wait} service rate
-_ADMIT = _TAKE + """
+_ADMIT = Script(_TAKE + """
 local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
 local wait = take(KEYS[3], 'n', 's', tonumber(ARGV[5]), tonumber(ARGV[6]), now)
 redis.call('PEXPIRE', KEYS[3], math.ceil(1000 * (tonumber(ARGV[6]) / tonumber(ARGV[5]) + 1)))
@@ -236,86 +242,130 @@ wait = take(KEYS[4], 'n', 's', tonumber(ARGV[7]), tonumber(ARGV[8]), now)
 redis.call('PEXPIRE', KEYS[4], math.ceil(1000 * (tonumber(ARGV[8]) / tonumber(ARGV[7]) + 1)))
 if wait > 0 then return {4, tostring(wait)} end
 return {0}
-"""
+""")
 
-# KEYS: trip, open, client zset, token key. ARGV: now, ttl_s, max_trips, max_per_client, id, token hash,
+# KEYS: trip, open, client zset, token key. ARGV: now, keep_s, max_trips, max_per_client, id, token hash,
 # client, burst, meta, state. -> 0 added, 2 client full, 3 service full
-_ADD = _TAKE + """
+_ADD = Script(_TAKE + """
 local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
 if tonumber(ARGV[4]) > 0 and count(KEYS[3], now - ttl) >= tonumber(ARGV[4]) then return 2 end
 if count(KEYS[2], now - ttl) >= tonumber(ARGV[3]) then return 3 end
 local ms = math.ceil(ttl * 1000)
-redis.call('HSET', KEYS[1], 'v', '1', 'tok', ARGV[6], 'client', ARGV[7], 'bt', ARGV[8], 'bs', ARGV[1], 'meta', ARGV[9], 'state', ARGV[10])
+redis.call('HSET', KEYS[1], 'v', '1', 'tok', ARGV[6], 'client', ARGV[7], 'bt', ARGV[8], 'bs', ARGV[1], 'ts', ARGV[1], 'meta', ARGV[9], 'state', ARGV[10])
 redis.call('PEXPIRE', KEYS[1], ms)
 redis.call('SET', KEYS[4], ARGV[5], 'PX', ms)
 redis.call('ZADD', KEYS[2], now, ARGV[5])
 redis.call('ZADD', KEYS[3], now, ARGV[5])
 redis.call('PEXPIRE', KEYS[3], ms)
 return 0
-"""
+""")
 
-_TOUCH = """
-local function touch(key, tok, client, ttl_s, now, p, id)
-  local ms = math.ceil(ttl_s * 1000)
+# The trip's hash is read once per call (HMGET of TRIP_FIELDS) and written once (HSET of what changed).
+# ``touch``: the idle clock (the keys' expiry, the open-trip sets' scores) is reset when it was last reset
+# ``every`` seconds ago or more (a tenth of the TTL, at most 10 s), not per request: 6 commands saved on most
+# fixes. The keys then live ``keep`` = TTL + every after a reset, so a trip lives at least its TTL after its
+# last request, and the caps count a trip until ``keep`` after its last reset (never too few).
+# ``bucket``: the trip's request bucket from the fields read; its new tokens and stamp go with the write.
+_TRIP = """
+local function touch(key, h, keep, every, now, p, id, out)
+  if now - (tonumber(h[6]) or 0) < every then return end
+  local ms = math.ceil(keep * 1000)
   redis.call('PEXPIRE', key, ms)
   redis.call('PEXPIRE', key .. ':tr', ms)
-  redis.call('PEXPIRE', p .. ':k:' .. tok, ms)
+  redis.call('PEXPIRE', p .. ':k:' .. h[2], ms)
   redis.call('ZADD', p .. ':open', now, id)
-  redis.call('ZADD', p .. ':c:' .. client, now, id)
-  redis.call('PEXPIRE', p .. ':c:' .. client, ms)
+  redis.call('ZADD', p .. ':c:' .. h[3], now, id)
+  redis.call('PEXPIRE', p .. ':c:' .. h[3], ms)
+  out[#out + 1] = 'ts'
+  out[#out + 1] = string.format('%.17g', now)
+end
+local function bucket(h, rate, burst, now, out)
+  local n = tonumber(h[4]) or burst
+  local s = tonumber(h[5]) or now
+  n = math.min(burst, n + math.max(0, now - s) * rate)
+  if n < 1 then return (1 - n) / rate end
+  out[#out + 1] = 'bt'
+  out[#out + 1] = string.format('%.17g', n - 1)
+  out[#out + 1] = 'bs'
+  out[#out + 1] = string.format('%.17g', now)
+  return 0
+end
+local function write(key, out)
+  if #out > 0 then redis.call('HSET', key, unpack(out)) end
 end
 """
+TRIP_FIELDS = ("v", "tok", "client", "bt", "bs", "ts")
 
 # KEYS: trip. ARGV: token hash, version held ('' none), meta wanted (0/1), take (0/1), now, rate, burst,
-# ttl_s, prefix, id.
+# keep_s, every_s, prefix, id.
 # -> {0} unknown, {1} bad token, {2} another trip's token, {3, wait} rate limited,
 #    {4, version, state or nil, meta or nil}
-_LOAD = _TAKE + _TOUCH + """
-local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client')
+_LOAD = Script(_TRIP + """
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts')
 if not h[1] then return {0} end
-local p = ARGV[9]
+local p = ARGV[10]
 if h[2] ~= ARGV[1] then
   if redis.call('EXISTS', p .. ':k:' .. ARGV[1]) == 1 then return {2} end
   return {1}
 end
-local now = tonumber(ARGV[5])
-touch(KEYS[1], h[2], h[3], tonumber(ARGV[8]), now, p, ARGV[10])
+local now, out = tonumber(ARGV[5]), {}
+touch(KEYS[1], h, tonumber(ARGV[8]), tonumber(ARGV[9]), now, p, ARGV[11], out)
 if ARGV[4] == '1' then
-  local wait = take(KEYS[1], 'bt', 'bs', tonumber(ARGV[6]), tonumber(ARGV[7]), now)
-  if wait > 0 then return {3, tostring(wait)} end
+  local wait = bucket(h, tonumber(ARGV[6]), tonumber(ARGV[7]), now, out)
+  if wait > 0 then
+    write(KEYS[1], out)
+    return {3, tostring(wait)}
+  end
 end
+write(KEYS[1], out)
 local state, meta = false, false
-if h[1] ~= ARGV[2] then state = redis.call('HGET', KEYS[1], 'state') end
-if ARGV[3] == '1' then meta = redis.call('HGET', KEYS[1], 'meta') end
+if h[1] ~= ARGV[2] and ARGV[3] == '1' then
+  local sm = redis.call('HMGET', KEYS[1], 'state', 'meta')
+  state, meta = sm[1], sm[2]
+elseif h[1] ~= ARGV[2] then
+  state = redis.call('HGET', KEYS[1], 'state')
+elseif ARGV[3] == '1' then
+  meta = redis.call('HGET', KEYS[1], 'meta')
+end
 return {4, h[1], state, meta}
-"""
+""")
 
-# KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), ttl_s, token hash, take (0/1),
-# now, rate, burst, prefix, id. The trip's token is checked, its idle clock reset, a token of its bucket
-# taken (when asked), then the state written if the trip is still at the version it was computed from.
+# KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), keep_s, token hash, take (0/1),
+# now, rate, burst, prefix, id, every_s. The trip's token is checked, its idle clock reset, a token of its
+# bucket taken (when asked), then the state written if the trip is still at the version it was computed from:
+# 3 commands (HMGET, HSET, APPEND) on most fixes.
 # -> {new version}, {0, version, state} the trip moved meanwhile, {-1} gone, {-2} not its token, {-3, wait} rate limited
-_SAVE = _TAKE + _TOUCH + """
-local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client')
+_SAVE = Script(_TRIP + """
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts')
 if not h[1] then return {-1} end
 if h[2] ~= ARGV[5] then return {-2} end
-local now = tonumber(ARGV[7])
-touch(KEYS[1], h[2], h[3], tonumber(ARGV[4]), now, ARGV[10], ARGV[11])
+local now, keep, out = tonumber(ARGV[7]), tonumber(ARGV[4]), {}
+touch(KEYS[1], h, keep, tonumber(ARGV[12]), now, ARGV[10], ARGV[11], out)
 if ARGV[6] == '1' then
-  local wait = take(KEYS[1], 'bt', 'bs', tonumber(ARGV[8]), tonumber(ARGV[9]), now)
-  if wait > 0 then return {-3, tostring(wait)} end
+  local wait = bucket(h, tonumber(ARGV[8]), tonumber(ARGV[9]), now, out)
+  if wait > 0 then
+    write(KEYS[1], out)
+    return {-3, tostring(wait)}
+  end
 end
-if h[1] ~= ARGV[1] then return {0, h[1], redis.call('HGET', KEYS[1], 'state')} end
+if h[1] ~= ARGV[1] then
+  write(KEYS[1], out)
+  return {0, h[1], redis.call('HGET', KEYS[1], 'state')}
+end
 local nv = tonumber(h[1]) + 1
-redis.call('HSET', KEYS[1], 'v', tostring(nv), 'state', ARGV[2])
-if #ARGV[3] > 0 then
-  redis.call('APPEND', KEYS[2], ARGV[3])
-  redis.call('PEXPIRE', KEYS[2], math.ceil(tonumber(ARGV[4]) * 1000))
+out[#out + 1] = 'v'
+out[#out + 1] = tostring(nv)
+out[#out + 1] = 'state'
+out[#out + 1] = ARGV[2]
+write(KEYS[1], out)
+if #ARGV[3] > 0 and redis.call('APPEND', KEYS[2], ARGV[3]) == #ARGV[3] then  -- a new key: its expiry
+  redis.call('PEXPIRE', KEYS[2], math.ceil(keep * 1000))
 end
 return {nv}
-"""
+""")
 
 # KEYS: trip, samples. ARGV: prefix, id. -> 1 removed, 0 already gone
-_REMOVE = """
+_REMOVE = Script("""
 local h = redis.call('HMGET', KEYS[1], 'tok', 'client')
 if not h[1] then return 0 end
 local p = ARGV[1]
@@ -323,7 +373,7 @@ redis.call('DEL', KEYS[1], KEYS[2], p .. ':k:' .. h[1])
 redis.call('ZREM', p .. ':open', ARGV[2])
 redis.call('ZREM', p .. ':c:' .. h[2], ARGV[2])
 return 1
-"""
+""")
 
 SAMPLE = np.dtype("<f8")
 """A score sample's fields (t, v, x) as stored: little-endian doubles, 24 bytes a fix."""
@@ -331,6 +381,23 @@ SAMPLE = np.dtype("<f8")
 
 def _json(data) -> bytes:
     return to_json(data, inf_nan_mode="constants")  # advisories may hold infinite seconds
+
+
+class _Reach:
+    """``with REACH:`` Redis unreachable (down, silent, loading) as 503 ``store_unavailable`` (the trip is not gone: retry)."""
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind, exc, tb) -> bool:
+        if exc is None or not isinstance(exc, (RedisConnectionError, RedisTimeoutError, BusyLoadingError, OSError)):
+            return False
+        log.warning("trip store unreachable: %r", exc)
+        raise ApiError(503, "store_unavailable", f"the trip store is unreachable ({type(exc).__name__}); the trip is kept: retry in {RETRY_AFTER_S} s",
+                       headers={"Retry-After": str(RETRY_AFTER_S)}) from None  # fmt: skip
+
+
+REACH = _Reach()
 
 
 class RedisTrips:
@@ -343,27 +410,19 @@ class RedisTrips:
 
     def __init__(
         self, settings: Settings, limits: Limits, build: Callable[[dict], Awaitable[Trip]],
-        release: Callable[[Trip], Awaitable[None]] | None = None, clock: Callable[[], float] = time.time, client=None,
+        release: Callable[[Trip], Awaitable[None]] | None = None, clock: Callable[[], float] = time.time,
     ) -> None:  # fmt: skip
-        import redis.asyncio as aioredis
-
         self.s = settings
         self.limits = limits
         self.build = build
         self.release = release
         self.clock = clock
         self.p = settings.store_prefix
-        # a connection per concurrent call, up to store_max_connections (redis-py's blocking pool, which makes
-        # calls wait for a free connection, starved some waiters for seconds under 200 concurrent trips)
-        self.redis = client or aioredis.Redis.from_url(
-            settings.store_url, socket_timeout=settings.store_timeout_s, socket_connect_timeout=settings.store_timeout_s,
-            health_check_interval=30, max_connections=settings.store_max_connections,
-        )  # fmt: skip
-        self._admit = self.redis.register_script(_ADMIT)
-        self._add = self.redis.register_script(_ADD)
-        self._load = self.redis.register_script(_LOAD)
-        self._save = self.redis.register_script(_SAVE)
-        self._remove = self.redis.register_script(_REMOVE)
+        self.redis = RedisPipe(settings.store_url, settings.store_timeout_s)  # one pipelined connection per worker
+        self.touch_every_s = min(10.0, settings.trip_idle_ttl_s / 10)
+        """A trip's idle clock is reset at most this often (each request did it before: 6 more commands). [s]"""
+        self.keep_s = settings.trip_idle_ttl_s + self.touch_every_s
+        """A trip's keys live this long after its idle clock's last reset: at least the TTL after its last request. [s]"""
         self._cache: dict[str, tuple[Trip, float]] = {}  # id -> (trip, last used, monotonic)
         self._locks: dict[str, list] = {}  # id -> [lock, holders and waiters]
         self._count = 0
@@ -374,30 +433,18 @@ class RedisTrips:
     def _key(self, trip_id: str) -> str:
         return f"{self.p}:t:{trip_id}"
 
-    @contextlib.asynccontextmanager
-    async def _reach(self) -> AsyncIterator[None]:
-        """Redis errors as 503 (the trip is not gone: retry)."""
-        from redis.exceptions import ConnectionError, TimeoutError, BusyLoadingError
-
-        try:
-            yield
-        except (ConnectionError, TimeoutError, BusyLoadingError, OSError) as exc:
-            log.warning("trip store unreachable: %r", exc)
-            raise ApiError(503, "store_unavailable", f"the trip store is unreachable ({type(exc).__name__}); the trip is kept: retry in {RETRY_AFTER_S} s",
-                           headers={"Retry-After": str(RETRY_AFTER_S)}) from None  # fmt: skip
-
     async def count(self) -> int:
-        async with self._reach():
-            await self.redis.zremrangebyscore(f"{self.p}:open", "-inf", f"({self.clock() - self.s.trip_idle_ttl_s}")
-            self._count = int(await self.redis.zcard(f"{self.p}:open"))
+        with REACH:
+            await self.redis.call("ZREMRANGEBYSCORE", f"{self.p}:open", "-inf", f"({self.clock() - self.keep_s!r}")
+            self._count = int(await self.redis.call("ZCARD", f"{self.p}:open"))
         return self._count
 
     async def admit(self, client: str) -> None:
         s = self.s
-        async with self._reach():
-            r = await self._admit(
-                keys=[f"{self.p}:open", f"{self.p}:c:{client}", f"{self.p}:rl:c:{client}", f"{self.p}:rl:create"],
-                args=[repr(self.clock()), s.trip_idle_ttl_s, s.max_trips, s.max_trips_per_client, s.create_rate_per_client_per_s,
+        with REACH:
+            r = await self.redis.run(
+                _ADMIT, keys=[f"{self.p}:open", f"{self.p}:c:{client}", f"{self.p}:rl:c:{client}", f"{self.p}:rl:create"],
+                args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, s.create_rate_per_client_per_s,
                       s.create_burst_per_client, s.create_rate_per_s, s.create_burst],
             )  # fmt: skip
         code = int(r[0])
@@ -412,10 +459,10 @@ class RedisTrips:
 
     async def add(self, trip: Trip) -> None:
         s = self.s
-        async with self._reach():
-            code = await self._add(
-                keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash],
-                args=[repr(self.clock()), s.trip_idle_ttl_s, s.max_trips, s.max_trips_per_client, trip.id, trip.token_hash, trip.client,
+        with REACH:
+            code = await self.redis.run(
+                _ADD, keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash],
+                args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, trip.id, trip.token_hash, trip.client,
                       s.rate_burst, _json(trip.meta()), _json(trip.state())],
             )  # fmt: skip
         if code == 2:
@@ -449,11 +496,11 @@ class RedisTrips:
         cached = self._cache.get(trip_id)
         trip = cached[0] if cached is not None else None
         digest = token_hash(token)
-        async with self._reach():
-            r = await self._load(
-                keys=[self._key(trip_id)],
+        with REACH:
+            r = await self.redis.run(
+                _LOAD, keys=[self._key(trip_id)],
                 args=[digest, "" if trip is None else str(trip.version), 0 if trip is not None else 1, 1 if take else 0, repr(self.clock()),
-                      s.rate_per_s, s.rate_burst, s.trip_idle_ttl_s, self.p, trip_id],
+                      s.rate_per_s, s.rate_burst, self.keep_s, self.touch_every_s, self.p, trip_id],
             )  # fmt: skip
         code = int(r[0])
         if code == 0:
@@ -474,15 +521,20 @@ class RedisTrips:
         return trip
 
     async def _exists(self, trip_id: str) -> bool:
-        async with self._reach():
-            return bool(await self.redis.exists(self._key(trip_id)))
+        with REACH:
+            return bool(await self.redis.call("EXISTS", self._key(trip_id)))
 
     async def for_fix(self, trip_id: str, token: str | None) -> Trip:
         """The trip to apply a fix to: this worker's copy when it has one and ``token`` is its token (no round
         trip: :meth:`save` finds out whether the copy was current), else :meth:`authorize` (no bucket token)."""
         cached = self._cache.get(trip_id)
-        if cached is not None and cached[0].version > 0 and token and hmac.compare_digest(token_hash(token), cached[0].token_hash):
-            return cached[0]
+        if cached is not None and cached[0].version > 0 and token:
+            trip = cached[0]
+            if trip.token is not None and hmac.compare_digest(token.encode(), trip.token.encode()):
+                return trip  # the token this worker already checked against the hash (no SHA-256 per fix)
+            if hmac.compare_digest(token_hash(token), trip.token_hash):
+                trip.token = token
+                return trip
         return await self.authorize(trip_id, token)
 
     async def save(self, trip: Trip, take: bool = False) -> bool:
@@ -497,11 +549,11 @@ class RedisTrips:
             samples = rows.tobytes()
         s = self.s
         try:
-            async with self._reach():
-                r = await self._save(
-                    keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
-                    args=[str(trip.version), _json(trip.state()), samples, s.trip_idle_ttl_s, trip.token_hash, 1 if take else 0,
-                          repr(self.clock()), s.rate_per_s, s.rate_burst, self.p, trip.id],
+            with REACH:
+                r = await self.redis.run(
+                    _SAVE, keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
+                    args=[str(trip.version), _json(trip.state()), samples, self.keep_s, trip.token_hash, 1 if take else 0,
+                          repr(self.clock()), s.rate_per_s, s.rate_burst, self.p, trip.id, self.touch_every_s],
                 )  # fmt: skip
         except ApiError:
             trip.version = -1  # not known to be written: the copy may be ahead of the store, reload its state
@@ -526,8 +578,8 @@ class RedisTrips:
         return True
 
     async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        async with self._reach():
-            data = await self.redis.get(self._key(trip.id) + ":tr") or b""
+        with REACH:
+            data = await self.redis.call("GET", self._key(trip.id) + ":tr") or b""
         rows = np.frombuffer(data, dtype=SAMPLE)[: 3 * (len(data) // (3 * SAMPLE.itemsize))].reshape(-1, 3)
         pending = np.column_stack([np.frombuffer(a, dtype=np.float64) for a in (trip.trace_t, trip.trace_v, trip.trace_x)]).reshape(-1, 3)
         rows = np.concatenate([rows, pending]) if pending.size else rows
@@ -535,8 +587,8 @@ class RedisTrips:
 
     async def remove(self, trip_id: str) -> Trip:
         cached = self._cache.get(trip_id)
-        async with self._reach():
-            gone = not await self._remove(keys=[self._key(trip_id), self._key(trip_id) + ":tr"], args=[self.p, trip_id])
+        with REACH:
+            gone = not await self.redis.run(_REMOVE, keys=[self._key(trip_id), self._key(trip_id) + ":tr"], args=[self.p, trip_id])
         trip = self._forget(trip_id, release=False) or (cached[0] if cached else None)  # the caller closes its SPaT
         if gone or trip is None:  # another call ended it first
             if trip is not None and self.release is not None:
@@ -567,12 +619,12 @@ class RedisTrips:
     async def close(self) -> None:
         for trip_id in list(self._cache):
             self._forget(trip_id)
-        await self.redis.aclose()
+        await self.redis.close()
 
 
 # KEYS: the trip's and the client's stream sets. ARGV: now, stream id, per trip, per client (0: none), lease_s.
 # -> 0 opened, 1 the trip's streams are full, 2 the client's
-_STREAM_OPEN = """
+_STREAM_OPEN = Script("""
 local now, lease = tonumber(ARGV[1]), tonumber(ARGV[5])
 redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now)
 redis.call('ZREMRANGEBYSCORE', KEYS[2], '-inf', now)
@@ -583,10 +635,10 @@ for i = 1, 2 do
   redis.call('PEXPIRE', KEYS[i], math.ceil(lease * 1000))
 end
 return 0
-"""
+""")
 
 # KEYS: as above. ARGV: now, stream id, lease_s (0: the stream closed)
-_STREAM_RENEW = """
+_STREAM_RENEW = Script("""
 for i = 1, 2 do
   if tonumber(ARGV[3]) > 0 then
     redis.call('ZADD', KEYS[i], 'XX', tonumber(ARGV[1]) + tonumber(ARGV[3]), ARGV[2])
@@ -596,7 +648,7 @@ for i = 1, 2 do
   end
 end
 return 0
-"""
+""")
 
 
 class RedisStreams:
@@ -608,8 +660,6 @@ class RedisStreams:
 
     def __init__(self, store: RedisTrips) -> None:
         self.store = store
-        self._open = store.redis.register_script(_STREAM_OPEN)
-        self._renew = store.redis.register_script(_STREAM_RENEW)
 
     def _keys(self, trip_id: str, client: str) -> list[str]:
         return [f"{self.store.p}:ws:t:{trip_id}", f"{self.store.p}:ws:c:{client}"]
@@ -618,8 +668,8 @@ class RedisStreams:
         """A handle for :meth:`renew` and :meth:`close`; 429 ``too_many_streams`` beyond the caps."""
         sid = uuid.uuid4().hex
         now = self.store.clock()
-        async with self.store._reach():
-            code = await self._open(keys=self._keys(trip_id, client), args=[repr(now), sid, per_trip, per_client, self.LEASE_S])
+        with REACH:
+            code = await self.store.redis.run(_STREAM_OPEN, keys=self._keys(trip_id, client), args=[repr(now), sid, per_trip, per_client, self.LEASE_S])
         if code == 1:
             raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
         if code == 2:
@@ -631,13 +681,13 @@ class RedisStreams:
         now = self.store.clock()
         if now >= handle[3]:
             handle[3] = now + self.LEASE_S / 3
-            async with self.store._reach():
-                await self._renew(keys=self._keys(handle[0], handle[1]), args=[repr(now), handle[2], self.LEASE_S])
+            with REACH:
+                await self.store.redis.run(_STREAM_RENEW, keys=self._keys(handle[0], handle[1]), args=[repr(now), handle[2], self.LEASE_S])
 
     async def close(self, handle: list) -> None:
         with contextlib.suppress(ApiError):
-            async with self.store._reach():
-                await self._renew(keys=self._keys(handle[0], handle[1]), args=[repr(self.store.clock()), handle[2], 0])
+            with REACH:
+                await self.store.redis.run(_STREAM_RENEW, keys=self._keys(handle[0], handle[1]), args=[repr(self.store.clock()), handle[2], 0])
 
 
 def make_store(settings: Settings, limits: Limits, build, release, clock) -> MemoryTrips | RedisTrips:

@@ -84,7 +84,7 @@ class Trip:
         params=None, observe_spat: bool = False, max_speed_mps: float = 50.0, trip_id: str | None = None,
     ) -> None:  # fmt: skip
         self.id = trip_id or uuid.uuid4().hex
-        self.token: str | None = None  # the bearer token, known only to the worker that created the trip
+        self.token: str | None = None  # the bearer token, known only to the worker that created the trip (or has checked it since)
         self.token_hash = b""  # what the stores keep (token_hash(token))
         if trip_id is None:
             self.token = f"{self.id[:8]}.{secrets.token_urlsafe(24)}"

@@ -168,9 +168,23 @@ def test_websocket_streams_are_capped_across_workers(workers):
                     await asyncio.wait_for(ws3.recv(), 10)
                 assert closed.value.rcvd.code == 4429
             await ws1.close()
-            async with websockets.connect(urls[2], additional_headers=auth) as ws4:  # the slot ws1 held
-                await ws4.send(json.dumps({"t_unix_s": time.time() - 1, "lat_deg": 0.0, "lon_deg": 0.0}))
-                assert "seq" in json.loads(await asyncio.wait_for(ws4.recv(), 10))
+            # the slot ws1 held: the server frees it when it sees the close, and its closing frame may reach the
+            # client first (uvicorn answers a close before the route's ``finally`` runs): a new stream opens
+            # once the slot is free, within a bound; until then it is refused with 4429, never anything else
+            deadline = time.monotonic() + 20
+            while True:
+                try:
+                    async with websockets.connect(urls[2], additional_headers=auth) as ws4:
+                        await ws4.send(json.dumps({"t_unix_s": time.time() - 1, "lat_deg": 0.0, "lon_deg": 0.0}))
+                        reply = json.loads(await asyncio.wait_for(ws4.recv(), 10))
+                except websockets.ConnectionClosed as exc:
+                    assert exc.rcvd is not None and exc.rcvd.code == 4429, exc
+                    reply = {"error": "too_many_streams"}
+                if "seq" in reply or time.monotonic() > deadline:
+                    break
+                assert reply["error"] == "too_many_streams", reply
+                await asyncio.sleep(0.1)
+            assert "seq" in reply, reply
 
     asyncio.run(run())
 
@@ -183,15 +197,66 @@ def test_trip_state_is_bounded_and_expires(workers, store, s200):
         assert httpx.post(f"{a.base_url}/v1/trips/{trip_id}/fixes", json=fix, headers=auth).status_code == 200
     with redis.Redis(port=store.port) as r:
         h = r.hgetall(f"eco:t:{trip_id}")
-        assert set(h) == {b"v", b"tok", b"client", b"bt", b"bs", b"meta", b"state"}
+        assert set(h) == {b"v", b"tok", b"client", b"bt", b"bs", b"ts", b"meta", b"state"}
         assert auth["Authorization"].split()[1].encode() not in b"".join(h.values())  # the token's hash only
         state = json.loads(h[b"state"])
         assert state["n_fixes"] == 30 and len(state["track"][1]) <= 8 and len(h[b"state"]) < 4096
         samples = r.get(f"eco:t:{trip_id}:tr")
         assert len(samples) == 24 * state["n_trace"] and state["n_trace"] == 29  # 24 bytes a sample, per fix with a speed (not the first)
-        ttl = 1800.0
+        ttl, every = 1800.0, 10.0  # the idle clock is reset at most every 10 s: the keys live TTL + 10 s after a reset
         for key in (f"eco:t:{trip_id}", f"eco:t:{trip_id}:tr"):
-            assert 0 < r.pttl(key) <= ttl * 1000
+            assert (ttl - 60.0) * 1000 < r.pttl(key) <= (ttl + every) * 1000  # at least the TTL after the last fix (just now)
+
+
+def test_the_idle_clock_is_reset_at_most_every_tenth_of_the_ttl_and_the_bucket_holds(store, s200):
+    """A fix does not reset the trip's expiry and open-set scores unless they were last reset a tenth of the TTL
+    ago (at most 10 s): the trip still counts as open until the TTL after its last request; the trip's request
+    bucket is taken in the same write. In process (``Engine`` on the shared Redis, no HTTP), on a fake clock."""
+    from server.advising import Engine
+    from server.config import Settings
+    from server.errors import ApiError
+    from server.gps import Fix
+    from server.schemas import TripCreate
+
+    now = [time.time()]
+    settings = Settings(corridors=("paper_s200",), default_corridor="paper_s200", tables=False, speech=False, store_url=store.url,
+                        store_prefix="idle", trip_idle_ttl_s=100.0, rate_per_s=0.001, rate_burst=12.0)  # fmt: skip
+    engine = Engine(settings, {"paper_s200": s200}, clock=lambda: now[0])
+
+    def fix(k: int) -> Fix:
+        lat, lon = s200.position(10.0 * k)
+        return Fix(now[0], lat, lon, 10.0, None, 4.0)
+
+    async def run() -> None:
+        trip = await engine.create_trip(TripCreate(corridor="paper_s200", timing="15_15", entry_unix_s=now[0]))
+        key, r = f"idle:t:{trip.id}", redis.Redis(port=store.port)
+        reset = float(r.hget(key, "ts"))
+        assert reset == now[0] and r.zscore("idle:open", trip.id) == reset
+        for k in range(1, 10):  # 9 s: no reset
+            now[0] += 1.0
+            assert (await engine.apply_fix(trip.id, trip.token, lambda: fix(k)))["seq"] == k
+            assert float(r.hget(key, "ts")) == reset and r.zscore("idle:open", trip.id) == reset
+        last = now[0]
+        now[0] = last + 100.0 - 1e-3  # the TTL after the last request, not yet passed: still open
+        assert await engine.trips.count() == 1
+        now[0] = last + 1.0  # 10 s after the reset: this fix resets the clock
+        assert (await engine.apply_fix(trip.id, trip.token, lambda: fix(10)))["seq"] == 10
+        assert float(r.hget(key, "ts")) == now[0] == r.zscore("idle:open", trip.id)
+        assert r.pttl(key) > 100_000  # TTL + 10 s from the reset (real milliseconds)
+        for k in (11, 12):  # the bucket (burst 12) is used up by the 12th fix
+            now[0] += 1.0
+            await engine.apply_fix(trip.id, trip.token, lambda: fix(k))
+        now[0] += 1.0
+        with pytest.raises(ApiError) as refused:
+            await engine.apply_fix(trip.id, trip.token, lambda: fix(13))
+        assert refused.value.status == 429 and int(r.hget(key, "v")) == 13  # nothing written: 12 fixes, version 1 + 12
+        now[0] += 200.0  # idle longer than TTL + 10 s after the reset: not counted any more
+        assert await engine.trips.count() == 0
+        r.delete(*r.keys("idle:*"))
+        await engine.trips.close()
+        r.close()
+
+    asyncio.run(run())
 
 
 def test_websocket_on_a_killed_uvicorn_worker_reconnects_with_the_same_token(store, s200, tmp_path):
@@ -306,6 +371,8 @@ def test_behind_the_load_balancer_workers_come_and_go_and_the_trip_goes_on(worke
                 if httpx.get(base + "/health", timeout=1).status_code == 200:
                     break
             time.sleep(0.1)
+        else:
+            raise AssertionError(f"haproxy did not answer on port {port} within 30 s (exit code {lb.poll()})")
         before = [_advised(w) for w in workers]
         t0 = time.time() - 100.0
         trip_id, auth = _create(base, "k-ws", corridor="paper_s200", timing="15_15", entry_unix_s=t0)

@@ -1,0 +1,190 @@
+"""One pipelined connection to Redis per worker: the trip store's client (``server.store.RedisTrips``).
+
+Every call of the worker goes over the same connection. The commands issued during one turn of the event loop
+leave in one write, and Redis answers in order, so the replies resolve the calls in the order they were sent
+(hiredis parses them). Under 200 concurrent trips redis-py's pool cost the worker about 130 us of CPU per
+call (a connection per call in flight, a write per command, health checks and retries); this costs about 12 us,
+and Redis reads many commands per read too. Redis runs one command at a time, so one connection loses nothing.
+
+Failures: a call made while the connection is down reconnects first (one attempt, bounded by ``timeout_s``);
+when the connection is lost every call in flight fails with ``redis.exceptions.ConnectionError``; a reply
+later than ``timeout_s`` drops the connection and fails every call in flight with ``redis.exceptions.TimeoutError``. The
+caller decides what a failure means (the trip store answers 503 + ``Retry-After``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+from collections import deque
+
+import hiredis
+from redis.asyncio.connection import parse_url
+from redis.exceptions import BusyLoadingError, ConnectionError, NoScriptError, ResponseError
+from redis.exceptions import TimeoutError as ReplyTimeout
+
+
+class Script:
+    """A Lua script, called by its SHA-1 (``EVALSHA``; loaded once when Redis does not know it yet)."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+        self.sha = hashlib.sha1(source.encode()).hexdigest()
+
+
+class _Connection(asyncio.Protocol):
+    """The socket: requests queued and written once per loop turn, replies matched in order."""
+
+    def __init__(self) -> None:
+        self.transport: asyncio.Transport | None = None
+        self.reader = hiredis.Reader()
+        self.pending: deque[tuple[asyncio.Future, float]] = deque()  # (call, monotonic when sent), in order
+        self.out: list[bytes] = []
+        self.failure: Exception | None = None  # why the connection is unusable
+        self._flush = None
+
+    def connection_made(self, transport) -> None:
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        if self.failure is not None:
+            return
+        self.reader.feed(data)
+        try:
+            while (reply := self.reader.gets()) is not False:
+                future = self.pending.popleft()[0]
+                if not future.done():  # a cancelled caller: its reply is dropped, the order kept
+                    future.set_result(reply)
+        except (hiredis.ProtocolError, IndexError) as exc:
+            self.fail(ConnectionError(f"unexpected data from Redis ({exc!r})"))
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.fail(self.failure or ConnectionError(f"connection to Redis lost ({exc!r})" if exc else "connection to Redis closed"))
+
+    def fail(self, failure: Exception) -> None:
+        """The connection is unusable: every call in flight fails with ``failure``."""
+        self.failure = self.failure or failure
+        while self.pending:
+            future = self.pending.popleft()[0]
+            if not future.done():
+                future.set_exception(self.failure)
+        if self.transport is not None:
+            self.transport.abort()
+
+    def send(self, loop: asyncio.AbstractEventLoop, packed: bytes) -> asyncio.Future:
+        future = loop.create_future()
+        if self.failure is not None:
+            future.set_exception(self.failure)
+            return future
+        self.pending.append((future, loop.time()))
+        self.out.append(packed)
+        if self._flush is None:
+            self._flush = loop.call_soon(self.flush)
+        return future
+
+    def flush(self) -> None:
+        self._flush = None
+        if self.out and self.failure is None:
+            self.transport.write(b"".join(self.out))
+        self.out.clear()
+
+
+class RedisPipe:
+    """A client for ``url`` (``redis://[[user]:password@]host[:port][/db]``, ``rediss://`` with TLS,
+    ``unix:///path.sock[?db=N]``): :meth:`call` a command, :meth:`run` a :class:`Script`."""
+
+    def __init__(self, url: str, timeout_s: float) -> None:
+        self.options = parse_url(url)
+        self.tls = url.startswith("rediss://")
+        self.timeout_s = timeout_s
+        self._conn: _Connection | None = None
+        self._connecting: asyncio.Task | None = None
+        self._watch: asyncio.TimerHandle | None = None
+        self._loading: dict[str, asyncio.Future] = {}  # script SHA-1 -> its SCRIPT LOAD
+
+    async def _connect(self) -> _Connection:
+        loop = asyncio.get_running_loop()
+        o = self.options
+        conn = None
+        try:
+            async with asyncio.timeout(self.timeout_s):
+                if "path" in o:
+                    _, conn = await loop.create_unix_connection(_Connection, o["path"])
+                else:
+                    _, conn = await loop.create_connection(_Connection, o.get("host", "localhost"), o.get("port", 6379), ssl=self.tls or None)
+                if o.get("password"):
+                    await self._reply(conn.send(loop, hiredis.pack_command(("AUTH", *([o["username"]] if o.get("username") else []), o["password"]))))
+                if o.get("db"):
+                    await self._reply(conn.send(loop, hiredis.pack_command(("SELECT", o["db"]))))
+        except BaseException as exc:
+            if conn is not None:
+                conn.fail(ConnectionError("connection set-up failed"))
+            if isinstance(exc, ResponseError):  # a wrong password or database: unreachable as configured
+                raise ConnectionError(f"Redis refused the connection's set-up: {exc}") from None
+            raise
+        self._conn = conn
+        return conn
+
+    async def _connection(self) -> _Connection:
+        conn = self._conn
+        if conn is not None and conn.failure is None:
+            return conn
+        if self._connecting is None or self._connecting.done():  # one attempt at a time, shared by the callers waiting
+            self._connecting = asyncio.ensure_future(self._connect())
+        try:
+            return await asyncio.shield(self._connecting)
+        except (OSError, TimeoutError) as exc:  # refused, unreachable, or no answer within timeout_s
+            raise ConnectionError(f"cannot connect to Redis ({exc!r})") from None
+
+    @staticmethod
+    async def _reply(future: asyncio.Future):
+        reply = await future
+        if isinstance(reply, hiredis.ReplyError):
+            message = str(reply)
+            if message.startswith("NOSCRIPT"):
+                raise NoScriptError(message)
+            if message.startswith("LOADING"):
+                raise BusyLoadingError(message)
+            raise ResponseError(message)
+        return reply
+
+    async def call(self, *args):
+        """One command's reply (bytes, int, None, lists of those); Redis's error replies raised."""
+        conn = await self._connection()
+        loop = asyncio.get_running_loop()
+        future = conn.send(loop, hiredis.pack_command(args))
+        if self._watch is None:
+            self._watch = loop.call_later(self.timeout_s, self._check)
+        return await self._reply(future)
+
+    def _check(self) -> None:
+        """Drop the connection when its oldest call in flight has waited ``timeout_s``; else look again when it will have."""
+        self._watch = None
+        conn = self._conn
+        if conn is None or conn.failure is not None or not conn.pending:
+            return
+        loop = asyncio.get_running_loop()
+        waited = loop.time() - conn.pending[0][1]
+        if waited >= self.timeout_s:
+            conn.fail(ReplyTimeout(f"no reply from Redis within {self.timeout_s:g} s"))
+            return
+        self._watch = loop.call_later(self.timeout_s - waited, self._check)
+
+    async def run(self, script: Script, keys: list, args: list):
+        """``script``'s reply for ``keys`` and ``args`` (``EVALSHA``; ``EVAL`` the first time Redis lacks it)."""
+        try:
+            return await self.call("EVALSHA", script.sha, len(keys), *keys, *args)
+        except NoScriptError:  # the calls of a burst all fail at once: one SCRIPT LOAD serves them all
+            loading = self._loading.get(script.sha)
+            if loading is None or loading.done():
+                loading = self._loading[script.sha] = asyncio.ensure_future(self.call("SCRIPT", "LOAD", script.source))
+            await asyncio.shield(loading)
+            return await self.call("EVALSHA", script.sha, len(keys), *keys, *args)
+
+    async def close(self) -> None:
+        if self._watch is not None:
+            self._watch.cancel()
+            self._watch = None
+        if self._conn is not None and self._conn.transport is not None:
+            self._conn.transport.close()
+        self._conn = None

@@ -1,0 +1,105 @@
+"""server.redispipe: one pipelined connection to a real ``redis-server`` on loopback. Concurrent calls get their
+own replies (checked against values each call alone determines), a cancelled call does not shift the others,
+scripts unknown to Redis are sent whole, error replies raise, a silent Redis fails calls (TimeoutError) and a
+dead one fails them (ConnectionError), and the next call after a restart reconnects. Every wait is bounded."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+
+import pytest
+from redis.exceptions import ConnectionError, ResponseError, TimeoutError
+
+from server.redispipe import RedisPipe, Script
+from tests.procs import RedisServer, redis_server_path
+
+
+@pytest.fixture
+def store(tmp_path):
+    if redis_server_path() is None:
+        pytest.skip("redis-server is not installed and scripts/system-deps.sh could not install it (needs root and apt-get)")
+    server = RedisServer(tmp_path).start()
+    yield server
+    server.kill()
+
+
+def test_concurrent_calls_share_one_connection_and_get_their_own_replies(store):
+    async def run() -> None:
+        pipe = RedisPipe(store.url, 10.0)
+        n = 600
+        replies = await asyncio.gather(*(pipe.call("SET", f"k{i}", f"v{i}") for i in range(n)))
+        assert replies == [b"OK"] * n
+        calls = [asyncio.ensure_future(pipe.call("GET", f"k{i}")) for i in range(n)]
+        for i in range(0, n, 7):
+            calls[i].cancel()  # callers that went away: the others still get their own replies
+        await asyncio.wait(calls)
+        for i, call in enumerate(calls):
+            assert call.cancelled() if i % 7 == 0 else call.result() == f"v{i}".encode()
+        clients = (await pipe.call("CLIENT", "LIST")).decode().strip().splitlines()
+        assert len(clients) == 1  # this one connection
+        assert await pipe.call("INCRBY", "n", 5) == 5 and await pipe.call("GET", "missing") is None
+        with pytest.raises(ResponseError, match="WRONGTYPE|not an integer"):
+            await pipe.call("INCR", "k1")  # an error reply raises, the connection goes on
+        assert await pipe.call("GET", "k1") == b"v1"
+        await pipe.close()
+
+    asyncio.run(run())
+
+
+def test_scripts_are_sent_whole_when_redis_does_not_know_them(store):
+    script = Script("return {KEYS[1], ARGV[1] + 1}")
+
+    async def run() -> None:
+        pipe = RedisPipe(store.url, 10.0)
+        assert await pipe.run(script, keys=["a"], args=[41]) == [b"a", 42]
+        await pipe.call("SCRIPT", "FLUSH")  # as after a Redis restart (scripts are not persisted)
+        await pipe.call("CONFIG", "RESETSTAT")
+        replies = await asyncio.gather(*(pipe.run(script, keys=[f"b{i}"], args=[i]) for i in range(50)))
+        assert replies == [[f"b{i}".encode(), i + 1] for i in range(50)]
+        stats = (await pipe.call("INFO", "commandstats")).decode()
+        assert "cmdstat_script|load:calls=1," in stats and "cmdstat_eval:" not in stats  # a burst of NOSCRIPT: one load
+        await pipe.close()
+
+    asyncio.run(run())
+
+
+def test_a_silent_redis_times_out_a_dead_one_fails_and_a_restarted_one_serves(store):
+    async def run() -> None:
+        pipe = RedisPipe(store.url, 0.5)
+        assert await pipe.call("SET", "k", "1") == b"OK"
+        os.kill(store.proc.pid, signal.SIGSTOP)  # alive, silent
+        try:
+            with pytest.raises(TimeoutError):
+                await asyncio.wait_for(pipe.call("GET", "k"), 30)
+        finally:
+            os.kill(store.proc.pid, signal.SIGCONT)
+        assert await asyncio.wait_for(pipe.call("GET", "k"), 30) == b"1"  # a new connection
+        store.kill()
+        with pytest.raises(ConnectionError):
+            await asyncio.wait_for(pipe.call("GET", "k"), 30)
+        with pytest.raises(ConnectionError):  # refused while down
+            await asyncio.wait_for(pipe.call("GET", "k"), 30)
+        store.start()  # same port and folder: the append-only file brings the key back
+        assert await asyncio.wait_for(pipe.call("GET", "k"), 30) == b"1"
+        await pipe.close()
+
+    asyncio.run(run())
+
+
+def test_password_and_database_from_the_url_and_a_wrong_password_is_unreachable(store):
+    async def run() -> None:
+        admin = RedisPipe(store.url, 10.0)
+        await admin.call("CONFIG", "SET", "requirepass", "s3cret")
+        good = RedisPipe(f"redis://:s3cret@127.0.0.1:{store.port}/2", 10.0)
+        assert await good.call("SET", "k", "in db 2") == b"OK"
+        assert b" db=2 " in await good.call("CLIENT", "INFO")
+        bad = RedisPipe(f"redis://:wrong@127.0.0.1:{store.port}/0", 10.0)
+        with pytest.raises(ConnectionError, match="set-up"):
+            await bad.call("GET", "k")
+        await good.call("CONFIG", "SET", "requirepass", "")
+        for pipe in (admin, good, bad):
+            await pipe.close()
+
+    asyncio.run(run())
