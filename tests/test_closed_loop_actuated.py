@@ -100,3 +100,11 @@ def test_through_a_dropout_the_driver_keeps_its_plan_and_never_speeds_up_towards
     stale = (tr.t_s >= 7.0) & (tr.t_s < 35.0)  # after the reaction to the first stale advice, while the red lasts
     assert tr.v_mps[stale].max() <= tr.v_mps[np.searchsorted(tr.t_s, 7.0)] + 0.05
     assert not red_light_violations(tr, truth)
+
+
+def test_a_driver_clearing_an_amber_does_not_coast_on_into_the_red():
+    """Seed 4786 of the randomized runs: the car coasts towards light 2 at ~3 m/s when its amber begins 11 m out; the
+    driver decides it clears the line before the red (it does, holding its speed) but the coast advice kept slowing
+    it, and it crossed 0.17 s into the red. Clearing an amber now overrides coasting, as it overrides any slowing."""
+    truth, run = _run(4786, 3.0)
+    assert not red_light_violations(run.trajectory, truth)

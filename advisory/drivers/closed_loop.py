@@ -219,11 +219,12 @@ def simulate(
                     rate = coast_decel_mps2(v, advisor.vehicle) if active is not None and active.action in ("ease_off", "cruise") else rate_down
                     if next_red <= t + _time_to_cover_s(dist, v, v_to, rate) + 1.0:
                         v_cmd = v
-        if ahead and ahead[0][0] in amber_go and braking_for != ahead[0][0] and not light.is_red(t):
-            v_cmd = max(v_cmd, v)  # clearing an amber: no slowing down before the line
+        clearing = bool(ahead) and ahead[0][0] in amber_go and braking_for != ahead[0][0] and not light.is_red(t)
+        if clearing:
+            v_cmd = max(v_cmd, v)  # clearing an amber: no slowing down before the line (coasting included)
         if braking_for is None and active is not None and active.action in ("ease_off", "cruise") and v_cmd < v:
             rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast
-        if braking_for is None and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
+        if braking_for is None and not clearing and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
             if v > driver.min_coast_mps:
                 v_cmd, rate_down = 0.0, coast_decel_mps2(v, advisor.vehicle)  # target reached: keep coasting
             elif ahead and light.is_red(t):  # nobody coasts to a standstill: at a red, stop at the line
