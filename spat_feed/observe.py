@@ -350,16 +350,17 @@ def light_view(
     if reading is None or reading.plan is None:
         return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s) if reading is not None else math.inf)
     plan, t_feed = reading.plan, t_unix_s + reading.clock_offset_s  # our instant on the feed's clock
+    # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no
+    # chance), a red that ended less than u ago by the feed's clock included: the windows are taken from u before now
+    u = reading.clock_uncertainty_s
     if isinstance(plan, FixedTimePlan):
-        windows = likely = late = red_windows_s(plan, t_feed, horizon_s)
+        windows = likely = late = red_windows_s(plan, t_feed - u, horizon_s + u)
     else:
         if unknown_now(plan, t_unix_s - reading.age_s) and not _clearance(reading.cycle):
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
-        windows, likely, late = (_windows(phases, t_feed, horizon_s, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
-    # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no chance)
-    u = reading.clock_uncertainty_s
-    windows, likely, late = _widened(windows, u), _widened(likely, u), _widened(late, u)
+        windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
+    windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
     return LightView(
         intersection.id,
         distance_m,

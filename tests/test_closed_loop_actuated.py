@@ -108,3 +108,11 @@ def test_a_driver_clearing_an_amber_does_not_coast_on_into_the_red():
     it, and it crossed 0.17 s into the red. Clearing an amber now overrides coasting, as it overrides any slowing."""
     truth, run = _run(4786, 3.0)
     assert not red_light_violations(run.trajectory, truth)
+
+
+def test_a_red_just_ended_on_a_skewed_feed_clock_is_no_surprise():
+    """Seed 6633: the feed's clock 2.5 s off; light 1's red ends 2.5 s after entry, 1.5 s later than the feed says.
+    The view keeps that red for the clock's uncertainty, so the display never says green while it is red: no
+    emergency braking (it braked at 4.54 m/s²)."""
+    truth, run = _run(6633, 3.0)
+    assert run.trajectory.accel_mps2.min() >= -HARD_BRAKE_MPS2 - 1e-9 and not red_light_violations(run.trajectory, truth)

@@ -316,3 +316,14 @@ def test_an_amber_published_as_unavailable_goes_on_as_the_history_says():
     assert not between_reds.fresh and between_reds.red_windows_s == ()
     bare = light_view(ix, PlanReading(published(UNAVAILABLE, t + 1.0)), 0.0, t + 2.0)  # no history: no data, as before
     assert not bare.fresh
+
+
+def test_a_red_that_ended_within_the_clock_uncertainty_may_still_be_red():
+    """A feed clock that may be 3 s off: a red that ended 1 s ago by the feed's clock may still be red on ours for
+    2 s. It used to vanish from the view (windows were widened only after the ended ones were dropped): the display
+    said green while the light was red, and the virtual driver braked at 4.5 m/s² (randomized run, seed 6633)."""
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    plan = UncertainPlan((RED, GREEN, RED), (ChangeWindow(T0 - 1.0, T0 - 1.0, T0 - 1.0), ChangeWindow(T0 + 30, T0 + 30, T0 + 30)))
+    view = light_view(ix, PlanReading(plan, clock_uncertainty_s=3.0), 0.0, T0)
+    assert view.red_windows_s[0] == pytest.approx((0.0, 2.0)) and view.red_windows_s[1] == pytest.approx((27.0, math.inf))
+    assert light_view(ix, PlanReading(plan), 0.0, T0).red_windows_s == ((30.0, math.inf),)  # an exact clock: green now
