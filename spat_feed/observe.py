@@ -11,8 +11,9 @@ Conversion of one light (:func:`light_view`):
   (``max_end_s`` of the change out of red). Unknown states (``unavailable``, ``dark``) count as red, so a
   speed is never advised that reaches a line after the plan's horizon. Windows are kept up to ``horizon_s``.
 * ``fresh``: the reading's flag; a light whose published state is unknown is reported as not fresh (no data),
-  unless the group's history says its unknown phases come between green and red and how long they last (a
-  controller that publishes its amber as ``unavailable``): then it is blocking now and the cycle goes on from there. A
+  unless the group's history says its unknown phases come between green and red and last no longer than an amber
+  (:data:`CLEARANCE_MAX_S`; a controller that publishes its amber as ``unavailable``): such a phase is that group's
+  amber (passable as an amber is), and when it is the current one the cycle goes on from it as the history says. A
   phase past its ``minEndTime`` is still the published one (it may end any moment: a possible red, not no data).
 * ``confidence_frac``: the lowest confidence of the change windows that bound a red window within the horizon
   (1 for a fixed-time plan).
@@ -27,7 +28,8 @@ Conversion of one light (:func:`light_view`):
   ``late_red_windows_s`` latest start to late end (never slowed for a red that may not have begun on arrival;
   what a driver's display may rely on). The first two contain every red that ``minEndTime`` guarantees.
 * **Clock**: a reading may carry the feed clock's estimated offset (subtracted) and its uncertainty (every
-  ``red_windows_s`` widened by it on both sides), so a few seconds of skew never put the advice into a red.
+  ``red_windows_s`` widened by it on both sides, a red that ended less than that long ago included), so a few
+  seconds of skew never put the advice into a red.
 """
 
 from __future__ import annotations
@@ -360,7 +362,8 @@ def light_view(
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
         windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
-    windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
+    if u > 0.0:
+        windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
     return LightView(
         intersection.id,
         distance_m,

@@ -638,13 +638,13 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         v = obs.speed_mps
         to_green = _countdown_view(nxt).seconds_to_green_after(min(arrival, slowest))
         far = nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)
-        lift_off = v >= params.min_cruise_speed_mps  # (not at a crawl)
-        if far and (uncertain or not math.isfinite(to_green)) and not lift_off:
-            return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_green)
         if far and (uncertain or not math.isfinite(to_green)):
             # far from a red whose end is uncertain: no stop asked for yet (a stop so far out halted the car 220 m
             # short of the line), but lift off: arriving later only helps (the red may end first), and what coasting
-            # sheds the stop would have braked away anyway. A known end keeps the early gentle stop (re-planned from)
+            # sheds the stop would have braked away anyway. Not at a crawl (launching from the light before): there
+            # only what is ahead. A known end keeps the early gentle stop (the advisor re-plans from it)
+            if v < params.min_cruise_speed_mps:
+                return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_green)
             keep = last is not None and last.action == "coast" and last.reason == "red_ahead" and last.target_speed_mps is not None
             return Advice("coast", "red_ahead", last.target_speed_mps if keep else v, red, to_green)
         return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_green)
