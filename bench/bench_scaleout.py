@@ -46,7 +46,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from bench._procs import cpu_seconds, free_port, machine_cpu_s  # noqa: E402
-from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
+from bench.bench_server import CORRIDOR, create_trips, pct_ms  # noqa: E402
 from server.advising import Engine  # noqa: E402
 from server.config import Settings  # noqa: E402
 from server.gps import Fix  # noqa: E402
@@ -58,10 +58,6 @@ OPEN = {"ECO_RATE_PER_S": "1000000", "ECO_RATE_BURST": "1000000", "ECO_CREATE_RA
         "ECO_MAX_CONNECTIONS_PER_CLIENT": "0", "ECO_WS_MAX_PER_CLIENT": "0", "ECO_MAX_TRIPS_PER_CLIENT": "0",
         "ECO_CREATE_RATE_PER_CLIENT_PER_S": "1000000", "ECO_CREATE_BURST_PER_CLIENT": "1000000", "ECO_MAX_TRIPS": "100000"}  # fmt: skip
 """Limits off: one client address makes every request here."""
-
-
-def pct_ms(x, q: float) -> float:
-    return float(np.percentile(np.asarray(x), q) * 1e3) if len(x) else float("nan")
 
 
 def settings(store_url: str | None, prefix: str = "eco") -> Settings:

@@ -200,7 +200,9 @@ async def ws_phase(port: int, trips, positions, warmup_s: float, seconds: float)
     return np.array(lat), errors, n_conn
 
 
-def pct_ms(a: np.ndarray, q: float) -> float:
+def pct_ms(samples_s, q: float) -> float:
+    """The ``q`` percentile of latencies in seconds, in milliseconds (nan when there are none)."""
+    a = np.asarray(samples_s)
     return float(np.percentile(a, q) * 1e3) if a.size else float("nan")
 
 
