@@ -61,7 +61,7 @@ def test_the_driver_never_sees_the_future():
         moved.append(replace(light, switches_s=switches))
     other = Scenario(truth.name, tuple(a.truth() for a in moved), truth.zone_length_m, truth.speed_limit_mps, truth.initial_speed_mps)
     assert any(a.reds_s != b.reds_s for a, b in zip(truth.signals, other.signals))
-    runs = [simulate(sc, driver=DriverModel(noise_mps=noise, seed=7), feed=replace(feed, lights=lights, _last={}))
+    runs = [simulate(sc, driver=DriverModel(noise_mps=noise, seed=7), feed=replace(feed, lights=lights, _last={}, _history={}))  # a fresh receiver each
             for sc, lights in ((truth, feed.lights), (other, moved))]  # fmt: skip
     a, b = (r.trajectory for r in runs)
     ea, eb = a.t_s <= horizon_s, b.t_s <= horizon_s

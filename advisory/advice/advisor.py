@@ -150,6 +150,7 @@ class AdvisorParams:
     too_close_s: float = 3.0  # closer than this many seconds to the line at current speed: no advice
     too_close_m: float = 15.0
     short_wait_s: float = 3.0
+    table_slack_s: float = 3.0  # the tables' target reaches the lines at most this much later than the fastest feasible one [s]
     min_confidence_frac: float = 0.5
     stop_lead_s: float = 2.0  # "prepare to stop" this long before a comfortable stop must begin (earlier: "Red light ahead.") [s]
     hold_stale_s: float = 30.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
@@ -436,7 +437,20 @@ def _search(lines: _Lines, obs: Observation, params: AdvisorParams) -> tuple[int
     Returns (lines planned for, mode, feasible speeds)."""
     speeds, v0, reaction, *rest = _kernel_args(obs, params, None)
     n_lines, mode, ok = _first_feasible(speeds, lines.distances_m, lines.windows_s, params.green_margin_s, v0, reaction, *rest)
-    return n_lines, MODE_NAMES[mode], speeds[ok]
+    return n_lines, MODE_NAMES[mode], _earliest_green(speeds, ok)
+
+
+def _earliest_green(speeds: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """The feasible speeds that make the earliest greens: the run of consecutive feasible candidates that ends at
+    the fastest one. A gap in the run is a red between two greens; a slower run aims at a later green, a whole
+    cycle lost (the tables' value of time prices a crawl to the next green below a brisk run to this one, but the
+    paper's optimum is held to the regular driver's trip time, and the driver would not wait a cycle for it)."""
+    idx = np.flatnonzero(ok)
+    if idx.size == 0:
+        return speeds[ok]
+    gaps = np.flatnonzero(np.diff(idx) > 1)
+    first = idx[gaps[-1] + 1] if gaps.size else idx[0]
+    return speeds[first : idx[-1] + 1]
 
 
 def feasible_speeds_mps(
@@ -653,6 +667,10 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         wanted = tables.target_speed_mps(obs)
         if wanted is not None:  # the DP's speed at the next stop line: the feasible target that reaches the line nearest it
             _, v0, reaction, *rest = _kernel_args(obs, params, None)
+            # no lingering: at most ``table_slack_s`` later over the lines planned for than the fastest feasible speed
+            last_m = float(both.distances_m[n_lines - 1])
+            arrive = _crossing_times_s(last_m, v0, feasible, MODE_CODES[mode], reaction, *rest)
+            feasible = feasible[arrive <= arrive[-1] + params.table_slack_s]
             miss = np.abs(_line_speeds_mps(float(nxt.distance_m), v0, feasible, MODE_CODES[mode], reaction, *rest) - wanted)
             # targets still being braked to at the line reach it alike: of those, the one nearest the wanted speed
             close = feasible[miss <= miss.min() + LINE_SPEED_TIE_MPS]
