@@ -111,7 +111,7 @@ class Observation:
 
 ACTIONS = ("cruise", "ease_off", "coast", "slow_down", "brake_to", "accelerate", "stop", "resume", "none")
 """Every ``Advice.action`` the advisor gives (the service's API enumerates these: keep them in step)."""
-REASONS = ("green_wave", "red_ahead", "past_lights", "off_route", "no_spat", "stale_spat", "low_confidence", "too_close", "short_wait")
+REASONS = ("green_wave", "red_ahead", "past_lights", "off_route", "no_spat", "stale_spat", "low_confidence", "too_close", "short_wait", "tight_green")
 """Every ``Advice.reason`` the advisor gives (the service's API enumerates these: keep them in step)."""
 
 
@@ -147,6 +147,7 @@ class AdvisorParams:
     comfort_decel_mps2: float = 1.5
     firm_decel_mps2: float = 3.0  # "brake to X" when gentle braking cannot make the green (regular driver: 4)
     comfort_accel_mps2: float = 1.5
+    normal_accel_mps2: float = 2.0  # how a driver speeds up with no advice (the regular driver's rate, paper Sec. 2)
     too_close_s: float = 3.0  # closer than this many seconds to the line at current speed: no advice
     too_close_m: float = 15.0
     short_wait_s: float = 3.0
@@ -468,6 +469,15 @@ def _green_crossing(light: LightView, t_s: float, after_red_s: float) -> bool:
     return bool(np.isfinite(t_s)) and not any(start <= t_s < end + after_red_s for start, end in light.red_windows_s)
 
 
+def _normal_drive_s(distance_m: float, obs: Observation, params: AdvisorParams) -> float:
+    """Time to a line ``distance_m`` ahead speeding up from the current speed to the limit at ``normal_accel_mps2``. [s]"""
+    v0, v1, a = obs.speed_mps, obs.speed_limit_mps, params.normal_accel_mps2
+    d_ramp = max(v1 * v1 - v0 * v0, 0.0) / (2.0 * a)
+    if distance_m <= d_ramp:
+        return (math.sqrt(v0 * v0 + 2.0 * a * distance_m) - v0) / a
+    return max(v1 - v0, 0.0) / a + (distance_m - d_ramp) / v1
+
+
 def _say_speed(speed_mps: float, units: str) -> str:
     return f"{round(speed_mps * (MPH_PER_MPS if units == 'mph' else KMH_PER_MPS)):d}"
 
@@ -493,6 +503,8 @@ def phrase(advice: Advice, units: str = "mph") -> str:
     if advice.action == "none":
         if advice.reason == "red_ahead":
             return f"Red light ahead. Green in {when}." if when else "Red light ahead."
+        if advice.reason == "tight_green":
+            return f"Red in {when}. Drive normally." if when else "Drive normally."
         if advice.reason == "stale_spat" and advice.light_red is not None:
             return "Signal data delayed."  # a short dropout: no new advice, and no push back to the limit
         return {
@@ -640,6 +652,14 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
         feasible = feasible[feasible <= max(obs.speed_mps, params.min_cruise_speed_mps) + 1e-9]
+    to_red = nxt.seconds_to_red() if not red and nxt.likely_red_windows_s is None else None
+    if to_red is not None and _normal_drive_s(nxt.distance_m, obs, params) < to_red and (
+        feasible.size == 0 or crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible.max()), params, mode) >= to_red
+    ):
+        # green now (exact timing), and a normal drive (speeding up to the limit at the regular driver's rate: no advice
+        # to react to) is over the line before the red, where no comfortable speed is: a plan for the green after the
+        # red, or a "prepare to stop", would lose a cycle that the driver makes without advice
+        return Advice("none", "tight_green", light_red=False, seconds_to_change_s=to_change)
     if feasible.size == 0:
         arrival = crossing_time_s(nxt.distance_m, obs.speed_mps, obs.speed_mps, params) if obs.speed_mps > 0 else np.inf
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:

@@ -17,7 +17,7 @@ const ACTIONS = {
 const PAUSES = {
   no_fix: "Waiting for GPS", no_speed: "Waiting for speed", poor_gps: "GPS weak", off_route: "Off the route",
   no_spat: "No signal data", stale_spat: "Signal data old", low_confidence: "Timing uncertain",
-  too_close: "At the light", short_wait: "Short wait",
+  too_close: "At the light", short_wait: "Short wait", tight_green: "Drive normally",
 };
 
 const $ = (id) => document.getElementById(id);
