@@ -482,3 +482,19 @@ def test_no_paper_scenario_ends_far_behind_the_regular_driver(case):
     params = model_params()
     advised, regular = (score_in_end_state(tr, params, sc.speed_limit_mps) for tr in (run.trajectory, regular_driver(sc)))
     assert advised.time_s <= regular.time_s + 5.0
+
+
+def test_no_slowing_for_an_uncertain_red_that_likely_ends_before_the_car_gets_there():
+    """Paper [15 -15] s=400 with ±10 s windows: light 2 (500 m) is red, likely until 15 s, surely over by 25 s. Holding
+    the limit (20.3 s there) makes it if the red ends as likely; the sure plan ("slow to 43 mph, then coast") cost +19 %
+    against the regular driver when the red ended at 12 s. Holding is the regular driver's own motion: hold. Where
+    holding misses even the likely green, the sure plan stands."""
+    lights = (LightView(1, 100.0, True, 0.9, ((5.0, 55.0),), likely_red_windows_s=((15.0, 45.0),), late_red_windows_s=((25.0, 55.0),)),
+              LightView(2, 500.0, True, 0.9, ((0.0, 25.0), (35.0, 84.0)), likely_red_windows_s=((0.0, 15.0), (45.0, 70.0)),
+                        late_red_windows_s=((0.0, 25.0), (55.0, 84.0))))  # fmt: skip
+    adv = advise(Observation(V, V, lights))[0]
+    assert (adv.action, adv.target_speed_mps) == ("cruise", V)
+    later = (lights[0], LightView(2, 500.0, True, 0.9, ((0.0, 25.0), (35.0, 84.0)), likely_red_windows_s=((0.0, 19.0), (45.0, 70.0)),
+                                  late_red_windows_s=((0.0, 25.0), (55.0, 84.0))))  # fmt: skip
+    sure = advise(Observation(V, V, later))[0]
+    assert sure.target_speed_mps < V - 1.0 and crossing_time_s(500.0, V, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 25.0 + P.green_margin_s
