@@ -37,6 +37,7 @@ NumPy/Python (unpruned), used by tests and the benchmark.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -377,14 +378,27 @@ class DPSolution:
     n_labels: int
 
 
+_WORKSPACE = threading.local()
+"""Per thread, the memory of the last pass's (stage, speed, bin) tables, reused by the next pass when large enough:
+fresh tables of this size come from the kernel as zero pages, and faulting them in cost ~15 % of a study's time."""
+
+WORKSPACE_MAX_CELLS = 8_000_000
+"""Tables above this many cells (3 x 8 bytes each) are not kept for reuse (the study grid's largest: ~6e6)."""
+
+
 def _empty_tables(prob: DPProblem):
     """The kernel's tables: (stage, speed, bin) ones uninitialised (valid over each row's range in use,
-    ``occ_lo..occ_hi``, which the kernel fills), the halts' ones empty."""
+    ``occ_lo..occ_hi``, which the kernel fills; their memory is reused from pass to pass), the halts' ones empty."""
     shape = (prob.n_stages + 1, prob.speed_mps.size, prob.n_bins)
+    n = shape[0] * shape[1] * shape[2]
+    bufs = getattr(_WORKSPACE, "bufs", None)
+    if bufs is None or bufs[0].size < n:
+        bufs = (np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
+        _WORKSPACE.bufs = bufs if n <= WORKSPACE_MAX_CELLS else None
     s_shape = (prob.n_lights, prob.n_bins)
     occ_lo = np.full(shape[:2], prob.n_bins, dtype=np.int64)
     occ_hi = np.full(shape[:2], -1, dtype=np.int64)
-    return (np.empty(shape), np.empty(shape), np.empty(shape, dtype=np.int64),
+    return (*(b[:n].reshape(shape) for b in bufs),
             np.full(s_shape, np.inf), np.full(s_shape, np.nan), np.full(s_shape, -1, dtype=np.int64), occ_lo, occ_hi)
 
 
