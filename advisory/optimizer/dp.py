@@ -243,11 +243,11 @@ def build_problem(
     if key not in _BOUNDS:
         if len(_BOUNDS) >= 32:  # ~1 MB each at the study grid
             _BOUNDS.clear()
-        _BOUNDS[key] = cost_to_go_bounds(
+        _BOUNDS[key] = tuple(map(_a_hair_below, cost_to_go_bounds(
             band_lo, band_hi, stage_grade, step_dt, step_usd, np.asarray(pen.cost_usd, dtype=float), np.asarray(pen.time_s, dtype=float),
             is_stop, arcs["light_stage"], arcs["arc_k_lo"], arcs["stop_dt_s"], arcs["stop_usd"], arcs["launch_dt_s"],
             arcs["launch_usd"], arcs["rest_dt_s"], arcs["rest_usd"], TIME_PRICES_USD_PER_S,
-        )
+        )))
     lb, halt_lb = _BOUNDS[key]
     return DPProblem(
         scenario=scenario,
@@ -272,8 +272,8 @@ def build_problem(
         terminal_cost_usd=np.asarray(pen.cost_usd),
         terminal_time_s=np.asarray(pen.time_s),
         **arcs,
-        lower_bound_usd=_a_hair_below(lb),
-        halt_bound_usd=_a_hair_below(halt_lb),
+        lower_bound_usd=lb,
+        halt_bound_usd=halt_lb,
     )
 
 
@@ -337,23 +337,37 @@ def _no_arcs(n_v: int) -> dict:
                 stop_usd=empty, launch_dt_s=empty, launch_usd=empty, launch_cross_s=empty, rest_dt_s=empty, rest_usd=empty)
 
 
-@lru_cache(maxsize=32)
-def _arc_tables(params: ModelParams, grid: GridSpec, speed: tuple[float, ...], n_stop: int) -> tuple[np.ndarray, ...]:
+_ARCS: dict = {}
+"""Arc tables by vehicle, arc geometry and speed nodes (``_arc_tables``), shared by every case and pass that uses them."""
+
+
+def _arc_tables(params: ModelParams, grid: GridSpec, speed: np.ndarray, n_stop: int) -> tuple[np.ndarray, ...]:
     """Stop arcs by distance (row n: from n + 1 stages before the line to the halt), launches from the halt
-    (row m: to m + 1 stages past the line), launches from rest at a stage (row n: over n + 1 stages)."""
-    ds, gap, v = grid.stage_m, grid.stop_gap_m, np.asarray(speed)[None, :]
-    n_launch = max(1, int(np.floor((grid.launch_max_m - gap) / ds)))
-    dist = np.arange(1, n_stop + 1)[:, None] * ds - gap
-    ok = (v > 0) & (dist > 0) & (v**2 <= 2 * grid.brake_max_mps2 * dist + 1e-9)
-    stop_dt, stop_usd = arc_table(v, 0.0, np.maximum(dist, 1e-9), params, grid.arc_steps)
-    out = [np.where(ok, stop_dt, np.inf), np.where(ok, stop_usd, np.inf)]
-    for dist in (np.arange(1, n_launch + 1)[:, None] * ds + gap, np.arange(1, n_launch + 1)[:, None] * ds):
-        ok = (v > 0) & (v**2 <= 2 * grid.accel_max_mps2 * dist + 1e-9)
-        dt, usd = arc_table(0.0, v, dist, params, grid.arc_steps)
-        out += [np.where(ok, dt, np.inf), np.where(ok, usd, np.inf)]
-    accel = np.where(out[2] < np.inf, v**2, 1.0) / (2 * (np.arange(1, n_launch + 1)[:, None] * ds + gap))
-    cross = np.where(out[2] < np.inf, np.sqrt(2 * gap / accel), np.inf)
-    return (*out, cross)
+    (row m: to m + 1 stages past the line), launches from rest at a stage (row n: over n + 1 stages).
+
+    Computed once per vehicle, arc geometry and speeds; stop rows are added when a longer approach needs them."""
+    ds, gap, v = grid.stage_m, grid.stop_gap_m, speed[None, :]
+    key = (params, ds, gap, grid.launch_max_m, grid.accel_max_mps2, grid.brake_max_mps2, grid.arc_steps, speed.tobytes())
+    tables = _ARCS.get(key)
+    if tables is None:
+        if len(_ARCS) >= 32:  # ~0.5 MB each at the study grid
+            _ARCS.clear()
+        n_launch = max(1, int(np.floor((grid.launch_max_m - gap) / ds)))
+        out = [np.zeros((0, speed.size)), np.zeros((0, speed.size))]
+        for dist in (np.arange(1, n_launch + 1)[:, None] * ds + gap, np.arange(1, n_launch + 1)[:, None] * ds):
+            ok = (v > 0) & (v**2 <= 2 * grid.accel_max_mps2 * dist + 1e-9)
+            dt, usd = arc_table(0.0, v, dist, params, grid.arc_steps)
+            out += [np.where(ok, dt, np.inf), np.where(ok, usd, np.inf)]
+        accel = np.where(out[2] < np.inf, v**2, 1.0) / (2 * (np.arange(1, n_launch + 1)[:, None] * ds + gap))
+        tables = _ARCS[key] = [*out, np.where(out[2] < np.inf, np.sqrt(2 * gap / accel), np.inf)]
+    have = tables[0].shape[0]
+    if have < n_stop:
+        dist = np.arange(have + 1, n_stop + 1)[:, None] * ds - gap
+        ok = (v > 0) & (dist > 0) & (v**2 <= 2 * grid.brake_max_mps2 * dist + 1e-9)
+        stop_dt, stop_usd = arc_table(v, 0.0, np.maximum(dist, 1e-9), params, grid.arc_steps)
+        tables[0] = np.concatenate([tables[0], np.where(ok, stop_dt, np.inf)])
+        tables[1] = np.concatenate([tables[1], np.where(ok, stop_usd, np.inf)])
+    return (tables[0][:n_stop], tables[1][:n_stop], *tables[2:])
 
 
 def _stop_arcs(scenario: Scenario, params: ModelParams, grid: GridSpec, speed: np.ndarray, n_stage: int) -> dict:
@@ -361,7 +375,7 @@ def _stop_arcs(scenario: Scenario, params: ModelParams, grid: GridSpec, speed: n
     stages = [int(round(light.position_m / grid.stage_m)) for light in scenario.signals]
     k_lo = [0] + stages[:-1]  # arcs start at or after the previous line: they never cross a light
     n_stop = max(kl - lo for kl, lo in zip(stages, k_lo, strict=True))
-    stop_dt, stop_usd, launch_dt, launch_usd, rest_dt, rest_usd, cross = _arc_tables(params, grid, tuple(speed), n_stop)
+    stop_dt, stop_usd, launch_dt, launch_usd, rest_dt, rest_usd, cross = _arc_tables(params, grid, speed, n_stop)
     return dict(light_stage=np.array(stages, dtype=np.int64), arc_k_lo=np.array(k_lo, dtype=np.int64), stop_dt_s=stop_dt,
                 stop_usd=stop_usd, launch_dt_s=launch_dt, launch_usd=launch_usd, launch_cross_s=cross,
                 rest_dt_s=rest_dt, rest_usd=rest_usd)
