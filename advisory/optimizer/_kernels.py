@@ -151,6 +151,21 @@ def _beyond(c, t, bound, k, i, lam_usd_per_s, t_max_s, limit_usd):
 
 
 @njit(cache=True)
+def best_end(cost_usd, time_s, occ_lo, occ_hi, terminal_cost_usd, terminal_time_s, t_max_s):
+    """The cheapest label of the last stage (tables (n_v, n_bins), valid over ``[occ_lo, occ_hi]`` per speed) plus
+    its terminal cost, among those whose end state is reached by ``t_max_s``: ``(i * n_bins + b, total)``, or
+    ``(0, inf)`` when there is none; ties go to the first in (speed, bin) order."""
+    n_bins = cost_usd.shape[1]
+    flat, best = 0, np.inf
+    for i in range(cost_usd.shape[0]):
+        for b in range(occ_lo[i], occ_hi[i] + 1):
+            c = cost_usd[i, b]
+            if c < np.inf and time_s[i, b] + terminal_time_s[i] <= t_max_s + LATE_TOL_S and c + terminal_cost_usd[i] < best:
+                flat, best = i * n_bins + b, c + terminal_cost_usd[i]
+    return flat, best
+
+
+@njit(cache=True)
 def count_labels(cost_usd, occ_lo, occ_hi):
     """Cells holding a label (the tables are valid only over each row's range in use)."""
     n = 0

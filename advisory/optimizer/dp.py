@@ -45,7 +45,7 @@ import numpy as np
 
 from advisory.evaluation.endstate import reacceleration_penalty
 from advisory.physics.model import I_AUX, arc_cost_usd, pack, step_cost_usd, step_wheel_power_w
-from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, cost_to_go_bounds, count_labels, forward_pass, step_tables
+from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, best_end, cost_to_go_bounds, count_labels, forward_pass, step_tables
 from advisory.physics.params import ModelParams, VehicleParams
 from advisory.drivers.regular import time_to_cover_s
 from advisory.signals import Scenario
@@ -232,7 +232,7 @@ def build_problem(
     n_bins = _n_bins(scenario, t_max_s, grid)
     if n_bins < 2:
         raise InfeasibleError(f"time limit {t_max_s:.3f} s is below the fastest possible {scenario.zone_length_m / v_lim:.3f} s")
-    pen = reacceleration_penalty(speed, params, v_lim, grid.accel_max_mps2)
+    pen = _terminal_penalty(params, speed.tobytes(), v_lim, grid.accel_max_mps2)
     arcs = _stop_arcs(scenario, params, grid, speed, n_stage) if grid.stop_arcs else _no_arcs(speed.size)
     grade = np.zeros(n_stage)
     grades, stage_grade = np.unique(grade, return_inverse=True)
@@ -275,6 +275,12 @@ def build_problem(
         lower_bound_usd=lb,
         halt_bound_usd=halt_lb,
     )
+
+
+@lru_cache(maxsize=32)
+def _terminal_penalty(params: ModelParams, speed_bytes: bytes, speed_limit_mps: float, accel_mps2: float):
+    """The re-acceleration penalty at every speed node (the terminal cost), shared by the cases that use these nodes."""
+    return reacceleration_penalty(np.frombuffer(speed_bytes), params, speed_limit_mps, accel_mps2)
 
 
 def _a_hair_below(bound: np.ndarray) -> np.ndarray:
@@ -430,14 +436,9 @@ def _kernel_args(prob: DPProblem):
 def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=None, occ=None, upper_bound_usd=np.inf) -> DPSolution | None:
     """The optimum from the kernel's tables (``occ``: their rows' ranges in use, None when fully initialised);
     None when it exceeds ``upper_bound_usd`` (the pruned tables then do not hold the unpruned optimum)."""
-    bins = np.arange(prob.n_bins)
-    valid = np.ones(cost[-1].shape, dtype=bool) if occ is None else (bins >= occ[0][-1][:, None]) & (bins <= occ[1][-1][:, None])
-    last_cost = np.where(valid, cost[-1], np.inf)
-    total = last_cost + prob.terminal_cost_usd[:, None]
-    late = np.where(valid, time[-1], 0.0) + prob.terminal_time_s[:, None] > prob.t_max_s + LATE_TOL_S
-    total = np.where(late | ~np.isfinite(last_cost), np.inf, total)
-    flat = int(np.argmin(total))
-    best = float(total.flat[flat])
+    if occ is None:
+        occ = (np.zeros(cost.shape[:2], dtype=np.int64), np.full(cost.shape[:2], prob.n_bins - 1, dtype=np.int64))
+    flat, best = best_end(cost[-1], time[-1], occ[0][-1], occ[1][-1], prob.terminal_cost_usd, prob.terminal_time_s, prob.t_max_s)
     if np.isfinite(upper_bound_usd) and not best <= upper_bound_usd:
         return None
     if not np.isfinite(best):
