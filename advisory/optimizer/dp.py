@@ -515,15 +515,18 @@ def _coarser(prob: DPProblem, factor: int) -> DPProblem:
     return replace(prob, grid=grid, n_bins=_n_bins(prob.scenario, prob.t_max_s, grid))
 
 
-def solve_problem(prob: DPProblem, prune: bool = True) -> DPSolution:
+def solve_problem(prob: DPProblem, prune: bool = True, estimate_usd: float | None = None) -> DPSolution:
     """Run the numba forward pass on a built problem and read off the optimal trajectory.
 
     With ``prune`` (exact: the result is that of the full pass), labels that cannot finish within a limit on the
     total cost are dropped; the limit is the optimum of the problem with coarser time bins (``COARSE_LEVELS``),
     which is almost always a little above this one's, and falls back to looser limits when it is not.
+    ``estimate_usd`` (for example the cost of a feasible path) replaces that estimate: the first limit tried.
     """
     if not prune:
         return _pass(prob, np.inf)
+    if estimate_usd is not None:
+        return _solve_pruned(prob, estimate_usd)
     estimate = None
     coarse_stage = replace(prob.grid, stage_m=2 * prob.grid.stage_m)
     if _divides(prob.scenario, coarse_stage.stage_m):  # the problem on stages twice as long: a close estimate, cheaply
@@ -548,19 +551,22 @@ def time_limit_s(regular: Trajectory, params: ModelParams, scenario: Scenario, g
     return (regular.duration_s + float(pen.time_s[0])) * (1.0 + grid.time_buffer_frac)
 
 
-def solve(scenario: Scenario, params: ModelParams, grid: GridSpec | None = None, t_max_s: float | None = None) -> DPSolution:
+def solve(
+    scenario: Scenario, params: ModelParams, grid: GridSpec | None = None, t_max_s: float | None = None, estimate_usd: float | None = None
+) -> DPSolution:
     """
     Optimal eco-driving trajectory through ``scenario``.
 
     ``t_max_s`` defaults to the regular driver's time to the common end state (paper: the regular
     driver's trip time is the eco-driver's upper limit), times ``1 + grid.time_buffer_frac``.
+    ``estimate_usd``: a close estimate of the optimum, if known (see :func:`solve_problem`).
     """
     from advisory.drivers.regular import regular_driver
 
     grid = grid or GridSpec()
     if t_max_s is None:
         t_max_s = time_limit_s(regular_driver(scenario), params, scenario, grid)
-    return solve_problem(build_problem(scenario, params, grid, t_max_s))
+    return solve_problem(build_problem(scenario, params, grid, t_max_s), estimate_usd=estimate_usd)
 
 
 def solve_numpy(prob: DPProblem) -> DPSolution:
