@@ -405,6 +405,7 @@ def forward_pass(
             row_min = np.inf
             for b in range(b_lo, b_hi):
                 row_min = min(row_min, cost_row[b])
+            t_first = time_row[b_lo]  # the row's earliest label (its first bin in use holds one)
             base = (k * n_v + i) * n_bins
             for j in range(band_hi[i] - band_lo[i] + 1):
                 dt = step_dt[i, j]
@@ -416,6 +417,8 @@ def forward_pass(
                 bound = upper_bound_usd - lower_bound_usd[0, k2, i2] - step  # the time-free bound (lam[0] = 0)
                 if row_min > bound:  # no label of this row can finish within the limit this way
                     continue
+                if n_lam > 1 and _beyond(row_min + step, t_first + dt, lower_bound_usd, k2, i2, lam_usd_per_s, t_max_s, upper_bound_usd):
+                    continue  # nor with the time-aware bounds, which grow with time: at the row's cheapest cost and earliest time
                 cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]
                 lo2, hi2 = occ_lo[k2, i2], occ_hi[k2, i2]
                 for b in range(b_lo, b_hi):  # times ascend with the bins: past the time limit, stop
