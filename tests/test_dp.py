@@ -378,3 +378,46 @@ def test_bounds_of_states_that_cannot_finish_are_inf_not_nan():
     assert not np.isnan(prob.lower_bound_usd).any() and not np.isnan(prob.halt_bound_usd).any()
     assert np.isinf(prob.lower_bound_usd[:, :-1, 0]).all()
     assert solve_problem(prob).cost_usd == pytest.approx(solve_problem(prob, prune=False).cost_usd, rel=1e-12)
+
+
+def test_pass_tables_reused_from_a_poisoned_workspace_give_the_same_optimum():
+    """The pass tables' memory is reused from pass to pass (``dp._WORKSPACE``) without being cleared: the kernel must
+    read only cells it wrote. Filled with garbage (NaN, -inf costs, wild parents), it gives the same optimum, to the bit."""
+    from advisory.optimizer import dp
+
+    prob = _paper_problem((0, 0, 400), PRUNE_GRID)
+    clean = solve_problem(prob)
+    cost, time, parent = dp._WORKSPACE.bufs
+    for value in (np.nan, -np.inf, 0.0):
+        cost[:], time[:], parent[:] = value, value, 7
+        again = solve_problem(prob)
+        assert again.cost_usd == clean.cost_usd
+        assert np.array_equal(again.trajectory.t_s, clean.trajectory.t_s) and np.array_equal(again.trajectory.v_mps, clean.trajectory.v_mps)
+
+
+def test_arc_tables_grown_row_by_row_equal_those_computed_at_once():
+    """Stop arcs are added to the shared tables as longer approaches need them: the rows equal a table computed at once."""
+    from advisory.optimizer import dp
+
+    params, grid = model_params(), GridSpec(stage_m=20.0)
+    speed = coast_chain_mps(paper_scenario(0, 0, 200).speed_limit_mps, grid.stage_m, params.vehicle)
+    dp._ARCS.clear()
+    short, longer = dp._arc_tables(params, grid, speed, 3), dp._arc_tables(params, grid, speed, 9)
+    dp._ARCS.clear()
+    fresh = dp._arc_tables(params, grid, speed, 9)
+    assert short[0].shape[0] == 3 and longer[0].shape[0] == 9
+    for a, b, c in zip(short, longer, fresh, strict=True):
+        assert np.array_equal(b, c)
+        assert np.array_equal(a, c[: a.shape[0]]) if a.shape[0] == 3 else np.array_equal(a, c)
+
+
+@pytest.mark.parametrize("factor", [0.5, 0.99, 1.0, 1.02, 3.0])
+def test_solve_from_an_estimate_finds_the_optimum(factor):
+    """An estimate of the optimum (for example a feasible path priced for this vehicle) is the first pruning limit; too
+    low, it is given up for looser limits; too high, it prunes less. The optimum is the same, to the time binning."""
+    sc = paper_scenario(0, 0, 400)
+    params = model_params()
+    full = solve_problem(_paper_problem((0, 0, 400), PRUNE_GRID), prune=False)
+    sol = solve(sc, params, PRUNE_GRID, estimate_usd=full.cost_usd * factor)
+    assert full.cost_usd * (1 - 3e-3) <= sol.cost_usd <= full.cost_usd * (1 + 1e-3)
+    assert violations(sol.trajectory, sc) == []
