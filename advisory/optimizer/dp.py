@@ -500,7 +500,7 @@ def _solve_pruned(prob: DPProblem, estimate_usd: float | None) -> DPSolution:
     bound0 = prob.bound_at_usd(0, prob.i_start, 0.0)
     limits = [bound0 + m * abs(bound0) for m in PRUNE_MARGINS] if np.isfinite(bound0) else []
     if estimate_usd is not None:
-        near = [estimate_usd * (1 + m) for m in (1e-9, 3e-3, 1e-2, 3e-2)]  # the estimate is rarely far below
+        near = [estimate_usd * (1 + m) for m in (1e-4, 3e-3, 1e-2, 3e-2)]  # the estimate is rarely below, and then close
         limits = near + [x for x in limits if x > near[-1]]
     for limit in [*limits, np.inf]:
         sol = _pass(prob, limit)
