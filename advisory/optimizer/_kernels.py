@@ -419,6 +419,8 @@ def forward_pass(
                     continue
                 if n_lam > 1 and _beyond(row_min + step, t_first + dt, lower_bound_usd, k2, i2, lam_usd_per_s, t_max_s, upper_bound_usd):
                     continue  # nor with the time-aware bounds, which grow with time: at the row's cheapest cost and earliest time
+                for n in range(1, n_lam):  # past this time even the row's cheapest label could not finish within the limit
+                    slack = min(slack, t_max_s + LATE_TOL_S - (row_min + step + lower_bound_usd[n, k2, i2] - upper_bound_usd) / lam_usd_per_s[n] + 1e-9)
                 cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]
                 lo2, hi2 = occ_lo[k2, i2], occ_hi[k2, i2]
                 for b in range(b_lo, b_hi):  # times ascend with the bins: past the time limit, stop
