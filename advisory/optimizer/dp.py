@@ -23,10 +23,12 @@ Formulation
   pay, at several prices of time (a Lagrangian relaxation of the trip-time limit: a label with little time
   left must hurry, which costs); a label that cannot finish within a limit on the total cost is dropped. The
   limit is the optimum of the same problem on stages twice as long (or with coarser time bins), which lies a
-  little above this one's; when no path is found within it, looser limits follow, finally none. No path within
-  the limit is lost; a time bin then keeps its cheapest label that can still finish, which may differ from
-  the cheapest label of all (doomed by the time limit), so the result may differ from the unpruned DP's at
-  the level of the binning (on the study: 46 of 192 cases, -0.21 % to +0.06 %; ``solve_problem(prune=False)``).
+  little above this one's, or a caller's estimate (the study prices a scenario's optimum for one vehicle for the
+  next: ``advisory.evaluation.study.run_cases``); when no path is found within it, looser limits follow, finally
+  none. No path within the limit is lost; a time bin then keeps its cheapest label that can still finish, which
+  may differ from the cheapest label of all (doomed by the time limit), so the result may differ from the
+  unpruned DP's at the level of the binning, and with the limit (on the study: 38 of 192 cases, -0.21 % to
+  +0.11 %; ``solve_problem(prune=False)``).
 * **End state**: both drivers are compared back at the speed limit (``advisory.evaluation.endstate``): the terminal
   cost is the re-acceleration penalty, and its time part counts against the trip-time limit
   ``(T_regular + penalty time of the regular driver) · (1 + time_buffer_frac)``.
