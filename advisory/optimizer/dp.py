@@ -47,7 +47,16 @@ import numpy as np
 
 from advisory.evaluation.endstate import reacceleration_penalty
 from advisory.physics.model import I_AUX, arc_cost_usd, pack, step_cost_usd, step_wheel_power_w
-from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, best_end, cost_to_go_bounds, count_labels, forward_pass, step_tables
+from advisory.optimizer._kernels import (
+    LATE_TOL_S,
+    RED_TOL_S,
+    best_end,
+    cost_to_go_bounds,
+    count_labels,
+    forward_pass,
+    light_bounds,
+    step_tables,
+)
 from advisory.physics.params import ModelParams, VehicleParams
 from advisory.drivers.regular import time_to_cover_s
 from advisory.signals import Scenario
@@ -183,6 +192,9 @@ class DPProblem:
     rest_usd: np.ndarray
     lower_bound_usd: np.ndarray
     halt_bound_usd: np.ndarray
+    light_bound_usd: np.ndarray
+    light_bound_len: np.ndarray
+    line_t_min_s: np.ndarray
 
     def bound_at_usd(self, k: int, i: int, t_s: float) -> float:
         """Least cost still to pay from stage k at speed i at time ``t_s`` (``_kernels.cost_to_go_bounds``)."""
@@ -251,6 +263,8 @@ def build_problem(
             arcs["launch_usd"], arcs["rest_dt_s"], arcs["rest_usd"], TIME_PRICES_USD_PER_S,
         )))
     lb, halt_lb = _BOUNDS[key]
+    light_lb, light_len, line_t_min = _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade.astype(np.int64),
+                                                    is_stop, lb[0], halt_lb[0], arcs, v_lim)
     return DPProblem(
         scenario=scenario,
         grid=grid,
@@ -276,7 +290,49 @@ def build_problem(
         **arcs,
         lower_bound_usd=lb,
         halt_bound_usd=halt_lb,
+        light_bound_usd=light_lb,
+        light_bound_len=light_len,
+        line_t_min_s=line_t_min,
     )
+
+
+LIGHT_BOUND_STAGES = 20
+"""Stages before each light over which labels are also bounded by the light's red (``_kernels.light_bounds``)."""
+LIGHT_BOUND_BIN_S, LIGHT_BOUND_N = 0.25, 160
+"""Resolution and range of the time a label must still take to its line, in those bounds (beyond: clamped). [s]"""
+
+_LIGHT_BOUNDS: dict = {}
+"""Light bounds by what they depend on (vehicle, grid, speeds, the bounds at and before the line): a light whose
+downstream is the same in several cases (the paper's light 2 at every spacing) shares one table."""
+
+
+def _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade, is_stop, lb0, halt_lb0, arcs, v_lim):
+    """The bounds of ``_kernels.light_bounds`` for every light, stacked (n_light, LIGHT_BOUND_STAGES + 1, n_v,
+    LIGHT_BOUND_N), the stages each covers, and the least time from each (stage, speed) to the next line (0 where
+    no bound applies; a hair short of the fastest drive there, accelerating at the limit to the speed limit)."""
+    light_stage, k_lo = arcs["light_stage"], arcs["arc_k_lo"]
+    n_l, n_v = light_stage.size, speed.size
+    out = np.empty((n_l, LIGHT_BOUND_STAGES + 1, n_v, LIGHT_BOUND_N), dtype=np.float32)  # rows past a light's window unused
+    lens = np.zeros(n_l, dtype=np.int64)
+    t_min = np.zeros((stage_grade.size + 1, n_v))
+    for l in range(n_l):
+        kl = int(light_stage[l])
+        n_back = min(LIGHT_BOUND_STAGES, kl - int(k_lo[l]))
+        window = slice(kl - n_back, kl + 1)
+        key = (params, grid, speed.tobytes(), lb0[window].tobytes(), float(halt_lb0[l]), is_stop[window].tobytes(),
+               stage_grade[kl - n_back : kl].tobytes(), n_back)
+        if key not in _LIGHT_BOUNDS:
+            if len(_LIGHT_BOUNDS) >= 48:  # 2-3.5 MB each at the study grid; the paper's study uses ~20
+                _LIGHT_BOUNDS.clear()
+            h = _a_hair_below(light_bounds(speed, band_lo, band_hi, step_dt, step_usd, stage_grade, is_stop, grid.allow_dwell, lb0,
+                                           float(halt_lb0[l]), arcs["stop_usd"], kl, n_back, LIGHT_BOUND_BIN_S, LIGHT_BOUND_N))
+            h32 = h.astype(np.float32)  # rounded down, so that it stays a lower bound
+            _LIGHT_BOUNDS[key] = np.where(h32 > h, np.nextafter(h32, np.float32(-np.inf)), h32)
+        out[l, : n_back + 1] = _LIGHT_BOUNDS[key]
+        lens[l] = n_back
+        d = (kl - np.arange(kl - n_back, kl))[:, None] * grid.stage_m
+        t_min[kl - n_back : kl] = time_to_cover_s(d, speed[None, :], grid.accel_max_mps2, v_lim) - 1e-6
+    return out, lens, t_min
 
 
 @lru_cache(maxsize=32)
@@ -492,7 +548,8 @@ def _pass(prob: DPProblem, limit_usd: float) -> DPSolution | None:
     cost, time, parent, s_cost, s_time, s_parent, occ_lo, occ_hi = _empty_tables(prob)
     n = TIME_PRICES_USD_PER_S.size if np.isfinite(limit_usd) else 1  # no limit: no bounds to check
     forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd[:n],
-                 prob.halt_bound_usd[:n], TIME_PRICES_USD_PER_S[:n], min(limit_usd, np.finfo(float).max), occ_lo, occ_hi)
+                 prob.halt_bound_usd[:n], TIME_PRICES_USD_PER_S[:n], min(limit_usd, np.finfo(float).max), occ_lo, occ_hi,
+                 prob.light_bound_usd, prob.light_bound_len, prob.line_t_min_s, LIGHT_BOUND_BIN_S)
     return _read_solution(prob, cost, time, parent, s_time, s_parent, (occ_lo, occ_hi), limit_usd)
 
 
