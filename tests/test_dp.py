@@ -421,3 +421,60 @@ def test_solve_from_an_estimate_finds_the_optimum(factor):
     sol = solve(sc, params, PRUNE_GRID, estimate_usd=full.cost_usd * factor)
     assert full.cost_usd * (1 - 3e-3) <= sol.cost_usd <= full.cost_usd * (1 + 1e-3)
     assert violations(sol.trajectory, sc) == []
+
+
+def test_light_bound_is_below_every_path_to_the_line_that_takes_that_long():
+    """The light's bound ``h[d, i, m]`` (d stages before the line at speed i, reaching the line no sooner than m bins
+    from now) is below the cost of every path that does so, enumerated here with costs priced here: stage moves to
+    the line (then the time-free bound there), or a stop arc to the halt, or a standstill off the line (both can
+    wait any time)."""
+    from advisory.optimizer import dp
+
+    light = Scenario("one", (FixedTimeSignal(60.0, 0.0, 30.0, 30.0),), zone_length_m=100.0, speed_limit_mps=10.0, initial_speed_mps=10.0)
+    params = model_params()
+    grid = GridSpec(stage_m=10.0, dwell_s=0.5)
+    prob = build_problem(light, params, grid, 60.0, speed_nodes_mps=np.array([0.0, 2.0, 4.0, 6.0, 8.0, 10.0]))
+    p, rates, pref = pack(params)
+    v, kl, lb, halt = prob.speed_mps, int(prob.light_stage[0]), prob.lower_bound_usd[0], prob.halt_bound_usd[0, 0]
+    h, n_back = prob.light_bound_usd[0].astype(float), int(prob.light_bound_len[0])
+    assert n_back == 6 and h.shape[-1] == dp.LIGHT_BOUND_N
+    top = dp.LIGHT_BOUND_N - 1
+    tol = 1e-12
+    checked = 0
+
+    def walk(k, i, d0, i0, cost, dur):
+        nonlocal checked
+        if k == kl:
+            m = min(int(dur / dp.LIGHT_BOUND_BIN_S), top)
+            assert h[d0, i0, m] <= cost + lb[kl, i] + tol
+            checked += 1
+            return
+        if np.isfinite(prob.stop_usd[kl - k - 1, i]):  # halt before the line: any time
+            assert h[d0, i0, top] <= cost + prob.stop_usd[kl - k - 1, i] + halt + tol
+        if i == 0 and k > 0:  # standstill off the line: it may wait
+            assert h[d0, i0, top] <= cost + lb[k, 0] + tol
+        for j in range(prob.band_lo[i], prob.band_hi[i] + 1):
+            if v[i] + v[j] > 0:
+                dt = 2 * grid.stage_m / (v[i] + v[j])
+                walk(k + 1, j, d0, i0, cost + arc_cost_usd(v[i], v[j], dt, 0.0, grid.step_substeps, p, rates, pref), dur + dt)
+
+    for d in range(1, 5):
+        for i in range(v.size):
+            walk(kl - d, i, d, i, 0.0, 0.0)
+    assert checked > 1000
+    assert np.isinf(h[0, :, 1:]).all()  # at the line no time is left before it
+
+
+def test_light_bound_prunes_the_labels_that_the_red_dooms():
+    """[15 15] at 400 m: the car must slow down to reach light 2 as its red ends; the light's bound drops the labels
+    that would get there in the red, long before they do, and the optimum is the same."""
+    from advisory.optimizer import dp
+
+    with_it = solve_problem(_paper_problem((15, 15, 400), PRUNE_GRID))
+    dp.LIGHT_BOUND_STAGES, saved = 0, dp.LIGHT_BOUND_STAGES
+    try:
+        without = solve_problem(_paper_problem((15, 15, 400), PRUNE_GRID))
+    finally:
+        dp.LIGHT_BOUND_STAGES = saved
+    assert with_it.cost_usd == pytest.approx(without.cost_usd, rel=1e-3)
+    assert with_it.n_labels < without.n_labels / 2
