@@ -21,7 +21,10 @@ Formulation
   and paths that run along the speed-limit boundary (the regular driver barely brakes) stay representable.
 * **Pruning**: a backward DP on the same moves, with lights and waits left out, bounds what a label still has to
   pay, at several prices of time (a Lagrangian relaxation of the trip-time limit: a label with little time
-  left must hurry, which costs); a label that cannot finish within a limit on the total cost is dropped. The
+  left must hurry, which costs). Over the last ``LIGHT_BOUND_STAGES`` stages before each light a second bound
+  sees the light: a label that cannot reach the line before the red ends must take at least that long to get
+  there, and the least cost of doing so (slowing down, or stopping) is tabulated against that time
+  (``_kernels.light_bounds``). A label that cannot finish within a limit on the total cost is dropped. The
   limit is the optimum of the same problem on stages twice as long (or with coarser time bins), which lies a
   little above this one's, or a caller's estimate (the study prices a scenario's optimum for one vehicle for the
   next: ``advisory.evaluation.study.run_cases``); when no path is found within it, looser limits follow, finally
