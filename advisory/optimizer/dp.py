@@ -309,21 +309,26 @@ _LIGHT_BOUNDS: dict = {}
 downstream is the same in several cases (the paper's light 2 at every spacing) shares one table."""
 
 
+_LIGHT_STACKS: dict = {}
+"""``_light_bounds``'s arrays by the geometry of a problem (the study's consecutive cases share them)."""
+
+
 def _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade, is_stop, lb0, halt_lb0, arcs, v_lim):
     """The bounds of ``_kernels.light_bounds`` for every light, stacked (n_light, LIGHT_BOUND_STAGES + 1, n_v,
     LIGHT_BOUND_N), the stages each covers, and the least time from each (stage, speed) to the next line (0 where
     no bound applies; a hair short of the fastest drive there, accelerating at the limit to the speed limit)."""
     light_stage, k_lo = arcs["light_stage"], arcs["arc_k_lo"]
     n_l, n_v = light_stage.size, speed.size
+    backs = [min(LIGHT_BOUND_STAGES, int(kl - lo)) for kl, lo in zip(light_stage, k_lo, strict=True)]
+    keys = [(params, grid, speed.tobytes(), lb0[kl - n : kl + 1].tobytes(), float(halt_lb0[l]), is_stop[kl - n : kl + 1].tobytes(),
+             stage_grade[kl - n : kl].tobytes(), n) for l, (kl, n) in enumerate(zip(light_stage, backs, strict=True))]
+    stack_key = (tuple(keys), tuple(light_stage), v_lim, stage_grade.size)
+    if stack_key in _LIGHT_STACKS:  # the same geometry as a recent case: the same arrays (read only)
+        return _LIGHT_STACKS[stack_key]
     out = np.empty((n_l, LIGHT_BOUND_STAGES + 1, n_v, LIGHT_BOUND_N), dtype=np.float32)  # rows past a light's window unused
-    lens = np.zeros(n_l, dtype=np.int64)
     t_min = np.zeros((stage_grade.size + 1, n_v))
-    for l in range(n_l):
+    for l, (key, n_back) in enumerate(zip(keys, backs, strict=True)):
         kl = int(light_stage[l])
-        n_back = min(LIGHT_BOUND_STAGES, kl - int(k_lo[l]))
-        window = slice(kl - n_back, kl + 1)
-        key = (params, grid, speed.tobytes(), lb0[window].tobytes(), float(halt_lb0[l]), is_stop[window].tobytes(),
-               stage_grade[kl - n_back : kl].tobytes(), n_back)
         if key not in _LIGHT_BOUNDS:
             if len(_LIGHT_BOUNDS) >= 48:  # 2-3.5 MB each at the study grid; the paper's study uses ~20
                 _LIGHT_BOUNDS.clear()
@@ -332,10 +337,12 @@ def _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stag
             h32 = h.astype(np.float32)  # rounded down, so that it stays a lower bound
             _LIGHT_BOUNDS[key] = np.where(h32 > h, np.nextafter(h32, np.float32(-np.inf)), h32)
         out[l, : n_back + 1] = _LIGHT_BOUNDS[key]
-        lens[l] = n_back
         d = (kl - np.arange(kl - n_back, kl))[:, None] * grid.stage_m
         t_min[kl - n_back : kl] = time_to_cover_s(d, speed[None, :], grid.accel_max_mps2, v_lim) - 1e-6
-    return out, lens, t_min
+    if len(_LIGHT_STACKS) >= 8:  # 7 MB each at the study grid with two lights
+        _LIGHT_STACKS.clear()
+    _LIGHT_STACKS[stack_key] = out, np.array(backs, dtype=np.int64), t_min
+    return _LIGHT_STACKS[stack_key]
 
 
 @lru_cache(maxsize=32)
