@@ -436,7 +436,8 @@ def test_light_bound_is_below_every_path_to_the_line_that_takes_that_long():
     prob = build_problem(light, params, grid, 60.0, speed_nodes_mps=np.array([0.0, 2.0, 4.0, 6.0, 8.0, 10.0]))
     p, rates, pref = pack(params)
     v, kl, lb, halt = prob.speed_mps, int(prob.light_stage[0]), prob.lower_bound_usd[0], prob.halt_bound_usd[0, 0]
-    h, n_back = prob.light_bound_usd[0].astype(float), int(prob.light_bound_len[0])
+    n_back = int(prob.light_bound_len[0])
+    h = prob.light_bound_usd[0, : n_back + 1].astype(float)  # the rows past the light's window are not in use
     assert n_back == 6 and h.shape[-1] == dp.LIGHT_BOUND_N
     top = dp.LIGHT_BOUND_N - 1
     tol = 1e-12
