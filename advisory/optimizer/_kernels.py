@@ -148,6 +148,7 @@ def light_bounds(speed_mps, band_lo, band_hi, step_dt_s, step_usd, stage_grade, 
     before the line (stage ``k_line - d``) at speed i, for paths that reach the line no sooner than
     ``m tau_bin_s`` from now (a label that cannot reach it before its red ends must take that long).
 
+    Returned in single precision, lowered by 1e-6 of itself (more than a float32 rounding: still a lower bound).
     A backward DP over the moves of ``forward_pass`` up to the line: stage moves, whose durations count rounded
     up to whole ``tau_bin_s`` (so every path that takes that long is admitted: a lower bound), and a stop arc to
     the halt (``stop_usd`` row d - 1, then at least ``halt_lb_usd``: the halt can wait any time). At the line
@@ -174,15 +175,21 @@ def light_bounds(speed_mps, band_lo, band_hi, step_dt_s, step_usd, stage_grade, 
                 c = step_usd[g, i, j]
                 i2 = band_lo[i] + j
                 r = int(np.ceil(dt / tau_bin_s + 1e-9))  # rounded up: a weaker requirement after the move
-                for m in range(n_tau):
-                    m2 = m - r if m > r else 0
-                    v = c + nxt[i2, m2]
-                    if v < hd[i, m]:
-                        hd[i, m] = v
+                row, nxt_row = hd[i], nxt[i2]
+                v0 = c + nxt_row[0]
+                for m in range(min(r + 1, n_tau)):  # the move alone takes long enough
+                    row[m] = min(row[m], v0)
+                for m in range(r + 1, n_tau):
+                    row[m] = min(row[m], c + nxt_row[m - r])
         if allow_dwell and speed_mps[0] == 0.0 and not is_stop[k]:
             for m in range(n_tau):  # it can wait at no cost in the bound: no requirement on time
                 hd[0, m] = min(hd[0, 0], lb_line_usd[k, 0])
-    return h
+    out = np.empty(h.shape, dtype=np.float32)  # stored in single precision, lowered by 1e-6 of itself: still below
+    flat, flat_out = h.ravel(), out.ravel()
+    for n in range(flat.shape[0]):
+        v = flat[n]
+        flat_out[n] = np.float32(v - 1e-6 * abs(v)) if v < np.inf else np.inf
+    return out
 
 
 @njit(cache=True, inline="always")

@@ -332,10 +332,8 @@ def _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stag
         if key not in _LIGHT_BOUNDS:
             if len(_LIGHT_BOUNDS) >= 48:  # 2-3.5 MB each at the study grid; the paper's study uses ~20
                 _LIGHT_BOUNDS.clear()
-            h = _a_hair_below(light_bounds(speed, band_lo, band_hi, step_dt, step_usd, stage_grade, is_stop, grid.allow_dwell, lb0,
-                                           float(halt_lb0[l]), arcs["stop_usd"], kl, n_back, LIGHT_BOUND_BIN_S, LIGHT_BOUND_N))
-            h32 = h.astype(np.float32)  # rounded down, so that it stays a lower bound
-            _LIGHT_BOUNDS[key] = np.where(h32 > h, np.nextafter(h32, np.float32(-np.inf)), h32)
+            _LIGHT_BOUNDS[key] = light_bounds(speed, band_lo, band_hi, step_dt, step_usd, stage_grade, is_stop, grid.allow_dwell, lb0,
+                                              float(halt_lb0[l]), arcs["stop_usd"], kl, n_back, LIGHT_BOUND_BIN_S, LIGHT_BOUND_N)
         out[l, : n_back + 1] = _LIGHT_BOUNDS[key]
         d = (kl - np.arange(kl - n_back, kl))[:, None] * grid.stage_m
         t_min[kl - n_back : kl] = time_to_cover_s(d, speed[None, :], grid.accel_max_mps2, v_lim) - 1e-6
