@@ -310,6 +310,10 @@ def forward_pass(
     (``halt_bound_usd[n, l]`` at a halt; see ``cost_to_go_bounds``) exceeds ``upper_bound_usd`` (finite) cannot
     finish within it and is dropped. No path within the limit is lost; as labels are binned, a bin may then
     keep another of its labels than it would without pruning (one whose bound, at an earlier time, is lower).
+    Over the ``light_lb_len[l]`` stages before light l, a label of a stage move is also dropped when its cost plus
+    ``light_lb_usd[l, d, i, m]`` (``light_bounds``, d stages before the line, m bins of ``tau_bin_s``) exceeds
+    the limit, m being the least time it must still take to the line: ``line_t_min_s[k, i]`` (the fastest
+    drive there), or longer, until the red ends, when that drive would arrive in the red. Only with a limit.
     """
     n_stage = stage_grade.shape[0]
     n_v = speed_mps.shape[0]
