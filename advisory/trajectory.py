@@ -28,11 +28,13 @@ class Trajectory:
 
     def sample(self, max_dt_s: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Samples (t, x, v) containing every knot, no step longer than ``max_dt_s``. [s], [m], [m/s]"""
-        ts = [self.t_s[:1]]
-        for t0, t1 in zip(self.t_s[:-1], self.t_s[1:], strict=True):
-            n = max(1, int(np.ceil((t1 - t0) / max_dt_s - 1e-9)))
-            ts.append(np.linspace(t0, t1, n + 1)[1:])
-        t = np.concatenate(ts)
+        t0, t1 = self.t_s[:-1], self.t_s[1:]
+        n = np.maximum(1, np.ceil((t1 - t0) / max_dt_s - 1e-9).astype(np.int64))  # steps per segment
+        seg = np.repeat(np.arange(n.size), n)
+        k = np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each segment
+        t = k * ((t1 - t0) / n)[seg] + t0[seg]  # as np.linspace(t0, t1, n + 1)[1:] computes it
+        t[np.cumsum(n) - 1] = t1  # segment ends exactly on the knots
+        t = np.concatenate([self.t_s[:1], t])
         return t, self.position_at(t), self.speed_at(t)
 
     def _segment(self, t_s):

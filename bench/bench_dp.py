@@ -9,7 +9,8 @@ Run: .venv/bin/python bench/bench_dp.py [--quick]
 * Matched accuracy: for [15 15] and [0 0] at s = 800 m, the cheapest grid of a ladder whose optimum is within
   0.3 % of the reference, and its solve time (best of 5 after JIT, one core), pruned (the default) and as one
   unpruned pass (the recursion alone, as before pruning), with their ratio. Target < 0.1 s.
-* The full study (64 cases x 3 variants) at the study grid on 2 processes (target < 10 s), its distance from
+* The full study (64 cases x 3 variants) at the study grid on 2 processes (target < 10 s) with its CPU seconds, then
+  in this one process (CPU seconds: what 2 free cores divide by about 2), its distance from
   the reference on the two cells above (target < 0.5 %), the DP tables of one solve and the peak RSS of a
   worker-sized process (target < 200 MB per solve).
 * The same problem solved by ``solve_numpy`` (the recursion in plain NumPy/Python, without stop arcs or pruning)
@@ -57,6 +58,11 @@ def problem(case, grid):
 
 def load() -> str:
     return "load average %.1f" % os.getloadavg()[0]
+
+
+def cpu_s() -> float:
+    """CPU seconds (user + system) of this process and of its finished children (the study's workers)."""
+    return sum(getattr(resource.getrusage(who), f) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN) for f in ("ru_utime", "ru_stime"))
 
 
 def best_time(fn, repeats=3):
@@ -123,10 +129,13 @@ def main() -> None:
 
     if not quick:
         cases = paper_cases()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu_s()
         run_study(cases, STUDY_GRID, 2, progress=False)
-        print(f"\nFull study: {len(cases)} cases (64 x 3 variants) at the study grid on 2 processes: {time.perf_counter() - t0:.1f} s "
-              f"(target < 10 s; {load()})")
+        print(f"\nFull study: {len(cases)} cases (64 x 3 variants) at the study grid on 2 processes: {time.perf_counter() - t0:.1f} s, "
+              f"{cpu_s() - c0:.1f} s of CPU in all (target < 10 s; {load()})")
+        t0, c0 = time.perf_counter(), cpu_s()
+        run_study(cases, STUDY_GRID, 1, progress=False)
+        print(f"The same in this process (kernels loaded, caches warm): {time.perf_counter() - t0:.1f} s, {cpu_s() - c0:.1f} s of CPU ({load()})")
     print(f"Peak RSS of this process (largest solve above included): {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 

@@ -37,8 +37,9 @@ from advisory.evaluation.study import (
     VARIANTS,
     CaseResult,
     StudyCase,
+    by_scenario,
     paper_cases,
-    run_case,
+    run_cases,
     table2,
     table3,
 )
@@ -50,21 +51,26 @@ from advisory.signals import paper_scenario
 def run_study(
     cases: Sequence[StudyCase], grid: GridSpec = STUDY_GRID, workers: int = 1, overrides: dict | None = None, progress: bool = True
 ) -> dict:
-    """Run ``cases`` on ``workers`` processes (a tqdm bar on stderr unless ``progress`` is False); results by case key."""
+    """Run ``cases`` on ``workers`` processes (a tqdm bar on stderr unless ``progress`` is False); results by case key.
+
+    A task is a scenario's variants (``run_cases``: each starts its DP from the optima of those before it), the
+    longest approaches first so that no long task is left for the end."""
     results: dict = {}
+    groups = sorted(by_scenario(cases), key=lambda g: -g[0].scenario.zone_length_m)
     bar = tqdm(total=len(cases), desc="study", unit="case", disable=not progress, file=sys.stderr)
     if workers <= 1:
-        for case in cases:
-            res = run_case(case, grid, overrides)
-            results[res.key] = res
-            bar.update()
+        for group in groups:
+            for res in run_cases(group, grid, overrides):
+                results[res.key] = res
+            bar.update(len(group))
     else:
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(run_case, case, grid, overrides) for case in cases]
+            futures = [pool.submit(run_cases, group, grid, overrides) for group in groups]
             for fut in as_completed(futures):
-                res = fut.result()
-                results[res.key] = res
-                bar.update()
+                done = fut.result()
+                for res in done:
+                    results[res.key] = res
+                bar.update(len(done))
     bar.close()
     return results
 

@@ -378,3 +378,104 @@ def test_bounds_of_states_that_cannot_finish_are_inf_not_nan():
     assert not np.isnan(prob.lower_bound_usd).any() and not np.isnan(prob.halt_bound_usd).any()
     assert np.isinf(prob.lower_bound_usd[:, :-1, 0]).all()
     assert solve_problem(prob).cost_usd == pytest.approx(solve_problem(prob, prune=False).cost_usd, rel=1e-12)
+
+
+def test_pass_tables_reused_from_a_poisoned_workspace_give_the_same_optimum():
+    """The pass tables' memory is reused from pass to pass (``dp._WORKSPACE``) without being cleared: the kernel must
+    read only cells it wrote. Filled with garbage (NaN, -inf costs, wild parents), it gives the same optimum, to the bit."""
+    from advisory.optimizer import dp
+
+    prob = _paper_problem((0, 0, 400), PRUNE_GRID)
+    clean = solve_problem(prob)
+    cost, time, parent = dp._WORKSPACE.bufs
+    for value in (np.nan, -np.inf, 0.0):
+        cost[:], time[:], parent[:] = value, value, 7
+        again = solve_problem(prob)
+        assert again.cost_usd == clean.cost_usd
+        assert np.array_equal(again.trajectory.t_s, clean.trajectory.t_s) and np.array_equal(again.trajectory.v_mps, clean.trajectory.v_mps)
+
+
+def test_arc_tables_grown_row_by_row_equal_those_computed_at_once():
+    """Stop arcs are added to the shared tables as longer approaches need them: the rows equal a table computed at once."""
+    from advisory.optimizer import dp
+
+    params, grid = model_params(), GridSpec(stage_m=20.0)
+    speed = coast_chain_mps(paper_scenario(0, 0, 200).speed_limit_mps, grid.stage_m, params.vehicle)
+    dp._ARCS.clear()
+    short, longer = dp._arc_tables(params, grid, speed, 3), dp._arc_tables(params, grid, speed, 9)
+    dp._ARCS.clear()
+    fresh = dp._arc_tables(params, grid, speed, 9)
+    assert short[0].shape[0] == 3 and longer[0].shape[0] == 9
+    for a, b, c in zip(short, longer, fresh, strict=True):
+        assert np.array_equal(b, c)
+        assert np.array_equal(a, c[: a.shape[0]]) if a.shape[0] == 3 else np.array_equal(a, c)
+
+
+@pytest.mark.parametrize("factor", [0.5, 0.99, 1.0, 1.02, 3.0])
+def test_solve_from_an_estimate_finds_the_optimum(factor):
+    """An estimate of the optimum (for example a feasible path priced for this vehicle) is the first pruning limit; too
+    low, it is given up for looser limits; too high, it prunes less. The optimum is the same, to the time binning."""
+    sc = paper_scenario(0, 0, 400)
+    params = model_params()
+    full = solve_problem(_paper_problem((0, 0, 400), PRUNE_GRID), prune=False)
+    sol = solve(sc, params, PRUNE_GRID, estimate_usd=full.cost_usd * factor)
+    assert full.cost_usd * (1 - 3e-3) <= sol.cost_usd <= full.cost_usd * (1 + 1e-3)
+    assert violations(sol.trajectory, sc) == []
+
+
+def test_light_bound_is_below_every_path_to_the_line_that_takes_that_long():
+    """The light's bound ``h[d, i, m]`` (d stages before the line at speed i, reaching the line no sooner than m bins
+    from now) is below the cost of every path that does so, enumerated here with costs priced here: stage moves to
+    the line (then the time-free bound there), or a stop arc to the halt, or a standstill off the line (both can
+    wait any time)."""
+    from advisory.optimizer import dp
+
+    light = Scenario("one", (FixedTimeSignal(60.0, 0.0, 30.0, 30.0),), zone_length_m=100.0, speed_limit_mps=10.0, initial_speed_mps=10.0)
+    params = model_params()
+    grid = GridSpec(stage_m=10.0, dwell_s=0.5)
+    prob = build_problem(light, params, grid, 60.0, speed_nodes_mps=np.array([0.0, 2.0, 4.0, 6.0, 8.0, 10.0]))
+    p, rates, pref = pack(params)
+    v, kl, lb, halt = prob.speed_mps, int(prob.light_stage[0]), prob.lower_bound_usd[0], prob.halt_bound_usd[0, 0]
+    n_back = int(prob.light_bound_len[0])
+    h = prob.light_bound_usd[0, : n_back + 1].astype(float)  # the rows past the light's window are not in use
+    assert n_back == 6 and h.shape[-1] == dp.LIGHT_BOUND_N
+    top = dp.LIGHT_BOUND_N - 1
+    tol = 1e-12
+    checked = 0
+
+    def walk(k, i, d0, i0, cost, dur):
+        nonlocal checked
+        if k == kl:
+            m = min(int(dur / dp.LIGHT_BOUND_BIN_S), top)
+            assert h[d0, i0, m] <= cost + lb[kl, i] + tol
+            checked += 1
+            return
+        if np.isfinite(prob.stop_usd[kl - k - 1, i]):  # halt before the line: any time
+            assert h[d0, i0, top] <= cost + prob.stop_usd[kl - k - 1, i] + halt + tol
+        if i == 0 and k > 0:  # standstill off the line: it may wait
+            assert h[d0, i0, top] <= cost + lb[k, 0] + tol
+        for j in range(prob.band_lo[i], prob.band_hi[i] + 1):
+            if v[i] + v[j] > 0:
+                dt = 2 * grid.stage_m / (v[i] + v[j])
+                walk(k + 1, j, d0, i0, cost + arc_cost_usd(v[i], v[j], dt, 0.0, grid.step_substeps, p, rates, pref), dur + dt)
+
+    for d in range(1, 5):
+        for i in range(v.size):
+            walk(kl - d, i, d, i, 0.0, 0.0)
+    assert checked > 1000
+    assert np.isinf(h[0, :, 1:]).all()  # at the line no time is left before it
+
+
+def test_light_bound_prunes_the_labels_that_the_red_dooms():
+    """[15 15] at 400 m: the car must slow down to reach light 2 as its red ends; the light's bound drops the labels
+    that would get there in the red, long before they do, and the optimum is the same."""
+    from advisory.optimizer import dp
+
+    with_it = solve_problem(_paper_problem((15, 15, 400), PRUNE_GRID))
+    dp.LIGHT_BOUND_STAGES, saved = 0, dp.LIGHT_BOUND_STAGES
+    try:
+        without = solve_problem(_paper_problem((15, 15, 400), PRUNE_GRID))
+    finally:
+        dp.LIGHT_BOUND_STAGES = saved
+    assert with_it.cost_usd == pytest.approx(without.cost_usd, rel=1e-3)
+    assert with_it.n_labels < without.n_labels / 2

@@ -59,3 +59,35 @@ def test_bigger_pack_cuts_cruise_decay_by_pack_ratio():
 
 def test_table2_layout():
     assert table2({}).shape == (len(TIMINGS), len(SPACINGS)) and np.isnan(table2({})).all()
+
+
+def test_variants_of_a_scenario_run_as_one_task_from_each_others_optima(monkeypatch):
+    """``run_cases``: the first variant's DP runs alone; the next start from the earlier optima priced for their vehicle
+    (the cheapest of them: a feasible path's cost). Each optimum equals the one found alone, to the time binning."""
+    from advisory.evaluation import study
+    from advisory.evaluation.endstate import score_in_end_state
+    from advisory.evaluation.study import by_scenario, run_cases, variant_params
+
+    group = next(g for g in by_scenario(paper_cases()) if g[0].label == (0.0, 0.0, 400.0))  # a stop at light 1
+    assert [c.variant for c in group] == ["lfp54", "nca54", "nca75"] and len({c.label for c in group}) == 1
+    alone = [run_case(c, COARSE) for c in group]
+    seen = []
+    real_solve = study.solve
+    monkeypatch.setattr(study, "solve", lambda *a, **kw: seen.append(kw["estimate_usd"]) or real_solve(*a, **kw))
+    together = run_cases(group, COARSE)
+    v_lim = group[0].scenario.speed_limit_mps
+    assert seen[0] is None
+    for n in (1, 2):
+        priced = [score_in_end_state(r.eco_traj, variant_params(group[n].variant), v_lim).cost_usd for r in together[:n]]
+        assert seen[n] == min(priced)
+    for a, b in zip(alone, together, strict=True):
+        assert a.key == b.key
+        assert b.dp_cost_usd == pytest.approx(a.dp_cost_usd, rel=3e-3)
+
+
+def test_study_groups_cases_by_scenario():
+    from advisory.evaluation.study import by_scenario
+
+    groups = by_scenario(paper_cases(["lfp54", "nca75"]))
+    assert len(groups) == 64 and all([c.variant for c in g] == ["lfp54", "nca75"] for g in groups)
+    assert all(g[0].label == g[1].label and g[0].scenario == g[1].scenario for g in groups)

@@ -16,14 +16,14 @@ the side-by-side comparison.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import EndStateScore, score_in_end_state
-from advisory.optimizer.dp import GridSpec, solve
+from advisory.optimizer.dp import GridSpec, solve, time_limit_s
 from advisory.physics.params import ModelParams, model_params
 from advisory.signals import PAPER_EXIT_M, PAPER_SPACINGS_M, PAPER_TIMINGS_S, Scenario, paper_scenario
 from advisory.trajectory import Trajectory
@@ -120,16 +120,19 @@ class CaseResult:
         return out
 
 
-def run_case(case: StudyCase, grid: GridSpec = STUDY_GRID, overrides: dict | None = None) -> CaseResult:
+def run_case(case: StudyCase, grid: GridSpec = STUDY_GRID, overrides: dict | None = None, paths: Sequence[Trajectory] = ()) -> CaseResult:
     """Regular driver and DP optimum for one case, both scored to the common end state.
 
     ``overrides``: vehicle fields to replace (sensitivity runs), e.g. ``{"regen_power_max_w": 60e3}``.
+    ``paths``: optimal trajectories of the same scenario for other vehicles (:func:`run_cases`); the cheapest of them
+    priced for this case's vehicle is the DP's first pruning limit, in place of its coarse-grid estimates.
     """
     params = variant_params(case.variant, overrides)
     scenario = case.scenario
-    regular = regular_driver(scenario)
-    sol = solve(scenario, params, grid)
     v_lim = scenario.speed_limit_mps
+    regular = regular_driver(scenario)
+    estimate = min((score_in_end_state(p, params, v_lim).cost_usd for p in paths), default=None)
+    sol = solve(scenario, params, grid, time_limit_s(regular, params, scenario, grid), estimate_usd=estimate)
     return CaseResult(
         case=case,
         regular=score_in_end_state(regular, params, v_lim, keep_series=True),
@@ -138,6 +141,24 @@ def run_case(case: StudyCase, grid: GridSpec = STUDY_GRID, overrides: dict | Non
         eco_traj=sol.trajectory,
         dp_cost_usd=sol.cost_usd,
     )
+
+
+def run_cases(cases: Sequence[StudyCase], grid: GridSpec = STUDY_GRID, overrides: dict | None = None) -> list[CaseResult]:
+    """Cases of one scenario (:func:`by_scenario`), in turn: each after the first starts its DP from the optima found
+    before it, priced for its vehicle (the variants' optima lie within ~1 % of each other), which saves the coarse
+    grids' estimates."""
+    out: list[CaseResult] = []
+    for case in cases:
+        out.append(run_case(case, grid, overrides, [r.eco_traj for r in out]))
+    return out
+
+
+def by_scenario(cases: Iterable[StudyCase]) -> list[list[StudyCase]]:
+    """``cases`` grouped by scenario and label (the variants of one paper cell), in order of first appearance."""
+    groups: dict = {}
+    for case in cases:
+        groups.setdefault((case.scenario, case.label), []).append(case)
+    return list(groups.values())
 
 
 def _cell(results: dict, variant: str, x, y, s, what: str) -> float:

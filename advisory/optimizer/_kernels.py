@@ -140,6 +140,58 @@ def cost_to_go_bounds(
     return lb, halt_lb
 
 
+@njit(cache=True)
+def light_bounds(speed_mps, band_lo, band_hi, step_dt_s, step_usd, stage_grade, is_stop, allow_dwell, lb_line_usd, halt_lb_usd,
+                 stop_usd, k_line, n_back, tau_bin_s, n_tau):
+    """
+    A bound on the cost still to pay that sees one light: ``h (n_back + 1, n_v, n_tau)``, ``h[d, i, m]`` at d stages
+    before the line (stage ``k_line - d``) at speed i, for paths that reach the line no sooner than
+    ``m tau_bin_s`` from now (a label that cannot reach it before its red ends must take that long).
+
+    Returned in single precision, lowered by 1e-6 of itself (more than a float32 rounding: still a lower bound).
+    A backward DP over the moves of ``forward_pass`` up to the line: stage moves, whose durations count rounded
+    up to whole ``tau_bin_s`` (so every path that takes that long is admitted: a lower bound), and a stop arc to
+    the halt (``stop_usd`` row d - 1, then at least ``halt_lb_usd``: the halt can wait any time). At the line
+    (d = 0) no time is left to spend before it: the time-free bound ``lb_line_usd`` (K + 1, n_v) of
+    ``cost_to_go_bounds`` there, and no path for m > 0. A car at standstill off a stop line can wait, so its
+    row is its time-free bound, whatever m (that bound also covers its timed launches).
+    """
+    n_v = speed_mps.shape[0]
+    h = np.full((n_back + 1, n_v, n_tau), np.inf)
+    for j in range(n_v):
+        h[0, j, 0] = lb_line_usd[k_line, j]
+    for d in range(1, n_back + 1):
+        k = k_line - d
+        g = stage_grade[k]
+        hd, nxt = h[d], h[d - 1]
+        for i in range(n_v):
+            stop = stop_usd[d - 1, i] + halt_lb_usd
+            for m in range(n_tau):
+                hd[i, m] = stop
+            for j in range(band_hi[i] - band_lo[i] + 1):
+                dt = step_dt_s[g, i, j]
+                if dt == np.inf:
+                    continue
+                c = step_usd[g, i, j]
+                i2 = band_lo[i] + j
+                r = int(np.ceil(dt / tau_bin_s + 1e-9))  # rounded up: a weaker requirement after the move
+                row, nxt_row = hd[i], nxt[i2]
+                v0 = c + nxt_row[0]
+                for m in range(min(r + 1, n_tau)):  # the move alone takes long enough
+                    row[m] = min(row[m], v0)
+                for m in range(r + 1, n_tau):
+                    row[m] = min(row[m], c + nxt_row[m - r])
+        if allow_dwell and speed_mps[0] == 0.0 and not is_stop[k]:
+            for m in range(n_tau):  # it can wait at no cost in the bound: no requirement on time
+                hd[0, m] = min(hd[0, 0], lb_line_usd[k, 0])
+    out = np.empty(h.shape, dtype=np.float32)  # stored in single precision, lowered by 1e-6 of itself: still below
+    flat, flat_out = h.ravel(), out.ravel()
+    for n in range(flat.shape[0]):
+        v = flat[n]
+        flat_out[n] = np.float32(v - 1e-6 * abs(v)) if v < np.inf else np.inf
+    return out
+
+
 @njit(cache=True, inline="always")
 def _beyond(c, t, bound, k, i, lam_usd_per_s, t_max_s, limit_usd):
     """Whether a label (cost c, time t) at (k, i) cannot finish within ``limit_usd``, by the bounds
@@ -148,6 +200,21 @@ def _beyond(c, t, bound, k, i, lam_usd_per_s, t_max_s, limit_usd):
         if c + bound[n, k, i] - lam_usd_per_s[n] * (t_max_s + LATE_TOL_S - t) > limit_usd:
             return True
     return False
+
+
+@njit(cache=True)
+def best_end(cost_usd, time_s, occ_lo, occ_hi, terminal_cost_usd, terminal_time_s, t_max_s):
+    """The cheapest label of the last stage (tables (n_v, n_bins), valid over ``[occ_lo, occ_hi]`` per speed) plus
+    its terminal cost, among those whose end state is reached by ``t_max_s``: ``(i * n_bins + b, total)``, or
+    ``(0, inf)`` when there is none; ties go to the first in (speed, bin) order."""
+    n_bins = cost_usd.shape[1]
+    flat, best = 0, np.inf
+    for i in range(cost_usd.shape[0]):
+        for b in range(occ_lo[i], occ_hi[i] + 1):
+            c = cost_usd[i, b]
+            if c < np.inf and time_s[i, b] + terminal_time_s[i] <= t_max_s + LATE_TOL_S and c + terminal_cost_usd[i] < best:
+                flat, best = i * n_bins + b, c + terminal_cost_usd[i]
+    return flat, best
 
 
 @njit(cache=True)
@@ -206,6 +273,10 @@ def forward_pass(
     upper_bound_usd,
     occ_lo,
     occ_hi,
+    light_lb_usd,
+    light_lb_len,
+    line_t_min_s,
+    tau_bin_s,
 ):
     """
     Forward DP over distance stages with labels carrying exact arrival times, plus exact stop arcs.
@@ -239,6 +310,10 @@ def forward_pass(
     (``halt_bound_usd[n, l]`` at a halt; see ``cost_to_go_bounds``) exceeds ``upper_bound_usd`` (finite) cannot
     finish within it and is dropped. No path within the limit is lost; as labels are binned, a bin may then
     keep another of its labels than it would without pruning (one whose bound, at an earlier time, is lower).
+    Over the ``light_lb_len[l]`` stages before light l, a label of a stage move is also dropped when its cost plus
+    ``light_lb_usd[l, d, i, m]`` (``light_bounds``, d stages before the line, m bins of ``tau_bin_s``) exceeds
+    the limit, m being the least time it must still take to the line: ``line_t_min_s[k, i]`` (the fastest
+    drive there), or longer, until the red ends, when that drive would arrive in the red. Only with a limit.
     """
     n_stage = stage_grade.shape[0]
     n_v = speed_mps.shape[0]
@@ -253,8 +328,15 @@ def forward_pass(
     idle_cost = step_cost_usd(p[I_AUX], dwell_s, p, m_c_rates, m_prefactor)
     idle_per_s = step_cost_usd(p[I_AUX], 1.0, p, m_c_rates, m_prefactor)
     light_of = np.full(n_stage + 1, -1, dtype=np.int64)
+    light_ahead = np.full(n_stage + 1, -1, dtype=np.int64)  # the light whose bound ``light_lb_usd`` covers a stage
     for l in range(n_light):
         light_of[light_stage[l]] = l
+        for k in range(max(arc_k_lo[l], light_stage[l] - light_lb_len[l]), light_stage[l]):
+            light_ahead[k] = l
+    n_tau = light_lb_usd.shape[3]
+    inv_tau = 1.0 / tau_bin_s
+    light_h = np.zeros(n_tau, dtype=np.float32)  # the bound row of the move at hand (when its target is before a light)
+    h_top, t_line, l_start, l_red, l_cycle = np.inf, 0.0, 0.0, 1.0, 2.0
     for k in range(n_stage):
         step_dt, step_cost = step_dt_s[stage_grade[k]], step_usd[stage_grade[k]]
         # a light at this stage: its standstill is complete; wait there, then launch past the line
@@ -390,6 +472,7 @@ def forward_pass(
             row_min = np.inf
             for b in range(b_lo, b_hi):
                 row_min = min(row_min, cost_row[b])
+            t_first = time_row[b_lo]  # the row's earliest label (its first bin in use holds one)
             base = (k * n_v + i) * n_bins
             for j in range(band_hi[i] - band_lo[i] + 1):
                 dt = step_dt[i, j]
@@ -401,6 +484,20 @@ def forward_pass(
                 bound = upper_bound_usd - lower_bound_usd[0, k2, i2] - step  # the time-free bound (lam[0] = 0)
                 if row_min > bound:  # no label of this row can finish within the limit this way
                     continue
+                if n_lam > 1 and _beyond(row_min + step, t_first + dt, lower_bound_usd, k2, i2, lam_usd_per_s, t_max_s, upper_bound_usd):
+                    continue  # nor with the time-aware bounds, which grow with time: at the row's cheapest cost and earliest time
+                for n in range(1, n_lam):  # past this time even the row's cheapest label could not finish within the limit
+                    slack = min(slack, t_max_s + LATE_TOL_S - (row_min + step + lower_bound_usd[n, k2, i2] - upper_bound_usd) / lam_usd_per_s[n] + 1e-9)
+                la = light_ahead[k2] if n_lam > 1 else -1  # the light's bound (only with a limit)
+                if la >= 0:
+                    light_h = light_lb_usd[la, light_stage[la] - k2, i2]
+                    t_line = line_t_min_s[k2, i2]
+                    m0 = min(int(t_line * inv_tau), n_tau - 1)
+                    if row_min + step + light_h[m0] > upper_bound_usd:
+                        continue  # reaching the line as soon as possible is already too dear
+                    h_top = upper_bound_usd - step - light_h[n_tau - 1]  # labels cheaper than this pass whatever the light
+                    kl = light_stage[la]
+                    l_start, l_red, l_cycle = stop_red_start_s[kl], stop_red_s[kl], stop_cycle_s[kl]
                 cost_next, time_next, parent_next = cost_usd[k2, i2], time_s[k2, i2], parent[k2, i2]
                 lo2, hi2 = occ_lo[k2, i2], occ_hi[k2, i2]
                 for b in range(b_lo, b_hi):  # times ascend with the bins: past the time limit, stop
@@ -414,6 +511,10 @@ def forward_pass(
                         continue
                     if n_lam > 1 and _beyond(c0 + step, t2, lower_bound_usd, k2, i2, lam_usd_per_s, t_max_s, upper_bound_usd):
                         continue
+                    if la >= 0 and c0 > h_top:  # it must reach the line no sooner than its red ends
+                        tau = t_line + red_left_s(t2 + t_line, l_start, l_red, l_cycle)
+                        if c0 + step + light_h[min(int(tau * inv_tau), n_tau - 1)] > upper_bound_usd:
+                            continue
                     b2 = int((t2 - t_lo2) * inv_bin)
                     if b2 >= n_bins:
                         break

@@ -21,12 +21,17 @@ Formulation
   and paths that run along the speed-limit boundary (the regular driver barely brakes) stay representable.
 * **Pruning**: a backward DP on the same moves, with lights and waits left out, bounds what a label still has to
   pay, at several prices of time (a Lagrangian relaxation of the trip-time limit: a label with little time
-  left must hurry, which costs); a label that cannot finish within a limit on the total cost is dropped. The
+  left must hurry, which costs). Over the last ``LIGHT_BOUND_STAGES`` stages before each light a second bound
+  sees the light: a label that cannot reach the line before the red ends must take at least that long to get
+  there, and the least cost of doing so (slowing down, or stopping) is tabulated against that time
+  (``_kernels.light_bounds``). A label that cannot finish within a limit on the total cost is dropped. The
   limit is the optimum of the same problem on stages twice as long (or with coarser time bins), which lies a
-  little above this one's; when no path is found within it, looser limits follow, finally none. No path within
-  the limit is lost; a time bin then keeps its cheapest label that can still finish, which may differ from
-  the cheapest label of all (doomed by the time limit), so the result may differ from the unpruned DP's at
-  the level of the binning (on the study: 46 of 192 cases, -0.21 % to +0.06 %; ``solve_problem(prune=False)``).
+  little above this one's, or a caller's estimate (the study prices a scenario's optimum for one vehicle for the
+  next: ``advisory.evaluation.study.run_cases``); when no path is found within it, looser limits follow, finally
+  none. No path within the limit is lost; a time bin then keeps its cheapest label that can still finish, which
+  may differ from the cheapest label of all (doomed by the time limit), so the result may differ from the
+  unpruned DP's at the level of the binning, and with the limit (on the study: 38 of 192 cases, -0.21 % to
+  +0.11 %; ``solve_problem(prune=False)``).
 * **End state**: both drivers are compared back at the speed limit (``advisory.evaluation.endstate``): the terminal
   cost is the re-acceleration penalty, and its time part counts against the trip-time limit
   ``(T_regular + penalty time of the regular driver) · (1 + time_buffer_frac)``.
@@ -37,6 +42,7 @@ NumPy/Python (unpruned), used by tests and the benchmark.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -44,7 +50,16 @@ import numpy as np
 
 from advisory.evaluation.endstate import reacceleration_penalty
 from advisory.physics.model import I_AUX, arc_cost_usd, pack, step_cost_usd, step_wheel_power_w
-from advisory.optimizer._kernels import LATE_TOL_S, RED_TOL_S, cost_to_go_bounds, count_labels, forward_pass, step_tables
+from advisory.optimizer._kernels import (
+    LATE_TOL_S,
+    RED_TOL_S,
+    best_end,
+    cost_to_go_bounds,
+    count_labels,
+    forward_pass,
+    light_bounds,
+    step_tables,
+)
 from advisory.physics.params import ModelParams, VehicleParams
 from advisory.drivers.regular import time_to_cover_s
 from advisory.signals import Scenario
@@ -180,6 +195,9 @@ class DPProblem:
     rest_usd: np.ndarray
     lower_bound_usd: np.ndarray
     halt_bound_usd: np.ndarray
+    light_bound_usd: np.ndarray
+    light_bound_len: np.ndarray
+    line_t_min_s: np.ndarray
 
     def bound_at_usd(self, k: int, i: int, t_s: float) -> float:
         """Least cost still to pay from stage k at speed i at time ``t_s`` (``_kernels.cost_to_go_bounds``)."""
@@ -231,7 +249,7 @@ def build_problem(
     n_bins = _n_bins(scenario, t_max_s, grid)
     if n_bins < 2:
         raise InfeasibleError(f"time limit {t_max_s:.3f} s is below the fastest possible {scenario.zone_length_m / v_lim:.3f} s")
-    pen = reacceleration_penalty(speed, params, v_lim, grid.accel_max_mps2)
+    pen = _terminal_penalty(params, speed.tobytes(), v_lim, grid.accel_max_mps2)
     arcs = _stop_arcs(scenario, params, grid, speed, n_stage) if grid.stop_arcs else _no_arcs(speed.size)
     grade = np.zeros(n_stage)
     grades, stage_grade = np.unique(grade, return_inverse=True)
@@ -242,12 +260,14 @@ def build_problem(
     if key not in _BOUNDS:
         if len(_BOUNDS) >= 32:  # ~1 MB each at the study grid
             _BOUNDS.clear()
-        _BOUNDS[key] = cost_to_go_bounds(
+        _BOUNDS[key] = tuple(map(_a_hair_below, cost_to_go_bounds(
             band_lo, band_hi, stage_grade, step_dt, step_usd, np.asarray(pen.cost_usd, dtype=float), np.asarray(pen.time_s, dtype=float),
             is_stop, arcs["light_stage"], arcs["arc_k_lo"], arcs["stop_dt_s"], arcs["stop_usd"], arcs["launch_dt_s"],
             arcs["launch_usd"], arcs["rest_dt_s"], arcs["rest_usd"], TIME_PRICES_USD_PER_S,
-        )
+        )))
     lb, halt_lb = _BOUNDS[key]
+    light_lb, light_len, line_t_min = _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade.astype(np.int64),
+                                                    is_stop, lb[0], halt_lb[0], arcs, v_lim)
     return DPProblem(
         scenario=scenario,
         grid=grid,
@@ -271,9 +291,62 @@ def build_problem(
         terminal_cost_usd=np.asarray(pen.cost_usd),
         terminal_time_s=np.asarray(pen.time_s),
         **arcs,
-        lower_bound_usd=_a_hair_below(lb),
-        halt_bound_usd=_a_hair_below(halt_lb),
+        lower_bound_usd=lb,
+        halt_bound_usd=halt_lb,
+        light_bound_usd=light_lb,
+        light_bound_len=light_len,
+        line_t_min_s=line_t_min,
     )
+
+
+LIGHT_BOUND_STAGES = 20
+"""Stages before each light over which labels are also bounded by the light's red (``_kernels.light_bounds``)."""
+LIGHT_BOUND_BIN_S, LIGHT_BOUND_N = 0.25, 160
+"""Resolution and range of the time a label must still take to its line, in those bounds (beyond: clamped). [s]"""
+
+_LIGHT_BOUNDS: dict = {}
+"""Light bounds by what they depend on (vehicle, grid, speeds, the bounds at and before the line): a light whose
+downstream is the same in several cases (the paper's light 2 at every spacing) shares one table."""
+
+
+_LIGHT_STACKS: dict = {}
+"""``_light_bounds``'s arrays by the geometry of a problem (the study's consecutive cases share them)."""
+
+
+def _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade, is_stop, lb0, halt_lb0, arcs, v_lim):
+    """The bounds of ``_kernels.light_bounds`` for every light, stacked (n_light, LIGHT_BOUND_STAGES + 1, n_v,
+    LIGHT_BOUND_N), the stages each covers, and the least time from each (stage, speed) to the next line (0 where
+    no bound applies; a hair short of the fastest drive there, accelerating at the limit to the speed limit)."""
+    light_stage, k_lo = arcs["light_stage"], arcs["arc_k_lo"]
+    n_l, n_v = light_stage.size, speed.size
+    backs = [min(LIGHT_BOUND_STAGES, int(kl - lo)) for kl, lo in zip(light_stage, k_lo, strict=True)]
+    keys = [(params, grid, speed.tobytes(), lb0[kl - n : kl + 1].tobytes(), float(halt_lb0[l]), is_stop[kl - n : kl + 1].tobytes(),
+             stage_grade[kl - n : kl].tobytes(), n) for l, (kl, n) in enumerate(zip(light_stage, backs, strict=True))]
+    stack_key = (tuple(keys), tuple(light_stage), v_lim, stage_grade.size)
+    if stack_key in _LIGHT_STACKS:  # the same geometry as a recent case: the same arrays (read only)
+        return _LIGHT_STACKS[stack_key]
+    out = np.empty((n_l, LIGHT_BOUND_STAGES + 1, n_v, LIGHT_BOUND_N), dtype=np.float32)  # rows past a light's window unused
+    t_min = np.zeros((stage_grade.size + 1, n_v))
+    for l, (key, n_back) in enumerate(zip(keys, backs, strict=True)):
+        kl = int(light_stage[l])
+        if key not in _LIGHT_BOUNDS:
+            if len(_LIGHT_BOUNDS) >= 48:  # 2-3.5 MB each at the study grid; the paper's study uses ~20
+                _LIGHT_BOUNDS.clear()
+            _LIGHT_BOUNDS[key] = light_bounds(speed, band_lo, band_hi, step_dt, step_usd, stage_grade, is_stop, grid.allow_dwell, lb0,
+                                              float(halt_lb0[l]), arcs["stop_usd"], kl, n_back, LIGHT_BOUND_BIN_S, LIGHT_BOUND_N)
+        out[l, : n_back + 1] = _LIGHT_BOUNDS[key]
+        d = (kl - np.arange(kl - n_back, kl))[:, None] * grid.stage_m
+        t_min[kl - n_back : kl] = time_to_cover_s(d, speed[None, :], grid.accel_max_mps2, v_lim) - 1e-6
+    if len(_LIGHT_STACKS) >= 8:  # 7 MB each at the study grid with two lights
+        _LIGHT_STACKS.clear()
+    _LIGHT_STACKS[stack_key] = out, np.array(backs, dtype=np.int64), t_min
+    return _LIGHT_STACKS[stack_key]
+
+
+@lru_cache(maxsize=32)
+def _terminal_penalty(params: ModelParams, speed_bytes: bytes, speed_limit_mps: float, accel_mps2: float):
+    """The re-acceleration penalty at every speed node (the terminal cost), shared by the cases that use these nodes."""
+    return reacceleration_penalty(np.frombuffer(speed_bytes), params, speed_limit_mps, accel_mps2)
 
 
 def _a_hair_below(bound: np.ndarray) -> np.ndarray:
@@ -336,23 +409,37 @@ def _no_arcs(n_v: int) -> dict:
                 stop_usd=empty, launch_dt_s=empty, launch_usd=empty, launch_cross_s=empty, rest_dt_s=empty, rest_usd=empty)
 
 
-@lru_cache(maxsize=32)
-def _arc_tables(params: ModelParams, grid: GridSpec, speed: tuple[float, ...], n_stop: int) -> tuple[np.ndarray, ...]:
+_ARCS: dict = {}
+"""Arc tables by vehicle, arc geometry and speed nodes (``_arc_tables``), shared by every case and pass that uses them."""
+
+
+def _arc_tables(params: ModelParams, grid: GridSpec, speed: np.ndarray, n_stop: int) -> tuple[np.ndarray, ...]:
     """Stop arcs by distance (row n: from n + 1 stages before the line to the halt), launches from the halt
-    (row m: to m + 1 stages past the line), launches from rest at a stage (row n: over n + 1 stages)."""
-    ds, gap, v = grid.stage_m, grid.stop_gap_m, np.asarray(speed)[None, :]
-    n_launch = max(1, int(np.floor((grid.launch_max_m - gap) / ds)))
-    dist = np.arange(1, n_stop + 1)[:, None] * ds - gap
-    ok = (v > 0) & (dist > 0) & (v**2 <= 2 * grid.brake_max_mps2 * dist + 1e-9)
-    stop_dt, stop_usd = arc_table(v, 0.0, np.maximum(dist, 1e-9), params, grid.arc_steps)
-    out = [np.where(ok, stop_dt, np.inf), np.where(ok, stop_usd, np.inf)]
-    for dist in (np.arange(1, n_launch + 1)[:, None] * ds + gap, np.arange(1, n_launch + 1)[:, None] * ds):
-        ok = (v > 0) & (v**2 <= 2 * grid.accel_max_mps2 * dist + 1e-9)
-        dt, usd = arc_table(0.0, v, dist, params, grid.arc_steps)
-        out += [np.where(ok, dt, np.inf), np.where(ok, usd, np.inf)]
-    accel = np.where(out[2] < np.inf, v**2, 1.0) / (2 * (np.arange(1, n_launch + 1)[:, None] * ds + gap))
-    cross = np.where(out[2] < np.inf, np.sqrt(2 * gap / accel), np.inf)
-    return (*out, cross)
+    (row m: to m + 1 stages past the line), launches from rest at a stage (row n: over n + 1 stages).
+
+    Computed once per vehicle, arc geometry and speeds; stop rows are added when a longer approach needs them."""
+    ds, gap, v = grid.stage_m, grid.stop_gap_m, speed[None, :]
+    key = (params, ds, gap, grid.launch_max_m, grid.accel_max_mps2, grid.brake_max_mps2, grid.arc_steps, speed.tobytes())
+    tables = _ARCS.get(key)
+    if tables is None:
+        if len(_ARCS) >= 32:  # ~0.5 MB each at the study grid
+            _ARCS.clear()
+        n_launch = max(1, int(np.floor((grid.launch_max_m - gap) / ds)))
+        out = [np.zeros((0, speed.size)), np.zeros((0, speed.size))]
+        for dist in (np.arange(1, n_launch + 1)[:, None] * ds + gap, np.arange(1, n_launch + 1)[:, None] * ds):
+            ok = (v > 0) & (v**2 <= 2 * grid.accel_max_mps2 * dist + 1e-9)
+            dt, usd = arc_table(0.0, v, dist, params, grid.arc_steps)
+            out += [np.where(ok, dt, np.inf), np.where(ok, usd, np.inf)]
+        accel = np.where(out[2] < np.inf, v**2, 1.0) / (2 * (np.arange(1, n_launch + 1)[:, None] * ds + gap))
+        tables = _ARCS[key] = [*out, np.where(out[2] < np.inf, np.sqrt(2 * gap / accel), np.inf)]
+    have = tables[0].shape[0]
+    if have < n_stop:
+        dist = np.arange(have + 1, n_stop + 1)[:, None] * ds - gap
+        ok = (v > 0) & (dist > 0) & (v**2 <= 2 * grid.brake_max_mps2 * dist + 1e-9)
+        stop_dt, stop_usd = arc_table(v, 0.0, np.maximum(dist, 1e-9), params, grid.arc_steps)
+        tables[0] = np.concatenate([tables[0], np.where(ok, stop_dt, np.inf)])
+        tables[1] = np.concatenate([tables[1], np.where(ok, stop_usd, np.inf)])
+    return (tables[0][:n_stop], tables[1][:n_stop], *tables[2:])
 
 
 def _stop_arcs(scenario: Scenario, params: ModelParams, grid: GridSpec, speed: np.ndarray, n_stage: int) -> dict:
@@ -360,7 +447,7 @@ def _stop_arcs(scenario: Scenario, params: ModelParams, grid: GridSpec, speed: n
     stages = [int(round(light.position_m / grid.stage_m)) for light in scenario.signals]
     k_lo = [0] + stages[:-1]  # arcs start at or after the previous line: they never cross a light
     n_stop = max(kl - lo for kl, lo in zip(stages, k_lo, strict=True))
-    stop_dt, stop_usd, launch_dt, launch_usd, rest_dt, rest_usd, cross = _arc_tables(params, grid, tuple(speed), n_stop)
+    stop_dt, stop_usd, launch_dt, launch_usd, rest_dt, rest_usd, cross = _arc_tables(params, grid, speed, n_stop)
     return dict(light_stage=np.array(stages, dtype=np.int64), arc_k_lo=np.array(k_lo, dtype=np.int64), stop_dt_s=stop_dt,
                 stop_usd=stop_usd, launch_dt_s=launch_dt, launch_usd=launch_usd, launch_cross_s=cross,
                 rest_dt_s=rest_dt, rest_usd=rest_usd)
@@ -377,14 +464,27 @@ class DPSolution:
     n_labels: int
 
 
+_WORKSPACE = threading.local()
+"""Per thread, the memory of the last pass's (stage, speed, bin) tables, reused by the next pass when large enough:
+fresh tables of this size come from the kernel as zero pages, and faulting them in cost ~15 % of a study's time."""
+
+WORKSPACE_MAX_CELLS = 8_000_000
+"""Tables above this many cells (3 x 8 bytes each) are not kept for reuse (the study grid's largest: ~6e6)."""
+
+
 def _empty_tables(prob: DPProblem):
     """The kernel's tables: (stage, speed, bin) ones uninitialised (valid over each row's range in use,
-    ``occ_lo..occ_hi``, which the kernel fills), the halts' ones empty."""
+    ``occ_lo..occ_hi``, which the kernel fills; their memory is reused from pass to pass), the halts' ones empty."""
     shape = (prob.n_stages + 1, prob.speed_mps.size, prob.n_bins)
+    n = shape[0] * shape[1] * shape[2]
+    bufs = getattr(_WORKSPACE, "bufs", None)
+    if bufs is None or bufs[0].size < n:
+        bufs = (np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
+        _WORKSPACE.bufs = bufs if n <= WORKSPACE_MAX_CELLS else None
     s_shape = (prob.n_lights, prob.n_bins)
     occ_lo = np.full(shape[:2], prob.n_bins, dtype=np.int64)
     occ_hi = np.full(shape[:2], -1, dtype=np.int64)
-    return (np.empty(shape), np.empty(shape), np.empty(shape, dtype=np.int64),
+    return (*(b[:n].reshape(shape) for b in bufs),
             np.full(s_shape, np.inf), np.full(s_shape, np.nan), np.full(s_shape, -1, dtype=np.int64), occ_lo, occ_hi)
 
 
@@ -402,14 +502,9 @@ def _kernel_args(prob: DPProblem):
 def _read_solution(prob: DPProblem, cost, time, parent, s_time=None, s_parent=None, occ=None, upper_bound_usd=np.inf) -> DPSolution | None:
     """The optimum from the kernel's tables (``occ``: their rows' ranges in use, None when fully initialised);
     None when it exceeds ``upper_bound_usd`` (the pruned tables then do not hold the unpruned optimum)."""
-    bins = np.arange(prob.n_bins)
-    valid = np.ones(cost[-1].shape, dtype=bool) if occ is None else (bins >= occ[0][-1][:, None]) & (bins <= occ[1][-1][:, None])
-    last_cost = np.where(valid, cost[-1], np.inf)
-    total = last_cost + prob.terminal_cost_usd[:, None]
-    late = np.where(valid, time[-1], 0.0) + prob.terminal_time_s[:, None] > prob.t_max_s + LATE_TOL_S
-    total = np.where(late | ~np.isfinite(last_cost), np.inf, total)
-    flat = int(np.argmin(total))
-    best = float(total.flat[flat])
+    if occ is None:
+        occ = (np.zeros(cost.shape[:2], dtype=np.int64), np.full(cost.shape[:2], prob.n_bins - 1, dtype=np.int64))
+    flat, best = best_end(cost[-1], time[-1], occ[0][-1], occ[1][-1], prob.terminal_cost_usd, prob.terminal_time_s, prob.t_max_s)
     if np.isfinite(upper_bound_usd) and not best <= upper_bound_usd:
         return None
     if not np.isfinite(best):
@@ -461,7 +556,8 @@ def _pass(prob: DPProblem, limit_usd: float) -> DPSolution | None:
     cost, time, parent, s_cost, s_time, s_parent, occ_lo, occ_hi = _empty_tables(prob)
     n = TIME_PRICES_USD_PER_S.size if np.isfinite(limit_usd) else 1  # no limit: no bounds to check
     forward_pass(*_kernel_args(prob), cost, time, parent, s_cost, s_time, s_parent, prob.lower_bound_usd[:n],
-                 prob.halt_bound_usd[:n], TIME_PRICES_USD_PER_S[:n], min(limit_usd, np.finfo(float).max), occ_lo, occ_hi)
+                 prob.halt_bound_usd[:n], TIME_PRICES_USD_PER_S[:n], min(limit_usd, np.finfo(float).max), occ_lo, occ_hi,
+                 prob.light_bound_usd, prob.light_bound_len, prob.line_t_min_s, LIGHT_BOUND_BIN_S)
     return _read_solution(prob, cost, time, parent, s_time, s_parent, (occ_lo, occ_hi), limit_usd)
 
 
@@ -471,7 +567,7 @@ def _solve_pruned(prob: DPProblem, estimate_usd: float | None) -> DPSolution:
     bound0 = prob.bound_at_usd(0, prob.i_start, 0.0)
     limits = [bound0 + m * abs(bound0) for m in PRUNE_MARGINS] if np.isfinite(bound0) else []
     if estimate_usd is not None:
-        near = [estimate_usd * (1 + m) for m in (1e-9, 3e-3, 1e-2, 3e-2)]  # the estimate is rarely far below
+        near = [estimate_usd * (1 + m) for m in (1e-4, 3e-3, 1e-2, 3e-2)]  # the estimate is rarely below, and then close
         limits = near + [x for x in limits if x > near[-1]]
     for limit in [*limits, np.inf]:
         sol = _pass(prob, limit)
@@ -486,15 +582,18 @@ def _coarser(prob: DPProblem, factor: int) -> DPProblem:
     return replace(prob, grid=grid, n_bins=_n_bins(prob.scenario, prob.t_max_s, grid))
 
 
-def solve_problem(prob: DPProblem, prune: bool = True) -> DPSolution:
+def solve_problem(prob: DPProblem, prune: bool = True, estimate_usd: float | None = None) -> DPSolution:
     """Run the numba forward pass on a built problem and read off the optimal trajectory.
 
     With ``prune`` (exact: the result is that of the full pass), labels that cannot finish within a limit on the
     total cost are dropped; the limit is the optimum of the problem with coarser time bins (``COARSE_LEVELS``),
     which is almost always a little above this one's, and falls back to looser limits when it is not.
+    ``estimate_usd`` (for example the cost of a feasible path) replaces that estimate: the first limit tried.
     """
     if not prune:
         return _pass(prob, np.inf)
+    if estimate_usd is not None:
+        return _solve_pruned(prob, estimate_usd)
     estimate = None
     coarse_stage = replace(prob.grid, stage_m=2 * prob.grid.stage_m)
     if _divides(prob.scenario, coarse_stage.stage_m):  # the problem on stages twice as long: a close estimate, cheaply
@@ -519,19 +618,22 @@ def time_limit_s(regular: Trajectory, params: ModelParams, scenario: Scenario, g
     return (regular.duration_s + float(pen.time_s[0])) * (1.0 + grid.time_buffer_frac)
 
 
-def solve(scenario: Scenario, params: ModelParams, grid: GridSpec | None = None, t_max_s: float | None = None) -> DPSolution:
+def solve(
+    scenario: Scenario, params: ModelParams, grid: GridSpec | None = None, t_max_s: float | None = None, estimate_usd: float | None = None
+) -> DPSolution:
     """
     Optimal eco-driving trajectory through ``scenario``.
 
     ``t_max_s`` defaults to the regular driver's time to the common end state (paper: the regular
     driver's trip time is the eco-driver's upper limit), times ``1 + grid.time_buffer_frac``.
+    ``estimate_usd``: a close estimate of the optimum, if known (see :func:`solve_problem`).
     """
     from advisory.drivers.regular import regular_driver
 
     grid = grid or GridSpec()
     if t_max_s is None:
         t_max_s = time_limit_s(regular_driver(scenario), params, scenario, grid)
-    return solve_problem(build_problem(scenario, params, grid, t_max_s))
+    return solve_problem(build_problem(scenario, params, grid, t_max_s), estimate_usd=estimate_usd)
 
 
 def solve_numpy(prob: DPProblem) -> DPSolution:
