@@ -470,12 +470,10 @@ def _green_crossing(light: LightView, t_s: float, after_red_s: float) -> bool:
 
 
 def _normal_drive_s(distance_m: float, obs: Observation, params: AdvisorParams) -> float:
-    """Time to a line ``distance_m`` ahead speeding up from the current speed to the limit at ``normal_accel_mps2``. [s]"""
-    v0, v1, a = obs.speed_mps, obs.speed_limit_mps, params.normal_accel_mps2
-    d_ramp = max(v1 * v1 - v0 * v0, 0.0) / (2.0 * a)
-    if distance_m <= d_ramp:
-        return (math.sqrt(v0 * v0 + 2.0 * a * distance_m) - v0) / a
-    return max(v1 - v0, 0.0) / a + (distance_m - d_ramp) / v1
+    """Time to a line ``distance_m`` ahead driving normally: speeding up to the limit at ``normal_accel_mps2`` at once
+    (no advice to react to), the kernel's "auto" motion. [s]"""
+    return _time_to_line_s(float(distance_m), float(obs.speed_mps), float(obs.speed_limit_mps), MODE_CODES["auto"], 0.0, params.comfort_decel_mps2,
+                           params.firm_decel_mps2, params.normal_accel_mps2, *_coast_arrays(params.vehicle))  # fmt: skip
 
 
 def _say_speed(speed_mps: float, units: str) -> str:

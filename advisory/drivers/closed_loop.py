@@ -151,9 +151,7 @@ def simulate(
             v_cmd = min(max(v_cmd + error, 0.0), v_lim)
         rate_up, rate_down = driver.accel_mps2, driver.decel_mps2
         if active is None or active.target_speed_mps is None or active.action in ("none", "resume", "stop"):
-            rate_up = advisor.normal_accel_mps2  # no speed asked for: the driver speeds up as the regular driver does
-        if active is None or active.target_speed_mps is None or active.action in ("none", "resume", "stop"):
-            rate_up = rules.accel_mps2  # no speed asked for: the driver drives as the regular driver does
+            rate_up = rules.accel_mps2  # no speed asked for: the driver speeds up as the regular driver does
         if active is not None and active.action == "brake_to":
             rate_down = advisor.firm_decel_mps2
         if active is not None and active.action == "stop" and x < stop_line_m and v * v < 2.0 * driver.decel_mps2 * (stop_line_m - rules.stop_gap_m - x):
