@@ -11,9 +11,10 @@ Conversion of one light (:func:`light_view`):
   (``max_end_s`` of the change out of red). Unknown states (``unavailable``, ``dark``) count as red, so a
   speed is never advised that reaches a line after the plan's horizon. Windows are kept up to ``horizon_s``.
 * ``fresh``: the reading's flag; a light whose published state is unknown is reported as not fresh (no data),
-  unless the group's history says its unknown phases come between green and red and last no longer than an amber
-  (:data:`CLEARANCE_MAX_S`; a controller that publishes its amber as ``unavailable``): such a phase is that group's
-  amber (passable as an amber is), and when it is the current one the cycle goes on from it as the history says. A
+  unless the group's history reads its unknown phases as a passable phase published as ``unavailable``
+  (:func:`_unknown_as`): its amber (between green and red, no longer than :data:`CLEARANCE_MAX_S`) or its go phase
+  (between reds, longer than an amber: a red ends into a movement). Such a phase passes as an amber or a green
+  does, and when it is the current one the cycle goes on from it as the history says. A
   phase past its ``minEndTime`` is still the published one (it may end any moment: a possible red, not no data).
 * ``confidence_frac``: the lowest confidence of the change windows that bound a red window within the horizon
   (1 for a fixed-time plan).
@@ -219,14 +220,16 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
         start = end
     if cycle is None or out[-1][0] is not PhaseClass.UNKNOWN:
         return out
-    if len(out) == 1:  # unknown now, in a group whose unknown phases lead from green into red: as its history says
-        if not _clearance(cycle):
+    if len(out) == 1:  # unknown now (no window), in a group whose unknown phases are its amber or go phase: as its history says
+        if not _passable_now(cycle):
             return out
         return _continued(PhaseClass.UNKNOWN, cycle.since_unix_s, (-inf,) * 3, t_unix_s, horizon_s, cycle) or out
-    # the plan ends in "unavailable": its last known phase ends when such phases end, then the cycle goes on
-    cls, begun, (lo, _, _) = out[-2]
+    # the plan ends in "unavailable": its last known phase ends when such phases end, then the cycle goes on. A
+    # group's amber or go phase now that has run longer than any seen ends in its published window; a red stays
+    # unbounded (the window's middle, 30-50 s after a real red's end, slowed cars that the regular driver beat)
+    cls, begun, published = out[-2]
     since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
-    rest = _continued(cls, since, begun, max(t_unix_s, lo), horizon_s, cycle) if since is not None else None
+    rest = _continued(cls, since, begun, max(t_unix_s, published[0]), horizon_s, cycle, published if cls is PhaseClass.UNKNOWN else None)
     return out if rest is None else out[:-2] + rest
 
 
@@ -235,34 +238,48 @@ CLEARANCE_MAX_S = 6.0
 unknown phase between green and red that lasts no longer is that group's amber, published as "unavailable". [s]"""
 
 
-def _unknown_is_amber(cycle: CycleStats | None) -> bool:
-    """The group's unknown phases come between green and red and last no longer than an amber: its clearance
-    interval, published as "unavailable" (2019-05-01 does so). Passable as an amber is; how long it lasts and what
-    follows, the history tells. An unknown between reds (a green published so) or a long one stays unknown."""
-    if cycle is None or cycle.following.get(PhaseClass.GREEN) is not PhaseClass.UNKNOWN or cycle.following.get(PhaseClass.UNKNOWN) is not PhaseClass.RED:
-        return False
-    d = cycle.durations(PhaseClass.UNKNOWN)
-    return bool(d) and _quantile(d, LATE_QUANTILE) <= CLEARANCE_MAX_S
+def _unknown_as(cycle: CycleStats | None) -> PhaseClass:
+    """What the group's unknown phases are, read by what the group does (J2735 ``unavailable`` says nothing):
+
+    * AMBER: they come between green and red and last no longer than an amber (:data:`CLEARANCE_MAX_S`): its
+      clearance interval published as "unavailable" (2019-05-01 does so);
+    * GREEN: they come between reds and usually last longer than an amber: its go phase (green, then its amber)
+      published as "unavailable" (2019-05-17 does so for every group). A stop-And-Remain ends into a movement
+      (J2735's phase sequence); the group publishes its reds, so the next red is the change out of the unknown
+      phase, bounded by the published window and the durations seen like any other;
+    * UNKNOWN: anything else (an unknown between greens, a group too young to tell): never a basis for advice.
+    """
+    if cycle is None or cycle.following.get(PhaseClass.UNKNOWN) is not PhaseClass.RED or not (d := cycle.durations(PhaseClass.UNKNOWN)):
+        return PhaseClass.UNKNOWN
+    if cycle.following.get(PhaseClass.GREEN) is PhaseClass.UNKNOWN and _quantile(d, LATE_QUANTILE) <= CLEARANCE_MAX_S:
+        return PhaseClass.AMBER
+    if cycle.following.get(PhaseClass.RED) is PhaseClass.UNKNOWN and _quantile(d, 0.5) > CLEARANCE_MAX_S:
+        return PhaseClass.GREEN
+    return PhaseClass.UNKNOWN
 
 
-def _clearance(cycle: CycleStats | None) -> bool:
-    """In such a clearance interval now (:func:`_unknown_is_amber`)."""
-    return cycle is not None and cycle.current is PhaseClass.UNKNOWN and cycle.since_unix_s is not None and _unknown_is_amber(cycle)
+def _passable_now(cycle: CycleStats | None) -> bool:
+    """In such a passable unknown phase now (:func:`_unknown_as`): the light is fresh, the cycle goes on from it."""
+    return cycle is not None and cycle.current is PhaseClass.UNKNOWN and cycle.since_unix_s is not None and _unknown_as(cycle) is not PhaseClass.UNKNOWN
 
 
-def _continued(cls: PhaseClass, since_unix_s: float, begun: Bound, after_s: float, horizon_s: float, cycle: CycleStats) -> list | None:
+def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, after_s: float, horizon_s: float, cycle: CycleStats,
+               published: Bound | None = None) -> list | None:  # fmt: skip
     """The phase of class ``cls`` that began at ``since_unix_s`` (``begun``: its start bounds), ending no earlier
-    than ``after_s``, when such phases have ended (given how long it has run), then the classes that followed it
-    for ``horizon_s``, then the unknown; None when the history cannot say (too few seen, or longer than any)."""
+    than ``after_s``, when such phases have ended (given how long it has run), else in its ``published`` window
+    (when finite), then the classes that followed it for ``horizon_s``, then the unknown; None when neither says."""
     inf = math.inf
-    ends = [since_unix_s + x for x in cycle.durations(cls) if since_unix_s + x >= after_s]
-    if not ends:  # too few seen, or running longer than any seen: nothing to go by
+    ends = [since_unix_s + x for x in cycle.durations(cls) if since_unix_s + x >= after_s] if since_unix_s is not None else []
+    if ends:
+        # what this group has done beats what its controller predicts: maxEndTime was 9 s early or 2 minutes late
+        likely, late = max(_quantile(ends, 0.5), after_s), max(_quantile(ends, LATE_QUANTILE), after_s)
+    elif published is not None and math.isfinite(published[2]):  # too few seen, or longer than any: as published
+        likely, late = max(published[1], after_s), max(published[2], after_s)
+    else:
         return None
-    # what this group has done beats what its controller predicts: maxEndTime was 9 s early or 2 minutes late
-    likely, late = max(_quantile(ends, 0.5), after_s), max(_quantile(ends, LATE_QUANTILE), after_s)
     start: Bound = (after_s, likely, max(late, likely))
-    amber = _unknown_is_amber(cycle)  # the group's clearance published as "unavailable": an amber
-    out: list[tuple[PhaseClass, Bound, Bound]] = [(PhaseClass.AMBER if amber and cls is PhaseClass.UNKNOWN else cls, begun, start)]
+    unknown_as = _unknown_as(cycle)  # the group's amber or go phase published as "unavailable"
+    out: list[tuple[PhaseClass, Bound, Bound]] = [(unknown_as if cls is PhaseClass.UNKNOWN else cls, begun, start)]
     while start[0] < after_s + horizon_s:
         nxt = cycle.following.get(cls)
         d = cycle.durations(nxt) if nxt is not None else ()
@@ -270,7 +287,7 @@ def _continued(cls: PhaseClass, since_unix_s: float, begun: Bound, after_s: floa
             break
         cls = nxt
         end = (start[0] + d[0], start[1] + _quantile(d, 0.5), start[2] + _quantile(d, LATE_QUANTILE))
-        out.append((PhaseClass.AMBER if amber and cls is PhaseClass.UNKNOWN else cls, start, end))
+        out.append((unknown_as if cls is PhaseClass.UNKNOWN else cls, start, end))
         start = end
     out.append((PhaseClass.UNKNOWN, start, (inf, inf, inf)))
     return out
@@ -358,9 +375,9 @@ def light_view(
     if isinstance(plan, FixedTimePlan):
         windows = likely = late = red_windows_s(plan, t_feed - u, horizon_s + u)
     else:
-        if unknown_now(plan, t_unix_s - reading.age_s) and not _clearance(reading.cycle):
-            return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
+        if unknown_now(plan, t_unix_s - reading.age_s) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
+            return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
         windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
     if u > 0.0:
         windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))

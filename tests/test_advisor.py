@@ -1,6 +1,7 @@
 """The advisor: suppression rules, feasibility (never red, never above the limit), hysteresis, voice, tables."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ from advisory.advice.advisor import (
     crossing_time_s,
     phrase,
 )
-from advisory.advice.advisor import _coast_arrays, _line_speeds_mps
+from advisory.advice.advisor import _coast_arrays, _line_speeds_mps, _normal_drive_s
 from advisory.drivers.closed_loop import DriverModel, evaluate, observe, red_light_violations, simulate
 from advisory.physics.params import PAPER_54KWH, SPEED_LIMIT_MPS, model_params
 from advisory.signals import paper_scenario
@@ -498,3 +499,22 @@ def test_no_slowing_for_an_uncertain_red_that_likely_ends_before_the_car_gets_th
                                   late_red_windows_s=((0.0, 25.0), (55.0, 84.0))))  # fmt: skip
     sure = advise(Observation(V, V, later))[0]
     assert sure.target_speed_mps < V - 1.0 and crossing_time_s(500.0, V, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 25.0 + P.green_margin_s
+
+
+def test_under_uncertain_timing_no_time_is_given_up_before_a_green_ends():
+    """The recorded controller (2019-05-17, group 3): a car that coasted towards a red's likely end meets the green
+    early; the next red may begin in 10 s, likely in 19 s; 145 m at 40 km/h. Coasting on (the kept plan: "Lift off and
+    coast.") reached the line 1 s into the red, a cycle lost; the regular driver went through. Under uncertain timing
+    any time given up before a green ends is a chance of meeting the red: drive normally. And a lift-off asked for a
+    red of unknown end ("Red light ahead. Lift off and coast.") is not carried into the plan for the green after it."""
+    v, limit = 40 / 3.6, 50 / 3.6
+    green = LightView(1, 145.0, True, 0.9, ((9.8, 300.0),), likely_red_windows_s=((19.4, 70.0),), late_red_windows_s=((19.4, 100.0),))
+    coasting = AdvisorMemory(last=Advice("coast", "green_wave", 38 / 3.6, True, 13.0), spoken=None)
+    adv = advise(Observation(v, limit, (green,)), coasting, AdvisorParams(units="kmh"))[0]
+    assert (adv.action, adv.reason, adv.message) == ("none", "tight_green", "Red in 19 seconds. Drive normally.")
+    assert _normal_drive_s(145.0, Observation(v, limit, (green,)), P) < 19.4 - P.reaction_s
+    at_limit = advise(Observation(limit, limit, (replace(green, distance_m=200.0),)), coasting, AdvisorParams(units="kmh"))[0]
+    assert (at_limit.action, at_limit.target_speed_mps) == ("cruise", limit)  # at the limit: holding it is the normal drive
+    lifted = AdvisorMemory(last=Advice("coast", "red_ahead", limit, True, None), spoken=None)
+    after = advise(Observation(47 / 3.6, limit, (LightView(1, 178.0, True, 0.9, ((10.4, 300.0),), likely_red_windows_s=((21.2, 70.0),)),)), lifted)[0]
+    assert after.action != "coast" and after.reason != "red_ahead"

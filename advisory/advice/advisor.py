@@ -202,6 +202,9 @@ def coast_decel_mps2(v_mps: float, vehicle: VehicleParams) -> float:
 LINE_SPEED_TIE_MPS = 0.2
 """Targets whose speeds at the next line differ by less than this count as equally close to the tables'
 wanted speed there; the tie goes to the target nearest it. [m/s]"""
+TIGHT_SLACK_S = 0.5
+"""Under uncertain timing, a plan reaching the line more than this much later than a normal drive gives up time
+against a red that may come early: the driver is left to drive normally instead (reason ``tight_green``). [s]"""
 
 MODE_CODES = {"auto": 0, "brake_coast": 1, "brake": 2, "firm": 3}
 """How the speed changes towards a target (see :func:`crossing_time_s`), as kernel codes."""
@@ -654,6 +657,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         # the regular driver's own motion (it meets a late red only where the regular driver does too), while slowing
         # for a red that ends early cost up to +19 % against it (±10 s windows): plan on the likely changes
         feasible = feasible[:0]
+    on_likely = False  # the plan is on the likely changes: no speed is sure
     if feasible.size == 0 and uncertain:
         # no speed makes the greens whenever the changes come: plan on the likely changes (never into a red that
         # minEnd guarantees: the likely windows contain it; the after-red margin still applies), never faster than now
@@ -664,14 +668,20 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
         feasible = feasible[feasible <= max(obs.speed_mps, params.min_cruise_speed_mps) + 1e-9]
-    to_red = nxt.seconds_to_red() if not red and nxt.likely_red_windows_s is None else None
-    if to_red is not None and _normal_drive_s(nxt.distance_m, obs, params) < to_red and (
-        feasible.size == 0 or crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible.max()), params, mode) >= to_red
-    ):
-        # green now (exact timing), and a normal drive (speeding up to the limit at the regular driver's rate: no advice
-        # to react to) is over the line before the red, where no comfortable speed is: a plan for the green after the
-        # red, or a "prepare to stop", would lose a cycle that the driver makes without advice
-        return Advice("none", "tight_green", light_red=False, seconds_to_change_s=to_change)
+        on_likely = True
+    exact = nxt.likely_red_windows_s is None
+    to_red = None if red or not (exact or on_likely) else _countdown_view(nxt).seconds_to_red()
+    if to_red is not None and (normal_s := _normal_drive_s(nxt.distance_m, obs, params)) < to_red:
+        planned_s = crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible.max()), params, mode) if feasible.size else np.inf
+        if planned_s >= to_red if exact else normal_s + TIGHT_SLACK_S < planned_s < to_red and all(
+            _green_crossing(light, _normal_drive_s(light.distance_m, obs, params), params.green_margin_s) for light in usable[1:]):
+            # green now, and a normal drive (speeding up to the limit at the regular driver's rate: no advice to react
+            # to) is over the line before the red, where no comfortable speed is (exact timing): a plan for the green
+            # after the red, or a "prepare to stop", would lose a cycle that the driver makes without advice. Under
+            # uncertain timing, a plan that reaches this line later than a normal drive, which makes the lines after it
+            # too (as likely): any time given up is a chance of meeting the red (was: a lift-off kept into such a
+            # green, a cycle lost); a plan slowed for the next light's green is kept
+            return Advice("none", "tight_green", light_red=False, seconds_to_change_s=to_change)
     if feasible.size == 0:
         arrival = crossing_time_s(nxt.distance_m, obs.speed_mps, obs.speed_mps, params) if obs.speed_mps > 0 else np.inf
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:
@@ -707,8 +717,9 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             # targets still being braked to at the line reach it alike: of those, the one nearest the wanted speed
             close = feasible[miss <= miss.min() + LINE_SPEED_TIE_MPS]
             target, source = float(close[np.argmin(np.abs(close - wanted))]), "dp_table"
-    if last is not None and last.target_speed_mps is not None and last.action in ("cruise", "ease_off", "accelerate", "slow_down", "coast"):
-        # the driver is already following the last advice: keep it while it still works (no new reaction delay)
+    if last is not None and last.target_speed_mps is not None and last.action in ("cruise", "ease_off", "accelerate", "slow_down", "coast") and last.reason == "green_wave":
+        # the driver is already following the last plan: keep it while it still works (no new reaction delay); not
+        # a lift-off for a red whose end was unknown ("Red light ahead. Lift off and coast."): a plan now, for a green
         keep_mode = {"slow_down": "brake", "coast": "brake_coast"}.get(last.action, "auto")
         if abs(last.target_speed_mps - target) < params.speak_change_mps and _keeps(both, obs, params, keep_mode, last.target_speed_mps, n_lines):
             target, mode = last.target_speed_mps, keep_mode

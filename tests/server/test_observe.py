@@ -289,12 +289,16 @@ def test_the_recorded_controller_through_the_history():
 UNAVAILABLE = S.UNAVAILABLE
 
 
-def test_an_amber_published_as_unavailable_goes_on_as_the_history_says():
-    """2019-05-01 publishes each amber as "unavailable" between green and red: after a few cycles such a short phase
-    is the group's amber (passable, as an amber is), its red and the green after it bounded by what the group has done
-    (was: "no data" in the middle of every approach, the driver told to drive normally, and a car due in the amber
-    slowed for the next green). A group whose unknown phases come between reds (2019-05-17 publishes greens so), or
-    last longer than an amber, stays "no data": an unknown phase is never read as a green."""
+def test_an_unknown_phase_is_read_by_what_the_group_does():
+    """J2735 ``unavailable`` says nothing; what the group does with it does. 2019-05-01 publishes each amber as
+    "unavailable" between green and red: after a few cycles such a short phase is the group's amber (passable, as an
+    amber is), its red and the green after it bounded by what the group has done (was: "no data" in the middle of
+    every approach, the driver told to drive normally, and a car due in the amber slowed for the next green).
+    2019-05-17 publishes every green (and its amber) as "unavailable" between reds: such a phase is the group's go
+    phase (a stop-And-Remain ends into a movement; its reds are published), so a red ends where it ends (was: every
+    red merged with the unknown phases after it into one window to the horizon, the advisor could never aim at a
+    red's end, and a car was told to stop for a red that ended 30 s later). An unknown phase that is neither (longer
+    than an amber between green and red, or with no history) stays "no data"."""
     ix = make_scenario("paper_s400").corridor.intersections[0]
     h = PhaseHistory()
     t = feed(h, T0, [(GREEN, 20), (UNAVAILABLE, 3), (RED, 40)] * 4 + [(GREEN, 20)])
@@ -309,13 +313,22 @@ def test_an_amber_published_as_unavailable_goes_on_as_the_history_says():
     t3 = feed(long, T0, [(GREEN, 20), (UNAVAILABLE, 12), (RED, 40)] * 4 + [(GREEN, 20)])
     stats3 = long.update(t3 + 1.0, published(UNAVAILABLE, t3 + 1.0))
     assert not light_view(ix, PlanReading(published(UNAVAILABLE, t3 + 1.0), cycle=stats3), 0.0, t3 + 2.0).fresh  # 12 s: no amber
+    # greens published as "unavailable", between reds of 40 s: the go phase (20 s each)
     h2 = PhaseHistory()
-    t2 = feed(h2, T0, [(RED, 40), (UNAVAILABLE, 20)] * 4 + [(RED, 40)])
-    stats2 = h2.update(t2 + 1.0, published(UNAVAILABLE, t2 + 1.0))
-    between_reds = light_view(ix, PlanReading(published(UNAVAILABLE, t2 + 1.0), cycle=stats2), 0.0, t2 + 2.0)
-    assert not between_reds.fresh and between_reds.red_windows_s == ()
+    t2 = feed(h2, T0, [(RED, 40), (UNAVAILABLE, 20)] * 4)
+    stats2 = h2.update(t2, published(RED, t2 + 30.0, t2 + 50.0))  # a red has begun: minEnd 30 s, maxEnd 50 s
+    red_now = light_view(ix, PlanReading(published(RED, t2 + 30.0, t2 + 50.0), cycle=stats2), 0.0, t2 + 1.0)
+    assert red_now.fresh and [x for w in red_now.likely_red_windows_s[:2] for x in w] == pytest.approx([0.0, 39.0, 59.0, 99.0])  # was ((0, 150),)
+    stats2 = feed(h2, t2, [(RED, 40)]) and h2.update(t2 + 41.0, published(UNAVAILABLE, t2 + 41.0))
+    go_now = light_view(ix, PlanReading(published(UNAVAILABLE, t2 + 41.0), cycle=stats2), 0.0, t2 + 42.0)
+    assert go_now.fresh and go_now.red_windows_s[0][0] == 0.0  # past its minEnd: a red may come any moment (sure view)
+    assert go_now.likely_red_windows_s[0] == pytest.approx((19.0, 59.0))  # likely as the go phases lasted: 20 s from t2 + 41
     bare = light_view(ix, PlanReading(published(UNAVAILABLE, t + 1.0)), 0.0, t + 2.0)  # no history: no data, as before
     assert not bare.fresh
+    short = PhaseHistory()  # unknown blips between reds: no go phase
+    t4 = feed(short, T0, [(RED, 40), (UNAVAILABLE, 2)] * 4 + [(RED, 40)])
+    stats4 = short.update(t4 + 1.0, published(UNAVAILABLE, t4 + 1.0))
+    assert not light_view(ix, PlanReading(published(UNAVAILABLE, t4 + 1.0), cycle=stats4), 0.0, t4 + 2.0).fresh
 
 
 def test_a_red_that_ended_within_the_clock_uncertainty_may_still_be_red():
