@@ -226,7 +226,7 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
         return _continued(PhaseClass.UNKNOWN, cycle.since_unix_s, (-inf,) * 3, t_unix_s, horizon_s, cycle) or out
     # the plan ends in "unavailable": its last known phase ends when such phases end, then the cycle goes on. A
     # group's amber or go phase now that has run longer than any seen ends in its published window; a red stays
-    # unbounded (the window's middle, 30-50 s after a real red's end, slowed cars that the regular driver beat)
+    # unbounded (its window's middle as the likely end slowed cars that the regular driver beat: docs/ADVISOR.md 1a)
     cls, begun, published = out[-2]
     since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
     rest = _continued(cls, since, begun, max(t_unix_s, published[0]), horizon_s, cycle, published if cls is PhaseClass.UNKNOWN else None)
