@@ -212,17 +212,26 @@ class DPProblem:
         return self.light_stage.shape[0]
 
 
+def _tables_key(grid: GridSpec) -> GridSpec:
+    """``grid`` less what only the forward pass reads (time bins, dwell, trip-time buffer): the key of the move, bound
+    and light-bound tables, so that a problem on finer time bins (``refine``) shares them."""
+    return replace(grid, time_bin_s=1.0, dwell_s=1.0, time_buffer_frac=0.0)
+
+
 _BOUNDS: dict = {}
 """Pruning bounds by vehicle, grid and geometry (``build_problem``)."""
 
 
 def build_problem(
-    scenario: Scenario, params: ModelParams, grid: GridSpec, t_max_s: float, speed_nodes_mps: np.ndarray | None = None
+    scenario: Scenario, params: ModelParams, grid: GridSpec, t_max_s: float, speed_nodes_mps: np.ndarray | None = None,
+    light_bounds: bool = True,
 ) -> DPProblem:
     """
     Lay ``scenario`` on ``grid``. ``t_max_s``: latest exact arrival at the end state (zone time + penalty time).
 
     ``speed_nodes_mps`` replaces the coasting chain (tests use a handful of nodes to compare with brute force).
+    ``light_bounds=False`` leaves out the bounds that see the lights (``_light_bounds``: worth their cost over the
+    passes of a solve, not for the single pass of ``refine``).
     """
     ds = grid.stage_m
     n_stage = int(round(scenario.zone_length_m / ds))
@@ -253,10 +262,10 @@ def build_problem(
     arcs = _stop_arcs(scenario, params, grid, speed, n_stage) if grid.stop_arcs else _no_arcs(speed.size)
     grade = np.zeros(n_stage)
     grades, stage_grade = np.unique(grade, return_inverse=True)
-    moves = [_step_tables(params, grid, tuple(speed), float(g)) for g in grades]
+    moves = [_step_tables(params, _tables_key(grid), tuple(speed), float(g)) for g in grades]
     step_dt, step_usd = np.stack([m[0] for m in moves]), np.stack([m[1] for m in moves])
     # the bounds do not depend on the lights' timings: cases that differ only there share them
-    key = (params, grid, speed.tobytes(), v_lim, grade.tobytes(), tuple(arcs["light_stage"]))
+    key = (params, _tables_key(grid), speed.tobytes(), v_lim, grade.tobytes(), tuple(arcs["light_stage"]))
     if key not in _BOUNDS:
         if len(_BOUNDS) >= 32:  # ~1 MB each at the study grid
             _BOUNDS.clear()
@@ -266,7 +275,8 @@ def build_problem(
             arcs["launch_usd"], arcs["rest_dt_s"], arcs["rest_usd"], TIME_PRICES_USD_PER_S,
         )))
     lb, halt_lb = _BOUNDS[key]
-    light_lb, light_len, line_t_min = _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade.astype(np.int64),
+    light_lb, light_len, line_t_min = (np.zeros((len(scenario.signals), 1, speed.size, 1), dtype=np.float32), np.zeros(len(scenario.signals), dtype=np.int64),
+                                       np.zeros((n_stage + 1, speed.size))) if not light_bounds else _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade.astype(np.int64),
                                                     is_stop, lb[0], halt_lb[0], arcs, v_lim)
     return DPProblem(
         scenario=scenario,
@@ -320,7 +330,7 @@ def _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stag
     light_stage, k_lo = arcs["light_stage"], arcs["arc_k_lo"]
     n_l, n_v = light_stage.size, speed.size
     backs = [min(LIGHT_BOUND_STAGES, int(kl - lo)) for kl, lo in zip(light_stage, k_lo, strict=True)]
-    keys = [(params, grid, speed.tobytes(), lb0[kl - n : kl + 1].tobytes(), float(halt_lb0[l]), is_stop[kl - n : kl + 1].tobytes(),
+    keys = [(params, _tables_key(grid), speed.tobytes(), lb0[kl - n : kl + 1].tobytes(), float(halt_lb0[l]), is_stop[kl - n : kl + 1].tobytes(),
              stage_grade[kl - n : kl].tobytes(), n) for l, (kl, n) in enumerate(zip(light_stage, backs, strict=True))]
     stack_key = (tuple(keys), tuple(light_stage), v_lim, stage_grade.size)
     if stack_key in _LIGHT_STACKS:  # the same geometry as a recent case: the same arrays (read only)
@@ -610,6 +620,22 @@ def solve_problem(prob: DPProblem, prune: bool = True, estimate_usd: float | Non
         except InfeasibleError:  # too coarse to find a path along the time limit: no estimate from it
             estimate = None
     return _solve_pruned(prob, estimate)
+
+
+def refine(sol: DPSolution, grid: GridSpec) -> DPSolution:
+    """The problem of ``sol`` laid on ``grid`` (a finer one) and solved by one pass pruned at ``sol``'s cost: that
+    optimum when it is cheaper than ``sol`` (pruning is exact: no cheaper path on ``grid`` is missed), else ``sol``.
+
+    A pass at a limit the answer is known to lie under costs much less than a solve; the study refines its cases
+    this way (``advisory.evaluation.study.solve_case``). ``sol`` is kept when ``grid`` does not fit the scenario."""
+    prob = sol.problem
+    if not _divides(prob.scenario, grid.stage_m):
+        return sol
+    try:
+        better = _pass(build_problem(prob.scenario, prob.params, grid, prob.t_max_s, light_bounds=False), sol.cost_usd)
+    except InfeasibleError:
+        return sol
+    return better if better is not None and better.cost_usd < sol.cost_usd else sol
 
 
 def time_limit_s(regular: Trajectory, params: ModelParams, scenario: Scenario, grid: GridSpec) -> float:
