@@ -36,8 +36,9 @@ VARIANTS: dict[str, tuple[str, float]] = {
 """Variant name -> (vehicle preset, battery-decay multiplier)."""
 
 STUDY_GRID = GridSpec(time_bin_s=0.2, dwell_s=0.4)
-"""Resolution of the study (the convergence table of bench/bench_dp.py and docs/REPRODUCTION.md), refined case by case
-(:func:`solve_case`)."""
+"""Resolution of the study, refined case by case (:func:`solve_case`): 10 m stages, time bins of 0.2 s (the cells that
+slow or stop for a light converge with the bins: 0.25 s left four of them 0.51-0.58 % above the reference grid, 0.125 s
+would double the study's time). Convergence over all 192 cases: ``bench/bench_dp.py --all-cells``, docs/REPRODUCTION.md."""
 
 PINNED_SLACK_S = 3.0
 """An optimum that reaches the end of the zone more than this before the trip-time limit is timed by a light, not by
@@ -128,20 +129,16 @@ class CaseResult:
 def solve_case(scenario: Scenario, params: ModelParams, grid: GridSpec, t_max_s: float, estimate_usd: float | None = None) -> DPSolution:
     """The DP optimum of a case on ``grid``, refined where that grid is too coarse for it (docs/REPRODUCTION.md).
 
-    * Every case again on time bins (and dwell) half as wide: a path that waits for a red (stopping, or slowing to
-      pass as it ends) is kept or lost by the binning of the labels that reach the light just before the red ends.
-    * A case whose optimum reaches the end of the zone more than :data:`PINNED_SLACK_S` before the trip-time limit
-      again on stages half as long: its timing is set by a light's red, which it passes as the red ends while
-      coasting (brake hard, coast to the line, coast on to the end); the speed it can coast at comes in steps of the
-      coasting chain, one node of which is up to 0.8 % of the cost with the 10x decay. Halving the stage halves the
-      steps.
-
-    Each refinement is one DP pass pruned at the best cost so far (``dp.refine``: exact, it only accepts a cheaper
-    path); the cheapest answer wins.
+    A case whose optimum reaches the end of the zone more than :data:`PINNED_SLACK_S` before the trip-time limit is
+    timed by a light's red, not by the limit: it brakes hard, coasts to the line to cross it as the red ends, and
+    coasts on to the end. The speed it can coast at comes in steps of the coasting chain (one step of the 10 m chain
+    is 0.5-0.8 % of the cost with the 10x decay), so it is solved again on stages half as long (half the steps), by
+    one DP pass pruned at its cost (``dp.refine``: exact, it only accepts a cheaper path). That pass looks for paths
+    that pass the lights moving, as such a case does: no stop arcs, whose tables would cost more than the pass.
     """
     sol = solve(scenario, params, grid, t_max_s, estimate_usd=estimate_usd)
     pinned = sol.problem.t_max_s - sol.end_time_s > PINNED_SLACK_S
-    return refine(sol, replace(grid, stage_m=grid.stage_m / 2)) if pinned else sol
+    return refine(sol, replace(grid, stage_m=grid.stage_m / 2, stop_arcs=False)) if pinned else sol
 
 
 def run_case(case: StudyCase, grid: GridSpec = STUDY_GRID, overrides: dict | None = None, paths: Sequence[Trajectory] = ()) -> CaseResult:

@@ -223,15 +223,12 @@ _BOUNDS: dict = {}
 
 
 def build_problem(
-    scenario: Scenario, params: ModelParams, grid: GridSpec, t_max_s: float, speed_nodes_mps: np.ndarray | None = None,
-    light_bounds: bool = True,
+    scenario: Scenario, params: ModelParams, grid: GridSpec, t_max_s: float, speed_nodes_mps: np.ndarray | None = None
 ) -> DPProblem:
     """
     Lay ``scenario`` on ``grid``. ``t_max_s``: latest exact arrival at the end state (zone time + penalty time).
 
     ``speed_nodes_mps`` replaces the coasting chain (tests use a handful of nodes to compare with brute force).
-    ``light_bounds=False`` leaves out the bounds that see the lights (``_light_bounds``: worth their cost over the
-    passes of a solve, not for the single pass of ``refine``).
     """
     ds = grid.stage_m
     n_stage = int(round(scenario.zone_length_m / ds))
@@ -275,8 +272,7 @@ def build_problem(
             arcs["launch_usd"], arcs["rest_dt_s"], arcs["rest_usd"], TIME_PRICES_USD_PER_S,
         )))
     lb, halt_lb = _BOUNDS[key]
-    light_lb, light_len, line_t_min = (np.zeros((len(scenario.signals), 1, speed.size, 1), dtype=np.float32), np.zeros(len(scenario.signals), dtype=np.int64),
-                                       np.zeros((n_stage + 1, speed.size))) if not light_bounds else _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade.astype(np.int64),
+    light_lb, light_len, line_t_min = _light_bounds(params, grid, speed, band_lo, band_hi, step_dt, step_usd, stage_grade.astype(np.int64),
                                                     is_stop, lb[0], halt_lb[0], arcs, v_lim)
     return DPProblem(
         scenario=scenario,
@@ -632,7 +628,7 @@ def refine(sol: DPSolution, grid: GridSpec) -> DPSolution:
     if not _divides(prob.scenario, grid.stage_m):
         return sol
     try:
-        better = _pass(build_problem(prob.scenario, prob.params, grid, prob.t_max_s, light_bounds=False), sol.cost_usd)
+        better = _pass(build_problem(prob.scenario, prob.params, grid, prob.t_max_s), sol.cost_usd)
     except InfeasibleError:
         return sol
     return better if better is not None and better.cost_usd < sol.cost_usd else sol
