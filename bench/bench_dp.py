@@ -13,7 +13,7 @@ Run: .venv/bin/python bench/bench_dp.py [--quick | --all-cells]
   in this one process (CPU seconds: what 2 free cores divide by about 2), its distance from
   the reference on the two cells above (target < 0.5 %), the DP tables of one solve and the peak RSS of a
   worker-sized process (target < 200 MB per solve).
-* ``--all-cells`` (instead of the above; ~10 min on 2 cores): every one of the 192 cases as the study solves it
+* ``--all-cells`` (instead of the above; ~2-3 min on 2 cores): every one of the 192 cases as the study solves it
   (``study.solve_case``: the study grid, refined case by case) and on the study grid alone, against the reference
   (stage 5 m, bins 0.125 s), per variant: mean and max distance and the count above 0.5 % (target: none), with the
   worst cells.
