@@ -37,7 +37,7 @@ VARIANTS: dict[str, tuple[str, float]] = {
 
 STUDY_GRID = GridSpec(time_bin_s=0.2, dwell_s=0.4)
 """Resolution of the study, refined case by case (:func:`solve_case`): 10 m stages, time bins of 0.2 s (the cells that
-slow or stop for a light converge with the bins: 0.25 s left four of them 0.51-0.58 % above the reference grid, 0.125 s
+slow or stop for a light converge with the bins: 0.25 s left six of them 0.52-0.58 % above the reference grid, 0.125 s
 would double the study's time). Convergence over all 192 cases: ``bench/bench_dp.py --all-cells``, docs/REPRODUCTION.md."""
 
 PINNED_SLACK_S = 3.0
