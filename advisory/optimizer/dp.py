@@ -215,7 +215,7 @@ class DPProblem:
 
 def _tables_key(grid: GridSpec) -> GridSpec:
     """``grid`` less what only the forward pass reads (time bins, dwell, trip-time buffer): the key of the move, bound
-    and light-bound tables, so that a problem on finer time bins (``refine``) shares them."""
+    and light-bound tables, so that grids that differ only there (a ladder of time bins) share them."""
     return replace(grid, time_bin_s=1.0, dwell_s=1.0, time_buffer_frac=0.0)
 
 
