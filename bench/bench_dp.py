@@ -1,6 +1,6 @@
 """DP benchmarks, every figure measured in one run (issue 18's targets).
 
-Run: .venv/bin/python bench/bench_dp.py [--quick]
+Run: .venv/bin/python bench/bench_dp.py [--quick | --all-cells]
 
 * Convergence: optimal cost, solve time and table memory as stage, speed spacing (tied to the stage by the
   coasting chain), time bins and dwell are halved, for a coasting cell ([15 15], s = 800 m), a stopping cell
@@ -13,6 +13,10 @@ Run: .venv/bin/python bench/bench_dp.py [--quick]
   in this one process (CPU seconds: what 2 free cores divide by about 2), its distance from
   the reference on the two cells above (target < 0.5 %), the DP tables of one solve and the peak RSS of a
   worker-sized process (target < 200 MB per solve).
+* ``--all-cells`` (instead of the above; ~2-3 min on 2 cores): every one of the 192 cases as the study solves it
+  (``study.solve_case``: the study grid, refined case by case) and on the study grid alone, against the reference
+  (stage 5 m, bins 0.125 s), per variant: mean and max distance and the count above 0.5 % (target: none), with the
+  worst cells.
 * The same problem solved by ``solve_numpy`` (the recursion in plain NumPy/Python, without stop arcs or pruning)
   and by one unpruned numba pass: ratio.
 
@@ -29,12 +33,14 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from advisory.drivers.regular import regular_driver  # noqa: E402
-from advisory.evaluation.study import STUDY_GRID, paper_cases  # noqa: E402
-from advisory.optimizer.dp import GridSpec, build_problem, solve_numpy, solve_problem, time_limit_s  # noqa: E402
+from advisory.evaluation.study import STUDY_GRID, VARIANTS, paper_cases, solve_case, variant_params  # noqa: E402
+from advisory.optimizer.dp import GridSpec, build_problem, solve, solve_numpy, solve_problem, time_limit_s  # noqa: E402
 from advisory.physics.params import model_params  # noqa: E402
 from advisory.signals import paper_scenario  # noqa: E402
 from ecodrive.study import run_study  # noqa: E402
@@ -83,7 +89,47 @@ def name(case) -> str:
     return f"[{case[0]} {case[1]}] s={case[2]}"
 
 
+REFERENCE = GridSpec(stage_m=5.0, time_bin_s=0.125, dwell_s=0.25)
+"""The reference ("converged") of ``--all-cells``: on the worst cells it lies within -0.12..+0.26 % of stage 5 m with
+0.0625 s bins and of stage 2.5 m (docs/REPRODUCTION.md)."""
+
+
+def _three_costs(case) -> tuple:
+    """A case's DP cost on the study grid alone, as the study solves it, and on the reference grid. [$]"""
+    params = variant_params(case.variant)
+    t_max = time_limit_s(regular_driver(case.scenario), params, case.scenario, STUDY_GRID)
+    plain = solve(case.scenario, params, STUDY_GRID, t_max).cost_usd
+    study = solve_case(case.scenario, params, STUDY_GRID, t_max).cost_usd
+    return case.key, plain, study, solve(case.scenario, params, REFERENCE, t_max, estimate_usd=study).cost_usd
+
+
+def all_cells(workers: int = 2) -> None:
+    """Every case of the study against the reference grid, per variant (progress on stderr)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from tqdm import tqdm
+
+    cases = sorted(paper_cases(), key=lambda c: -c.scenario.zone_length_m)  # long ones first
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(workers) as pool:
+        rows = list(tqdm(pool.map(_three_costs, cases), total=len(cases), desc="192 cases x 3 grids", file=sys.stderr))
+    print(f"All {len(cases)} cases against the reference (stage {REFERENCE.stage_m:g} m, bins {REFERENCE.time_bin_s:g} s), "
+          f"{time.perf_counter() - t0:.0f} s on {workers} processes ({load()}):")
+    print(f"  {'variant':8} {'solved':20} {'mean':>8} {'max':>8} {'> 0.5 %':>8}  worst cells")
+    for variant in VARIANTS:
+        for col, what in ((1, "on the study grid"), (2, "as the study does")):
+            d = sorted((100 * (r[col] / r[3] - 1), r[0][1:]) for r in rows if r[0][0] == variant)
+            off = np.array([x for x, _ in d])
+            worst = ", ".join(f"[{x:g} {y:g}] s={s:g} {e:+.2f} %" for e, (x, y, s) in d[-3:][::-1])
+            print(f"  {variant:8} {what:20} {off.mean():+7.3f}% {off.max():+7.3f}% {int((off > 0.5).sum()):8d}  {worst}")
+    off = np.array([100 * (r[2] / r[3] - 1) for r in rows])
+    print(f"  all variants, as the study does: mean {off.mean():+.3f} %, max {off.max():+.3f} %, {int((off > 0.5).sum())} of {len(rows)} > 0.5 % (target 0)")
+
+
 def main() -> None:
+    if "--all-cells" in sys.argv:
+        all_cells()
+        return
     quick = "--quick" in sys.argv
     solve_problem(problem(COASTING, COARSE))  # JIT / cache load
     factors = (1, 2) if quick else (1, 2, 4)

@@ -31,6 +31,7 @@ from advisory.evaluation.study import (
     PAPER_NCA_15_15_COST,
     PAPER_TABLE2_COST_REDUCTION_PCT,
     PAPER_TABLE3_DECAY_REDUCTION_PCT,
+    PINNED_SLACK_S,
     SPACINGS,
     STUDY_GRID,
     TIMINGS,
@@ -102,7 +103,8 @@ def render_report(results: dict, grid: GridSpec, elapsed_s: float, overrides: di
         "# Reproduction of the paper's study",
         "",
         f"Grid: stage {grid.stage_m} m, coasting-chain speeds (split {grid.coast_split}), time bins {grid.time_bin_s} s, "
-        f"trip-time buffer {grid.time_buffer_frac:+.0%}. {len(results)} cases in {elapsed_s:.1f} s. "
+        f"trip-time buffer {grid.time_buffer_frac:+.0%}; a case timed by a light (its optimum ends > {PINNED_SLACK_S:g} s before the "
+        f"trip-time limit) solved again on {grid.stage_m / 2:g} m stages (`solve_case`). {len(results)} cases in {elapsed_s:.1f} s. "
         "Both drivers are scored to the common end state (back at the limit, `advisory/evaluation/endstate.py`)."
         + (f" Overrides: {overrides}." if overrides else ""),
         "",

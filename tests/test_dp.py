@@ -16,6 +16,7 @@ from advisory.optimizer.dp import (
     InfeasibleError,
     build_problem,
     coast_chain_mps,
+    refine,
     solve,
     solve_numpy,
     solve_problem,
@@ -249,6 +250,24 @@ def test_refining_the_grid_does_not_raise_the_optimum(case):
     coarse = solve(sc, params, COARSE).cost_usd
     fine = solve(sc, params, COARSE.refined(2)).cost_usd
     assert fine <= coarse * 1.005
+
+
+def test_refine_gives_the_finer_grids_optimum_when_it_is_cheaper_else_the_solution_itself():
+    """``refine``: one pass on another grid, pruned at the known cost. [15 -15] at s = 200 m with the 10x decay (brake,
+    coast through light 2 as its red ends, coast on): on 5 m stages the coasting speed is resolved twice as finely and
+    the optimum is ~1 % cheaper; ``refine`` finds it as a full solve of that grid does. Back to 10 m stages nothing
+    is cheaper: the 5 m solution itself comes back."""
+    sc = paper_scenario(15, -15, 200)
+    params = model_params("paper_54kwh", 10.0)
+    grid = GridSpec()
+    coarse = solve(sc, params, grid)
+    fine = solve(sc, params, replace(grid, stage_m=5.0), coarse.problem.t_max_s)
+    assert fine.cost_usd < coarse.cost_usd * 0.995
+    refined = refine(coarse, replace(grid, stage_m=5.0))
+    assert refined.problem.grid.stage_m == 5.0 and refined.cost_usd == pytest.approx(fine.cost_usd, rel=1e-9)
+    assert violations(refined.trajectory, sc) == []
+    assert refine(fine, grid) is fine
+    assert refine(coarse, replace(grid, stage_m=30.0)) is coarse  # 30 m does not divide the zone: nothing to do
 
 
 def test_boundary_case_regular_driver_barely_brakes():

@@ -57,6 +57,30 @@ def test_bigger_pack_cuts_cruise_decay_by_pack_ratio():
     assert 1 - big.regular.soh_lost_frac / small.regular.soh_lost_frac == pytest.approx(1 - power_ratio * 54 / 75, rel=1e-6)
 
 
+def test_a_case_timed_by_a_light_is_solved_on_half_stages():
+    """nca54 [15 -15] at s = 200 m: brake hard, coast through light 2 as its red ends and on to the end, well before
+    the trip-time limit. The speed it coasts at comes in steps of the coasting chain (one step of the 10 m chain is
+    ~0.6 % of the cost with the 10x decay), so the study solves it again on 5 m stages: its optimum is the 5 m grid's,
+    ~1 % below the study grid's alone (before ``solve_case``: the study grid's)."""
+    from dataclasses import replace
+
+    from advisory.evaluation.study import PINNED_SLACK_S, STUDY_GRID, variant_params
+    from advisory.optimizer.dp import solve, time_limit_s
+    from tests.checks import violations
+
+    case = StudyCase(paper_scenario(15, -15, 200), "nca54")
+    res = run_case(case)
+    params = variant_params("nca54")
+    t_max = time_limit_s(res.regular_traj, params, case.scenario, STUDY_GRID)
+    plain = solve(case.scenario, params, STUDY_GRID, t_max)
+    assert plain.problem.t_max_s - plain.end_time_s > PINNED_SLACK_S
+    fine = solve(case.scenario, params, replace(STUDY_GRID, stage_m=STUDY_GRID.stage_m / 2), t_max)
+    assert res.dp_cost_usd == pytest.approx(fine.cost_usd, rel=1e-9)
+    assert res.dp_cost_usd < plain.cost_usd * 0.992
+    assert res.eco.cost_usd == pytest.approx(res.dp_cost_usd, rel=1e-4)
+    assert violations(res.eco_traj, case.scenario) == []
+
+
 def test_table2_layout():
     assert table2({}).shape == (len(TIMINGS), len(SPACINGS)) and np.isnan(table2({})).all()
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import EndStateScore, score_in_end_state
-from advisory.optimizer.dp import GridSpec, solve, time_limit_s
+from advisory.optimizer.dp import DPSolution, GridSpec, refine, solve, time_limit_s
 from advisory.physics.params import ModelParams, model_params
 from advisory.signals import PAPER_EXIT_M, PAPER_SPACINGS_M, PAPER_TIMINGS_S, Scenario, paper_scenario
 from advisory.trajectory import Trajectory
@@ -35,8 +35,14 @@ VARIANTS: dict[str, tuple[str, float]] = {
 }
 """Variant name -> (vehicle preset, battery-decay multiplier)."""
 
-STUDY_GRID = GridSpec()
-"""Resolution of the study (the convergence table of bench/bench_dp.py and docs/REPRODUCTION.md)."""
+STUDY_GRID = GridSpec(time_bin_s=0.2, dwell_s=0.4)
+"""Resolution of the study, refined case by case (:func:`solve_case`): 10 m stages, time bins of 0.2 s (the cells that
+slow or stop for a light converge with the bins: 0.25 s left six of them 0.52-0.58 % above the reference grid, 0.125 s
+would double the study's time). Convergence over all 192 cases: ``bench/bench_dp.py --all-cells``, docs/REPRODUCTION.md."""
+
+PINNED_SLACK_S = 3.0
+"""An optimum that reaches the end of the zone more than this before the trip-time limit is timed by a light, not by
+the limit (:func:`solve_case`). [s]"""
 
 SPACINGS = tuple(int(s) for s in PAPER_SPACINGS_M)
 TIMINGS = tuple((int(x), int(y)) for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S)
@@ -120,6 +126,21 @@ class CaseResult:
         return out
 
 
+def solve_case(scenario: Scenario, params: ModelParams, grid: GridSpec, t_max_s: float, estimate_usd: float | None = None) -> DPSolution:
+    """The DP optimum of a case on ``grid``, refined where that grid is too coarse for it (docs/REPRODUCTION.md).
+
+    A case whose optimum reaches the end of the zone more than :data:`PINNED_SLACK_S` before the trip-time limit is
+    timed by a light's red, not by the limit: it brakes hard, coasts to the line to cross it as the red ends, and
+    coasts on to the end. The speed it can coast at comes in steps of the coasting chain (one step of the 10 m chain
+    is 0.5-0.8 % of the cost with the 10x decay), so it is solved again on stages half as long (half the steps), by
+    one DP pass pruned at its cost (``dp.refine``: exact, it only accepts a cheaper path). That pass looks for paths
+    that pass the lights moving, as such a case does: no stop arcs, whose tables would cost more than the pass.
+    """
+    sol = solve(scenario, params, grid, t_max_s, estimate_usd=estimate_usd)
+    pinned = sol.problem.t_max_s - sol.end_time_s > PINNED_SLACK_S
+    return refine(sol, replace(grid, stage_m=grid.stage_m / 2, stop_arcs=False)) if pinned else sol
+
+
 def run_case(case: StudyCase, grid: GridSpec = STUDY_GRID, overrides: dict | None = None, paths: Sequence[Trajectory] = ()) -> CaseResult:
     """Regular driver and DP optimum for one case, both scored to the common end state.
 
@@ -132,7 +153,7 @@ def run_case(case: StudyCase, grid: GridSpec = STUDY_GRID, overrides: dict | Non
     v_lim = scenario.speed_limit_mps
     regular = regular_driver(scenario)
     estimate = min((score_in_end_state(p, params, v_lim).cost_usd for p in paths), default=None)
-    sol = solve(scenario, params, grid, time_limit_s(regular, params, scenario, grid), estimate_usd=estimate)
+    sol = solve_case(scenario, params, grid, time_limit_s(regular, params, scenario, grid), estimate)
     return CaseResult(
         case=case,
         regular=score_in_end_state(regular, params, v_lim, keep_series=True),
