@@ -21,7 +21,8 @@ Conversion of one light (:func:`light_view`):
 * **After the published phases** (an actuated controller publishes the current phase only): what the signal
   group has been seen to do (:class:`PhaseHistory`, passed as ``PlanReading.cycle``) bounds the phases that
   follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the current phase ends
-  no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run),
+  no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run)
+  but no later than the published ``maxEndTime``,
   late at their :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
   9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the
   next phases last their shortest / median / late durations seen. ``red_windows_s`` spans earliest start to late
@@ -229,7 +230,7 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
     # unbounded (its window's middle as the likely end slowed cars that the regular driver beat: docs/ADVISOR.md 1a)
     cls, begun, published = out[-2]
     since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
-    rest = _continued(cls, since, begun, max(t_unix_s, published[0]), horizon_s, cycle, published if cls is PhaseClass.UNKNOWN else None)
+    rest = _continued(cls, since, begun, max(t_unix_s, published[0]), horizon_s, cycle, published)
     return out if rest is None else out[:-2] + rest
 
 
@@ -270,10 +271,13 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, after_
     (when finite), then the classes that followed it for ``horizon_s``, then the unknown; None when neither says."""
     inf = math.inf
     ends = [since_unix_s + x for x in cycle.durations(cls) if since_unix_s + x >= after_s] if since_unix_s is not None else []
+    bounded = published is not None and math.isfinite(published[2])
     if ends:
-        # what this group has done beats what its controller predicts: maxEndTime was 9 s early or 2 minutes late
-        likely, late = max(_quantile(ends, 0.5), after_s), max(_quantile(ends, LATE_QUANTILE), after_s)
-    elif published is not None and math.isfinite(published[2]):  # too few seen, or longer than any: as published
+        # what this group has done bounds the late end (maxEndTime is soft: 6-12 % of phases outlast it, some by
+        # minutes); the likely end is the durations' median, but no later than the controller's own maxEndTime
+        likely, late = _quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE)
+        likely, late = max(min(likely, published[2]) if bounded else likely, after_s), max(late, after_s)
+    elif bounded and cls is PhaseClass.UNKNOWN:  # an amber or go phase longer than any seen: as published
         likely, late = max(published[1], after_s), max(published[2], after_s)
     else:
         return None
