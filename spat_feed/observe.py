@@ -267,20 +267,21 @@ def _passable_now(cycle: CycleStats | None) -> bool:
 def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, after_s: float, horizon_s: float, cycle: CycleStats,
                published: Bound | None = None) -> list | None:  # fmt: skip
     """The phase of class ``cls`` that began at ``since_unix_s`` (``begun``: its start bounds), ending no earlier
-    than ``after_s``, when such phases have ended (given how long it has run), else in its ``published`` window
-    (when finite), then the classes that followed it for ``horizon_s``, then the unknown; None when neither says."""
+    than ``after_s``, when such phases have ended (given how long it has run; likely no later than its ``published``
+    maxEndTime), else, for an amber or go phase read from "unavailable", in its ``published`` window (when finite),
+    then the classes that followed it for ``horizon_s``, then the unknown; None when neither says."""
     inf = math.inf
     ends = [since_unix_s + x for x in cycle.durations(cls) if since_unix_s + x >= after_s] if since_unix_s is not None else []
-    bounded = published is not None and math.isfinite(published[2])
+    max_end = published[2] if published is not None else inf
     if ends:
         # what this group has done bounds the late end (maxEndTime is soft: 6-12 % of phases outlast it, some by
         # minutes); the likely end is the durations' median, but no later than the controller's own maxEndTime
-        likely, late = _quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE)
-        likely, late = max(min(likely, published[2]) if bounded else likely, after_s), max(late, after_s)
-    elif bounded and cls is PhaseClass.UNKNOWN:  # an amber or go phase longer than any seen: as published
-        likely, late = max(published[1], after_s), max(published[2], after_s)
+        likely, late = min(_quantile(ends, 0.5), max_end), _quantile(ends, LATE_QUANTILE)
+    elif cls is PhaseClass.UNKNOWN and math.isfinite(max_end):  # an amber or go phase longer than any seen: as published
+        likely, late = published[1], max_end
     else:
         return None
+    likely, late = max(likely, after_s), max(late, after_s)
     start: Bound = (after_s, likely, max(late, likely))
     unknown_as = _unknown_as(cycle)  # the group's amber or go phase published as "unavailable"
     out: list[tuple[PhaseClass, Bound, Bound]] = [(unknown_as if cls is PhaseClass.UNKNOWN else cls, begun, start)]
