@@ -298,11 +298,11 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, after_
     return out
 
 
-def _windows(phases, t_unix_s: float, horizon_s: float, lo: int, hi: int) -> tuple[tuple[float, float], ...]:
-    """Blocking phases as windows from their start's ``lo`` bound to their end's ``hi`` bound, relative, merged."""
+def _windows(phases, t_unix_s: float, horizon_s: float, lo: int, hi: int, classes=BLOCKING_CLASSES) -> tuple[tuple[float, float], ...]:
+    """Phases of ``classes`` as windows from their start's ``lo`` bound to their end's ``hi`` bound, relative, merged."""
     out: list[list[float]] = []
     for cls, start, end in phases:
-        if cls not in BLOCKING_CLASSES:
+        if cls not in classes:
             continue
         start_rel, end_rel = start[lo] - t_unix_s, end[hi] - t_unix_s
         if end_rel <= 0.0 or start_rel >= horizon_s:
@@ -379,11 +379,14 @@ def light_view(
     u = reading.clock_uncertainty_s
     if isinstance(plan, FixedTimePlan):
         windows = likely = late = red_windows_s(plan, t_feed - u, horizon_s + u)
+        unknown = ()
     else:
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
         if unknown_now(plan, t_unix_s - reading.age_s) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
         windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
+        # the unknown phases that end (between known ones; the open tail past the plan and the history stays a red)
+        unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
     if u > 0.0:
         windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
     return LightView(
@@ -395,6 +398,7 @@ def light_view(
         likely_red_windows_s=None if likely == windows else likely,
         late_red_windows_s=None if late == windows else late,
         age_s=float(reading.age_s),
+        unknown_windows_s=unknown,
     )
 
 

@@ -63,11 +63,20 @@ class LightView:
     likely_red_windows_s: tuple[tuple[float, float], ...] | None = None  # every change at its likely time; None: as red_windows_s
     late_red_windows_s: tuple[tuple[float, float], ...] | None = None  # every change at its latest; None: not known
     age_s: float = 0.0  # how old the SPaT behind this view is (a dropout: not fresh, windows of the last reading) [s]
+    unknown_windows_s: tuple[tuple[float, float], ...] = ()  # phases whose state nothing reads, at their likely times [s]
+    """Within the windows above, the phases whose state is unknown (J2735 ``unavailable`` or ``dark`` that the
+    group's history cannot read, and the time past what it can bound), as each change is likely: no plan crosses
+    in them, but they are not a red: no stop is asked for them (the driver is told there is no data)."""
 
     def likely_red_at(self, t_s: float) -> bool:
-        """Red at ``t_s`` seconds from now if every change comes at its likely time (exact plans: :meth:`is_red_at`)."""
+        """Red at ``t_s`` seconds from now if every change comes at its likely time (exact plans: :meth:`is_red_at`);
+        a phase of unknown state is not a red."""
         windows = self.red_windows_s if self.likely_red_windows_s is None else self.likely_red_windows_s
-        return any(start <= t_s < end for start, end in windows)
+        return any(start <= t_s < end for start, end in windows) and not self.unknown_at(t_s)
+
+    def unknown_at(self, t_s: float) -> bool:
+        """The state at ``t_s`` seconds from now is unknown (as each change is likely)."""
+        return any(start <= t_s < end for start, end in self.unknown_windows_s)
 
     @property
     def red_now(self) -> bool:
@@ -664,6 +673,10 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         # (no racing an uncertain red), and never slowing for a red the car may beat as it is (_beats_maybe)
         if _beats_maybe(usable[:1], obs, params):  # (the next light: a red at the one after it does not void the plan for this one)
             return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
+        if obs.speed_mps > 0.0 and nxt.unknown_at(nxt.distance_m / obs.speed_mps):
+            # as it is, the car meets a phase whose state nobody knows: no plan slows it for the green after that
+            # phase (the regular driver went through it), and none crosses in it: no data, said so
+            return Advice("none", "no_spat", light_red=red, seconds_to_change_s=to_change)
         usable = tuple(_likely_only(light) for light in usable)
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
@@ -688,9 +701,12 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)
         slowest = crossing_time_s(nxt.distance_m, obs.speed_mps, params.min_cruise_speed_mps, params, "brake")
         uncertain = nxt.likely_red_windows_s is not None
-        if uncertain and not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
-            # a stop is possible but not likely: no "prepare to stop" for a car that most likely goes through
-            return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
+        if (uncertain or nxt.unknown_windows_s) and not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
+            # a stop is possible but not likely: no "prepare to stop" for a car that most likely goes through; nor for
+            # a phase whose state nobody knows (a group published "unavailable" between its greens: the regular
+            # driver went through it, the advised one was stopped): no data, said so
+            reason = "no_spat" if nxt.unknown_at(arrival) or nxt.unknown_at(slowest) else "low_confidence"
+            return Advice("none", reason, light_red=red, seconds_to_change_s=to_change)
         v = obs.speed_mps
         to_green = _countdown_view(nxt).seconds_to_green_after(min(arrival, slowest))
         far = nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)

@@ -61,11 +61,19 @@ def belief(view: LightView | None, t_obs_s: float, position_m: float) -> Timelin
     """What the driver's display says of one light after the observation at ``t_obs_s``: its red windows on the
     scenario's axis, each change at its latest (a red that may not have begun is the driver's eyes' to judge, as
     for the regular driver; a red is not relied on to end before its latest); a fixed-time light's exact windows;
-    None when it says nothing (no data, stale)."""
+    None when it says nothing (no data, stale). A phase of unknown state is not shown as a red (nor as a green)."""
     if view is None or not view.fresh:
         return None
     windows = view.red_windows_s if view.late_red_windows_s is None else view.late_red_windows_s
-    return TimelineSignal(position_m, tuple((t_obs_s + a, t_obs_s + b) for a, b in windows))
+    return TimelineSignal(position_m, tuple((t_obs_s + a, t_obs_s + b) for a, b in _minus(windows, view.unknown_windows_s)))
+
+
+def _minus(windows, holes) -> list[tuple[float, float]]:
+    """The parts of sorted, disjoint ``windows`` outside every interval of ``holes``."""
+    out = list(windows)
+    for h0, h1 in holes:
+        out = [piece for a, b in out for piece in ((a, min(b, h0)), (max(a, h1), b)) if piece[0] < piece[1]]
+    return out
 
 
 def observe(scenario: Scenario, t_s: float, x_m: float, v_mps: float, horizon_s: float = 180.0) -> Observation:

@@ -331,6 +331,31 @@ def test_an_unknown_phase_is_read_by_what_the_group_does():
     assert not light_view(ix, PlanReading(published(UNAVAILABLE, t4 + 1.0), cycle=stats4), 0.0, t4 + 2.0).fresh
 
 
+def test_a_phase_nobody_can_read_is_no_data_not_a_red():
+    """2019-05-01 group 6 publishes a green of 8 s, then "unavailable" for ~65 s, then green again (no red at all).
+    The unknown phase blocks every plan, but it is not a red: a car due in it was told "Red light ahead. Prepare to
+    stop." (or to slow to 21 km/h for the green after it), and the virtual driver, its display showing that phase as
+    red, stopped, while the regular driver went through (7 approaches +11..+78 % against it). Now: the view marks the
+    phase unknown, the advice is "no data" and the display shows no red in it. A red whose end is not known still
+    counts as a red (the open tail after a plan and its history is not such a phase)."""
+    from advisory.drivers.closed_loop import belief
+
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    h = PhaseHistory()
+    t = feed(h, T0, [(GREEN, 8), (UNAVAILABLE, 65)] * 4)
+    stats = h.update(t, published(GREEN, t + 7.0, t + 7.0))  # a green has begun: ends in 7 s
+    view = light_view(ix, PlanReading(published(GREEN, t + 7.0, t + 7.0), cycle=stats), ix.stop_line_m - 300.0, t)
+    assert view.fresh and view.unknown_windows_s[0] == pytest.approx((7.0, 72.0))
+    assert all(math.isfinite(b) for _, b in view.unknown_windows_s)
+    car = Observation(50 / 3.6, 50 / 3.6, (view,))  # due at 21.6 s: in the unknown phase
+    advice, _ = advise(car)
+    assert (advice.action, advice.reason) == ("none", "no_spat") and advice.message == "No signal data. Drive normally."
+    assert not belief(view, 0.0, 300.0).is_red(21.6)  # the display shows no red in it: the driver's eyes judge
+    # a red with an unknown end (no history): still a red to stop for
+    red = light_view(ix, PlanReading(published(RED, t + 30.0, t + 60.0)), ix.stop_line_m - 300.0, t)
+    assert red.unknown_windows_s == () and advise(Observation(50 / 3.6, 50 / 3.6, (red,)))[0].action in ("stop", "coast")
+
+
 def test_a_red_that_ended_within_the_clock_uncertainty_may_still_be_red():
     """A feed clock that may be 3 s off: a red that ended 1 s ago by the feed's clock may still be red on ours for
     2 s. It used to vanish from the view (windows were widened only after the ended ones were dropped): the display
