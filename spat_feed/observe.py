@@ -224,13 +224,13 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
     if len(out) == 1:  # unknown now (no window), in a group whose unknown phases are its amber or go phase: as its history says
         if not _passable_now(cycle):
             return out
-        return _continued(PhaseClass.UNKNOWN, cycle.since_unix_s, (-inf,) * 3, t_unix_s, horizon_s, cycle) or out
+        return _continued(PhaseClass.UNKNOWN, cycle.since_unix_s, (-inf,) * 3, t_unix_s, t_unix_s, horizon_s, cycle) or out
     # the plan ends in "unavailable": its last known phase ends when such phases end, then the cycle goes on. A
     # group's amber or go phase now that has run longer than any seen ends in its published window; a red stays
     # unbounded (its window's middle as the likely end slowed cars that the regular driver beat: docs/ADVISOR.md 1a)
     cls, begun, published = out[-2]
     since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
-    rest = _continued(cls, since, begun, max(t_unix_s, published[0]), horizon_s, cycle, published)
+    rest = _continued(cls, since, begun, t_unix_s, max(t_unix_s, published[0]), horizon_s, cycle, published)
     return out if rest is None else out[:-2] + rest
 
 
@@ -264,14 +264,14 @@ def _passable_now(cycle: CycleStats | None) -> bool:
     return cycle is not None and cycle.current is PhaseClass.UNKNOWN and cycle.since_unix_s is not None and _unknown_as(cycle) is not PhaseClass.UNKNOWN
 
 
-def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, after_s: float, horizon_s: float, cycle: CycleStats,
+def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s: float, after_s: float, horizon_s: float, cycle: CycleStats,
                published: Bound | None = None) -> list | None:  # fmt: skip
     """The phase of class ``cls`` that began at ``since_unix_s`` (``begun``: its start bounds), ending no earlier
     than ``after_s``, when such phases have ended (given how long it has run; likely no later than its ``published``
     maxEndTime), else, for an amber or go phase read from "unavailable", in its ``published`` window (when finite),
     then the classes that followed it for ``horizon_s``, then the unknown; None when neither says."""
     inf = math.inf
-    ends = [since_unix_s + x for x in cycle.durations(cls) if since_unix_s + x >= after_s] if since_unix_s is not None else []
+    ends = [max(since_unix_s + x, after_s) for x in cycle.durations(cls) if since_unix_s + x >= now_s] if since_unix_s is not None else []
     max_end = published[2] if published is not None else inf
     if ends:
         # what this group has done bounds the late end (maxEndTime is soft: 6-12 % of phases outlast it, some by
