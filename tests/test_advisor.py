@@ -518,3 +518,20 @@ def test_under_uncertain_timing_no_time_is_given_up_before_a_green_ends():
     lifted = AdvisorMemory(last=Advice("coast", "red_ahead", limit, True, None), spoken=None)
     after = advise(Observation(47 / 3.6, limit, (LightView(1, 178.0, True, 0.9, ((10.4, 300.0),), likely_red_windows_s=((21.2, 70.0),)),)), lifted)[0]
     assert after.action != "coast" and after.reason != "red_ahead"
+
+
+def test_a_plan_is_not_dropped_while_the_driver_still_reacts_to_it():
+    """The recorded controller (2019-05-17, group 8): a red's likely end moves from 25 s to 5 s; the advisor's plan
+    turns from "Slow to 42" to "Hold 50"; a second later the car is still slowing (1 s reaction) at 44.6 km/h, and a
+    plan on the likely changes, never faster than the car, found no speed: "Red light ahead. Lift off and coast.",
+    then "Hold 50" again, and so on for 8 s (+90 % against the regular driver, who went through). The speed the last
+    plan asked for counts as the car's: the plan stands."""
+    limit = 50 / 3.6
+    params = AdvisorParams(units="kmh")
+    first = Observation(limit, limit, (LightView(1, 286.1, True, 1.0, ((0.0, 309.8),), ((0.0, 5.0), (23.0, 89.4)), ((0.0, 27.2), (52.0, 121.4))),))
+    hold, memory = advise(first, AdvisorMemory(), params)
+    assert (hold.action, hold.target_speed_mps) == ("cruise", limit)
+    later = Observation(44.6 / 3.6, limit, (LightView(1, 273.0, True, 1.0, ((0.0, 308.8),), ((0.0, 4.0), (22.0, 88.4)), ((0.0, 26.2), (51.0, 120.4))),))
+    kept = advise(later, memory, params)[0]
+    assert kept.reason == "green_wave" and kept.target_speed_mps == pytest.approx(limit)  # (was "Red light ahead. Lift off and coast.")
+    assert advise(later, AdvisorMemory(), params)[0].reason != "green_wave"  # told nothing before: no racing an uncertain red

@@ -116,3 +116,24 @@ def test_a_red_just_ended_on_a_skewed_feed_clock_is_no_surprise():
     emergency braking (it braked at 4.54 m/s²)."""
     truth, run = _run(6633, 3.0)
     assert run.trajectory.accel_mps2.min() >= -HARD_BRAKE_MPS2 - 1e-9 and not red_light_violations(run.trajectory, truth)
+
+
+def test_a_committed_driver_stops_for_a_red_extended_on_the_display():
+    """2019-05-17 group 12 (spat-eval): a car crawling towards a red decided to go on (the display said green before it
+    arrived); the controller then held the red 4 s longer, the display said so, the advisor was silent (a short
+    wait) and the committed driver rolled over the line 2 s into the red. A driver still facing a red where a stop at
+    the line needs 3 m/s² stops (a surprise, as a red outlasting its countdown is), not harder than 4 m/s²."""
+    from advisory.advice.advisor import LightView, Observation
+    from advisory.signals import TimelineSignal
+
+    v_lim, line_m = 50 / 3.6, 60.0
+    truth = Scenario("extended", (TimelineSignal(line_m, ((-10.0, 16.0),)),), 100.0, v_lim, 4.5)
+
+    def feed(t_s, x_m, v_mps):
+        end = 12.0 if t_s < 8.0 else 16.0  # published: red until 12 s; from 8 s on, until 16 s
+        lights = (LightView(1, line_m - x_m, True, 1.0, ((0.0, end - t_s),) if t_s < end else ()),) if x_m < line_m else ()
+        return Observation(v_mps, v_lim, lights, position_m=x_m)
+
+    run = simulate(truth, driver=DriverModel(), feed=feed)
+    assert not red_light_violations(run.trajectory, truth)
+    assert run.surprises >= 1 and run.trajectory.accel_mps2.min() >= -HARD_BRAKE_MPS2 - 1e-9

@@ -680,7 +680,9 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         usable = tuple(_likely_only(light) for light in usable)
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
-        feasible = feasible[feasible <= max(obs.speed_mps, params.min_cruise_speed_mps) + 1e-9]
+        # (the speed the last plan asked for counts as the car's: a driver still reacting to it is not racing)
+        told = last.target_speed_mps if last is not None and last.reason == "green_wave" and last.target_speed_mps is not None else 0.0
+        feasible = feasible[feasible <= max(obs.speed_mps, told, params.min_cruise_speed_mps) + 1e-9]
         on_likely = True
     exact = nxt.likely_red_windows_s is None
     to_red = None if red or not (exact or on_likely) else _countdown_view(nxt).seconds_to_red()

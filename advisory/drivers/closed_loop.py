@@ -39,6 +39,7 @@ class DriverModel:
     red_end_margin_s: float = 1.0  # a red seen at the decision point must end this long before arrival to go on
     emergency_decel_mps2: float = 8.0  # a red the display did not announce: stop if this suffices, else go on
     coast_floor_frac: float = 0.7  # a coasting car keeps slowing past its target: plan with this share of it [-]
+    last_call_decel_mps2: float = 3.0  # a car that went on towards a red still red where stopping takes this: it stops
     seed: int = 0
 
 
@@ -195,6 +196,9 @@ def simulate(
                     amber_go.add(n)
                     committed.add(n)
             overdue = display is None or (not display.is_red(t) and t - green_since.get(n, -np.inf) >= driver.reaction_s)
+            # or still red where a stop at the line needs ``last_call_decel_mps2`` (a red held longer since the driver
+            # committed: an actuated controller's late change): nobody rolls on into a red they can still stop for
+            overdue = overdue or (red_now and v * v >= 2.0 * driver.last_call_decel_mps2 * max(room, 1e-6))
             if n in committed and red_now and surprised.get(n) != light.next_green_start_s(t) and overdue:
                 surprises += 1  # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at all possible
                 surprised[n] = light.next_green_start_s(t)  # (once per red)
