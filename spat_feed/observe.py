@@ -21,8 +21,9 @@ Conversion of one light (:func:`light_view`):
 * **After the published phases** (an actuated controller publishes the current phase only): what the signal
   group has been seen to do (:class:`PhaseHistory`, passed as ``PlanReading.cycle``) bounds the phases that
   follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the current phase ends
-  no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run)
-  but no later than the published ``maxEndTime``,
+  no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run;
+  one that would have ended before ``minEndTime`` ends there: the controller holds it) but no later than the
+  published ``maxEndTime``,
   late at their :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
   9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the
   next phases last their shortest / median / late durations seen. ``red_windows_s`` spans earliest start to late
@@ -267,7 +268,8 @@ def _passable_now(cycle: CycleStats | None) -> bool:
 def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s: float, after_s: float, horizon_s: float, cycle: CycleStats,
                published: Bound | None = None) -> list | None:  # fmt: skip
     """The phase of class ``cls`` that began at ``since_unix_s`` (``begun``: its start bounds), ending no earlier
-    than ``after_s``, when such phases have ended (given how long it has run; likely no later than its ``published``
+    than ``after_s``, when such phases have ended (given how long it has run at ``now_s``; one that would have ended
+    before ``after_s``, its minEndTime, ends then; likely no later than its ``published``
     maxEndTime), else, for an amber or go phase read from "unavailable", in its ``published`` window (when finite),
     then the classes that followed it for ``horizon_s``, then the unknown; None when neither says."""
     inf = math.inf

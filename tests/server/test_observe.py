@@ -331,6 +331,21 @@ def test_an_unknown_phase_is_read_by_what_the_group_does():
     assert not light_view(ix, PlanReading(published(UNAVAILABLE, t4 + 1.0), cycle=stats4), 0.0, t4 + 2.0).fresh
 
 
+def test_a_phase_the_history_would_end_before_its_min_end_ends_at_min_end():
+    """A group whose reds lasted 40, 41, 42, 55 and 56 s; this one has run 30 s and is published with minEnd 14 s
+    from now (44 s in all). The reds that would have ended by then are held to minEnd, not forgotten: likely at
+    minEnd (2019-05-01 group 7: a red published to end no earlier than 16.4 s ended at 16.3 s; counting only the
+    durations past minEnd put it at 30 s, and the car was slowed for a green 14 s after the real one). Over both
+    Antwerp days, red ends 3-45 s ahead: mean error 3.78 -> 3.63 s and 3.98 -> 3.81 s."""
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    h = PhaseHistory()
+    t = feed(h, T0, [x for d in (40, 41, 42, 55, 56) for x in ((RED, d), (GREEN, 20))] + [(RED, 30)])
+    plan = published(RED, t + 14.0, t + 90.0)
+    view = light_view(ix, PlanReading(plan, cycle=h.update(t, plan)), 0.0, t)
+    assert view.likely_red_windows_s[0] == pytest.approx((0.0, 14.0))  # (was 25: the median of 55 and 56 s)
+    assert view.late_red_windows_s[0] == pytest.approx((0.0, 26.0))  # the late end: the longest seen
+
+
 def test_a_phase_nobody_can_read_is_no_data_not_a_red():
     """2019-05-01 group 6 publishes a green of 8 s, then "unavailable" for ~65 s, then green again (no red at all).
     The unknown phase blocks every plan, but it is not a red: a car due in it was told "Red light ahead. Prepare to
