@@ -16,6 +16,10 @@ Conversion of one light (:func:`light_view`):
   (between reds, longer than an amber: a red ends into a movement). Such a phase passes as an amber or a green
   does, and when it is the current one the cycle goes on from it as the history says. A
   phase past its ``minEndTime`` is still the published one (it may end any moment: a possible red, not no data).
+* ``unknown_windows_s``: the phases within those windows whose state nothing reads (an ``unavailable`` between
+  greens, say), as each change is likely, where they end: blocking for every plan, but not a red (no stop is asked
+  for them, the driver's display shows none). The open tail past the plan and the history is not among them: a red
+  whose end is unknown stays a red.
 * ``confidence_frac``: the lowest confidence of the change windows that bound a red window within the horizon
   (1 for a fixed-time plan).
 * **After the published phases** (an actuated controller publishes the current phase only): what the signal
