@@ -26,7 +26,8 @@ Conversion of one light (:func:`light_view`):
   group has been seen to do (:class:`PhaseHistory`, passed as ``PlanReading.cycle``) bounds the phases that
   follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the current phase ends
   no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run;
-  one that would have ended before ``minEndTime`` ends there: the controller holds it) but no later than the
+  one that would have ended before ``minEndTime`` ends there: the controller holds it; once its ``minEndTime``
+  runs again after a hold, as long after it as such phases ended, :class:`PhaseHistory`) but no later than the
   published ``maxEndTime``,
   late at their :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
   9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the
@@ -74,6 +75,17 @@ LATE_QUANTILE = 0.9
 MIN_PHASES_SEEN = 3
 """Durations of a phase class needed before they bound anything. [-]"""
 
+HOLD_STEP_S = 0.5
+"""A published ``minEndTime`` that moves later by at least this between two readings of one phase is held (the
+controller extends the phase); one that then stays put again has resumed. [s]"""
+
+MIN_RESUMED_SEEN = 20
+"""Readings of resumed phases (with how long after their ``minEndTime`` they ended) needed before they say when
+one ends. [-]"""
+
+RESUMED_KEEP = 300
+"""The readings of resumed phases kept per class. [-]"""
+
 BLOCKING_CLASSES = frozenset({PhaseClass.RED, PhaseClass.UNKNOWN})
 
 
@@ -85,6 +97,13 @@ class CycleStats:
     following: Mapping[PhaseClass, PhaseClass] = field(default_factory=dict)  # the class seen after each class
     current: PhaseClass | None = None
     since_unix_s: float | None = None  # the latest instant the current phase can have begun (first seen)
+    resumed: bool = False  # the current phase's minEndTime was held and runs again (:class:`PhaseHistory`)
+    resumed_excess_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # end - minEnd, resumed phases
+
+    def after_resumed(self, cls: PhaseClass) -> tuple[float, ...]:
+        """How long after their ``minEndTime`` resumed phases of ``cls`` ended (sorted), if enough are seen, else ()."""
+        d = self.resumed_excess_s.get(cls, ())
+        return d if len(d) >= MIN_RESUMED_SEEN else ()
 
     def durations(self, cls: PhaseClass) -> tuple[float, ...]:
         """The durations seen of ``cls`` if there are enough to go by, else ()."""
@@ -113,10 +132,17 @@ class PhaseHistory:
     Feed it every accepted reading of the group (``update``); it keeps the last ``keep`` completed phases of
     each class and the class that followed each. A change is dated at the first reading that shows it (the
     feed's period is the error); across a gap longer than ``max_gap_s`` the phase in progress is not timed.
+
+    Given plans, it also follows the published ``minEndTime`` of the phase in progress: an actuated controller
+    counts it down, *holds* it while it extends the phase (it moves later with the clock), and once it runs again
+    (*resumed*) the phase ends at or soon after it (2019-05-01: reds within 1.5 s of it 97 % of the time, against
+    36 % before any hold). For each class it keeps how long after the ``minEndTime`` of a resumed phase the phase
+    ended, reading by reading.
     Pure: no clock, the caller passes the reading's instant (Unix seconds, the plan's axis).
     """
 
-    __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t")
+    __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
+                 "_resumed_min_ends", "_excess", "_sorted")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
         self.keep, self.max_gap_s = keep, max_gap_s
@@ -126,6 +152,11 @@ class PhaseHistory:
         self._since: float | None = None  # the latest instant the current phase can have begun
         self._exact = False  # whether that is when it began (its change seen, with no gap before)
         self._last_t: float | None = None
+        self._min_end: float | None = None  # the phase in progress: its minEndTime at the last reading
+        self._held = self._resumed = False  # ... held since it began; running again since
+        self._resumed_min_ends: list[float] = []  # ... its minEndTime at each reading since it resumed
+        self._excess: dict[PhaseClass, deque[float]] = {}
+        self._sorted: tuple | None = None  # the two above, sorted (until a phase ends)
 
     def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
         """Take one reading at ``t_unix_s`` (:meth:`record`) and return the :meth:`stats` after it."""
@@ -140,23 +171,47 @@ class PhaseHistory:
         if self._last_t is not None and t_unix_s <= self._last_t:
             return False  # a repeat or an older reading
         state = plan if isinstance(plan, MovementPhaseState) else published_state(plan, t_unix_s)
+        min_end = None if isinstance(plan, MovementPhaseState) else _published_min_end(plan, t_unix_s)
         cls = phase_class(state)
         gap = self._last_t is not None and t_unix_s - self._last_t > self.max_gap_s
         changed = cls != self._current
+        was_resumed = self._resumed
         if changed or gap:
             if changed and not gap and self._current is not None:
                 if self._exact:
                     self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
                 self._following[self._current] = cls
+                excess = self._excess.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
+                excess.extend(t_unix_s - m for m in self._resumed_min_ends)
+                self._sorted = None
             # first seen now: it began now or before (a start dated late makes its end late: the safe side for a red)
             self._since, self._exact = t_unix_s, changed and not gap and self._current is not None
             self._current = cls
+            self._held = self._resumed = False
+            self._resumed_min_ends = []
+        elif min_end is not None and self._min_end is not None:
+            if min_end - self._min_end >= HOLD_STEP_S:  # moved later: held
+                self._held, self._resumed = True, False
+            elif self._held and abs(min_end - self._min_end) < HOLD_STEP_S:  # put again after a hold: resumed
+                self._resumed = True
+            if self._resumed and min_end >= t_unix_s:
+                self._resumed_min_ends.append(min_end)
+        self._min_end = min_end
         self._last_t = t_unix_s
-        return changed or gap
+        return changed or gap or self._resumed != was_resumed
 
     def stats(self) -> CycleStats:
         """A frozen snapshot to pass along with a reading (``PlanReading.cycle``)."""
-        return CycleStats({c: tuple(sorted(d)) for c, d in self._durations.items()}, dict(self._following), self._current, self._since)
+        if self._sorted is None:
+            self._sorted = tuple({c: tuple(sorted(d)) for c, d in dd.items()} for dd in (self._durations, self._excess))
+        durations, excess = self._sorted
+        return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess)
+
+
+def _published_min_end(plan: UncertainPlan, t_unix_s: float) -> float | None:
+    """The ``minEndTime`` of the published phase (:func:`published_state`), None when it has none."""
+    i = sum(1 for c in plan.changes if c.max_end_s <= t_unix_s)
+    return plan.changes[i].min_end_s if i < len(plan.changes) else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -235,7 +290,7 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
     # unbounded (its window's middle as the likely end slowed cars that the regular driver beat: docs/ADVISOR.md 1a)
     cls, begun, published = out[-2]
     since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
-    rest = _continued(cls, since, begun, t_unix_s, max(t_unix_s, published[0]), horizon_s, cycle, published)
+    rest = _continued(cls, since, begun, t_unix_s, max(t_unix_s, published[0]), horizon_s, cycle, published, cycle.resumed and cycle.current is cls)
     return out if rest is None else out[:-2] + rest
 
 
@@ -270,7 +325,7 @@ def _passable_now(cycle: CycleStats | None) -> bool:
 
 
 def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s: float, after_s: float, horizon_s: float, cycle: CycleStats,
-               published: Bound | None = None) -> list | None:  # fmt: skip
+               published: Bound | None = None, resumed: bool = False) -> list | None:  # fmt: skip
     """The phase of class ``cls`` that began at ``since_unix_s`` (``begun``: its start bounds), ending no earlier
     than ``after_s``, when such phases have ended (given how long it has run at ``now_s``; one that would have ended
     before ``after_s``, its minEndTime, ends then; likely no later than its ``published``
@@ -283,6 +338,8 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
         # what this group has done bounds the late end (maxEndTime is soft: 6-12 % of phases outlast it, some by
         # minutes); the likely end is the durations' median, but no later than the controller's own maxEndTime
         likely, late = min(_quantile(ends, 0.5), max_end), _quantile(ends, LATE_QUANTILE)
+        if resumed and (excess := cycle.after_resumed(cls)):  # its minEndTime runs again after a hold: as such phases ended
+            likely = min(published[0] + _quantile(excess, 0.5), max_end)
     elif cls is PhaseClass.UNKNOWN and math.isfinite(max_end):  # an amber or go phase longer than any seen: as published
         likely, late = published[1], max_end
     else:

@@ -183,7 +183,7 @@ class SpatStore:
                     history = entry.histories.get(movement.signal_group)
                     if history is None:
                         history = entry.histories[movement.signal_group] = PhaseHistory()
-                    if history.record(stamp, movement.state_time_speed[0].event_state):
+                    if history.record(stamp, plan_from_movement(movement, stamp)):  # (its minEndTime too: held, resumed)
                         entry.cycles.pop(movement.signal_group, None)
                 offsets, offset = entry.offsets, received - stamp  # a monotonic deque: its head is the window's floor
                 while offsets and offsets[-1][1] >= offset:

@@ -206,7 +206,8 @@ def test_history_bounds_the_phases_after_the_published_one_by_hand():
 
 def test_history_windows_keep_min_end_hard_and_spread_the_rest():
     """Reds of 30..48 s: the window of a red now runs from now to its late end; never ends before minEnd; the likely
-    end is the median of the reds that have lasted this long; a red longer than any seen is endless again."""
+    end is the median of the reds that have lasted this long, those that would end before minEnd held to it; a red
+    longer than any seen is endless again."""
     h = PhaseHistory()
     reds = [30, 36, 42, 48, 33, 39, 45]
     t = T0
@@ -218,7 +219,8 @@ def test_history_windows_keep_min_end_hard_and_spread_the_rest():
     (start, end), *_ = view.red_windows_s
     lasting = sorted(r for r in reds if r > 35)  # 36 39 42 45 48
     assert start == 0.0 and end == pytest.approx(lasting[math.ceil(LATE_QUANTILE * len(lasting)) - 1] - 10.0)
-    assert view.likely_red_windows_s[0] == pytest.approx((0.0, 42.0 - 10.0))
+    held = sorted(max(r, 35) for r in reds if r > 10)  # 35 35 36 39 42 45 48
+    assert view.likely_red_windows_s[0] == pytest.approx((0.0, held[math.ceil(0.5 * len(held)) - 1] - 10.0))  # 39 s
     assert view.red_windows_s[1][0] == pytest.approx(35.0 - 10.0 + 20.0)  # next red: earliest end + shortest green
     soon = light_view(ix, PlanReading(published(RED, t + 35), cycle=stats), 0.0, t + 34.0)
     assert soon.red_windows_s[0][1] >= 35.0 - 34.0  # minEnd is hard, whatever the history says
@@ -344,6 +346,39 @@ def test_a_phase_the_history_would_end_before_its_min_end_ends_at_min_end():
     view = light_view(ix, PlanReading(plan, cycle=h.update(t, plan)), 0.0, t)
     assert view.likely_red_windows_s[0] == pytest.approx((0.0, 14.0))  # (was 25: the median of 55 and 56 s)
     assert view.late_red_windows_s[0] == pytest.approx((0.0, 26.0))  # the late end: the longest seen
+
+
+def test_a_red_whose_min_end_runs_again_after_a_hold_ends_at_it():
+    """An actuated controller counts a red's minEndTime down, holds it while it extends the red (it moves later with
+    the clock), then lets it run again, and the red ends then (2019-05-01: within 1.5 s of it in 97 % of such
+    readings, 36 % before any hold). Reds of 30-55 s, each held for 5-30 s; one now resumed 13 s before its minEnd:
+    likely over at minEnd (the durations alone say 25 s). Both days' recordings: approaches > +10 % against the
+    regular driver 28 -> 23 and 32 -> 24."""
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    h = PhaseHistory()
+
+    def red(t, hold_s, until_s=None):
+        start = t
+        while until_s is None or t < start + until_s:
+            run = t - start
+            min_end = start + 25.0 if run < 10.0 else (t + 15.0 if run < 10.0 + hold_s else start + 10.0 + hold_s + 15.0)
+            if until_s is None and t >= min_end:
+                return t
+            h.update(t, published(RED, min_end))
+            t += 1.0
+        return t
+
+    t = T0
+    for hold in (5, 25, 10, 30, 15):
+        t = feed(h, red(t, hold), [(GREEN, 20)])
+    assert not h.stats().resumed and len(h.stats().after_resumed(PhaseClass.RED)) >= 20
+    t = red(t, 3, until_s=15.0)  # held for 3 s, running again since 12 s in: minEnd 28 s in
+    plan = published(RED, t - 15.0 + 28.0)
+    stats = h.update(t, plan)
+    assert stats.resumed and max(stats.after_resumed(PhaseClass.RED)) < 1.0
+    view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t)
+    assert view.likely_red_windows_s[0][1] == pytest.approx(13.0, abs=1.0)  # at minEnd (the durations' median: 25 s)
+    assert view.late_red_windows_s[0][1] >= 25.0  # the late end stays what the durations say
 
 
 def test_a_phase_nobody_can_read_is_no_data_not_a_red():

@@ -221,7 +221,9 @@ def _reading(plan, r):
 
 def test_the_store_learns_each_group_and_hands_it_to_the_observation(tmp_path):
     """What a group has been seen to do travels with its reading (PlanReading.cycle), as a receiver fed the
-    same states directly learns it; the controller's clock offset comes along (feed minus ours)."""
+    same messages directly learns it (durations, and how soon after a resumed minEndTime phases end); the
+    controller's clock offset comes along (feed minus ours)."""
+    from spat_feed.messages import plan_from_movement
     from spat_feed.observe import PhaseHistory
 
     log = read_spat_log(recorded_spat_slice(tmp_path, 5000))
@@ -233,7 +235,7 @@ def test_the_store_learns_each_group_and_hands_it_to_the_observation(tmp_path):
         clock.t = played_at + 0.6  # every state arrives 0.6 s after its timestamp: a controller 0.6 s behind
         assert store.offer(state) == "ok"
         if (movement := state.movement(1)) is not None:
-            direct.update(to_unix_s(state.timestamp), movement.state_time_speed[0].event_state)
+            direct.update(to_unix_s(state.timestamp), plan_from_movement(movement, to_unix_s(state.timestamp)))
     reading = store.plan_reading(648, 1)
     assert reading.fresh and reading.plan is not None
     assert reading.cycle == direct.stats() and reading.cycle.cycle_s is not None and len(reading.cycle.durations_s) >= 2
