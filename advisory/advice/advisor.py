@@ -17,8 +17,10 @@ How the advice is made (docs/ADVISOR.md):
    form). If no speed is sure under an actuated light's windows: a plan on its likely changes (never faster
    than now, never slowing for a red the car may beat as it is). If none: prepare to stop when a stop is
    likely and near, "Red light ahead." when far.
-4. **Hysteresis**: the previous target is kept while it stays feasible and close; ``speak`` is raised only
-   when the action changes, or the target moves by ``speak_change_mps``.
+4. **Hysteresis**: the previous target is kept while it stays feasible and close (a plan made on the likely
+   changes, while it works on them for a driver already following it, unless the car may beat a red as it is
+   or the plan gives up time before a green ends); ``speak`` is raised only when the action changes, or the
+   target moves by ``speak_change_mps``.
 """
 
 from __future__ import annotations
@@ -616,6 +618,29 @@ def _holds_on_likely(lights: tuple[LightView, ...], obs: Observation, params: Ad
     )
 
 
+def _gives_up_time(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, planned_s: float, to_red_s: float | None) -> bool:
+    """Green now, under uncertain timing: a normal drive is over the next line before its likely red (``to_red_s``)
+    and makes the lines after it as likely, while the plan reaches the line more than :data:`TIGHT_SLACK_S` later
+    (still before that red): time given up against a red that may come early."""
+    if to_red_s is None or (normal_s := _normal_drive_s(lights[0].distance_m, obs, params)) >= to_red_s:
+        return False
+    return normal_s + TIGHT_SLACK_S < planned_s < to_red_s and all(
+        _green_crossing(light, _normal_drive_s(light.distance_m, obs, params), params.green_margin_s) for light in lights[1:])
+
+
+def _kept_on_likely(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, last: Advice, red: bool) -> bool:
+    """A plan made on the likely changes still works on them for a driver already following it (no new reaction
+    delay): it is kept, as a sure plan is while it stays sure. Not while the car may beat a red as it is, nor where it
+    gives up time before a green ends (those rules stand over a kept plan as over a new one)."""
+    likely = tuple(_likely_only(light) if light.likely_red_windows_s is not None else light for light in lights)
+    if likely == lights or not _kept(_Lines.of(likely), likely, obs, params, last):
+        return False
+    if red:
+        return True
+    planned_s = crossing_time_s(lights[0].distance_m, obs.speed_mps, last.target_speed_mps, params, KEEP_MODES[last.action], 0.0)
+    return not _beats_maybe(lights[:1], obs, params) and not _gives_up_time(likely, obs, params, planned_s, _countdown_view(lights[0]).seconds_to_red())
+
+
 def _countdown_view(light: LightView) -> LightView:
     """The light with each change at its likely instant (what is said: "Green in 12 seconds")."""
     if light.likely_red_windows_s is None:
@@ -656,7 +681,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     last = memory.last
     if last is not None and last.target_speed_mps is not None and last.action in KEEP_MODES:
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
-        if _kept(both, usable, obs, params, last):
+        if _kept(both, usable, obs, params, last) or (last.reason == "green_wave" and _kept_on_likely(usable, obs, params, last, red)):
             action = last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise"
             return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source)
     n_lines, mode, feasible = _search(both, obs, params)
@@ -688,8 +713,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     to_red = None if red or not (exact or on_likely) else _countdown_view(nxt).seconds_to_red()
     if to_red is not None and (normal_s := _normal_drive_s(nxt.distance_m, obs, params)) < to_red:
         planned_s = crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible.max()), params, mode) if feasible.size else np.inf
-        if planned_s >= to_red if exact else normal_s + TIGHT_SLACK_S < planned_s < to_red and all(
-            _green_crossing(light, _normal_drive_s(light.distance_m, obs, params), params.green_margin_s) for light in usable[1:]):
+        if planned_s >= to_red if exact else _gives_up_time(usable, obs, params, planned_s, to_red):
             # green now, and a normal drive (speeding up to the limit at the regular driver's rate: no advice to react
             # to) is over the line before the red, where no comfortable speed is (exact timing): a plan for the green
             # after the red, or a "prepare to stop", would lose a cycle that the driver makes without advice. Under
