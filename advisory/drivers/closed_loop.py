@@ -196,9 +196,10 @@ def simulate(
                     amber_go.add(n)
                     committed.add(n)
             overdue = display is None or (not display.is_red(t) and t - green_since.get(n, -np.inf) >= driver.reaction_s)
-            # or still red where a stop at the line needs ``last_call_decel_mps2`` (a red held longer since the driver
-            # committed: an actuated controller's late change): nobody rolls on into a red they can still stop for
-            overdue = overdue or (red_now and v * v >= 2.0 * driver.last_call_decel_mps2 * max(room, 1e-6))
+            # or, rolling on (no stop asked for), still red where a stop at the line needs ``last_call_decel_mps2`` (a
+            # red held longer since the driver committed: an actuated controller's late change): nobody rolls on into a
+            # red they can still stop for
+            overdue = overdue or (red_now and v_cmd > 0.0 and v * v >= 2.0 * driver.last_call_decel_mps2 * max(room, 1e-6))
             if n in committed and red_now and surprised.get(n) != light.next_green_start_s(t) and overdue:
                 surprises += 1  # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at all possible
                 surprised[n] = light.next_green_start_s(t)  # (once per red)
