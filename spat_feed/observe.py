@@ -210,7 +210,7 @@ class PhaseHistory:
 
 def _published_min_end(plan: UncertainPlan, t_unix_s: float) -> float | None:
     """The ``minEndTime`` of the published phase (:func:`published_state`), None when it has none."""
-    i = sum(1 for c in plan.changes if c.max_end_s <= t_unix_s)
+    i = _published_index(plan, t_unix_s)
     return plan.changes[i].min_end_s if i < len(plan.changes) else None
 
 
@@ -262,7 +262,12 @@ Bound = tuple[float, float, float]
 def published_state(plan: UncertainPlan, t_unix_s: float) -> MovementPhaseState:
     """The state the plan says holds unless a change has surely come (the lowest possible index at ``t_unix_s``).
     A phase past its ``minEndTime`` is still this state: it may end any moment, it is not unknown."""
-    return plan.states[sum(1 for c in plan.changes if c.max_end_s <= t_unix_s)]
+    return plan.states[_published_index(plan, t_unix_s)]
+
+
+def _published_index(plan: UncertainPlan, t_unix_s: float) -> int:
+    """The lowest index the plan's state can have at ``t_unix_s``: changes that have surely come."""
+    return sum(1 for c in plan.changes if c.max_end_s <= t_unix_s)
 
 
 def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cycle: CycleStats | None) -> list[tuple[PhaseClass, Bound, Bound]]:

@@ -67,8 +67,9 @@ class LightView:
     age_s: float = 0.0  # how old the SPaT behind this view is (a dropout: not fresh, windows of the last reading) [s]
     unknown_windows_s: tuple[tuple[float, float], ...] = ()  # phases whose state nothing reads, at their likely times [s]
     """Within the windows above, the phases whose state is unknown (J2735 ``unavailable`` or ``dark`` that the
-    group's history cannot read, and the time past what it can bound), as each change is likely: no plan crosses
-    in them, but they are not a red: no stop is asked for them (the driver is told there is no data)."""
+    group's history cannot read, where they end: not the open tail past what it can bound), as each change is
+    likely: no plan crosses in them, but they are not a red: no stop is asked for them (the driver is told there is
+    no data)."""
 
     def likely_red_at(self, t_s: float) -> bool:
         """Red at ``t_s`` seconds from now if every change comes at its likely time (exact plans: :meth:`is_red_at`);
