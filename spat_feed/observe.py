@@ -344,7 +344,9 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
         # minutes); the likely end is the durations' median, but no later than the controller's own maxEndTime
         likely, late = min(_quantile(ends, 0.5), max_end), _quantile(ends, LATE_QUANTILE)
         if resumed and (excess := cycle.after_resumed(cls)):  # its minEndTime runs again after a hold: as such phases ended
+            # (likely at their median, late at their 90th percentile: 10 % of them later, as for the durations)
             likely = min(published[0] + _quantile(excess, 0.5), max_end)
+            late = published[0] + _quantile(excess, LATE_QUANTILE)
     elif cls is PhaseClass.UNKNOWN and math.isfinite(max_end):  # an amber or go phase longer than any seen: as published
         likely, late = published[1], max_end
     else:

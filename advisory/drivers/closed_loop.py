@@ -224,6 +224,8 @@ def simulate(
             elif n in committed:
                 if red_now:  # committed while red: it turns green before arrival at this speed, not faster
                     v_cmd = min(v_cmd, v)
+                    if room <= v * dt_s:  # creeping up to a line still red: wait at it (it crept over the line)
+                        v_cmd, rate_down = 0.0, min(v * v / (2.0 * max(dist - 0.05, 1e-3)), 4.0)
                 elif active is not None and active.action == "stop":
                     v_cmd = v_lim
                 # going: slow down only if the line is still cleared, with a second to spare, before the next
