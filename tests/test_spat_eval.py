@@ -81,3 +81,15 @@ def test_cli_json(head, monkeypatch, capsys):
     assert cli(["spat-eval", str(RECORDINGS[-1]), "--json", "--limit-s", "400", "--workers", "1", "--every-s", "60"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["approaches"] >= 1 and set(out["by_kind"]) == {"single", "pair"}
+
+
+def test_recorded_approaches_that_crossed_a_red_no_longer_do():
+    """Two approaches of 2019-05-17 that ended in a red (found by spat-eval while the advisor changed): group 12 at
+    1558113872.65, a crawling car committed to go, the controller held the red 4 s longer and the silent advisor let
+    it roll on (now the driver's last call stops it); groups 1 and 3 at 1558117672.65, a car creeping at 0.15 m/s
+    committed to a green its display put before its arrival, and crept over the line (now it waits at the line)."""
+    spat_eval._LOGS = spat_eval.group_logs(spat_eval._read_head(str(RECORDINGS[-1]), 5400.0))
+    keys = [log.key[1] for log in spat_eval._LOGS]
+    for groups, entry in (((12,), 1558113872.65), ((1, 3), 1558117672.65)):
+        row = spat_eval.approach((tuple(keys.index(g) for g in groups), entry, spat_eval.Setup()))
+        assert row is not None and not row["red_entry"] and not row["hard_brake"], (groups, entry)
