@@ -183,7 +183,10 @@ class SpatStore:
                     history = entry.histories.get(movement.signal_group)
                     if history is None:
                         history = entry.histories[movement.signal_group] = PhaseHistory()
-                    if history.record(stamp, plan_from_movement(movement, stamp)):  # (its minEndTime too: held, resumed)
+                    # parsed once per message: the plan the history records (its minEndTime too: held, resumed) is the
+                    # one readings get (the first movement of a group, as IntersectionState.movement finds it)
+                    plan = entry.plans.setdefault(movement.signal_group, plan_from_movement(movement, stamp))
+                    if history.record(stamp, plan):
                         entry.cycles.pop(movement.signal_group, None)
                 offsets, offset = entry.offsets, received - stamp  # a monotonic deque: its head is the window's floor
                 while offsets and offsets[-1][1] >= offset:
