@@ -557,3 +557,15 @@ def test_a_plan_on_the_likely_changes_is_kept_while_it_works_on_them():
     kept = advise(Observation(limit, limit, lights(27.8, 2.0)), memory, params)[0]
     assert (kept.action, kept.target_speed_mps) == ("coast", plan.target_speed_mps)  # (was "Hold 50.")
     assert advise(Observation(limit, limit, lights(27.8, 2.0)), AdvisorMemory(), params)[0].action == "cruise"  # a new plan: not found
+
+
+def test_a_plan_on_the_likely_changes_keeps_an_exact_lights_reds():
+    """Under uncertain timing the plan sees each light with its changes at their likely instants; a light whose
+    windows are exact (no likely view: both its changes known) is seen as it is. It was seen with no red at all, so a
+    plan for an uncertain first light could cross the second one in its red (05-01/05-17: 11 approaches moved)."""
+    from advisory.advice.advisor import _likely_only
+
+    exact = LightView(2, 600.0, True, 1.0, ((20.0, 50.0),))
+    assert _likely_only(exact).red_windows_s == ((20.0, 50.0),) and _likely_only(exact).is_red_at(30.0)
+    uncertain = LightView(1, 300.0, True, 1.0, ((0.0, 40.0),), ((0.0, 25.0),), ((0.0, 40.0),))
+    assert _likely_only(uncertain).red_windows_s == ((0.0, 25.0),)

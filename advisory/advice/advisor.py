@@ -592,7 +592,9 @@ def _kept(lines: _Lines, usable: tuple[LightView, ...], obs: Observation, params
 
 
 def _likely_only(light: LightView) -> LightView:
-    """The light with each change at its likely instant, as a plan under uncertainty sees it."""
+    """The light with each change at its likely instant, as a plan under uncertainty sees it (an exact light as it is)."""
+    if light.likely_red_windows_s is None:
+        return light
     return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or (), light.likely_red_windows_s)
 
 
@@ -614,7 +616,7 @@ def _beats_maybe(lights: tuple[LightView, ...], obs: Observation, params: Adviso
 def _holds_on_likely(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> bool:
     """Holding its speed, the car crosses every line on green if each change comes at its likely time (margin kept)."""
     return obs.speed_mps > 0.0 and all(
-        _green_crossing(_likely_only(light) if light.likely_red_windows_s is not None else light, light.distance_m / obs.speed_mps, params.green_margin_s)
+        _green_crossing(_likely_only(light), light.distance_m / obs.speed_mps, params.green_margin_s)
         for light in lights
     )
 
@@ -633,7 +635,7 @@ def _kept_on_likely(lights: tuple[LightView, ...], obs: Observation, params: Adv
     """A plan made on the likely changes still works on them for a driver already following it (no new reaction
     delay): it is kept, as a sure plan is while it stays sure. Not while the car may beat a red as it is, nor where it
     gives up time before a green ends (those rules stand over a kept plan as over a new one)."""
-    likely = tuple(_likely_only(light) if light.likely_red_windows_s is not None else light for light in lights)
+    likely = tuple(_likely_only(light) for light in lights)
     if likely == lights or not _kept(_Lines.of(likely), likely, obs, params, last):
         return False
     if red:
