@@ -6,8 +6,9 @@ J2735 movement states (:func:`spat_feed.recorded.read_spat_csv`), each second's 
 the last snapshot is under ``stale_after_s`` old), the advisor's observation comes from
 :func:`spat_feed.observe.light_view`, and the virtual driver of :func:`advisory.drivers.closed_loop.simulate`
 follows the advice, seeing the light's real colour. The source has watched the log from its start: each
-group's :class:`~spat_feed.observe.PhaseHistory` (what the advisor knows of the phases after the published one)
-holds every snapshot up to the reading's. The truth is the log itself: a phase switches midway
+intersection's :class:`~spat_feed.observe.IntersectionHistory` (what the advisor knows of the phases after the
+published one: each group's durations, and the changes of other groups its phases follow) holds every snapshot up
+to the reading's. The truth is the log itself: a phase switches midway
 between the last snapshot in it and the first after it; red is every J2735 stop state (unavailable and dark
 are not red: one recording publishes the non-red state of some groups as unavailable). Amber (J2735 clearance)
 is green for the rules and a warning to the driver's eye, who stops at it if that takes at most 4 m/s²; a
@@ -51,7 +52,7 @@ from advisory.physics.params import model_params
 from advisory.signals import Scenario, TimelineSignal
 from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.messages import MovementState, plan_from_movement, to_unix_s
-from spat_feed.observe import PhaseHistory, PlanReading, light_view
+from spat_feed.observe import CycleStats, IntersectionHistory, PlanReading, light_view
 from spat_feed.plans import STOP_STATES, PhaseClass, phase_class
 
 HINDSIGHT_GRID = GridSpec(stage_m=20.0)
@@ -82,7 +83,7 @@ class GroupLog:
     movements: list[MovementState]
     truth: TimelineSignal  # position 0: placed by the approach
     plans: list = None  # each snapshot read as a receiver does (plan_from_movement)
-    cycles: list = None  # what the receiver had learnt of the group by then (PhaseHistory), one per snapshot
+    cycles: list = None  # what the receiver had learnt of the group by then (IntersectionHistory), one per snapshot
 
     def reading(self, t_s: float, stale_after_s: float) -> PlanReading | None:
         """What the SPaT source holds at ``t_s``: the latest snapshot, aged, with the history learnt so far."""
@@ -95,11 +96,17 @@ class GroupLog:
 
 def group_logs(snapshots) -> list[GroupLog]:
     """Per (intersection, signal group): its snapshots and the truth (switches midway between snapshots)."""
-    rows: dict[tuple[int, int], list[tuple[float, MovementState]]] = {}
-    for ix in snapshots:
+    rows: dict[tuple[int, int], list[tuple[float, MovementState, object, CycleStats]]] = {}
+    histories: dict[int, IntersectionHistory] = {}
+    for ix in snapshots:  # read as a receiver does: each message's plans, and what was learnt by then
         t = to_unix_s(ix.timestamp)
+        plans = {}
         for m in ix.states:
-            rows.setdefault((ix.id, m.signal_group), []).append((t, m))
+            plans.setdefault(m.signal_group, plan_from_movement(m, t))
+        history = histories.setdefault(ix.id, IntersectionHistory())
+        history.record(t, plans)
+        for m in ix.states:
+            rows.setdefault((ix.id, m.signal_group), []).append((t, m, plans[m.signal_group], history.stats(m.signal_group)))
     out = []
     for key, items in sorted(rows.items()):
         t = np.array([r[0] for r in items])
@@ -122,10 +129,7 @@ def group_logs(snapshots) -> list[GroupLog]:
         if not amber.any():  # a group that never publishes its amber (its non-red state as unavailable): it had one
             ends = [-math.inf] + [b for _, b in reds]
             ambers = tuple((max(a - AMBER_S, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a))
-        history = PhaseHistory()
-        plans = [plan_from_movement(m, float(u)) for u, (_, m) in zip(t, items)]
-        cycles = [history.update(float(u), p) for u, p in zip(t, plans)]
-        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers), plans, cycles))
+        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers), [r[2] for r in items], [r[3] for r in items]))
     return out
 
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from spat_feed.messages import IntersectionState, SpatMessage, plan_from_movement, to_unix_s
-from spat_feed.observe import CycleStats, PhaseHistory, PlanReading
+from spat_feed.observe import IntersectionHistory, PlanReading
 from spat_feed.plans import UncertainPlan
 from spat_feed.scenarios import FeedScenario, spat_message_at
 
@@ -107,9 +107,9 @@ class IntersectionStats:
 
 class _Entry:
     """The latest state of one intersection, its plans parsed once per signal group, its clock offsets, and
-    per signal group what it has been seen to do (:class:`~spat_feed.observe.PhaseHistory`)."""
+    what its signal groups have been seen to do (:class:`~spat_feed.observe.IntersectionHistory`)."""
 
-    __slots__ = ("state", "stamp", "received", "plans", "offsets", "ahead_unix_s", "histories", "cycles")
+    __slots__ = ("state", "stamp", "received", "plans", "offsets", "ahead_unix_s", "history")
 
     def __init__(self) -> None:
         self.state: IntersectionState | None = None
@@ -117,8 +117,7 @@ class _Entry:
         self.plans: dict[int, UncertainPlan | None] = {}
         self.offsets: deque[tuple[float, float]] = deque()  # (arrival, arrival - timestamp), offsets increasing
         self.ahead_unix_s = float("-inf")  # arrival of the last message rejected as clock_ahead
-        self.histories: dict[int, PhaseHistory] = {}
-        self.cycles: dict[int, CycleStats] = {}  # the histories' snapshots, taken when read after a change
+        self.history = IntersectionHistory()
 
 
 class SpatStore:
@@ -179,15 +178,11 @@ class SpatStore:
             else:
                 verdict = "ok"
                 entry.state, entry.stamp, entry.received, entry.plans = state, stamp, received, {}
-                for movement in state.states:  # the published (current) state of each group: its phase durations
-                    history = entry.histories.get(movement.signal_group)
-                    if history is None:
-                        history = entry.histories[movement.signal_group] = PhaseHistory()
+                for movement in state.states:
                     # parsed once per message: the plan the history records (its minEndTime too: held, resumed) is the
                     # one readings get (the first movement of a group, as IntersectionState.movement finds it)
-                    plan = entry.plans.setdefault(movement.signal_group, plan_from_movement(movement, stamp))
-                    if history.record(stamp, plan):
-                        entry.cycles.pop(movement.signal_group, None)
+                    entry.plans.setdefault(movement.signal_group, plan_from_movement(movement, stamp))
+                entry.history.record(stamp, entry.plans)  # each group's phases, and the links between groups
                 offsets, offset = entry.offsets, received - stamp  # a monotonic deque: its head is the window's floor
                 while offsets and offsets[-1][1] >= offset:
                     offsets.pop()
@@ -244,10 +239,7 @@ class SpatStore:
         if reading is None:
             return PlanReading(None, fresh=False, age_s=float("inf"))
         with self._lock:
-            entry = self._entries[intersection_id]
-            cycle = entry.cycles.get(signal_group)
-            if cycle is None and (history := entry.histories.get(signal_group)) is not None:
-                cycle = entry.cycles[signal_group] = history.stats()
+            cycle = self._entries[intersection_id].history.stats(signal_group)
         return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s)
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:

@@ -434,3 +434,141 @@ def test_the_likely_end_is_no_later_than_the_controllers_max_end():
     assert view.late_red_windows_s[0] == pytest.approx((0.0, 40.0))  # the late end: as the group has done
     early = published(RED, t + 10.0, t + 60.0)  # maxEnd after what the group does: the durations seen decide
     assert light_view(ix, PlanReading(early, cycle=stats), 0.0, t).likely_red_windows_s[0] == pytest.approx((0.0, 40.0))
+
+
+AMBER = S.PROTECTED_CLEARANCE
+
+
+def two_stage_controller(rng, cycles, intergreen_s=4.0, amber_s=3.0):
+    """Readings once a second of a two-stage controller: group 1 green for an actuated 15-35 s, amber, then red;
+    group 2's green comes ``amber + intergreen`` after group 1's green ends and lasts an actuated 10-30 s; then group
+    1's again. A green is published with a minEnd 5 s after its start, a red with minEnd now (it may end any moment: its
+    controller does not say). Yields (t, {group: plan}, ends) where
+    ends[g] is the true end of group g's phase in progress."""
+    t, out = T0, []
+    for _ in range(cycles):
+        g1 = float(rng.integers(15, 36))
+        g2 = float(rng.integers(10, 31))
+        a, b, c = t + g1, t + g1 + amber_s, t + g1 + amber_s + intergreen_s  # group 1 amber, red; group 2 green at c
+        d = c + g2  # group 2 amber; group 1 green again at d + amber + intergreen
+        e = d + amber_s + intergreen_s
+        while t < e - 1e-9:
+            s1 = (GREEN, t + 5 if t < a - 5 else a, a) if t < a else (AMBER, b, b) if t < b else (RED, t, e + 30)
+            s2 = (RED, t, c + 30) if t < c else (GREEN, d, d) if t < d else (AMBER, d + amber_s, d + amber_s) if t < d + amber_s else (RED, t, e + 90)
+            plans = {g: published(st, lo, hi) for g, (st, lo, hi) in ((1, s1), (2, s2))}
+            ends = {1: a if t < a else b if t < b else e, 2: c if t < c else d if t < d else d + amber_s if t < d + amber_s else None}
+            out.append((t, plans, ends))
+            t += 1.0
+    return out
+
+
+def test_a_phase_ends_as_the_change_of_another_group_it_follows():
+    """A controller runs its stages in order with a fixed intergreen: group 2's red ends 7 s after group 1's green
+    ends, however long that green ran (actuated: 15-35 s), and group 1's red 7 s after group 2's. Each group's own
+    durations spread its red's end over 20 s; once the other group's green has ended, the link says the red ends in
+    7 s (likely and late: the view's windows say so). Before that change, and in a green (whose end no change of the
+    other group precedes), nothing is linked."""
+    import numpy as np
+
+    from spat_feed.observe import IntersectionHistory
+
+    history = IntersectionHistory()
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    linked = unlinked = 0
+    green_ended, was = {}, {}
+    for n, (t, plans, ends) in enumerate(two_stage_controller(np.random.default_rng(3), 40)):
+        history.record(t, plans)
+        for g, plan in plans.items():
+            if was.get(g) is GREEN and plan.states[0] is not GREEN:
+                green_ended[g] = t
+            was[g] = plan.states[0]
+        if n < 900:  # 15 cycles (60 s on average) to learn from
+            continue
+        for g, other in ((1, 2), (2, 1)):
+            stats = history.stats(g)
+            if plans[g].states[0] is not RED or ends[g] is None:
+                assert stats.linked_end_unix_s is None
+                continue
+            view = light_view(ix, PlanReading(plans[g], cycle=stats), 0.0, t)
+            if green_ended[other] >= stats.since_unix_s:  # the other group's green ended during this red
+                assert stats.linked_end_unix_s == pytest.approx((ends[g], ends[g]), abs=1.0)
+                assert (view.likely_red_windows_s or view.red_windows_s)[0][1] == pytest.approx(ends[g] - t, abs=1.0)
+                assert view.red_windows_s[0][1] == pytest.approx(ends[g] - t, abs=1.0)  # its late end: the sure window's
+                linked += 1
+            else:
+                assert stats.linked_end_unix_s is None
+                unlinked += 1
+    assert linked > 100 and unlinked > 100
+
+
+def test_links_speak_only_once_they_hold_and_forget_a_gap():
+    """Group 1 green for 10-19 s, then red; group 2's red ends 7 s after group 1's green does. The link speaks from
+    the :data:`MIN_LINKS_SEEN`-th red of group 2 seen whole (the first began before the readings did), once group 1
+    has turned red in it; group 2's own change into red (its start: the lags vary) never speaks. A gap in the
+    readings forgets the changes seen and the phases in progress."""
+    from spat_feed.observe import MIN_LINKS_SEEN, ChangeLinks
+
+    links = ChangeLinks(max_gap_s=5.0)
+    G, R_ = PhaseClass.GREEN, PhaseClass.RED
+
+    def cycle(t, g1, until_s=math.inf):
+        for u in range(int(g1) + 27):  # group 1: green g1 s, red 27 s; group 2: red until g1 + 7 s, then green
+            if u > until_s:
+                return t + u - 1
+            links.record(t + u, {1: G if u < g1 else R_, 2: R_ if u < g1 + 7 else G})
+        return t + g1 + 27
+
+    t = 0.0
+    for k in range(MIN_LINKS_SEEN):
+        t = cycle(t, 10 + k % 10)
+    cycle(t, 12, until_s=12)  # group 1 has just turned red: MIN_LINKS_SEEN - 1 reds of group 2 seen whole
+    assert links.end_of(2) is None
+    t = cycle(t, 12)
+    t = cycle(t, 15, until_s=15)  # one more seen: the link speaks
+    assert links.end_of(2) == pytest.approx((t + 7.0, t + 7.0))
+    assert links.end_of(1) is None  # group 1's red has just begun: nothing of group 2 within it
+    links.record(t + 20.0, {1: R_, 2: R_})  # a gap of 20 s: changes and phases in progress forgotten
+    assert links.end_of(2) is None
+
+
+def test_links_on_a_real_controller_tell_when_a_red_ends():
+    """2019-05-17, the first 1.5 hours as a receiver reads them: at reds 10-20 s before they really end (the log's
+    next non-red snapshot), where a link speaks, its likely end misses by < 1 s on average, a fraction of what the
+    group's own history says then (durations, minEnd held and resumed). Nothing is fitted: links learnt online."""
+    import csv
+    import gzip
+    from dataclasses import replace
+    from itertools import islice
+
+    from spat_feed.observe import IntersectionHistory, predicted_phases
+    from spat_feed.recorded import iter_spat_csv
+    from tests.conftest import SHARED_DATA
+
+    path = SHARED_DATA / "spat" / "antwerp-2019-05-17.csv.gz"
+    if not path.exists():
+        pytest.skip("recorded SPaT not available")
+    with gzip.open(path, "rt", newline="") as fh:
+        snaps = list(islice(iter_spat_csv(csv.DictReader(fh)), 5400))
+    history = IntersectionHistory()
+    reds: dict[int, list] = {}  # group -> readings of the red in progress: (t, linked likely end, own likely end)
+    errors = []
+    for snap in snaps:
+        t = snap.timestamp.timestamp()
+        plans = {}
+        for m in snap.states:
+            plans.setdefault(m.signal_group, plan_from_movement(m, t))
+        history.record(t, plans)
+        for g, plan in plans.items():
+            if plan.states[0] is not RED:
+                errors += [(a - t, b - t) for u, a, b in reds.pop(g, ()) if 10.0 <= t - u <= 20.0]
+                continue
+            stats = history.stats(g)
+            if stats.linked_end_unix_s is not None:
+                ends = [predicted_phases(plan, t, 150.0, c)[0][2][1] for c in (stats, replace(stats, linked_end_unix_s=None))]
+                reds.setdefault(g, []).append((t, *ends))
+            else:
+                reds.setdefault(g, [])
+    import numpy as np
+
+    linked, own = np.abs(np.array(errors)).mean(axis=0)
+    assert len(errors) > 1000 and linked < 1.0 and linked < 0.3 * own, (len(errors), linked, own)

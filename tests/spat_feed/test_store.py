@@ -221,23 +221,27 @@ def _reading(plan, r):
 
 def test_the_store_learns_each_group_and_hands_it_to_the_observation(tmp_path):
     """What a group has been seen to do travels with its reading (PlanReading.cycle), as a receiver fed the
-    same messages directly learns it (durations, and how soon after a resumed minEndTime phases end); the
-    controller's clock offset comes along (feed minus ours)."""
+    same messages directly learns it (durations, how soon after a resumed minEndTime phases end, and the changes of
+    other groups its phases follow); the controller's clock offset comes along (feed minus ours)."""
     from spat_feed.messages import plan_from_movement
-    from spat_feed.observe import PhaseHistory
+    from spat_feed.observe import IntersectionHistory
 
-    log = read_spat_log(recorded_spat_slice(tmp_path, 5000))
+    log = read_spat_log(recorded_spat_slice(tmp_path, 30000))
     clock = Clock(T0)
     store = SpatStore(TimeRules(clock_tolerance_s=1.0), clock)
-    direct = PhaseHistory()
+    direct = IntersectionHistory()
     player = LogPlayer(log, start_unix_s=T0, speedup=1.0)
+    linked = 0
     for played_at, state in player:
         clock.t = played_at + 0.6  # every state arrives 0.6 s after its timestamp: a controller 0.6 s behind
         assert store.offer(state) == "ok"
-        if (movement := state.movement(1)) is not None:
-            direct.update(to_unix_s(state.timestamp), plan_from_movement(movement, to_unix_s(state.timestamp)))
+        t = to_unix_s(state.timestamp)
+        direct.record(t, {m.signal_group: plan_from_movement(m, t) for m in reversed(state.states)})  # a group's first movement
+        for g in (1, 3, 4, 5):
+            assert store.plan_reading(648, g).cycle == direct.stats(g)
+            linked += direct.stats(g).linked_end_unix_s is not None
     reading = store.plan_reading(648, 1)
     assert reading.fresh and reading.plan is not None
-    assert reading.cycle == direct.stats() and reading.cycle.cycle_s is not None and len(reading.cycle.durations_s) >= 2
+    assert reading.cycle.cycle_s is not None and len(reading.cycle.durations_s) >= 2 and linked > 0
     assert reading.clock_offset_s == pytest.approx(-0.6)
     assert store.plan_reading(648, 99).plan is None and store.plan_reading(9, 1).fresh is False
