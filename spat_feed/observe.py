@@ -420,7 +420,8 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
     # unbounded (its window's middle as the likely end slowed cars that the regular driver beat: docs/ADVISOR.md 1a)
     cls, begun, published = out[-2]
     since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
-    rest = _continued(cls, since, begun, t_unix_s, max(t_unix_s, published[0]), horizon_s, cycle, published, cycle.current is cls)
+    current = cycle.current is cls and len(out) - 2 <= _published_index(plan, t_unix_s)  # the phase in progress, not a later one
+    rest = _continued(cls, since, begun, t_unix_s, max(t_unix_s, published[0]), horizon_s, cycle, published, current)
     return out if rest is None else out[:-2] + rest
 
 

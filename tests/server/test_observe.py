@@ -525,7 +525,7 @@ def test_links_speak_only_once_they_hold_and_forget_a_gap():
     assert links.end_of(2) is None
     t = cycle(t, 12)
     t = cycle(t, 15, until_s=15)  # one more seen: the link speaks
-    assert links.end_of(2) == pytest.approx((t + 7.0, t + 7.0))
+    assert links.end_of(2) == pytest.approx((t + 7.0, t + 7.0), abs=1e-6)
     assert links.end_of(1) is None  # group 1's red has just begun: nothing of group 2 within it
     links.record(t + 20.0, {1: R_, 2: R_})  # a gap of 20 s: changes and phases in progress forgotten
     assert links.end_of(2) is None
@@ -572,3 +572,18 @@ def test_links_on_a_real_controller_tell_when_a_red_ends():
 
     linked, own = np.abs(np.array(errors)).mean(axis=0)
     assert len(errors) > 1000 and linked < 1.0 and linked < 0.3 * own, (len(errors), linked, own)
+
+
+def test_what_is_learnt_of_the_phase_in_progress_does_not_end_a_later_one():
+    """A feed that publishes several phases (red now, green, red again, then unknown): the link (or a resumed
+    minEnd) that ends the red *now* must not end the later red, whose end comes from the durations seen (reds of
+    40 s: it began at +25 s, so likely at +65 s). It ended at its minEnd (+60 s), where the link's end was clamped."""
+    from spat_feed.observe import CycleStats, predicted_phases
+
+    t = T0
+    durations = {PhaseClass.RED: (40.0,) * 5, PhaseClass.GREEN: (20.0,) * 5}
+    cycle = CycleStats(durations, {PhaseClass.RED: PhaseClass.GREEN, PhaseClass.GREEN: PhaseClass.RED}, PhaseClass.RED, t - 10.0,
+                       linked_end_unix_s=(t + 5.0, t + 5.0))  # fmt: skip
+    plan = UncertainPlan((RED, GREEN, RED, UNAVAILABLE), (ChangeWindow(t + 5, t + 5, t + 5), ChangeWindow(t + 25, t + 25, t + 25), ChangeWindow(t + 60, t + 70, t + 90)))
+    later_red = [p for p in predicted_phases(plan, t, 150.0, cycle) if p[0] is PhaseClass.RED][1]
+    assert later_red[2][1] == pytest.approx(t + 65.0, abs=1e-6)
