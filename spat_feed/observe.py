@@ -254,7 +254,8 @@ class ChangeLinks:
         self._last_t: float | None = None
 
     def record(self, t_unix_s: float, classes: Mapping[int, PhaseClass | None]) -> bool:
-        """Take one reading of the intersection (each group's published class); returns whether a class changed."""
+        """Take one reading of the intersection: the published class of each group (at least of each whose class
+        may have changed since the last reading); returns whether a class changed."""
         if self._last_t is not None and t_unix_s <= self._last_t:
             return False
         if self._last_t is not None and t_unix_s - self._last_t > self.max_gap_s:
@@ -319,10 +320,15 @@ class IntersectionHistory:
 
     def record(self, t_unix_s: float, plans: Mapping[int, Plan | MovementPhaseState | None]) -> None:
         """Take one message: each signal group's plan (or state) at ``t_unix_s``."""
+        changed = {}
         for g, plan in plans.items():
-            if self.groups.setdefault(g, PhaseHistory()).record(t_unix_s, plan):
+            history = self.groups.get(g)
+            if history is None:
+                history = self.groups[g] = PhaseHistory()
+            if history.record(t_unix_s, plan):
                 self._stats.pop(g, None)
-        if self.links.record(t_unix_s, {g: h.current for g, h in self.groups.items() if g in plans}):
+                changed[g] = history.current
+        if self.links.record(t_unix_s, changed):
             self._stats.clear()  # a change may start a link for any group
 
     def stats(self, group: int) -> CycleStats | None:
