@@ -16,8 +16,9 @@ Run: .venv/bin/python bench/bench_advisor.py [--runs N]   (default 10,000 random
 * The 64 paper timings with actuated lights, windows ±10 s (3 draws each): mean saving against the regular
   driver on the same truth, as a share of the fixed-time saving (target >= 75 %), and the worst case (<= +10 %).
 * N randomized runs with actuated lights (``spat_feed.actuated.random_case``: windows up to ±15 s, the real
-  switch anywhere inside and up to 10 % beyond, dropouts, ±3 s clock skew): red entries and hard brakes
-  (> 4 m/s²) (target: 0 and 0). ``--actuated-runs N`` (default 10,000).
+  switch anywhere inside and up to 10 % beyond, dropouts, ±3 s clock skew; half the controllers publish their
+  current phase only, as Antwerp's, the rest learnt from their history and a conflicting stage): red entries and
+  hard brakes (> 4 m/s²) (target: 0 and 0). ``--actuated-runs N`` (default 10,000).
 """
 
 from __future__ import annotations

@@ -20,7 +20,8 @@ Pure (no clock, no I/O except :func:`fit_switches`, which reads recordings). Thr
   (:func:`spat_feed.messages.plan_from_movement`) and gives the advisor its
   :class:`~advisory.advice.advisor.Observation` through :func:`spat_feed.observe.light_view`, with dropouts
   (no message: the last one ages and goes stale), a skewed feed clock (the receiver is told only a bound,
-  ``clock_uncertainty_s``) and what the receiver learnt of each light beforehand (``PhaseHistory``).
+  ``clock_uncertainty_s``) and what the receiver learnt of each intersection beforehand (``IntersectionHistory``:
+  the light's phases, and with a :func:`conflicting_light` the changes of that stage its phases follow).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -37,12 +38,14 @@ from advisory.advice.advisor import LightView, Observation
 from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
 from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.messages import MovementState, confidence_index, movement_events, plan_from_movement, to_unix_s
-from spat_feed.observe import PhaseHistory, PlanReading, light_view
+from spat_feed.observe import IntersectionHistory, PlanReading, light_view
 from spat_feed.plans import GREEN, RED, STOP_STATES, ChangeWindow, MovementPhaseState, UncertainPlan
 
 SAMPLE_S = 1.0
 """The recordings' snapshot interval: a switch is known to within this. [s]"""
 QUANTILE_LEVELS = tuple(np.linspace(0.0, 1.0, 11))
+LIKELY_AHEAD_S = 1e-3
+"""A change that has not come yet is published as likely at least this far after now. [s]"""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -146,6 +149,10 @@ class ActuatedLight:
         ambers = [(max(a - self.amber_s, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a)]
         return TimelineSignal(self.position_m, tuple(reds), tuple(ambers))
 
+    def state_at(self, t_s: float) -> MovementPhaseState:
+        """The state really showing at ``t_s`` (what its controller publishes as the current phase)."""
+        return self.states[int(np.searchsorted(self.switches_s, t_s, side="right"))]
+
     def plan_at(self, t_s: float) -> UncertainPlan:
         """What the controller publishes at ``t_s``: the state now and every change to come, windows narrowed."""
         k = int(np.searchsorted(self.switches_s, t_s, side="right"))  # changes already made
@@ -159,7 +166,9 @@ class ActuatedLight:
             else:
                 lo = max(w.min_end_s, floor_s)
                 hi = max(w.max_end_s if w.max_end_s > t_s else t_s + self.late_push_s, lo)
-                likely, conf = min(max(w.likely_s, lo), hi), w.confidence_frac
+                # a change still to come is likely after now (a likely time that has passed would publish the next
+                # state as the current one: J2735 receivers read the current state off the likely times)
+                likely, conf = min(max(w.likely_s, lo, t_s + LIKELY_AHEAD_S), hi), w.confidence_frac
             changes.append(ChangeWindow(lo, likely, hi, conf))
             states.append(self.states[i + 1])
             floor_s = hi
@@ -207,6 +216,29 @@ def actuated_light(
     return ActuatedLight(light.position_m, tuple(states), tuple(windows), tuple(switches))
 
 
+def conflicting_light(light: ActuatedLight, rng: np.random.Generator, *, after_start_s: tuple[float, float] = (2.0, 6.0),
+                      before_end_s: tuple[float, float] = (3.0, 20.0), misfire_frac: float = 0.1,
+                      misfire_s: tuple[float, float] = (5.0, 20.0)) -> ActuatedLight:  # fmt: skip
+    """A conflicting stage of ``light``: another signal group of its intersection, green while ``light`` is red, from
+    an intergreen after each of its reds begins to a fixed lead before it ends (an intergreen and any fixed stage
+    between them; each drawn once, in ``after_start_s`` and ``before_end_s``: a controller's are fixed). In
+    ``misfire_frac`` of its greens another stage comes in between: the green ends ``misfire_s`` earlier, so a
+    receiver that learnt "``light``'s red ends the lead after this green" (:class:`~spat_feed.observe.ChangeLinks`)
+    is told too early an end, or, with too many such, learns no link. Its windows are exact."""
+    after_start, before_end = float(rng.uniform(*after_start_s)), float(rng.uniform(*before_end_s))
+    states, switches = [RED], []
+    for a, b in light.truth().reds_s:
+        if not (math.isfinite(a) and math.isfinite(b)):
+            continue
+        g0 = a + after_start
+        g1 = b - before_end - (rng.uniform(*misfire_s) if rng.uniform() < misfire_frac else 0.0)
+        if g1 - g0 >= 2.0:
+            switches += [g0, g1]
+            states += [GREEN, RED]
+    windows = tuple(ChangeWindow(x, x, x) for x in switches)
+    return ActuatedLight(light.position_m, tuple(states), windows, tuple(switches), amber_s=0.0)
+
+
 @dataclass
 class ActuatedFeed:
     """The closed loop's SPaT source for actuated lights: ``feed(t, x, v) -> Observation`` (see the module).
@@ -224,9 +256,15 @@ class ActuatedFeed:
     stale_after_s: float = 3.0
     epoch_unix_s: float = 1.7e9
     clock_uncertainty_s: float = 0.0  # what the receiver is told of the skew: a bound, not the offset [s]
-    warm_up_s: float = 600.0  # the receiver has watched each light this long before the car enters (PhaseHistory) [s]
+    warm_up_s: float = 600.0  # the receiver has watched each light this long before the car enters (IntersectionHistory) [s]
+    conflicting: Sequence[ActuatedLight | None] = ()  # each light's conflicting stage (signal group 2 of its intersection)
     _last: dict[int, tuple[float, object]] = field(default_factory=dict, repr=False)
-    _history: dict[int, PhaseHistory] = field(default_factory=dict, repr=False)
+    _history: dict[int, IntersectionHistory] = field(default_factory=dict, repr=False)
+
+    def _others(self, n: int, t_s: float) -> dict[int, MovementPhaseState]:
+        """The other signal groups of light ``n``'s intersection at ``t_s``: their states (group 2: the conflicting stage)."""
+        other = self.conflicting[n] if n < len(self.conflicting) else None
+        return {} if other is None else {2: other.state_at(t_s)}
 
     def movement_at(self, n: int, t_s: float) -> MovementState:
         """Light ``n``'s J2735 movement as published at ``t_s`` (on the feed's skewed clock)."""
@@ -241,15 +279,17 @@ class ActuatedFeed:
         for n, light in enumerate(self.lights):
             if light.position_m <= x_m or len(views) == 2:
                 continue
-            if n not in self._history:  # what the receiver learnt of the light before the car came
-                self._history[n] = PhaseHistory()
+            history = self._history.get(n)
+            if history is None:  # what the receiver learnt of the intersection before the car came
+                history = self._history[n] = IntersectionHistory()
                 for t in np.arange(t_s - self.warm_up_s, t_s, 1.0):
-                    self._history[n].update(float(t) + self.epoch_unix_s + self.skew_s, light.plan_at(float(t)).states[0])
+                    history.record(float(t) + self.epoch_unix_s + self.skew_s, {1: light.state_at(float(t)), **self._others(n, float(t))})
             if not down:
                 movement = self.movement_at(n, t_s)
                 stamp = t_s + self.epoch_unix_s + self.skew_s
                 plan = plan_from_movement(movement, stamp)
-                self._last[n] = (t_s, plan, self._history[n].update(stamp, plan))
+                history.record(stamp, {1: plan, **self._others(n, t_s)})
+                self._last[n] = (t_s, plan, history.stats(1))
             received = self._last.get(n)
             reading = None
             if received is not None:
@@ -270,26 +310,39 @@ def actuated_scenario(scenario: Scenario, half_width_s: float, rng: np.random.Ge
     return truth, lights
 
 
+CURRENT_ONLY_FRAC = 0.5
+"""Share of :func:`random_case` cases whose controller publishes the current phase only, as Antwerp's. [-]"""
+
+
 def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3.0, dropouts: bool = True):
     """One randomized closed-loop case (the tests' and the bench's): two lights 150-1000 m apart, cycle 40-120 s,
     red 30-70 %, actuated with windows up to ``±max_half_width_s`` (the real switch anywhere inside and up to
     10 % beyond), up to two dropouts of 2-10 s in the first minute, a feed clock off by up to ``±max_skew_s``,
-    tracking noise up to 1 m/s. Returns ``(truth scenario, feed, tracking noise [m/s])``."""
+    tracking noise up to 1 m/s. In :data:`CURRENT_ONLY_FRAC` of the cases (drawn apart, so the others are the
+    cases they always were) each controller publishes its current phase only, as Antwerp's: what comes after it
+    is what the receiver learnt over the 25 minutes before the car (the light's phases, and the changes of its
+    conflicting stage, :func:`conflicting_light`, with 10 % of misfires, that its reds follow).
+    Returns ``(truth scenario, feed, tracking noise [m/s])``."""
     from advisory.signals import paper_scenario
 
     rng = np.random.default_rng(seed)
+    current_only = np.random.default_rng([seed, 1]).uniform() < CURRENT_ONLY_FRAC
     cycle = rng.uniform(40, 120)
     share = rng.uniform(0.3, 0.7)
     fixed = paper_scenario(rng.uniform(-cycle, cycle), rng.uniform(-cycle, cycle), rng.uniform(150, 1000),
                            red_s=cycle * share, green_s=cycle * (1 - share))  # fmt: skip
-    truth, lights = actuated_scenario(fixed, rng.uniform(0, max_half_width_s), rng)
+    truth, lights = actuated_scenario(fixed, rng.uniform(0, max_half_width_s), rng, **({"t0_s": -1600.0} if current_only else {}))
     gaps = []
     for _ in range(rng.integers(0, 3) if dropouts else 0):
         start = rng.uniform(0, 60)
         gaps.append((start, start + rng.uniform(2, 10)))
     feed = ActuatedFeed(lights, fixed.speed_limit_mps, skew_s=rng.uniform(-max_skew_s, max_skew_s), dropouts_s=gaps,
                         clock_uncertainty_s=max_skew_s)  # fmt: skip
-    return truth, feed, float(rng.uniform(0, 1.0))
+    noise = float(rng.uniform(0, 1.0))
+    if current_only:
+        conflicting = [conflicting_light(light, rng) for light in lights]
+        feed = replace(feed, n_events=1, warm_up_s=1500.0, conflicting=conflicting)
+    return truth, feed, noise
 
 
 def recordings() -> list[str]:

@@ -163,8 +163,12 @@ def simulate(
             rate_up = rules.accel_mps2  # no speed asked for: the driver speeds up as the regular driver does
         if active is not None and active.action == "brake_to":
             rate_down = advisor.firm_decel_mps2
-        if active is not None and active.action == "stop" and x < stop_line_m and v * v < 2.0 * driver.decel_mps2 * (stop_line_m - rules.stop_gap_m - x):
-            rate_down = coast_decel_mps2(v, advisor.vehicle)  # prepare to stop: lift off until a comfortable stop at the line needs braking
+        if active is not None and active.action == "stop" and x < stop_line_m:
+            to_line_m = stop_line_m - rules.stop_gap_m - x
+            if v * v < 2.0 * driver.decel_mps2 * to_line_m:
+                rate_down = coast_decel_mps2(v, advisor.vehicle)  # prepare to stop: lift off until a comfortable stop at the line needs braking
+            else:  # then brake as it takes to stop there (told late, or a second's reaction behind: more than the comfortable rate)
+                rate_down = max(rate_down, min(v * v / (2.0 * max(to_line_m, 1e-6)), 4.0))
         # the driver's own eyes: decide once per light at the decision point, like the regular driver
         ahead = [(n, s) for n, s in enumerate(scenario.signals) if s.position_m > x + 1e-9]
         if ahead:
@@ -198,8 +202,8 @@ def simulate(
             overdue = display is None or (not display.is_red(t) and t - green_since.get(n, -np.inf) >= driver.reaction_s)
             # or, rolling on (no stop asked for), still red where a stop at the line needs ``last_call_decel_mps2`` (a
             # red held longer since the driver committed: an actuated controller's late change): nobody rolls on into a
-            # red they can still stop for
-            overdue = overdue or (red_now and v_cmd > 0.0 and v * v >= 2.0 * driver.last_call_decel_mps2 * max(room, 1e-6))
+            # red they can still stop for (checked a step ahead: at a crawl the need grows from 3 to 4+ m/s² within a step)
+            overdue = overdue or (red_now and v_cmd > 0.0 and v * v >= 2.0 * driver.last_call_decel_mps2 * max(room - v * dt_s, 1e-6))
             if n in committed and red_now and surprised.get(n) != light.next_green_start_s(t) and overdue:
                 surprises += 1  # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at all possible
                 surprised[n] = light.next_green_start_s(t)  # (once per red)

@@ -126,3 +126,64 @@ def test_switch_observations_match_the_raw_rows():
         assert lo <= hi and end >= lo - 1.0  # never before minEnd (within the 1 s sampling)
         assert to_unix_s(head[0].timestamp) < end < to_unix_s(head[-1].timestamp)
     assert any(r for r, *_ in obs) and not all(r for r, *_ in obs)
+
+
+def test_a_conflicting_stage_leads_each_red_end_and_the_receiver_links_them():
+    """The conflicting stage is green only while the light is red, from a fixed intergreen after each red begins to a
+    fixed lead before it ends (but in its misfires, which end earlier). A feed that publishes the current phase only
+    (as Antwerp's) with it: the receiver learns the link, and where it speaks in a red without a misfire, the red's
+    likely end in the view is the real end, to the 1 s readings (its late end is later, if anything: the lags'
+    90th percentile may be a misfire's)."""
+    from dataclasses import replace
+
+    from spat_feed.actuated import conflicting_light
+
+    sc = paper_scenario(-12.0, 20.0, 400.0, red_s=40.0, green_s=35.0)
+    rng = np.random.default_rng(5)
+    truth, lights = actuated_scenario(sc, 10.0, rng, t0_s=-1600.0)
+    other = conflicting_light(lights[0], rng, misfire_frac=0.1)
+    light, stage = lights[0].truth(), other.truth()
+    leads = []
+    for a, b in stage.reds_s[:-1]:  # each green of the stage: [end of one of its reds, start of the next]
+        green = (b, stage.reds_s[stage.reds_s.index((a, b)) + 1][0])
+        red = next(r for r in light.reds_s if r[0] <= green[0] and green[1] <= r[1])  # inside one of the light's reds
+        leads.append(red[1] - green[1])
+    leads = np.array(leads)
+    lead = np.median(leads)
+    assert len(leads) > 15 and np.mean(np.abs(leads - lead) < 1e-6) >= 0.75 and np.all(leads >= lead - 1e-6)  # misfires: earlier
+    feed = replace(ActuatedFeed(lights, sc.speed_limit_mps, n_events=1, warm_up_s=1500.0), conflicting=[other, None])
+    spoke = 0
+    for t in np.arange(0.0, 300.0, 1.0):
+        view = feed(float(t), 0.0, 10.0).lights[0]
+        cycle = feed._last[0][2]
+        red = next((r for r in light.reds_s if r[0] <= t < r[1]), None)
+        if cycle.linked_end_unix_s is None or red is None:
+            continue
+        told = cycle.linked_end_unix_s[0] - feed.epoch_unix_s
+        if abs(told - red[1]) < 1.5:
+            spoke += 1
+            likely = (view.likely_red_windows_s or view.red_windows_s)[0][1]
+            assert likely == pytest.approx(red[1] - t, abs=1.5) and view.red_windows_s[0][1] >= likely  # late: later, if anything
+    assert spoke > 5
+
+
+def test_the_published_current_state_is_the_real_one():
+    """A change past its likely time but not yet come was published with likelyTime = now, and J2735 readers (and
+    ``movement_events``) take the current state off the likely times: for a second the controller "published" the
+    next state (green) while the light was still red (randomized run 7853: a car crept to the line on that green and
+    then braked at 4.4 m/s²)."""
+    from spat_feed.messages import MovementState, movement_events, plan_from_movement
+    from spat_feed.plans import state_at
+
+    sc = paper_scenario(-12.0, 20.0, 400.0, red_s=40.0, green_s=35.0)
+    _, lights = actuated_scenario(sc, 10.0, np.random.default_rng(11), beyond_frac=0.5)
+    late = 0
+    for light in lights:
+        for t in np.arange(0.0, 300.0, 0.5):
+            plan = light.plan_at(float(t))
+            assert state_at(plan, float(t)) == light.state_at(float(t)), t
+            received = plan_from_movement(MovementState(signal_group=1, state_time_speed=movement_events(plan, float(t), 1)), float(t))
+            assert received.states[0] == light.state_at(float(t))  # what a receiver reads as the current phase
+            k = int(np.searchsorted(light.switches_s, t, side="right"))
+            late += k < len(light.windows) and light.windows[k].likely_s < t < light.switches_s[k]
+    assert late > 10  # changes past their likely time were there to publish
