@@ -27,8 +27,9 @@ Conversion of one light (:func:`light_view`):
   follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the current phase ends
   no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run;
   one that would have ended before ``minEndTime`` ends there: the controller holds it; once its ``minEndTime``
-  runs again after a hold, as long after it as such phases ended, :class:`PhaseHistory`) but no later than the
-  published ``maxEndTime``,
+  runs again after a hold, as long after it as such phases ended, :class:`PhaseHistory`; once a change of another
+  group that such phases end a steady time after has come, that long after it, :class:`ChangeLinks`) but no later
+  than the published ``maxEndTime``,
   late at their :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
   9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the
   next phases last their shortest / median / late durations seen. ``red_windows_s`` spans earliest start to late

@@ -6,7 +6,8 @@ at comfortable rates, drifting *up* when the advised speed is low (the paper's f
 decision point before each stop line, brakes for a light that will be red on arrival at its current
 speed (a red showing then must end ``red_end_margin_s`` before that arrival: the advice counts the seconds
 to green), and after deciding to go neither slows down so much that a red catches it nor speeds up while
-the light is still red. Everything else comes from the advice (a "stop" only until its line is behind; "Red light
+the light is still red. Everything else comes from the advice (a "stop": lift off, then brake at the comfortable
+rate, or harder if that no longer stops it at the line, only until its line is behind; "Red light
 ahead." alone: no speeding up towards it; advice that asks nothing new, such as "Signal data delayed.": it goes on
 with what it was told);
 ``overrides`` counts the times the driver's own braking was needed although the advice did not say "stop".
