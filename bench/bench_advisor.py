@@ -194,7 +194,7 @@ def main() -> None:
     with ProcessPoolExecutor(workers) as pool:
         res = list(pool.map(actuated_run, range(actuated_runs), chunksize=50))
     print(f"{actuated_runs:,} randomized closed-loop runs with ACTUATED lights (windows up to ±15 s, switch up to 10 % beyond, "
-          f"dropouts, ±3 s skew): {sum(r[0] for r in res)} red entries, {sum(r[1] for r in res)} hard brakes (> 4 m/s²), "
+          f"dropouts, ±3 s skew; half the controllers publish their current phase only): {sum(r[0] for r in res)} red entries, {sum(r[1] for r in res)} hard brakes (> 4 m/s²), "
           f"{sum(r[2] for r in res)} advised speeds above the limit; {sum(r[3] for r in res)} surprises "
           f"(targets 0 / 0 / 0; {time.perf_counter() - t0:.0f} s on {workers} processes)")
 
