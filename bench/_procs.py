@@ -1,10 +1,21 @@
-"""Helpers shared by the benchmarks that run real server processes (Linux /proc readings)."""
+"""Helpers shared by the benchmarks: timing, and for those that run real server processes, Linux /proc readings."""
 
 from __future__ import annotations
 
 import os
 import socket
+import time
 from pathlib import Path
+
+
+def best_of(fn, repeats: int = 3) -> float:
+    """The shortest of ``repeats`` timed calls of ``fn()``. [s]"""
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
 
 
 def free_port() -> int:

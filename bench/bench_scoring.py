@@ -7,7 +7,6 @@ reference), measured in the same run.
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -17,15 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from advisory.physics.params import model_params  # noqa: E402
 from advisory.evaluation.scoring import score_trace  # noqa: E402
 from tests.test_scoring import numpy_reference  # noqa: E402
-
-
-def best_of(fn, repeats=5):
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+from bench._procs import best_of  # noqa: E402
 
 
 def main() -> None:
@@ -36,7 +27,7 @@ def main() -> None:
     grade = 0.02 * np.sin(t / 200)
     params = model_params()
     score_trace(t[:100], v[:100], params, grade[:100])  # JIT / cache load
-    kernel_s = best_of(lambda: score_trace(t, v, params, grade))
+    kernel_s = best_of(lambda: score_trace(t, v, params, grade), repeats=5)
     numpy_s = best_of(lambda: numpy_reference(t, v, params, grade), repeats=3)
     print(f"score_trace: {n:,} samples in {kernel_s * 1e3:.0f} ms = {n / kernel_s / 1e6:.1f} M samples/s (target >= 10)")
     print(f"plain numpy : {n / numpy_s / 1e6:.1f} M samples/s; numba/numpy speed ratio {numpy_s / kernel_s:.1f}x")

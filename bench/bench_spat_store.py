@@ -12,7 +12,6 @@ groups whose phases a link ends (:class:`~spat_feed.observe.ChangeLinks`) and th
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -22,15 +21,7 @@ from spat_feed.messages import plan_from_movement, to_unix_s  # noqa: E402
 from spat_feed.plans import PhaseClass  # noqa: E402
 from spat_feed.recorded import read_spat_csv  # noqa: E402
 from spat_feed.source import SpatStore, TimeRules  # noqa: E402
-
-
-def best_of(fn, repeats: int = 3) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+from bench._procs import best_of  # noqa: E402
 
 
 def main() -> None:

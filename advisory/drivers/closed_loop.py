@@ -169,7 +169,7 @@ def simulate(
             if v * v < 2.0 * driver.decel_mps2 * to_line_m:
                 rate_down = coast_decel_mps2(v, advisor.vehicle)  # prepare to stop: lift off until a comfortable stop at the line needs braking
             else:  # then brake as it takes to stop there (told late, or a second's reaction behind: more than the comfortable rate)
-                rate_down = max(rate_down, min(v * v / (2.0 * max(to_line_m, 1e-6)), 4.0))
+                rate_down = max(rate_down, min(v * v / (2.0 * max(to_line_m, 1e-6)), rules.brake_max_mps2))
         # the driver's own eyes: decide once per light at the decision point, like the regular driver
         ahead = [(n, s) for n, s in enumerate(scenario.signals) if s.position_m > x + 1e-9]
         if ahead:
@@ -225,12 +225,12 @@ def simulate(
                     braking_for = None
             if braking_for == n:  # stop short of the line at the constant rate that gets there
                 v_cmd = 0.0
-                rate_down = min(v * v / (2.0 * room), driver.emergency_decel_mps2 if n in surprised else 4.0) if room > 1e-6 else 4.0
+                rate_down = min(v * v / (2.0 * room), driver.emergency_decel_mps2 if n in surprised else rules.brake_max_mps2) if room > 1e-6 else rules.brake_max_mps2
             elif n in committed:
                 if red_now:  # committed while red: it turns green before arrival at this speed, not faster
                     v_cmd = min(v_cmd, v)
                     if room <= v * dt_s:  # creeping up to a line still red: wait at it (it crept over the line)
-                        v_cmd, rate_down = 0.0, min(v * v / (2.0 * max(dist - 0.05, 1e-3)), 4.0)
+                        v_cmd, rate_down = 0.0, min(v * v / (2.0 * max(dist - 0.05, 1e-3)), rules.brake_max_mps2)
                 elif active is not None and active.action == "stop":
                     v_cmd = v_lim
                 # going: slow down only if the line is still cleared, with a second to spare, before the next
@@ -251,7 +251,7 @@ def simulate(
                 v_cmd, rate_down = 0.0, coast_decel_mps2(v, advisor.vehicle)  # target reached: keep coasting
             elif ahead and light.is_red(t):  # nobody coasts to a standstill: at a red, stop at the line
                 room = ahead[0][1].position_m - x - rules.stop_gap_m
-                v_cmd, rate_down = 0.0, (min(v * v / (2.0 * room), 4.0) if room > 1e-6 else 4.0)
+                v_cmd, rate_down = 0.0, (min(v * v / (2.0 * room), rules.brake_max_mps2) if room > 1e-6 else rules.brake_max_mps2)
             else:
                 v_cmd = v_lim  # nobody coasts to a standstill: drive on
         gap = v_cmd - v
