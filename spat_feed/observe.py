@@ -133,7 +133,8 @@ class PhaseHistory:
 
     Feed it every accepted reading of the group (``update``); it keeps the last ``keep`` completed phases of
     each class and the class that followed each. A change is dated at the first reading that shows it (the
-    feed's period is the error); across a gap longer than ``max_gap_s`` the phase in progress is not timed.
+    feed's period is the error); across a gap longer than ``max_gap_s`` the phase in progress is not timed, unless
+    it went on (the same class on both sides, and it cannot have ended yet or cannot have ended and come back).
 
     Given plans, it also follows the published ``minEndTime`` of the phase in progress: an actuated controller
     counts it down, *holds* it while it extends the phase (it moves later with the clock), and once it runs again
@@ -177,6 +178,8 @@ class PhaseHistory:
         cls = phase_class(state)
         gap = self._last_t is not None and t_unix_s - self._last_t > self.max_gap_s
         changed = cls != self._current
+        if gap and not changed and self._went_on(t_unix_s):
+            gap = False
         was_resumed = self._resumed
         if changed or gap:
             if changed and not gap and self._current is not None:
@@ -201,6 +204,16 @@ class PhaseHistory:
         self._min_end = min_end
         self._last_t = t_unix_s
         return changed or gap or self._resumed != was_resumed
+
+    def _went_on(self, t_unix_s: float) -> bool:
+        """Across a gap in the readings, with the same class on both sides: the phase in progress went on if it
+        cannot have ended yet (seen from its start, it has run less than the shortest phase of its class), or cannot
+        have ended and come back (the gap is shorter than the shortest phase of the class that follows it)."""
+        own = self._durations.get(self._current, ())
+        after = self._durations.get(self._following.get(self._current), ())
+        if self._exact and len(own) >= MIN_PHASES_SEEN and t_unix_s - self._since < min(own):
+            return True
+        return len(after) >= MIN_PHASES_SEEN and t_unix_s - self._last_t < min(after)
 
     def stats(self) -> CycleStats:
         """A frozen snapshot to pass along with a reading (``PlanReading.cycle``)."""

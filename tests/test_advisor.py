@@ -436,6 +436,22 @@ def test_a_red_the_car_may_beat_at_the_second_light_does_not_void_the_plan_for_t
     assert crossing_time_s(250.0, V, adv.target_speed_mps, P, KEEP_MODES[adv.action]) >= 20.0 + P.green_margin_s
 
 
+def test_no_sure_plan_slows_the_car_for_the_green_after_a_red_it_may_beat():
+    """The recorded controller (2019-05-17, group 12): green now, the next red may begin in 13.5 s, likely in 16.7 s,
+    at the latest in 25.1 s; 300 m at 50 km/h reaches the line at 21.6 s. A crawl to the green after that red is sure
+    ("Slow to 21 kilometers per hour, then coast"), and cost +68 % and 43 s when the red came at 23.3 s: the regular
+    driver went through. As with no sure plan, a car that may beat the red as it is is not slowed for the green after
+    it: no speed advice. Where it arrives after the red's latest start, the sure plan stands."""
+    v = 50 / 3.6
+    green = LightView(1, 300.0, True, 0.9, ((13.5, 65.5), (73.5, 245.5)), likely_red_windows_s=((16.7, 51.7), (85.7, 120.7)),
+                      late_red_windows_s=((25.1, 65.5), (115.1, 155.5)))  # fmt: skip
+    adv = advise(Observation(v, v, (green,)), params=AdvisorParams(units="kmh"))[0]
+    assert (adv.action, adv.reason) == ("none", "low_confidence") and 16.7 < 300.0 / v < 25.1
+    later = replace(green, late_red_windows_s=((20.0, 65.5), (115.1, 155.5)))
+    sure = advise(Observation(v, v, (later,)), params=AdvisorParams(units="kmh"))[0]
+    assert sure.reason == "green_wave" and crossing_time_s(300.0, v, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 65.5 + P.green_margin_s
+
+
 class _Wants:
     """Tables stand-in that always wants ``speed_mps`` at the next line (the tables' crawl to a later green)."""
 

@@ -689,11 +689,16 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source)
     n_lines, mode, feasible = _search(both, obs, params)
     uncertain = any(light.likely_red_windows_s is not None for light in usable)
-    if uncertain and feasible.size and feasible.max() < obs.speed_mps - params.hysteresis_mps and _holds_on_likely(usable, obs, params):
+    slows = uncertain and feasible.size and feasible.max() < obs.speed_mps - params.hysteresis_mps
+    if slows and _holds_on_likely(usable, obs, params):
         # the sure plan slows the car for a red that likely ends before it gets there as it is: holding its speed is
         # the regular driver's own motion (it meets a late red only where the regular driver does too), while slowing
         # for a red that ends early cost up to +19 % against it (±10 s windows): plan on the likely changes
         feasible = feasible[:0]
+    elif slows and _beats_maybe(usable[:1], obs, params):
+        # the sure plan slows the car for the green after a red it may beat as it is: as where no plan is sure, no speed
+        # advice (a crawl to the next green cost +68 % when the red came late: 2019-05-17, group 12)
+        return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
     on_likely = False  # the plan is on the likely changes: no speed is sure
     if feasible.size == 0 and uncertain:
         # no speed makes the greens whenever the changes come: plan on the likely changes (never into a red that

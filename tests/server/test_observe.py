@@ -237,6 +237,25 @@ def test_a_gap_in_the_readings_times_no_phase():
     assert stats.durations_s == {PhaseClass.RED: (40.0,)}  # the first green (seen mid-way) and the gapped one untimed
 
 
+def test_a_phase_that_cannot_have_ended_goes_on_across_a_gap():
+    """2019-05-17 drops a group's readings for 5-21 s in the middle of most of its reds (group 3: 98 times in 3.3 h;
+    groups 5, 7, 8, 9: 82). Dated from the end of the gap, such a red was predicted to end ~18 s late, so cars the
+    regular driver took through were slowed. A red seen red on both sides of a gap is the same red when it cannot have
+    ended yet (it has run less than any red seen) or cannot have ended and come back (the gap is shorter than any
+    green seen); otherwise it may be another one, begun at the end of the gap at the latest."""
+    h = PhaseHistory(max_gap_s=5.0)
+    t = feed(h, T0, [(GREEN, 5)] + [(RED, 40), (GREEN, 20)] * 3)
+    t = feed(h, t, [(RED, 10)])
+    t = feed(h, t + 22.0, [(RED, 8)])  # 23 s without readings (longer than a green), 10 s into a red: it has run 32 s < 40
+    stats = h.update(t, published(GREEN, t + 10))
+    assert stats.durations_s[PhaseClass.RED] == (40.0,) * 4  # the gapped red timed from its start
+    t = feed(h, t, [(GREEN, 20), (RED, 35)])
+    h.update(t + 25.0, published(RED, t + 40))  # 26 s without readings, 35 s into a red: it may have ended and come back
+    stats = h.update(t + 26.0, published(RED, t + 40))
+    assert stats.since_unix_s == t + 25.0 and not stats.resumed
+    assert stats.durations_s[PhaseClass.RED] == (40.0,) * 4
+
+
 def test_clock_uncertainty_widens_every_red():
     ix = make_scenario("paper_s400").corridor.intersections[0]
     plan = FixedTimePlan(30, 30, offset_s=T0)
