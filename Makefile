@@ -37,5 +37,6 @@ app-figure: $(STAMP)  # the README's screenshots of the phone app (a demo drive 
 bench: $(STAMP)
 	for b in bench/bench_*.py; do $(PY) $$b || exit 1; done
 
-clean:
+clean:  # also numba's cached kernels: it keys each by its own file, not by the physics it inlines (docs/MODEL.md)
 	rm -rf $(VENV) .pytest_cache build *.egg-info
+	find . -path ./$(VENV) -prune -o -name '*.nb[ic]' -exec rm -f {} +

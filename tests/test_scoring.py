@@ -80,6 +80,60 @@ def test_energy_audit_closes_and_kernel_matches_numpy(v, step, grade, vehicle):
     assert s.soh_lost_frac == pytest.approx(soh, rel=1e-9, abs=1e-18)
 
 
+def test_a_long_trace_is_scored_in_parallel_chunks_as_in_one_pass(paper):
+    """A trace longer than a chunk (``CHUNK_STEPS``) is scored in chunks on all threads: the same totals as the
+    numpy reference, its per-step series filled across the chunks, the audit closed, and the same sums to the bit
+    on one thread (the chunks' totals are added in order)."""
+    import numba
+
+    from advisory.evaluation.scoring import CHUNK_STEPS
+
+    n = 3 * CHUNK_STEPS + 101
+    rng = np.random.default_rng(1)
+    t = np.cumsum(rng.uniform(0.5, 1.5, n))
+    v = np.clip(12 + np.cumsum(rng.normal(0, 0.4, n)) % 18, 0, 30)
+    s = score_trace(t, v, paper, keep_series=True)
+    net_kwh, soh = numpy_reference(t, v, paper)
+    assert s.net_kwh == pytest.approx(net_kwh, rel=1e-9) and s.soh_lost_frac == pytest.approx(soh, rel=1e-9)
+    assert s.series.energy_kwh[-1] == pytest.approx(net_kwh, rel=1e-9)  # every step's battery power written
+    assert np.isfinite(s.series.battery_power_w).all() and s.series.soh_lost_frac[-1] == pytest.approx(soh, rel=1e-9)
+    assert abs(s.audit.residual_j) <= 1e-9 * s.battery_out_kwh * 3.6e6
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = score_trace(t, v, paper)
+    finally:
+        numba.set_num_threads(threads)
+    assert (one.net_kwh, one.soh_lost_frac, one.distance_m) == (s.net_kwh, s.soh_lost_frac, s.distance_m)
+
+
+def test_long_traces_scored_from_threads_and_forked_workers_do_not_abort_the_process():
+    """The parallel chunks in the ways the product calls them: threads at once (the service's thread pool) and worker
+    processes forked after the parent has scored (the study, spat-eval). With GNU OpenMP the forked workers aborted
+    ("fork() called from a process already using GNU OpenMP"), with ``workqueue`` and no lock the threads did
+    ("Concurrent access has been detected"). Run in a child process: such a failure kills the process."""
+    import os
+    import subprocess
+    import sys
+
+    script = """
+import threading, multiprocessing as mp, numpy as np
+from advisory.evaluation.scoring import CHUNK_STEPS, score_trace
+from advisory.physics.params import model_params
+p = model_params(); t = np.arange(3 * CHUNK_STEPS, dtype=float); v = 10.0 + np.sin(t / 50.0)
+first = score_trace(t, v, p).net_kwh
+out = []
+threads = [threading.Thread(target=lambda: out.extend(score_trace(t, v, p).net_kwh for _ in range(5))) for _ in range(3)]
+[th.start() for th in threads]; [th.join() for th in threads]
+with mp.get_context("fork").Pool(2) as pool:
+    out += [r.net_kwh for r in pool.starmap(score_trace, [(t, v, p)] * 4)]
+print(len(out), len(set(out)), set(out) == {first})
+"""
+    env = {k: val for k, val in os.environ.items() if k != "NUMBA_THREADING_LAYER"}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1], env=env)
+    assert done.returncode == 0 and done.stdout.split() == ["19", "1", "True"], (done.returncode, done.stdout, done.stderr[-2000:])
+
+
 @settings(max_examples=40, deadline=None)
 @given(v=speeds)
 def test_regen_is_bounded_by_kinetic_energy_given_up(v):

@@ -1,19 +1,22 @@
 """Score a speed trace: energy, regen, battery wear and cost, with an energy audit that closes.
 
 ``score_trace(t_s, speed_mps, params)`` runs one fused numba pass over the steps (mid-step form,
-``advisory.physics.model``). In the same pass it keeps an energy audit whose terms come from their own
+``advisory.physics.model``; a long trace in parallel chunks, :data:`CHUNK_STEPS`). In the same pass it keeps an energy audit whose terms come from their own
 formulas, not from the battery power: kinetic + potential + aerodynamic + rolling + drivetrain losses
 + regen losses + friction braking + accessories equals the net battery energy to rounding.
 """
 
 from __future__ import annotations
 
+import os
+import threading
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from advisory.physics.energy import motor_braking_power_w
+from advisory.physics.energy import battery_power_w, motor_braking_power_w
 from advisory.physics.model import (
     I_AREA,
     I_AUX,
@@ -24,7 +27,6 @@ from advisory.physics.model import (
     I_REGEN_MAX,
     I_RHO,
     J_PER_KWH,
-    battery_power_for_wheel_w,
     chain_effs,
     pack,
     soh_loss_frac,
@@ -37,10 +39,25 @@ from advisory.physics.params import G_MPS2, ModelParams
 T_OUT, T_IN, T_SOH, T_DIST, T_POT, T_AERO, T_ROLL, T_DRIVE, T_REGEN, T_FRICTION, T_AUX, N_TOTALS = range(12)
 
 
+CHUNK_STEPS = 1 << 16
+"""Steps per chunk of a long trace; the chunks are scored in parallel and their totals summed in order (the same
+sums, to rounding, whatever the number of threads)."""
+
+if "NUMBA_THREADING_LAYER" not in os.environ:
+    numba.config.THREADING_LAYER = "workqueue"
+_PARALLEL = threading.Lock()
+"""The parallel chunks run on numba's ``workqueue`` threading layer (unless ``NUMBA_THREADING_LAYER`` says
+otherwise), one kernel at a time per process. GNU OpenMP, which numba picks where it finds it, is not fork-safe: a
+process forked after a parallel kernel ran aborts at its own ("fork() called from a process already using GNU
+OpenMP"; the study, spat-eval and the benches fork worker pools). ``workqueue`` is fork-safe but aborts when two
+threads launch parallel kernels at once (numba docs, "The Threading Layers"; the service scores trips on its thread
+pool): hence the lock."""
+
+
 @njit(cache=True)
-def _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals, out_battery_w, out_soh_loss):
+def _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals, out_battery_w, out_soh_loss, first, stop):
     """
-    One pass over the steps of a trace (step k joins samples k and k+1).
+    One pass over steps ``first`` to ``stop - 1`` of a trace (step k joins samples k and k+1).
 
     Accumulates into ``totals`` (N_TOTALS,): battery out / regen in [J], SOH lost [-], distance [m], and
     the audit terms [J], each computed from its own formula (not from the battery power). When
@@ -49,12 +66,13 @@ def _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals, 
     """
     keep = out_battery_w.shape[0] > 0
     weight = p[I_MASS] * G_MPS2
-    for k in range(t_s.shape[0] - 1):
+    for k in range(first, stop):
         dt = t_s[k + 1] - t_s[k]
         grade = 0.5 * (grade_frac[k] + grade_frac[k + 1])
         wheel = step_wheel_power_w(speed_mps[k], speed_mps[k + 1], dt, grade, p)
         v = 0.5 * (speed_mps[k] + speed_mps[k + 1])
-        battery = battery_power_for_wheel_w(wheel, v, p)
+        drive_eff, regen_eff, share = chain_effs(wheel, v, p)  # once: for the battery power and the audit
+        battery = battery_power_w(wheel, drive_eff, regen_eff, share, p[I_REGEN_MAX], p[I_AUX])
         soh = soh_loss_frac(battery, dt, p, m_c_rates, m_prefactor)
         energy = battery * dt
         if energy >= 0.0:
@@ -72,7 +90,6 @@ def _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals, 
         totals[T_POT] += weight * grade * cos_theta * dist
         totals[T_AERO] += 0.5 * p[I_RHO] * p[I_AREA] * p[I_DRAG] * v * v * dist
         totals[T_ROLL] += (p[I_CR1] + p[I_CR2] * v) * weight * cos_theta * dist
-        drive_eff, regen_eff, share = chain_effs(wheel, v, p)
         motor = motor_braking_power_w(wheel, regen_eff, share, p[I_REGEN_MAX])
         if wheel > 0.0:
             totals[T_DRIVE] += wheel * (1.0 / drive_eff - 1.0) * dt
@@ -139,6 +156,21 @@ class DriveScore:
         return out
 
 
+@njit(cache=True, parallel=True)
+def _score_chunks(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, out_battery_w, out_soh_loss):
+    """:func:`_score_steps` over chunks of :data:`CHUNK_STEPS` steps in parallel; the totals (N_TOTALS,)."""
+    n_steps = t_s.shape[0] - 1
+    n_chunks = (n_steps + CHUNK_STEPS - 1) // CHUNK_STEPS
+    totals = np.zeros((n_chunks, N_TOTALS))
+    for c in prange(n_chunks):
+        stop = min((c + 1) * CHUNK_STEPS, n_steps)
+        _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals[c], out_battery_w, out_soh_loss, c * CHUNK_STEPS, stop)
+    out = np.zeros(N_TOTALS)
+    for c in range(n_chunks):  # in chunk order
+        out += totals[c]
+    return out
+
+
 def _validate(t_s, speed_mps, grade_frac):
     t = np.ascontiguousarray(t_s, dtype=np.float64)
     v = np.ascontiguousarray(speed_mps, dtype=np.float64)
@@ -192,8 +224,12 @@ def score_trace(
     vec, rates, pref = pack(params)
     n_keep = t.size - 1 if keep_series else 0
     battery_w, soh_loss = np.empty(n_keep), np.empty(n_keep)
-    tot = np.zeros(N_TOTALS)
-    _score_steps(t, v, g, vec, rates, pref, tot, battery_w, soh_loss)
+    if t.size - 1 > CHUNK_STEPS:  # long traces in parallel chunks; a closed-loop run's few hundred steps in one
+        with _PARALLEL:
+            tot = _score_chunks(t, v, g, vec, rates, pref, battery_w, soh_loss)
+    else:
+        tot = np.zeros(N_TOTALS)
+        _score_steps(t, v, g, vec, rates, pref, tot, battery_w, soh_loss, 0, t.size - 1)
     net_j = tot[T_OUT] - tot[T_IN]
     net_kwh = net_j / J_PER_KWH
     kinetic_j = 0.5 * params.vehicle.mass_kg * (v[-1] ** 2 - v[0] ** 2)

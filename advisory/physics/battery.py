@@ -139,8 +139,8 @@ def ah_throughput_eol_ah(
     c = np.minimum(np.maximum(c_rate_per_h, c_rate_min), c_rate_max)
     prefactor = interp_clamped(c, m_c_rates, m_prefactor)
     activation = activation_j_per_mol - activation_slope_j_per_mol_c * c
-    per_ah_loss = prefactor * np.exp(-activation / (gas_constant_j_per_mol_k * temperature_k))
-    return (capacity_loss_eol_pct / per_ah_loss) ** (1.0 / power_law_z)
+    # [dQ / (M e^(-Ea/RT))]^(1/z) as one log and one exp (a pow is a log and an exp of its own)
+    return np.exp((np.log(capacity_loss_eol_pct / prefactor) + activation / (gas_constant_j_per_mol_k * temperature_k)) / power_law_z)
 
 
 @register_jitable

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba.extending import register_jitable
 
+from advisory.physics.battery import interp_clamped
 from advisory.physics.params import G_MPS2, MPH_TO_MPS
 
 
@@ -158,7 +159,7 @@ def em_eff_frac(power_frac, map_power_frac, map_eff_frac):
     >>> round(float(em_eff_frac(0.05, x, y)), 4)
     0.89
     """
-    return np.interp(np.abs(power_frac), map_power_frac, map_eff_frac)
+    return interp_clamped(np.abs(power_frac), map_power_frac, map_eff_frac)  # (numba's np.interp allocates per scalar call)
 
 
 @register_jitable
