@@ -54,7 +54,7 @@ threads launch parallel kernels at once (numba docs, "The Threading Layers"; the
 pool): hence the lock."""
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)  # inputs are validated finite; reordering and FMA move sums by ~1e-15 relative (5.9 -> 7.9 M samples/s a thread)
 def _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals, out_battery_w, out_soh_loss, first, stop):
     """
     One pass over steps ``first`` to ``stop - 1`` of a trace (step k joins samples k and k+1).
