@@ -1,9 +1,10 @@
 """Score a speed trace: energy, regen, battery wear and cost, with an energy audit that closes.
 
 ``score_trace(t_s, speed_mps, params)`` runs one fused numba pass over the steps (mid-step form,
-``advisory.physics.model``; a long trace in parallel chunks, :data:`CHUNK_STEPS`). In the same pass it keeps an energy audit whose terms come from their own
-formulas, not from the battery power: kinetic + potential + aerodynamic + rolling + drivetrain losses
-+ regen losses + friction braking + accessories equals the net battery energy to rounding.
+``advisory.physics.model``; a long trace in parallel chunks of :data:`CHUNK_STEPS`). In the same pass it keeps
+an energy audit whose terms come from their own formulas, not from the battery power: kinetic + potential +
+aerodynamic + rolling + drivetrain losses + regen losses + friction braking + accessories equals the net battery
+energy to rounding.
 """
 
 from __future__ import annotations
@@ -54,7 +55,9 @@ threads launch parallel kernels at once (numba docs, "The Threading Layers"; the
 pool): hence the lock."""
 
 
-@njit(cache=True, fastmath=True)  # inputs are validated finite; reordering and FMA move sums by ~1e-15 relative (5.9 -> 7.9 M samples/s a thread)
+# fastmath: the inputs are validated finite; reordering and FMA move the sums by ~1e-15 relative (5.9 -> 7.9 M
+# samples/s on one thread)
+@njit(cache=True, fastmath=True)
 def _score_steps(t_s, speed_mps, grade_frac, p, m_c_rates, m_prefactor, totals, out_battery_w, out_soh_loss, first, stop):
     """
     One pass over steps ``first`` to ``stop - 1`` of a trace (step k joins samples k and k+1).
