@@ -452,6 +452,28 @@ def test_no_sure_plan_slows_the_car_for_the_green_after_a_red_it_may_beat():
     assert sure.reason == "green_wave" and crossing_time_s(300.0, v, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 65.5 + P.green_margin_s
 
 
+def test_a_red_the_car_may_beat_at_the_second_light_does_not_slow_it_for_the_green_after():
+    """Paper timing [15 15] s = 400 with ±10 s actuated windows (the bench's 3-draw sweep, draw 1), at entry: light 1
+    (100 m) is crossed on green; light 2 (500 m) may turn red at 5 s, likely at 15 s, at the latest at 25 s, and the
+    car at the limit is there at 20.3 s. A sure plan crawls to the green after that red ("Second light: red in 15
+    seconds. Slow to 18 miles per hour, then coast."), which lost the cycle the regular driver made when the red came
+    at 23.8 s (+65 %). As at the next light, a car that may beat the red as it is is not slowed: no speed advice. Where
+    it arrives after the red's latest start, the sure plan stands."""
+    light1 = LightView(1, 100.0, True, 0.88, ((5.0, 55.0), (65.0, 217.0)), likely_red_windows_s=((15.0, 45.0), (84.0, 100.0)),
+                       late_red_windows_s=((25.0, 55.0), (92.0, 131.0)))  # fmt: skip
+    light2 = LightView(2, 500.0, True, 0.88, ((5.0, 55.0), (65.0, 297.0)), likely_red_windows_s=((15.0, 45.0), (82.0, 111.0)),
+                       late_red_windows_s=((25.0, 55.0), (86.0, 129.0)))  # fmt: skip
+    assert 100.0 / V < 5.0 and 15.0 < 500.0 / V < 25.0
+    adv = advise(Observation(V, V, (light1, light2)))[0]
+    assert (adv.action, adv.reason, adv.message) == ("none", "low_confidence", "Signal timing uncertain. Drive normally.")
+    early = replace(light2, late_red_windows_s=((19.0, 55.0), (86.0, 129.0)))  # surely red before the car is there
+    sure = advise(Observation(V, V, (light1, early)))[0]
+    assert sure.reason == "green_wave" and sure.light_ahead == 2 and sure.target_speed_mps < V - 5.0
+    assert crossing_time_s(500.0, V, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 55.0 + P.green_margin_s
+    slowed = AdvisorMemory(last=replace(sure, target_speed_mps=8.0))  # already following a plan that slows it: kept at it
+    assert advise(Observation(V, V, (light1, light2)), slowed)[0].reason == "green_wave"
+
+
 class _Wants:
     """Tables stand-in that always wants ``speed_mps`` at the next line (the tables' crawl to a later green)."""
 
@@ -559,20 +581,25 @@ def test_a_plan_on_the_likely_changes_is_kept_while_it_works_on_them():
     one second, and not the next (the driver's reaction second moves the arrival past the plan's narrow window), so
     the advice flipped between it and "Hold 50" every second for 16 s (+27 % against the regular driver; the
     hindsight optimum saves 36 %). A plan made on the likely changes is kept while a driver following it still makes
-    the greens on them, as a sure plan is: -27 % -> 0 % here; both days 12.8 -> 13.4 % and 13.6 -> 14.7 % saving."""
+    the greens on them, as a sure plan is: -27 % -> 0 % here; both days 12.8 -> 13.4 % and 13.6 -> 14.7 % saving.
+    (Since the ninth session the car, at the limit, is not slowed for the green after light 2's next red where it may
+    beat that red as it goes: recorded, that red began at the latest 59.4 s out and the car is there at 42 s, so no
+    speed advice. With the red surely begun by then, the plan and its keeping, as they were.)"""
     limit, params = 50 / 3.6, AdvisorParams(units="kmh")
 
-    def lights(x_m, shift_s):
+    def lights(x_m, shift_s, late_next_s=59.42):
         return tuple(LightView(n + 1, d - x_m, True, 1.0, ((0.0, end - shift_s),), ((0.0, lik - shift_s), (35.82 - shift_s + 1.0, nxt - shift_s)),
-                               ((0.0, late - shift_s), (59.42 - shift_s + 1.0, lnxt - shift_s)))
+                               ((0.0, late - shift_s), (late_next_s - shift_s + 1.0, lnxt - shift_s)))
                      for n, (d, end, lik, nxt, late, lnxt) in enumerate(((300.0, 224.02, 17.22, 103.22, 35.62, 129.82),
                                                                          (600.0, 227.02, 20.22, 106.22, 38.62, 132.82))))  # fmt: skip
 
-    plan, memory = advise(Observation(limit, limit, lights(13.9, 1.0)), AdvisorMemory(), params)
+    maybe = advise(Observation(limit, limit, lights(13.9, 1.0)), AdvisorMemory(), params)[0]
+    assert (maybe.action, maybe.reason) == ("none", "low_confidence") and 35.82 < (600.0 - 13.9) / limit < 59.42
+    plan, memory = advise(Observation(limit, limit, lights(13.9, 1.0, 38.0)), AdvisorMemory(), params)
     assert (plan.action, plan.light_ahead) == ("coast", 2)
-    kept = advise(Observation(limit, limit, lights(27.8, 2.0)), memory, params)[0]
+    kept = advise(Observation(limit, limit, lights(27.8, 2.0, 38.0)), memory, params)[0]
     assert (kept.action, kept.target_speed_mps) == ("coast", plan.target_speed_mps)  # (was "Hold 50.")
-    assert advise(Observation(limit, limit, lights(27.8, 2.0)), AdvisorMemory(), params)[0].action == "cruise"  # a new plan: not found
+    assert advise(Observation(limit, limit, lights(27.8, 2.0, 38.0)), AdvisorMemory(), params)[0].action == "cruise"  # a new plan: not found
 
 
 def test_a_plan_on_the_likely_changes_keeps_an_exact_lights_reds():
