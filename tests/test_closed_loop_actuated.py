@@ -9,8 +9,10 @@ import pytest
 
 from advisory.drivers.closed_loop import DriverModel, red_light_violations, simulate
 from advisory.drivers.regular import regular_driver
-from advisory.signals import Scenario
-from spat_feed.actuated import random_case
+from advisory.evaluation.endstate import score_in_end_state
+from advisory.physics.params import model_params
+from advisory.signals import Scenario, paper_scenario
+from spat_feed.actuated import ActuatedFeed, actuated_scenario, random_case
 
 HARD_BRAKE_MPS2 = 4.0
 
@@ -156,11 +158,6 @@ def test_paper_timings_with_actuated_windows_cost_no_more_than_the_regular_drive
     cycle. [-15 -30] s = 400, draw 2: launching from light 1, the advice see-sawed between a crawl to light 2's next
     green and "drive normally" for 8 s (the car sped up, then was slowed, each second): +11.9 %. Now both cost no more
     than the regular driver on the same truth (within 2 %), with no red entry and at most one change of mind."""
-    from advisory.evaluation.endstate import score_in_end_state
-    from advisory.physics.params import model_params
-    from advisory.signals import paper_scenario
-    from spat_feed.actuated import ActuatedFeed, actuated_scenario
-
     sc = paper_scenario(*case)
     truth, lights = actuated_scenario(sc, 10.0, np.random.default_rng(draw))
     run = simulate(truth, driver=DriverModel(seed=draw), feed=ActuatedFeed(lights, sc.speed_limit_mps))
