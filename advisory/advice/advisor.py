@@ -599,8 +599,8 @@ def _likely_only(light: LightView) -> LightView:
 
 
 def _beats_maybe(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, speed_mps: float | None = None) -> bool:
-    """Holding its speed, the car reaches a line before a red's latest start but after its likely one: it may go
-    through as it is (the regular driver would try). Slowing for the green after that red cost a whole cycle
+    """Holding its speed (``speed_mps``, default the car's), the car reaches a line before a red's latest start but
+    after its likely one: it may go through as it is (the regular driver would try). Slowing for the green after that red cost a whole cycle
     whenever the red came late; no speed makes the green for sure: no speed advice (issue 13, spat-eval)."""
     v = obs.speed_mps if speed_mps is None else speed_mps
     if v <= 0.0:
@@ -622,16 +622,18 @@ def _reacting_mps(obs: Observation, last: Advice | None) -> float:
     return obs.speed_mps
 
 
-def _beats_maybe_after(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, last: Advice | None) -> bool:
-    """Driving normally (at the limit, following no slower plan), the car crosses the next line on green (as likely)
-    and may beat a red at the one after it as it is (:func:`_beats_maybe`): the plan that slows it for the green
-    after that red gives way to no speed advice, as at the next line."""
+def _may_beat(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, last: Advice | None) -> bool:
+    """Rule (2) of the robust rule: the car, as it goes, may beat a red (:func:`_beats_maybe`) at the next line, or,
+    driving normally (at the limit, following no slower plan) and crossing the next line on green as likely, at the
+    one after it. A plan that slows it for the green after that red gives way to no speed advice. "As it goes": a
+    driver still reacting to a plan that slows it is taken at the plan's speed (:func:`_reacting_mps`)."""
+    if _beats_maybe(lights[:1], obs, params, _reacting_mps(obs, last)):
+        return True
     v, nxt = obs.speed_mps, lights[0]
-    if len(lights) < 2 or v < obs.speed_limit_mps - params.hysteresis_mps or not _green_crossing(_likely_only(nxt), nxt.distance_m / v, params.green_margin_s):
-        return False
-    if last is not None and last.target_speed_mps is not None and last.target_speed_mps < v - params.hysteresis_mps:
-        return False
-    return _beats_maybe(lights[1:], obs, params)
+    normal = v >= obs.speed_limit_mps - params.hysteresis_mps and not (
+        last is not None and last.target_speed_mps is not None and last.target_speed_mps < v - params.hysteresis_mps)
+    return (len(lights) > 1 and normal and _green_crossing(_likely_only(nxt), nxt.distance_m / v, params.green_margin_s)
+            and _beats_maybe(lights[1:], obs, params))  # fmt: skip
 
 
 def _holds_on_likely(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> bool:
@@ -716,7 +718,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         # the regular driver's own motion (it meets a late red only where the regular driver does too), while slowing
         # for a red that ends early cost up to +19 % against it (±10 s windows): plan on the likely changes
         feasible = feasible[:0]
-    elif slows and (_beats_maybe(usable[:1], obs, params, _reacting_mps(obs, last)) or _beats_maybe_after(usable, obs, params, last)):
+    elif slows and _may_beat(usable, obs, params, last):
         # the sure plan slows the car for the green after a red it may beat as it is: as where no plan is sure, no speed
         # advice (a crawl to the next green cost +68 % when the red came late: 2019-05-17, group 12; at the second light,
         # "slow to 18 mph" 500 m out for a red likely in 15 s lost the cycle the regular driver made at 20 s: +65 %,
@@ -727,10 +729,10 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if feasible.size == 0 and uncertain:
         # no speed makes the greens whenever the changes come: plan on the likely changes (never into a red that
         # minEnd guarantees: the likely windows contain it; the after-red margin still applies), never faster than now
-        # (no racing an uncertain red), and never slowing for a red the car may beat as it is (_beats_maybe)
+        # (no racing an uncertain red), and never slowing for a red the car may beat as it goes (_may_beat)
         # (at the second light only where the car, driving normally, crosses the first on green: a red the car may beat
         # at the second light does not void a plan for the first)
-        if _beats_maybe(usable[:1], obs, params) or _beats_maybe_after(usable, obs, params, last):
+        if _may_beat(usable, obs, params, last):
             return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
         if obs.speed_mps > 0.0 and nxt.unknown_at(nxt.distance_m / obs.speed_mps):
             # as it is, the car meets a phase whose state nobody knows: no plan slows it for the green after that
