@@ -479,7 +479,7 @@ def test_a_driver_reacting_to_a_plan_that_slows_it_is_judged_at_the_plans_speed(
     car is at the line at 43 s: it may beat that red as it goes, so no speed advice. A driver a second behind "slow to
     8 m/s", not yet slowed, goes at 8 m/s: it meets that red, so the plan on the likely changes for the green after it
     stands (the advice flipped between the two every second as the car sped up and slowed down: 2019-05-17 group 12,
-    +18 % and +21 % against the regular driver, now 19-20 % savings)."""
+    +18 % and +21 % against the regular driver, now savings of 19 % and 21 %)."""
     v, params = 50 / 3.6, AdvisorParams(units="kmh")
     lit = LightView(1, 600.0, True, 0.9, ((0.0, 300.0),), likely_red_windows_s=((0.0, 20.0), (40.0, 80.0)),
                     late_red_windows_s=((0.0, 30.0), (55.0, 95.0)))  # fmt: skip

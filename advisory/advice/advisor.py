@@ -600,8 +600,9 @@ def _likely_only(light: LightView) -> LightView:
 
 def _beats_maybe(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, speed_mps: float | None = None) -> bool:
     """Holding its speed (``speed_mps``, default the car's), the car reaches a line before a red's latest start but
-    after its likely one: it may go through as it is (the regular driver would try). Slowing for the green after that red cost a whole cycle
-    whenever the red came late; no speed makes the green for sure: no speed advice (issue 13, spat-eval)."""
+    after its likely one: it may go through as it is (the regular driver would try). Slowing for the green after
+    that red cost a whole cycle whenever the red came late; no speed makes the green for sure: no speed advice
+    (issue 13, spat-eval)."""
     v = obs.speed_mps if speed_mps is None else speed_mps
     if v <= 0.0:
         return False
