@@ -70,23 +70,28 @@ def render_drive(result, title: str) -> str:
             ("battery wear [$]", lambda r: f"{r.score.wear_usd:.5f}"),
             ("cost [$]", lambda r: f"{r.score.cost_usd:.5f}"),
         ]
-        lines = ["", "Comparison through the same lights (zone + re-acceleration to the limit, as in the paper)"]
+        over = "zone" if not result.drive.partial else f"first {result.drive.distance_m:.1f} m the drive covered"
+        lines = ["", f"Comparison through the same lights (the {over} + re-acceleration to the limit, as in the paper)"]
         lines.append(f"  {'':<20}" + "".join(f"{name:>14}" for name, _ in drivers))
         for label, fn in rows:
             lines.append(f"  {label:<20}" + "".join(f"{fn(r):>14}" for _, r in drivers))
-        ch = result.changes()
+        saved = result.savings()
         for key, name in (("driven", "recorded"), ("dp_optimum", "DP optimum")):
-            if key in ch:
-                c = ch[key]
-                if c is None:
+            if key in saved:
+                if saved[key] is None:
                     lines.append(f"  {name} vs regular: not compared: the drive crossed a red light (Notes)")
                     continue
-                lines.append(f"  {name} vs regular: energy {c['energy']:+.1f} %, decay {c['decay']:+.1f} %, cost {c['cost']:+.1f} %")
+                lines.append(f"  {name} vs regular: {savings_text(saved[key])}")
         head += lines
     notes = result.trace.notes + result.notes
     if notes:
         head += ["", "Notes:"] + [f"  - {n}" for n in notes]
     return "\n".join(head)
+
+
+def savings_text(saved: dict[str, float]) -> str:
+    """``savings_frac`` in words: "41.1 % less energy, 41.1 % less wear, 41.1 % less cost" (the app's sign)."""
+    return ", ".join(f"{abs(100 * saved[k]):.1f} % {'less' if saved[k] >= 0 else 'more'} {k}" for k in ("energy", "wear", "cost"))
 
 
 def _finite_json(obj):
@@ -116,8 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
     gps.add_argument("--corridor", help="corridor preset or JSON file (default: the trace's '# corridor:', else found by map matching)")
     gps.add_argument("--timing", help="signal timing: a paper preset (field_test, -15_15), a plan of the corridor, or a plan file .json/.toml (default: the trace's '# timing:', else the corridor's own plan)")
     gps.add_argument("--entry", type=float, metavar="UNIX_S", help="zone-entry instant the timing is relative to (default: '# entry_unix_s:', else when the fixes cross station 0)")
-    gps.add_argument("--smooth-s", type=float, default=None, help="Gaussian speed smoothing sigma [s] (default: 0 for GPS speeds, 1 for speeds from positions)")
-    gps.add_argument("--baseline", type=Path, metavar="TRACE", help="another GPS trace of the same corridor (e.g. a regular drive): print this drive's change against it")
+    gps.add_argument("--smooth-s", type=float, default=None, help="Gaussian speed smoothing sigma [s] of the drive and of the drivers it is compared with (default: 1, as the service's trip score)")
+    gps.add_argument("--baseline", type=Path, metavar="TRACE", help="another GPS trace of the same corridor (e.g. a regular drive): print what this drive saved against it")
     gps.add_argument("--no-compare", action="store_true", help="skip the regular driver and the DP optimum")
     live = parser.add_argument_group("live service")
     live.add_argument("--server", metavar="URL", help="also feed the fixes to an advisory service (e.g. http://127.0.0.1:8000) and print its advisories")
@@ -156,7 +161,7 @@ def _speed_main(trace: SpeedTrace, args) -> int:
 
 
 def _gps_main(trace: GpsTrace, args) -> int:
-    from replay.drive import change_pct, score_drive
+    from replay.drive import savings_frac, score_drive
 
     vehicle = args.vehicle or trace.meta.get("vehicle") or DEFAULT_VEHICLE
     if vehicle not in VEHICLE_PRESETS:
@@ -175,8 +180,11 @@ def _gps_main(trace: GpsTrace, args) -> int:
             raise TraceError(f"{args.baseline}: --baseline needs a GPS trace")
         base = score_drive(other, params, corridor=args.corridor or result.matched.corridor.name, timing=args.timing,
                            smooth_s=args.smooth_s, compare=False)  # fmt: skip
-        baseline = {"trace": other.source, "complete": base.complete, "driven": base.driven.as_dict(),
-                    "change_pct": None if result.red_crossings else change_pct(result.driven.score, base.driven.score)}  # fmt: skip
+        same_m = abs(base.drive.distance_m - result.drive.distance_m) < 1e-6
+        baseline = {"trace": other.source, "complete": base.complete, "compared_m": result.drive.distance_m, "driven": base.driven.as_dict(),
+                    "savings_frac": savings_frac(result.driven.score, base.driven.score) if same_m and not result.red_crossings else None}  # fmt: skip
+        if not same_m:
+            result.notes.append(f"not compared with the baseline: it covers {base.drive.distance_m:.1f} m of the zone, this drive {result.drive.distance_m:.1f} m")
     timeline = None
     if args.server:
         from replay.live import replay_live
@@ -195,8 +203,8 @@ def _gps_main(trace: GpsTrace, args) -> int:
     else:
         print(render_drive(result, f"{trace.source} ({vehicle}, decay x{args.decay_multiplier:g})"))
         if baseline is not None:
-            c, b = baseline["change_pct"], baseline["driven"]
-            change = "  not compared: this drive crossed a red light (Notes)" if c is None else f"  energy {c['energy']:+.1f} %, decay {c['decay']:+.1f} %, cost {c['cost']:+.1f} %"
+            c, b = baseline["savings_frac"], baseline["driven"]
+            change = "  not compared: a red light crossed or another distance (Notes)" if c is None else f"  {savings_text(c)}"
             print(f"\nAgainst the baseline trace {other.source} (energy {b['energy_kwh'] * 1000:.1f} Wh, SOH {b['soh_lost_frac'] * 1e6:.3f}e-6, "
                   f"cost ${b['cost_usd']:.5f}):\n{change}")  # fmt: skip
         if timeline is not None:

@@ -6,21 +6,22 @@
    ones by map matching (``replay.matching.find_corridor``).
 2. **Stations** of every fix (``replay.matching.match``); fixes more than 30 m off the route are dropped.
 3. **Speeds**: the fixes' speed over ground; where a fix has none, the slope of the stations over time.
-   Optionally a Gaussian smoothing (``smooth_s``; default: none for GPS speeds, 1 s for speeds from
-   positions), then speeds under 0.2 m/s set to 0. Speed noise reads as kinetic-energy churn, which the
-   model charges at the drivetrain and regen efficiencies; smoothing rounds off braking peaks, which the
-   regen power limit rewards. docs/REPLAY.md has the numbers for both.
-4. **The zone**: from the instant the fixes cross station 0 to the instant they cross ``length_m``
-   (interpolated between fixes; a trace that starts inside the zone is extrapolated back, as the
-   service does), as a trajectory whose positions are integrated from the speeds
-   (``advisory.evaluation.track.trajectory_from_samples``).
+4. **The zone and the comparison** (``advisory.evaluation.compare``, the same code as the service's trip
+   score): the speeds smoothed (``smooth_s``, default ``SMOOTH_S`` = 1 s, as the service), standstill
+   below 0.2 m/s; the zone from the instant the fixes cross station 0 to the instant they cross
+   ``length_m`` (interpolated between fixes; a trace that starts inside the zone is extrapolated back),
+   or to where they stop (a partial drive is compared over the distance it drove), as a trajectory whose
+   positions are integrated from the speeds; the regular driver measured alike (sampled at the fixes'
+   instants, smoothed, cut at the same distance). The DP optimum is its exact trajectory over the whole
+   zone (none for a partial drive).
 5. **The lights**: the timing (``--timing`` / ``# timing:``: a paper preset, a plan of the corridor, or a
    plan file; default: the corridor's own plan if it has one) anchored at ``entry_unix_s`` (``--entry`` /
    ``# entry_unix_s:``, default: the measured zone entry; a plan by time of day runs on the trace's own
    clock), seen from the measured entry (``spat_feed.scenarios.advisory_scenario_at``), through all N lights.
 6. **Scores** (``advisory.evaluation.endstate.score_in_end_state``: zone + re-acceleration to the limit) of the drive,
-   the paper's regular driver entering at the same instant at the limit, and the DP optimum
-   (``advisory.optimizer.dp.solve``, 20 m stages), and the changes against the regular driver. The DP needs
+   the paper's regular driver entering at the same instant and as fast, and the DP optimum
+   (``advisory.optimizer.dp.solve``, 20 m stages), and the savings against the regular driver
+   (``savings_frac``: ``1 - drive / regular``, positive = less, as the service's). The DP needs
    every stop line on a stage boundary: where a corridor's are not (a real road), it solves with 10 m
    stages and the stop lines moved to the nearest boundary (at most 5 m; said in the notes,
    :func:`dp_scenario`). The speed limit is the corridor's lowest over the zone where its file states one.
@@ -32,30 +33,17 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from advisory.evaluation.endstate import EndStateScore, score_in_end_state
+from advisory.evaluation.compare import SMOOTH_S, Comparison, DriverResult, ZoneDrive, compare_drive, drive_in_zone, savings_frac  # noqa: F401  (DriverResult, savings_frac: re-exported)
+from advisory.evaluation.endstate import score_in_end_state
 from advisory.physics.params import SPEED_LIMIT_MPS, ModelParams
 from advisory.evaluation.scoring import DriveScore
 from advisory.signals import Scenario
-from advisory.evaluation.track import (  # noqa: F401  (smooth_speed_mps, STANDSTILL_MPS: re-exported, used by tests)
-    STANDSTILL_MPS,
-    RedCrossing,
-    cut_to_zone,
-    red_light_crossings,
-    smooth_speed_mps,
-    trajectory_from_samples,
-)
-from advisory.trajectory import Trajectory
+from advisory.evaluation.track import STANDSTILL_MPS, RedCrossing, smooth_speed_mps  # noqa: F401  (re-exported, used by tests)
 from replay.matching import CorridorChoice, MatchedTrace, find_corridor, match
 from replay.trace_io import GpsTrace, TraceError
 from spat_feed.corridors import TIMING_PRESETS, load_corridor, preset_names
 from spat_feed.scenarios import FeedScenario, advisory_scenario_at, make_scenario, resolve_timing
 
-SMOOTH_POSITIONS_S = 1.0
-"""Default Gaussian smoothing (standard deviation) of speeds derived from positions. [s]
-GPS (Doppler) speeds are not smoothed by default: at 1 Hz the sampling already rounds off the braking
-peaks, and smoothing them further lowers the energy more than the noise raises it (docs/REPLAY.md)."""
-EDGE_M = 25.0
-"""The fixes must reach within this of the zone entry and exit for the drive to be complete. [m]"""
 DP_STAGE_M = 20.0
 DP_FINE_STAGE_M = 10.0
 """DP stage where the stop lines are not on the 20 m grid; they move at most half of it. [m]"""
@@ -99,38 +87,6 @@ def speed_from_stations_mps(t_s: np.ndarray, station_m: np.ndarray) -> np.ndarra
     return np.maximum(np.gradient(station_m, t_s), 0.0)
 
 
-@dataclass(frozen=True, slots=True)
-class DriverResult:
-    """One driver over the zone: its trajectory and its end-state score."""
-
-    trajectory: Trajectory
-    score: EndStateScore
-
-    def as_dict(self) -> dict:
-        s = self.score
-        return {
-            "distance_m": s.zone.distance_m,
-            "duration_s": self.trajectory.duration_s,
-            "exit_speed_mps": s.exit_speed_mps,
-            "zone_net_kwh": s.zone.net_kwh,
-            "energy_kwh": s.energy_kwh,
-            "soh_lost_frac": s.soh_lost_frac,
-            "electricity_usd": s.electricity_usd,
-            "wear_usd": s.wear_usd,
-            "cost_usd": s.cost_usd,
-            "time_to_end_state_s": s.time_s,
-        }
-
-
-def change_pct(a: EndStateScore, b: EndStateScore) -> dict[str, float]:
-    """Change of ``a`` against ``b`` in %, negative = saving: energy, decay (SOH lost), cost."""
-
-    def pct(x: float, y: float) -> float:
-        return 100.0 * (x / y - 1.0) if y != 0 else float("nan")
-
-    return {"energy": pct(a.energy_kwh, b.energy_kwh), "decay": pct(a.soh_lost_frac, b.soh_lost_frac), "cost": pct(a.cost_usd, b.cost_usd)}
-
-
 @dataclass
 class DriveResult:
     """What ``replay`` reports on a GPS trace."""
@@ -143,24 +99,37 @@ class DriveResult:
     zone_entry_unix_s: float
     entry_unix_s: float | None  # the timing's anchor
     timing: str | None
-    complete: bool
-    driven: DriverResult
+    drive: ZoneDrive
     scenario: Scenario | None = None
-    regular: DriverResult | None = None
+    comparison: Comparison | None = None
     dp: DriverResult | None = None
     notes: list[str] = field(default_factory=list)
     red_crossings: list[RedCrossing] = field(default_factory=list)
 
     @property
+    def complete(self) -> bool:
+        return self.drive.complete
+
+    @property
+    def driven(self) -> DriverResult:
+        return self.drive.driven
+
+    @property
+    def regular(self) -> DriverResult | None:
+        return None if self.comparison is None else self.comparison.regular
+
+    @property
     def zone(self) -> DriveScore:
         return self.driven.score.zone
 
-    def changes(self) -> dict[str, dict[str, float]]:
-        if self.regular is None:
+    def savings(self) -> dict[str, dict[str, float] | None]:
+        """``savings_frac`` (positive = less) of the drive and of the DP optimum against the regular driver,
+        over the compared distance; the drive's is None when it crossed a red light."""
+        if self.comparison is None:
             return {}
-        out = {"driven": None if self.red_crossings else change_pct(self.driven.score, self.regular.score)}
+        out = {"driven": self.comparison.savings()}
         if self.dp is not None:
-            out["dp_optimum"] = change_pct(self.dp.score, self.regular.score)
+            out["dp_optimum"] = savings_frac(self.dp.score, self.regular.score)
         return out
 
     def as_dict(self) -> dict:
@@ -189,10 +158,11 @@ class DriveResult:
             },
             **self.zone.as_dict(),
             "comparison": {
+                "compared_m": self.drive.distance_m,
                 "driven": self.driven.as_dict(),
                 "regular": self.regular.as_dict() if self.regular else None,
                 "dp_optimum": self.dp.as_dict() if self.dp else None,
-                "change_vs_regular_pct": self.changes(),
+                "savings_frac": self.savings(),
             },
             "red_light_crossings": [{"light": c.light, "position_m": c.position_m, "t_unix_s": self.zone_entry_unix_s + c.t_s,
                                      "into_red_s": c.into_red_s, "speed_mps": c.speed_mps} for c in self.red_crossings],
@@ -256,28 +226,24 @@ def score_drive(
         if have.any():
             notes.append(f"{int((~have).sum())} fix(es) without a speed: speed from positions there")
     if smooth_s is None:
-        smooth_s = 0.0 if speed_source == "gps" else SMOOTH_POSITIONS_S
-    v = smooth_speed_mps(t, v, smooth_s)
-    v[v < STANDSTILL_MPS] = 0.0
+        smooth_s = SMOOTH_S
 
-    # the zone: from the entry crossing to the exit crossing (advisory.evaluation.track.cut_to_zone)
-    zone = cut_to_zone(t, st, v, length_m)
-    if zone is None:
+    # the zone, or the distance a partial drive covered (advisory.evaluation.compare, as the service)
+    drive = drive_in_zone(t, st, v, length_m, params, speed_limit_mps, smooth_s=smooth_s, keep_series=True)
+    if drive is None:
         raise TraceError(f"{trace.source}: the fixes never reach the zone of {m.corridor.name} (station 0)")
-    zt, zv, t_in = zone.t_s, zone.v_mps, zone.t_in_s
+    zone, t_in = drive.zone, drive.entry_s
     if not zone.entry_seen:
         notes.append(f"the trace starts {st[0]:.0f} m inside the zone: entry extrapolated back to {t_in - t[0]:+.1f} s")
-    complete = bool(st[0] <= EDGE_M and st[-1] >= length_m - EDGE_M) and zone.exit_seen
-    if not complete:
+    notes += drive.notes
+    if not drive.complete and not drive.partial:
         notes.append(f"the fixes cover stations {max(st.min(), 0):.0f}-{min(st.max(), length_m):.0f} m of 0-{length_m:.0f} m: the drive is incomplete, comparisons are indicative")
-    traj = trajectory_from_samples(zt, zv, x0_m=0.0, t0_s=t_in)
-    driven = DriverResult(traj, score_in_end_state(traj, params, speed_limit_mps, keep_series=True))
 
     own_plan = m.corridor.plan()
     if timing is None and own_plan is not None:
         timing = own_plan.name
         notes.append(f"timing: the corridor's plan {timing!r} (pattern in force at the zone entry)")
-    result = DriveResult(trace, choice, m, speed_source, float(smooth_s), t_in, entry_unix_s, timing, complete, driven, notes=notes)
+    result = DriveResult(trace, choice, m, speed_source, float(smooth_s), t_in, entry_unix_s, timing, drive, notes=notes)
     if timing is None:
         notes.append("no signal timing (--timing or '# timing:'): no comparison with the regular driver and the DP optimum")
         return result
@@ -291,19 +257,21 @@ def score_drive(
     except ValueError as exc:
         raise TraceError(str(exc)) from None
     # the regular driver and the DP optimum enter when and as fast as the recorded drive did
-    scenario = replace(scenario, initial_speed_mps=float(min(max(zv[0], 0.0), scenario.speed_limit_mps)))
+    scenario = replace(scenario, initial_speed_mps=float(min(max(zone.v_mps[0], 0.0), scenario.speed_limit_mps)))
     result.scenario = scenario
-    result.red_crossings = red_light_crossings(traj, scenario.signals, t - t_in, st)
+    result.red_crossings = drive.red_crossings(scenario.signals)
     for c in result.red_crossings:
         notes.append(f"crossed light {c.light} ({c.position_m:.0f} m) at {t_in + c.t_s:.1f} (Unix s), {c.into_red_s:.1f} s into red, at {c.speed_mps * 3.6:.0f} km/h: "
                      "this drive is not reported as a saving")
     if not compare:
         return result
     from advisory.optimizer import dp
-    from advisory.drivers.regular import regular_driver
 
-    reg = regular_driver(scenario)
-    result.regular = DriverResult(reg, score_in_end_state(reg, params, speed_limit_mps, keep_series=True))
+    result.comparison = compare_drive(drive, lambda _entry_s: scenario, params, speed_limit_mps, keep_series=True)
+    result.scenario = scenario = result.comparison.lights
+    if drive.partial:
+        notes.append("DP optimum: not computed for a partial drive (it is an optimum over the whole zone)")
+        return result
     solvable, stage_m, moved_m = dp_scenario(scenario)
     if moved_m > 0:
         notes.append(f"DP optimum on {stage_m:g} m stages with the stop lines moved to the grid (at most {moved_m:.1f} m)")

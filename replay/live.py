@@ -80,8 +80,9 @@ class Timeline:
         out.append(f"  {self.sent} fixes sent in {self.wall_s:.1f} s, {self.ok} used, ignored: {ign}; {len(self.events)} changes of advice; {self.retries} retries")
         if self.score and self.score.get("savings_frac"):
             s = self.score["savings_frac"]
-            out.append("  service's trip score vs its regular driver: "
-                       f"energy {-100 * s['energy']:+.1f} %, decay {-100 * s['wear']:+.1f} %, cost {-100 * s['cost']:+.1f} %")  # fmt: skip
+            from replay.cli import savings_text
+
+            out.append(f"  service's trip score vs its regular driver: {savings_text(s)}")
         return "\n".join(out)
 
 

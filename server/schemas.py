@@ -185,13 +185,14 @@ class TripScoreOut(_Out):
     complete: bool = Field(description="the fixes cover the zone from entry to exit (else the comparison is indicative)")
     n_fixes: int = Field(description="on-route fixes inside the zone")
     coverage_frac: float = Field(description="share of the zone covered by the fixes [0.0001]")
+    compared_m: float | None = Field(default=None, description="the distance both drivers are scored over: the zone's length, or where the fixes of a trip ended early stop [m, 0.1]; null when there is no drive")
     vehicle: str
     entry_unix_s: float = Field(description="when the car entered the zone (interpolated between fixes) [Unix s, 0.001]")
     entry_speed_mps: float = Field(description="the car's speed then, the regular driver's entry speed [m/s, 0.01]")
     driven: DriverScoreOut | None
     regular: DriverScoreOut
     savings_frac: dict[str, float] | None = Field(
-        default=None, description="1 - driven / regular for energy, wear and cost [0.0001]; null when there is no drive to compare or it crossed a red light"
+        default=None, description="1 - driven / regular for energy, wear and cost over `compared_m`, positive = less than the regular driver (the sign `replay` uses too) [0.0001]; null when there is no drive to compare or it crossed a red light"
     )
     red_light_crossings: list[RedLightCrossingOut] = Field(default_factory=list)
     note: str = ""

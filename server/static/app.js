@@ -264,12 +264,12 @@ async function finish(current, why, { scored = true } = {}) {
   wakeLock = null;
   if (drive !== current) return;
   drive = null;
-  renderScore(score);
+  renderScore(score, current);
   show("score");
 }
 
 // -- the score -------------------------------------------------------------------------------------
-function renderScore(score) {
+function renderScore(score, current) {
   const pct = new Intl.NumberFormat(locale, { style: "percent", maximumFractionDigits: 0 });
   const usd = new Intl.NumberFormat(locale, { style: "currency", currency: "USD", currencyDisplay: "narrowSymbol", maximumSignificantDigits: 2 });
   const wh = new Intl.NumberFormat(locale, { maximumFractionDigits: 0 });
@@ -292,7 +292,11 @@ function renderScore(score) {
   let summary = "No score: the trip could not be ended.";
   if (score && you && Number.isFinite(saved.energy)) {
     const frac = Math.abs(saved.energy);
-    summary = `You used ${pct.format(frac)} ${saved.energy >= 0 ? "less" : "more"} energy than a regular driver${score.complete ? "." : " (indicative: the drive did not cover the whole road)."}`;
+    // a trip ended early is scored over the distance it drove, the regular driver over the same distance
+    const partial = Number.isFinite(score.compared_m) && Number.isFinite(current?.length_m) && score.compared_m < current.length_m - 0.5;
+    const over = partial ? ` over the same ${distanceText(score.compared_m, current.units, locale)} (the trip ended before the end of the road).`
+      : score.complete ? "." : " (indicative: the drive did not start at the start of the road).";
+    summary = `You used ${pct.format(frac)} ${saved.energy >= 0 ? "less" : "more"} energy than a regular driver${over}`;
   } else if (score && you && score.red_light_crossings?.length) {
     summary = "A red light was crossed: this drive is not scored as a saving.";
   } else if (score && you) {

@@ -103,11 +103,11 @@ def test_a_red_light_crossing_is_flagged_and_not_a_saving(tmp_path, capsys):
     f = tmp_path / "red.csv"
     f.write_text("\n".join(rows) + "\n")
     rc, d = run_json(capsys, f, "--json", "--baseline", OURS)
-    assert rc == 0 and d["comparison"]["change_vs_regular_pct"]["driven"] is None and d["baseline"]["change_pct"] is None
+    assert rc == 0 and d["comparison"]["savings_frac"]["driven"] is None and d["baseline"]["savings_frac"] is None
     first = d["red_light_crossings"][0]
     assert first["light"] == 1 and first["into_red_s"] == pytest.approx(15 + 100 / v, abs=0.5)
     assert any("not reported as a saving" in n for n in d["notes"])
     # the shipped regular and advised drives run no red light
     for trace in (OURS, OURS.with_name("field_test_regular.csv")):
         _, d = run_json(capsys, trace, "--json")
-        assert d["red_light_crossings"] == [] and d["comparison"]["change_vs_regular_pct"]["driven"] is not None
+        assert d["red_light_crossings"] == [] and d["comparison"]["savings_frac"]["driven"] is not None
