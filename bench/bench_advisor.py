@@ -15,7 +15,7 @@ Run: .venv/bin/python bench/bench_advisor.py [--runs N]   (default 10,000 random
   behind the regular driver any scenario ends (target <= 5 s).
 * The 64 paper timings with actuated lights, windows ±10 s (3 draws each): mean saving against the regular
   driver on the same truth, as a share of the fixed-time saving (target >= 75 %), and the worst case (<= +10 %).
-* N randomized runs with actuated lights (``spat_feed.actuated.random_case``: windows up to ±15 s, the real
+* N randomized runs with actuated lights (``spat_feed.transport.actuated.random_case``: windows up to ±15 s, the real
   switch anywhere inside and up to 10 % beyond, dropouts, ±3 s clock skew; half the controllers publish their
   current phase only, as Antwerp's, the rest learnt from their history and a conflicting stage): red entries and
   hard brakes (> 4 m/s²) (target: 0 and 0). ``--actuated-runs N`` (default 10,000).
@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from advisory.advice.advisor import AdvisorMemory, AdvisorParams, advise  # noqa: E402
 from advisory.drivers.closed_loop import DriverModel, evaluate, hindsight_optimum, observe, red_light_violations, simulate  # noqa: E402
 from advisory.optimizer.dp import GridSpec  # noqa: E402
-from spat_feed.actuated import ActuatedFeed, actuated_scenario, random_case  # noqa: E402
+from spat_feed.transport.actuated import ActuatedFeed, actuated_scenario, random_case  # noqa: E402
 from advisory.evaluation.endstate import score_in_end_state  # noqa: E402
 from advisory.physics.params import model_params  # noqa: E402
 from advisory.drivers.regular import regular_driver  # noqa: E402

@@ -26,7 +26,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from spat_feed.corridors import StraightRoad, straight_corridor  # noqa: E402
+from spat_feed.road.corridors import StraightRoad, straight_corridor  # noqa: E402
 
 REPLAY = Path(sys.executable).with_name("replay")
 TARGET_S = 1.0

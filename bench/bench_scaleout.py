@@ -51,7 +51,7 @@ from server.advising import Engine  # noqa: E402
 from server.config import Settings  # noqa: E402
 from server.gps import Fix  # noqa: E402
 from server.schemas import TripCreate  # noqa: E402
-from spat_feed.corridors import load_corridor  # noqa: E402
+from spat_feed.road.corridors import load_corridor  # noqa: E402
 from tests.procs import RedisServer  # noqa: E402
 
 OPEN = {"ECO_RATE_PER_S": "1000000", "ECO_RATE_BURST": "1000000", "ECO_CREATE_RATE_PER_S": "1000000", "ECO_CREATE_BURST": "1000000",

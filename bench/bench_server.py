@@ -36,7 +36,7 @@ sys.path.insert(0, str(REPO))
 
 from bench._procs import cpu_seconds, free_port, rss_mib  # noqa: E402,F401
 
-from spat_feed.corridors import load_corridor  # noqa: E402
+from spat_feed.road.corridors import load_corridor  # noqa: E402
 
 CORRIDOR = "paper_s400"
 

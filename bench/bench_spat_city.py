@@ -31,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from bench._procs import cpu_seconds, free_port  # noqa: E402
-from spat_feed.corridors import CHAMPS_ELYSEES, straight_corridor  # noqa: E402
+from spat_feed.road.corridors import CHAMPS_ELYSEES, straight_corridor  # noqa: E402
 
 
 def write_corridors(folder: Path, n_corridors: int = 10, lights: int = 10) -> list[Path]:

@@ -1,10 +1,10 @@
 """The SPaT store on a real controller: what learning each intersection costs per message.
 
 Offers every snapshot of a shared Antwerp recording (K648, 10 signal groups, 1 Hz) to a
-:class:`~spat_feed.source.SpatStore` and reads one group's :meth:`~spat_feed.source.SpatStore.plan_reading` after each,
+:class:`~spat_feed.transport.store.SpatStore` and reads one group's :meth:`~spat_feed.transport.store.SpatStore.plan_reading` after each,
 as the service does for a car. Prints the microseconds per message, against the same messages only parsed
 (``plan_from_movement`` for each group: the store's floor), measured in the same run, and what was learnt: the
-groups whose phases a link ends (:class:`~spat_feed.observe.ChangeLinks`) and the share of red readings a link speaks in.
+groups whose phases a link ends (:class:`~spat_feed.prediction.observe.ChangeLinks`) and the share of red readings a link speaks in.
 
     .venv/bin/python bench/bench_spat_store.py [LOG.csv.gz]   (default: the 2019-05-01 recording)
 """
@@ -16,11 +16,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from spat_feed.actuated import recordings  # noqa: E402
-from spat_feed.messages import plan_from_movement, to_unix_s  # noqa: E402
-from spat_feed.plans import PhaseClass  # noqa: E402
-from spat_feed.recorded import read_spat_csv  # noqa: E402
-from spat_feed.source import SpatStore, TimeRules  # noqa: E402
+from spat_feed.transport.actuated import recordings  # noqa: E402
+from spat_feed.timing.messages import plan_from_movement, to_unix_s  # noqa: E402
+from spat_feed.timing.plans import PhaseClass  # noqa: E402
+from spat_feed.transport.recorded import read_spat_csv  # noqa: E402
+from spat_feed.transport.store import SpatStore, TimeRules  # noqa: E402
 from bench._procs import best_of  # noqa: E402
 
 

@@ -105,7 +105,7 @@ def main() -> None:
           f"(target p99 < 0.5 ms)")  # fmt: skip
 
     if SHARED_OSM.exists():
-        from spat_feed.osm import corridors_from_osm
+        from spat_feed.road.osm import corridors_from_osm
 
         t0 = time.perf_counter()
         result = corridors_from_osm(SHARED_OSM, "7th Street")

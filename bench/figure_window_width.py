@@ -3,7 +3,7 @@
 Run: .venv/bin/python bench/figure_window_width.py [--draws N] [SPAT_EVAL_JSON ...]
 
 The 64 paper timings with fixed-time lights (a perfect feed), then actuated with windows of ±5, ±10 and ±15 s
-(``spat_feed.actuated``: the real switch anywhere inside and up to 10 % beyond; ``--draws`` truths per timing),
+(``spat_feed.transport.actuated``: the real switch anywhere inside and up to 10 % beyond; ``--draws`` truths per timing),
 and the recorded days from ``ecodrive spat-eval LOG --json`` outputs given as arguments (another geometry: an
 urban approach at 50 km/h; their own regular driver and hindsight DP). Per setting: the advisor's mean saving,
 the regular driver's (0 by definition: every saving is against it on the same truth) and the hindsight DP's

@@ -1,7 +1,7 @@
 """``ecodrive corridor ...``: corridor and plan files from the command line.
 
 * ``from-osm FILE.osm[.bz2|.gz|.pbf] --street NAME [-o OUT] [--direction D] [--name N] [--units U]``: build
-  corridor files from OpenStreetMap data (``spat_feed.osm``), one per direction of travel.
+  corridor files from OpenStreetMap data (``spat_feed.road.osm``), one per direction of travel.
 * ``show FILE_OR_PRESET [--timing PLAN.json] [--json]``: the corridor as the product understands it
   (``length_m``, ``lights`` with their ``station_m``, limits, plans); also validates the files.
 * ``tables FILE_OR_PRESET [--timing PLAN.json] [--cache DIR] [--workers N]``: build (or load) the DP
@@ -92,7 +92,7 @@ def _text(d: dict) -> str:
 
 
 def _load(target: str, timing: Sequence[str] = ()):
-    from spat_feed.corridors import load_corridor
+    from spat_feed.road.corridors import load_corridor
 
     return load_corridor(target, plans=tuple(timing))
 
@@ -105,7 +105,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_from_osm(args) -> int:
-    from spat_feed.osm import corridors_from_osm
+    from spat_feed.road.osm import corridors_from_osm
 
     result = corridors_from_osm(args.file, args.street, name=args.name, units=args.units, direction=args.direction, first_id=args.first_id)
     for note in result.notes:
@@ -135,9 +135,9 @@ def cmd_from_osm(args) -> int:
 def cmd_tables(args) -> int:
     from advisory.advice.tables import TableGrid
     from advisory.physics.params import model_params
-    from spat_feed.corridor_tables import corridor_tables, default_cache_dir, table_timings
+    from spat_feed.road.corridor_tables import corridor_tables, default_cache_dir, table_timings
 
-    from spat_feed.corridors import load_plan
+    from spat_feed.road.corridors import load_plan
 
     corridor = _load(args.corridor, args.timing or ())
     timings = [corridor.plan(load_plan(t).name) for t in args.timing] if args.timing else None
@@ -158,8 +158,8 @@ def cmd_tables(args) -> int:
 
 
 def cmd_schema(args) -> int:
-    from spat_feed.corridors import Corridor
-    from spat_feed.signal_plans import SignalPlan
+    from spat_feed.road.corridors import Corridor
+    from spat_feed.timing.signal_plans import SignalPlan
 
     model = Corridor if args.kind == "corridor" else SignalPlan
     print(json.dumps(model.model_json_schema(), indent=1))
@@ -200,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from spat_feed.osm import OsmError
+    from spat_feed.road.osm import OsmError
 
     args = build_parser().parse_args(argv)
     try:

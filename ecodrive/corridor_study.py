@@ -24,9 +24,9 @@ import numpy as np
 from advisory.evaluation.study import StudyCase
 from advisory.optimizer.dp import GridSpec
 from replay.drive import dp_scenario
-from spat_feed.corridors import Corridor, load_corridor
-from spat_feed.scenarios import advisory_scenario_at, make_scenario, resolve_timing
-from spat_feed.signal_plans import SignalPlan
+from spat_feed.road.corridors import Corridor, load_corridor
+from spat_feed.transport.scenarios import advisory_scenario_at, make_scenario, resolve_timing
+from spat_feed.timing.signal_plans import SignalPlan
 
 DEFAULT_START = "2024-05-01T12:00"
 """A Wednesday noon, local time of the plan: the off-peak pattern of most plans. Override with --start."""

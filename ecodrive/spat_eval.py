@@ -1,12 +1,12 @@
 """`ecodrive spat-eval LOG [--json]`: the advisor on a recorded controller, judged on what really happened.
 
 The log (the ``../shared/data/spat`` CSV format) is replayed through the whole advisory path: its rows become
-J2735 movement states (:func:`spat_feed.recorded.read_spat_csv`), each second's state becomes a plan
-(:func:`spat_feed.messages.plan_from_movement`) and a :class:`~spat_feed.observe.PlanReading` (fresh while
+J2735 movement states (:func:`spat_feed.transport.recorded.read_spat_csv`), each second's state becomes a plan
+(:func:`spat_feed.timing.messages.plan_from_movement`) and a :class:`~spat_feed.prediction.observe.PlanReading` (fresh while
 the last snapshot is under ``stale_after_s`` old), the advisor's observation comes from
-:func:`spat_feed.observe.light_view`, and the virtual driver of :func:`advisory.drivers.closed_loop.simulate`
+:func:`spat_feed.prediction.observe.light_view`, and the virtual driver of :func:`advisory.drivers.closed_loop.simulate`
 follows the advice, seeing the light's real colour. The source has watched the log from its start: each
-intersection's :class:`~spat_feed.observe.IntersectionHistory` (what the advisor knows of the phases after the
+intersection's :class:`~spat_feed.prediction.observe.IntersectionHistory` (what the advisor knows of the phases after the
 published one: each group's durations, and the changes of other groups its phases follow) holds every snapshot up
 to the reading's. The truth is the log itself: a phase switches midway
 between the last snapshot in it and the first after it; red is every J2735 stop state (unavailable and dark
@@ -50,10 +50,10 @@ from advisory.evaluation.endstate import score_in_end_state
 from advisory.optimizer.dp import GridSpec
 from advisory.physics.params import model_params
 from advisory.signals import Scenario, TimelineSignal
-from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
-from spat_feed.messages import MovementState, plan_from_movement, to_unix_s
-from spat_feed.observe import CycleStats, IntersectionHistory, PlanReading, light_view
-from spat_feed.plans import STOP_STATES, PhaseClass, phase_class
+from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
+from spat_feed.timing.messages import MovementState, plan_from_movement, to_unix_s
+from spat_feed.prediction.observe import CycleStats, IntersectionHistory, PlanReading, light_view
+from spat_feed.timing.plans import STOP_STATES, PhaseClass, phase_class
 
 HINDSIGHT_GRID = GridSpec(stage_m=20.0)
 HARD_BRAKE_MPS2 = 4.0
@@ -227,7 +227,7 @@ def _read_head(path: str, limit_s: float) -> list:
     import csv
     import gzip
 
-    from spat_feed.recorded import iter_spat_csv
+    from spat_feed.transport.recorded import iter_spat_csv
 
     out = []
     with (gzip.open(path, "rt", encoding="utf-8", newline="") if str(path).endswith(".gz") else open(path, encoding="utf-8", newline="")) as fh:
@@ -242,7 +242,7 @@ def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_
     """Replay the log at ``path`` (optionally only its first ``limit_s`` seconds); the summary and its rows."""
     from tqdm import tqdm
 
-    from spat_feed.recorded import read_spat_csv
+    from spat_feed.transport.recorded import read_spat_csv
 
     global _LOGS
     setup = setup or Setup()
@@ -270,7 +270,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
-    from spat_feed.recorded import RecordedLogError
+    from spat_feed.transport.recorded import RecordedLogError
 
     results = []
     for path in args.logs:

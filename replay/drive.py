@@ -17,7 +17,7 @@
 5. **The lights**: the timing (``--timing`` / ``# timing:``: a paper preset, a plan of the corridor, or a
    plan file; default: the corridor's own plan if it has one) anchored at ``entry_unix_s`` (``--entry`` /
    ``# entry_unix_s:``, default: the measured zone entry; a plan by time of day runs on the trace's own
-   clock), seen from the measured entry (``spat_feed.scenarios.advisory_scenario_at``), through all N lights.
+   clock), seen from the measured entry (``spat_feed.transport.scenarios.advisory_scenario_at``), through all N lights.
 6. **Scores** (``advisory.evaluation.endstate.score_in_end_state``: zone + re-acceleration to the limit) of the drive,
    the paper's regular driver entering at the same instant and as fast, and the DP optimum
    (``advisory.optimizer.dp.solve``, 20 m stages), and the savings against the regular driver
@@ -41,8 +41,9 @@ from advisory.signals import Scenario
 from advisory.evaluation.track import STANDSTILL_MPS, RedCrossing, smooth_speed_mps  # noqa: F401  (re-exported, used by tests)
 from replay.matching import CorridorChoice, MatchedTrace, find_corridor, match
 from replay.trace_io import GpsTrace, TraceError
-from spat_feed.corridors import TIMING_PRESETS, load_corridor, preset_names
-from spat_feed.scenarios import FeedScenario, advisory_scenario_at, make_scenario, resolve_timing
+from spat_feed.road.corridors import load_corridor, preset_names
+from spat_feed.timing.paper import TIMING_PRESETS
+from spat_feed.transport.scenarios import FeedScenario, advisory_scenario_at, make_scenario, resolve_timing
 
 DP_STAGE_M = 20.0
 DP_FINE_STAGE_M = 10.0

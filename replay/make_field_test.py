@@ -33,8 +33,8 @@ from advisory.physics.params import model_params
 from advisory.drivers.regular import regular_driver
 from advisory.advice.tables import AdviceTables, TableGrid
 from advisory.trajectory import Trajectory
-from spat_feed.corridors import WGS84
-from spat_feed.scenarios import make_scenario
+from spat_feed.road.corridors import WGS84
+from spat_feed.transport.scenarios import make_scenario
 
 DATA = Path(__file__).resolve().parent / "data"
 CORRIDOR = "paper_s400"

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spat_feed.corridors import Corridor, load_corridor, preset_names
+from spat_feed.road.corridors import Corridor, load_corridor, preset_names
 
 ON_ROUTE_M = 30.0
 """A fix farther than this from the route counts as off route (the service's default ``off_route_m``). [m]"""

@@ -10,7 +10,7 @@ From a fix to an advisory (:meth:`Engine.on_fix`):
 3. **Speed**: the fix's speed over ground, else the least-squares slope of the last seconds' stations.
 4. **SPaT at the fix's own time**: the trip's plans for the next two lights, from the process's shared SPaT
    (``server.spat``: simulated plans, or the latest state per intersection from a feed, MQTT or a log), turned
-   into conservative red windows relative to the fix (``spat_feed.observe``).
+   into conservative red windows relative to the fix (``spat_feed.prediction.observe``).
 5. **Advice**: ``advisory.advice.advisor.advise(observation, memory, params, tables)``; the trip keeps the new memory.
    When the advisor has no speed advice for want of SPaT, the reason says why: ``no_spat``, ``stale_spat``,
    or ``clock_skew`` (the controller's clock is off ours).
@@ -25,19 +25,19 @@ from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, advise
 from advisory.physics.params import VEHICLE_PRESETS
-from spat_feed.corridors import Corridor
-from spat_feed.scenarios import FeedScenario, Uncertainty, resolve_timing
+from spat_feed.road.corridors import Corridor
+from spat_feed.transport.scenarios import FeedScenario, Uncertainty, resolve_timing
 
 from server.config import Settings
 from server.errors import ApiError
 from server.gps import Fix, RouteMatcher
-from spat_feed.observe import observation
+from spat_feed.prediction.observe import observation
 from server.ratelimit import TokenBucket
 from server.schemas import MS_TIMESTAMP_MIN, TripCreate
 from server.spat import ScenarioSpat, SharedSpat, SpatHub, TripSpat
 from server.store import Limits, make_store, retry_after  # noqa: F401  (retry_after: re-exported)
 from server.trips import Trip
-from spat_feed.simulator import shared_scenario
+from spat_feed.transport.simulator import shared_scenario
 
 ADVISOR_UNITS = {"metric": "kmh", "imperial": "mph"}
 """A trip's ``units`` -> the advisor's spoken speed unit (``AdvisorParams.units``)."""

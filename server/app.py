@@ -22,7 +22,7 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from advisory.advice.advisor import AdvisorParams, advise
 from advisory.physics.params import model_params
-from spat_feed.corridors import Corridor, load_corridor, load_corridor_dir
+from spat_feed.road.corridors import Corridor, load_corridor, load_corridor_dir
 
 from server.advising import Engine
 from server.audio import Speech
@@ -34,8 +34,8 @@ from server.openapi import install_docs
 from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
 from server.spat import SpatHub
-from spat_feed.observe import PlanReading, observation
-from spat_feed.simulator import shared_scenario
+from spat_feed.prediction.observe import PlanReading, observation
+from spat_feed.transport.simulator import shared_scenario
 from server.store import RedisStreams
 
 log = logging.getLogger("server")
@@ -67,13 +67,13 @@ def load_corridors(settings: Settings) -> dict[str, Corridor]:
 
 def build_tables(settings: Settings, corridors: dict[str, Corridor]) -> dict[str, object]:
     """DP lookup tables per corridor for the default vehicle, for every plan its trips can run under
-    (``spat_feed.corridor_tables``), cached as .npz in ``tables_dir`` if set.
+    (``spat_feed.road.corridor_tables``), cached as .npz in ``tables_dir`` if set.
 
     A corridor without any fixed-time light gets none: the advisor then uses its rules.
     """
     if not settings.tables:
         return {}
-    from spat_feed.corridor_tables import corridor_tables
+    from spat_feed.road.corridor_tables import corridor_tables
 
     params = model_params(settings.default_vehicle)
     out: dict[str, object] = {}

@@ -13,7 +13,7 @@ from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from advisory.physics.params import SPEED_LIMIT_MPS
-from spat_feed.corridors import preset_names
+from spat_feed.road.corridors import preset_names
 
 
 class Settings(BaseSettings):
@@ -107,7 +107,7 @@ class Settings(BaseSettings):
     @classmethod
     def _mqtt_url(cls, value: str | None) -> str | None:
         if value:
-            from spat_feed.mqtt import parse_mqtt_url
+            from spat_feed.transport.mqtt import parse_mqtt_url
 
             parse_mqtt_url(value)
         return value or None

@@ -13,7 +13,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-from spat_feed.corridors import WGS84, Corridor
+from spat_feed.road.corridors import WGS84, Corridor
 
 SPEED_WINDOW_S = 4.0
 """Positions of the last this many seconds give the speed when the fix has none. [s]"""

@@ -30,7 +30,7 @@ from advisory.evaluation.endstate import EndStateScore, score_in_end_state
 from advisory.physics.params import model_params
 from advisory.signals import Scenario
 from advisory.trajectory import Trajectory
-from spat_feed.scenarios import FeedScenario, advisory_scenario_at
+from spat_feed.transport.scenarios import FeedScenario, advisory_scenario_at
 
 from server.schemas import DriverScoreOut, RedLightCrossingOut, TripScoreOut
 

@@ -1,11 +1,11 @@
 """Where the service's SPaT comes from: one shared, per-intersection source for all trips.
 
-:class:`SpatHub` (one per process) holds a :class:`~spat_feed.source.SpatStore`: the latest state of every
+:class:`SpatHub` (one per process) holds a :class:`~spat_feed.transport.store.SpatStore`: the latest state of every
 (intersection, signal group), filled by whichever sources the settings name, all at once if need be:
 
 * the **simulator**, in process (``ECO_SPAT_SIMULATE``, on by default without a remote feed): a light with a
   fixed-time plan (the corridor's plan file, else the paper's ``15_15`` anchored on the epoch,
-  :func:`spat_feed.simulator.shared_scenario`) is read from its plan directly: exact, always fresh, and
+  :func:`spat_feed.transport.simulator.shared_scenario`) is read from its plan directly: exact, always fresh, and
   fit for the DP lookup tables; nothing to do per tick;
 * a **remote feed** (``ECO_SPAT_FEED_URL``): one WebSocket to its ``/spat/intersections/stream``;
 * an **MQTT broker** (``ECO_SPAT_MQTT_URL``): one subscription per intersection the corridors need;
@@ -24,17 +24,17 @@ import logging
 import time
 from typing import Any, Protocol
 
-from spat_feed.client import SpatClient
-from spat_feed.corridors import Corridor
-from spat_feed.messages import SpatMessage, from_unix_s
-from spat_feed.mqtt import MqttSubscriber
-from spat_feed.observe import PlanReading
-from spat_feed.player import JsonlRecorder, LogPlayer, read_spat_log
-from spat_feed.plans import Plan
-from spat_feed.pump import SpatPump, run_every
-from spat_feed.scenarios import FeedScenario, spat_message_at
-from spat_feed.simulator import shared_scenario
-from spat_feed.source import Clock, InProcessSpatSource, SpatStore, TimeRules
+from spat_feed.transport.client import SpatClient
+from spat_feed.road.corridors import Corridor
+from spat_feed.timing.messages import SpatMessage, from_unix_s
+from spat_feed.transport.mqtt import MqttSubscriber
+from spat_feed.prediction.observe import PlanReading
+from spat_feed.transport.player import JsonlRecorder, LogPlayer, read_spat_log
+from spat_feed.timing.plans import Plan
+from spat_feed.transport.pump import SpatPump, run_every
+from spat_feed.transport.scenarios import FeedScenario, spat_message_at
+from spat_feed.transport.simulator import shared_scenario
+from spat_feed.transport.store import Clock, InProcessSpatSource, SpatStore, TimeRules
 
 from server.config import Settings
 

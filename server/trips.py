@@ -19,10 +19,10 @@ from array import array
 from typing import TYPE_CHECKING
 
 from advisory.advice.advisor import Advice, AdvisorMemory
-from spat_feed.corridors import Corridor
-from spat_feed.scenarios import FeedScenario
+from spat_feed.road.corridors import Corridor
+from spat_feed.transport.scenarios import FeedScenario
 
-from spat_feed.plans import phase_class, state_at, state_start_s
+from spat_feed.timing.plans import phase_class, state_at, state_start_s
 
 from server.gps import RouteMatcher, Track
 from server.ratelimit import TokenBucket

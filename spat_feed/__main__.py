@@ -9,9 +9,10 @@ from collections.abc import Sequence
 
 import uvicorn
 
-from spat_feed.corridors import TIMING_PRESETS, preset_names
-from spat_feed.service import FeedSettings, create_app
-from spat_feed.source import Clock
+from spat_feed.road.corridors import preset_names
+from spat_feed.timing.paper import TIMING_PRESETS
+from spat_feed.transport.service import FeedSettings, create_app
+from spat_feed.transport.store import Clock
 
 
 def offset_clock(start_unix_s: float) -> Clock:

@@ -349,8 +349,8 @@ def test_one_second_is_singular():
 
 
 def test_leaving_the_zone_past_the_last_light_is_not_off_route():
-    from spat_feed.observe import observation
-    from spat_feed.scenarios import make_scenario
+    from spat_feed.prediction.observe import observation
+    from spat_feed.transport.scenarios import make_scenario
 
     corridor = make_scenario("paper_s400").corridor
     end = observation(corridor, corridor.length_m, 20.0, 0.0, {}, V, on_route=False)

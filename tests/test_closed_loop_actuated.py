@@ -12,7 +12,7 @@ from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import score_in_end_state
 from advisory.physics.params import model_params
 from advisory.signals import Scenario, paper_scenario
-from spat_feed.actuated import ActuatedFeed, actuated_scenario, random_case
+from spat_feed.transport.actuated import ActuatedFeed, actuated_scenario, random_case
 
 HARD_BRAKE_MPS2 = 4.0
 

@@ -12,8 +12,8 @@ from advisory.drivers.closed_loop import red_light_violations
 from advisory.drivers.regular import regular_driver
 from advisory.signals import Scenario
 from ecodrive.cli import main as cli
-from spat_feed.messages import to_unix_s
-from spat_feed.plans import STOP_STATES
+from spat_feed.timing.messages import to_unix_s
+from spat_feed.timing.plans import STOP_STATES
 
 from tests.conftest import SHARED_DATA
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Path
 from typing import Annotated
 
-from spat_feed.corridors import Corridor, IntersectionSpec
+from spat_feed.road.corridors import Corridor, IntersectionSpec
 
 from server.deps import EngineDep
 from server.errors import not_found

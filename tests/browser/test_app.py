@@ -23,7 +23,7 @@ import pytest
 
 from replay.trace_io import read_gps_csv
 from server.routes.webapp import DEMO_TRACE, STATIC_DIR
-from spat_feed.corridors import load_corridor
+from spat_feed.road.corridors import load_corridor
 
 from tests.browser.cdp import Browser, Page
 from tests.browser.conftest import CHROMIUM, figure_path, needs_chromium

@@ -14,8 +14,8 @@ from advisory.evaluation.endstate import score_in_end_state
 from advisory.physics.params import model_params
 from replay.cli import main
 from replay.make_field_test import ENTRY_UNIX_S, gps_fixes, write_csv
-from spat_feed.corridors import load_corridor
-from spat_feed.scenarios import advisory_scenario_at, make_scenario
+from spat_feed.road.corridors import load_corridor
+from spat_feed.transport.scenarios import advisory_scenario_at, make_scenario
 from tests.server.test_corridor_dir import five_light_files
 
 

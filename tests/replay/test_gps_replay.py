@@ -15,7 +15,7 @@ from replay.cli import main
 from replay.drive import score_drive, smooth_speed_mps
 from replay.matching import find_corridor, match
 from replay.trace_io import read_trace
-from spat_feed.corridors import load_corridor
+from spat_feed.road.corridors import load_corridor
 
 DATA = Path(__file__).resolve().parents[2] / "replay" / "data"
 ADVISED, REGULAR, GPX = DATA / "field_test_advised.csv", DATA / "field_test_regular.csv", DATA / "field_test_advised.gpx"

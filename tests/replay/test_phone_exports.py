@@ -92,7 +92,7 @@ def test_missing_columns_say_which_names_are_accepted(tmp_path, capsys):
 
 def test_a_red_light_crossing_is_flagged_and_not_a_saving(tmp_path, capsys):
     """Finding: a trace crossing a stop line during red was scored as a saving with `notes: []`."""
-    from spat_feed.corridors import load_corridor
+    from spat_feed.road.corridors import load_corridor
 
     cor = load_corridor("paper_s400")
     v = 50 / 3.6  # field_test: light 1 (100 m) is red until 15 s after entry; at 50 km/h it is reached at 7.2 s

@@ -100,6 +100,6 @@ def test_a_trip_ended_early_is_compared_over_the_distance_it_drove(demo):
 
 
 def _station(trace: GpsTrace, lat: float, lon: float) -> float:
-    from spat_feed.corridors import load_corridor
+    from spat_feed.road.corridors import load_corridor
 
     return float(load_corridor(trace.meta["corridor"]).project(lat, lon)[0])

@@ -11,7 +11,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from spat_feed.corridors import load_corridor
+from spat_feed.road.corridors import load_corridor
 
 from tests.procs import REPO, Proc, free_port  # noqa: F401  (re-exported for the test modules)
 

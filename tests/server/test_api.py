@@ -20,7 +20,7 @@ from server.app import create_app
 from server.config import Settings
 from server.schemas import AdviceOut
 from server.store import Limits
-from spat_feed.corridors import load_corridor
+from spat_feed.road.corridors import load_corridor
 
 NOW = 1_800_000_000.0
 

@@ -57,7 +57,7 @@ def test_trip_capacity_and_injected_clock():
         r = client.post("/v1/trips", json={})
         assert r.status_code == 503 and r.json()["error"] == "too_many_trips"
         # a fix at the injected clock's time is fine; one an hour ahead of it is not
-        from spat_feed.corridors import load_corridor
+        from spat_feed.road.corridors import load_corridor
 
         lat, lon = load_corridor("paper_s200").position(5.0)
         auth = {"Authorization": f"Bearer {a['token']}"}

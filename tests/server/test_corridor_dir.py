@@ -12,8 +12,8 @@ from fastapi.testclient import TestClient
 from advisory.drivers.regular import regular_driver
 from server.app import create_app
 from server.config import Settings
-from spat_feed.corridors import CHAMPS_ELYSEES, straight_corridor
-from spat_feed.scenarios import advisory_scenario_at, make_scenario
+from spat_feed.road.corridors import CHAMPS_ELYSEES, straight_corridor
+from spat_feed.transport.scenarios import advisory_scenario_at, make_scenario
 
 STOP_LINES_M = (150.0, 420.0, 700.0, 1000.0, 1300.0)
 T0 = 1_800_000_000.0  # a Friday, 08:00 UTC
@@ -48,7 +48,7 @@ def test_service_serves_a_corridor_folder_and_the_oakland_preset(tmp_path):
         assert created["timing"] == "fixed"
         auth = {"Authorization": f"Bearer {created['token']}"}
         # drive the regular driver's own trajectory through the five lights, one fix a second
-        from spat_feed.corridors import load_corridor_dir
+        from spat_feed.road.corridors import load_corridor_dir
 
         corridor = load_corridor_dir(tmp_path)["five"]
         scenario = advisory_scenario_at(make_scenario(corridor, "fixed", T0), T0)

@@ -15,7 +15,7 @@ import pytest
 import websockets
 
 from server.schemas import AdviceOut
-from spat_feed.corridors import WGS84
+from spat_feed.road.corridors import WGS84
 
 from tests.server.conftest import new_trip, service_proc
 

@@ -1,4 +1,4 @@
-"""spat_feed.observe (SPaT plans -> LightView/Observation) and server.gps (map matching, ordering, speed): pure."""
+"""spat_feed.prediction.observe (SPaT plans -> LightView/Observation) and server.gps (map matching, ordering, speed): pure."""
 
 from __future__ import annotations
 
@@ -6,13 +6,13 @@ import math
 
 import pytest
 
-from spat_feed.messages import plan_from_movement
-from spat_feed.plans import FixedTimePlan, UncertainPlan, ChangeWindow, MovementPhaseState as S, uncertain_from_fixed
-from spat_feed.scenarios import Uncertainty, make_scenario
-from spat_feed.source import InProcessSpatSource
+from spat_feed.timing.messages import plan_from_movement
+from spat_feed.timing.plans import FixedTimePlan, UncertainPlan, ChangeWindow, MovementPhaseState as S, uncertain_from_fixed
+from spat_feed.transport.scenarios import Uncertainty, make_scenario
+from spat_feed.transport.store import InProcessSpatSource
 
 from server.gps import RouteMatcher, Track
-from spat_feed.observe import PlanReading, confidence_frac, intersections_ahead, light_view, observation, red_windows_s
+from spat_feed.prediction.observe import PlanReading, confidence_frac, intersections_ahead, light_view, observation, red_windows_s
 from server.spat import SimulatedSpat
 
 T0 = 1_700_000_000.0
@@ -90,7 +90,7 @@ def test_projection_on_and_off_route(s200):
     on = m.match(lat, lon)
     assert on.station_m == pytest.approx(123.0, abs=0.05) and on.offset_m < 0.05
     # 60 m north of the route (it runs WNW): well off
-    from spat_feed.corridors import WGS84
+    from spat_feed.road.corridors import WGS84
 
     lon2, lat2, _ = WGS84.fwd(lon, lat, 25.5, 60.0)
     off = m.match(lat2, lon2)
@@ -131,19 +131,19 @@ def test_speed_from_noisy_positions_is_close():
 def test_server_doctests():
     import doctest
 
-    import spat_feed.observe
+    import spat_feed.prediction.observe
     import server.ratelimit
 
-    for module in (spat_feed.observe, server.ratelimit):
+    for module in (spat_feed.prediction.observe, server.ratelimit):
         assert doctest.testmod(module).failed == 0
 
 
 # -- issue 13: what a real actuated controller publishes --------------------------------------------
 
-from spat_feed.observe import LATE_QUANTILE, PhaseHistory  # noqa: E402
-from spat_feed.plans import PhaseClass  # noqa: E402
-from spat_feed.messages import MovementEvent, MovementState, TimeChangeDetails, UNSTATED_CONFIDENCE_FRAC  # noqa: E402
-from spat_feed.messages import from_unix_s  # noqa: E402
+from spat_feed.prediction.observe import LATE_QUANTILE, PhaseHistory  # noqa: E402
+from spat_feed.timing.plans import PhaseClass  # noqa: E402
+from spat_feed.timing.messages import MovementEvent, MovementState, TimeChangeDetails, UNSTATED_CONFIDENCE_FRAC  # noqa: E402
+from spat_feed.timing.messages import from_unix_s  # noqa: E402
 from advisory.advice.advisor import LightView, Observation, advise  # noqa: E402
 
 RED, GREEN = S.STOP_AND_REMAIN, S.PROTECTED_MOVEMENT_ALLOWED
@@ -272,8 +272,8 @@ def test_the_recorded_controller_through_the_history():
     import gzip
     from itertools import islice
 
-    from spat_feed.observe import predicted_phases
-    from spat_feed.recorded import iter_spat_csv
+    from spat_feed.prediction.observe import predicted_phases
+    from spat_feed.transport.recorded import iter_spat_csv
     from tests.conftest import SHARED_DATA
 
     path = SHARED_DATA / "spat" / "antwerp-2019-05-01.csv.gz"
@@ -489,7 +489,7 @@ def test_a_phase_ends_as_the_change_of_another_group_it_follows():
     other group precedes), nothing is linked."""
     import numpy as np
 
-    from spat_feed.observe import IntersectionHistory
+    from spat_feed.prediction.observe import IntersectionHistory
 
     history = IntersectionHistory()
     ix = make_scenario("paper_s400").corridor.intersections[0]
@@ -525,7 +525,7 @@ def test_links_speak_only_once_they_hold_and_forget_a_gap():
     the :data:`MIN_LINKS_SEEN`-th red of group 2 seen whole (the first began before the readings did), once group 1
     has turned red in it; group 2's own change into red (its start: the lags vary) never speaks. A gap in the
     readings forgets the changes seen and the phases in progress."""
-    from spat_feed.observe import MIN_LINKS_SEEN, ChangeLinks
+    from spat_feed.prediction.observe import MIN_LINKS_SEEN, ChangeLinks
 
     links = ChangeLinks(max_gap_s=5.0)
     G, R_ = PhaseClass.GREEN, PhaseClass.RED
@@ -559,8 +559,8 @@ def test_links_on_a_real_controller_tell_when_a_red_ends():
     from dataclasses import replace
     from itertools import islice
 
-    from spat_feed.observe import IntersectionHistory, predicted_phases
-    from spat_feed.recorded import iter_spat_csv
+    from spat_feed.prediction.observe import IntersectionHistory, predicted_phases
+    from spat_feed.transport.recorded import iter_spat_csv
     from tests.conftest import SHARED_DATA
 
     path = SHARED_DATA / "spat" / "antwerp-2019-05-17.csv.gz"
@@ -597,7 +597,7 @@ def test_what_is_learnt_of_the_phase_in_progress_does_not_end_a_later_one():
     """A feed that publishes several phases (red now, green, red again, then unknown): the link (or a resumed
     minEnd) that ends the red *now* must not end the later red, whose end comes from the durations seen (reds of
     40 s: it began at +25 s, so likely at +65 s). It ended at its minEnd (+60 s), where the link's end was clamped."""
-    from spat_feed.observe import CycleStats, predicted_phases
+    from spat_feed.prediction.observe import CycleStats, predicted_phases
 
     t = T0
     durations = {PhaseClass.RED: (40.0,) * 5, PhaseClass.GREEN: (20.0,) * 5}

@@ -21,9 +21,9 @@ from advisory.trajectory import Trajectory
 from server.app import create_app
 from server.config import Settings
 from server.score import trip_score
-from spat_feed.corridors import load_corridor
-from spat_feed.observe import PlanReading
-from spat_feed.scenarios import advisory_scenario_at, make_scenario
+from spat_feed.road.corridors import load_corridor
+from spat_feed.prediction.observe import PlanReading
+from spat_feed.transport.scenarios import advisory_scenario_at, make_scenario
 
 E = 1_800_000_000.0  # the trips' zone entry [Unix s]
 PAPER_TIMINGS = [f"{x}_{y}" for x in (-30, -15, 0, 15) for y in (-30, -15, 0, 15)]

@@ -1,4 +1,4 @@
-"""spat_feed.actuated: the switch-time fit on the recordings, actuated truth, and what the controller publishes."""
+"""spat_feed.transport.actuated: the switch-time fit on the recordings, actuated truth, and what the controller publishes."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from advisory.signals import FixedTimeSignal, paper_scenario
-from spat_feed.actuated import ActuatedFeed, SwitchFit, actuated_light, actuated_scenario, fit_switches, switch_observations
-from spat_feed.messages import to_unix_s
+from spat_feed.transport.actuated import ActuatedFeed, SwitchFit, actuated_light, actuated_scenario, fit_switches, switch_observations
+from spat_feed.timing.messages import to_unix_s
 
 from tests.conftest import SHARED_DATA
 
@@ -135,7 +135,7 @@ def test_a_conflicting_stage_leads_each_red_end_and_the_receiver_links_them():
     controller's window), and that is the real end, to the 1 s readings, but after a misfire."""
     from dataclasses import replace
 
-    from spat_feed.actuated import conflicting_light
+    from spat_feed.transport.actuated import conflicting_light
 
     sc = paper_scenario(-12.0, 20.0, 400.0, red_s=40.0, green_s=35.0)
     rng = np.random.default_rng(5)
@@ -174,8 +174,8 @@ def test_the_published_current_state_is_the_real_one():
     ``movement_events``) take the current state off the likely times: for a second the controller "published" the
     next state (green) while the light was still red (randomized run 7853: a car crept to the line on that green and
     then braked at 4.4 m/s²)."""
-    from spat_feed.messages import MovementState, movement_events, plan_from_movement
-    from spat_feed.plans import state_at
+    from spat_feed.timing.messages import MovementState, movement_events, plan_from_movement
+    from spat_feed.timing.plans import state_at
 
     sc = paper_scenario(-12.0, 20.0, 400.0, red_s=40.0, green_s=35.0)
     _, lights = actuated_scenario(sc, 10.0, np.random.default_rng(11), beyond_frac=0.5)

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from advisory.physics.params import SPEED_LIMIT_MPS, model_params
-from spat_feed import files, signal_plans
-from spat_feed.corridor_tables import cache_key, corridor_tables, table_timings, variants_of
-from spat_feed.corridors import (
+from spat_feed import files
+from spat_feed.timing import signal_plans
+from spat_feed.road.corridor_tables import cache_key, corridor_tables, table_timings, variants_of
+from spat_feed.road.corridors import (
     SCHEMA_VERSION,
     Corridor,
     FileFormatError,
@@ -24,8 +25,8 @@ from spat_feed.corridors import (
     paper_corridor,
     preset_names,
 )
-from spat_feed.scenarios import FeedScenario, advisory_scenario_at, make_scenario, resolve_timing, spat_message_at
-from spat_feed.signal_plans import SignalPlan, light_plans_at
+from spat_feed.transport.scenarios import FeedScenario, advisory_scenario_at, make_scenario, resolve_timing, spat_message_at
+from spat_feed.timing.signal_plans import SignalPlan, light_plans_at
 
 
 def test_doctests_of_the_file_modules():

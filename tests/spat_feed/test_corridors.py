@@ -8,17 +8,16 @@ import numpy as np
 import pytest
 
 from advisory.signals import PAPER_SPACINGS_M
-from spat_feed.corridors import (
+from spat_feed.road.corridors import (
     CHAMPS_ELYSEES,
     PAPER_CORRIDOR_NAMES,
-    TIMING_PRESETS,
     WGS84,
     corridor_from_json,
     load_corridor,
     paper_corridor,
     preset_names,
-    timing_for_trip,
 )
+from spat_feed.timing.paper import TIMING_PRESETS, timing_for_trip
 
 
 @pytest.fixture(scope="module", params=PAPER_SPACINGS_M)

@@ -7,7 +7,16 @@ import importlib
 
 import pytest
 
-MODULES = ["plans", "timemark", "messages", "corridors", "source", "client"]
+MODULES = [
+    "timing.plans",
+    "timing.timemark",
+    "timing.messages",
+    "timing.paper",
+    "timing.signal_plans",
+    "road.corridors",
+    "transport.store",
+    "transport.client",
+]
 
 
 @pytest.mark.parametrize("name", MODULES)

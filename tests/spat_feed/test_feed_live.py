@@ -13,9 +13,9 @@ from datetime import datetime, timezone
 
 import pytest
 
-from spat_feed.client import SpatClient, fetch_spat
-from spat_feed.messages import CONFIDENCE_FRAC, from_j2735, to_unix_s
-from spat_feed.plans import MovementPhaseState, seconds_to_next_green, seconds_to_next_red
+from spat_feed.transport.client import SpatClient, fetch_spat
+from spat_feed.timing.messages import CONFIDENCE_FRAC, from_j2735, to_unix_s
+from spat_feed.timing.plans import MovementPhaseState, seconds_to_next_green, seconds_to_next_red
 
 STALE_S = 0.6  # short, so the tests are quick
 FAST = dict(stale_after_s=STALE_S, backoff_initial_s=0.05, backoff_max_s=0.4, seed=1)
@@ -113,7 +113,7 @@ def test_old_data_from_a_live_feed_is_stale(start_feed):
 def test_malformed_messages_are_rejected_and_logged(start_feed, caplog):
     """Every 3rd message is bad: alternately not JSON, and JSON with intersection 1 invalid."""
     feed = start_feed("--fault-every", "3")
-    caplog.set_level(logging.WARNING, logger="spat_feed.client")
+    caplog.set_level(logging.WARNING, logger="spat_feed.transport.client")
 
     async def run():
         async with SpatClient(feed.base_url, **FAST) as client:

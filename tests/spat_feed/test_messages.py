@@ -8,7 +8,7 @@ from datetime import datetime, timezone
 import pytest
 from pydantic import ValidationError
 
-from spat_feed.messages import (
+from spat_feed.timing.messages import (
     CONFIDENCE_FRAC,
     IntersectionState,
     SpatMessage,
@@ -21,8 +21,8 @@ from spat_feed.messages import (
     to_j2735,
     to_unix_s,
 )
-from spat_feed.plans import FixedTimePlan, MovementPhaseState, seconds_to_next_green, seconds_to_next_red, state_at
-from spat_feed.scenarios import Uncertainty, make_scenario, spat_message_at
+from spat_feed.timing.plans import FixedTimePlan, MovementPhaseState, seconds_to_next_green, seconds_to_next_red, state_at
+from spat_feed.transport.scenarios import Uncertainty, make_scenario, spat_message_at
 
 T0 = datetime(2024, 5, 1, 12, 0, tzinfo=timezone.utc).timestamp()
 J2735_STATE_NAMES = {

@@ -15,10 +15,10 @@ from pathlib import Path
 import httpx
 import pytest
 
-from spat_feed.corridors import load_corridor_dir
-from spat_feed.messages import to_unix_s
-from spat_feed.mqtt import MqttPublisher
-from spat_feed.player import read_spat_log
+from spat_feed.road.corridors import load_corridor_dir
+from spat_feed.timing.messages import to_unix_s
+from spat_feed.transport.mqtt import MqttPublisher
+from spat_feed.transport.player import read_spat_log
 
 from tests.conftest import recorded_spat_slice
 from tests.procs import REPO, Proc, free_port
@@ -184,7 +184,7 @@ def test_malformed_duplicate_out_of_order_and_skewed_messages_are_rejected_and_c
     pub = MqttPublisher(broker.url)
     pub.start()
     assert pub.wait_connected(WAIT_S)
-    from spat_feed.player import map_times
+    from spat_feed.transport.player import map_times
 
     now = time.time()
     t0 = to_unix_s(recorded[0].timestamp)

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from ecodrive.corridor import main as corridor_cli
-from spat_feed.corridors import WGS84, load_corridor
-from spat_feed.osm import MERGE_M, STOP_LINE_GAP_M, LANE_WIDTH_M, OsmError, compass, corridors_from_osm, parse_maxspeed
+from spat_feed.road.corridors import WGS84, load_corridor
+from spat_feed.road.osm import MERGE_M, STOP_LINE_GAP_M, LANE_WIDTH_M, OsmError, compass, corridors_from_osm, parse_maxspeed
 from tests.conftest import SHARED_DATA
 
 LAT = 37.80

@@ -10,8 +10,8 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from advisory.signals import PAPER_SPACINGS_M, PAPER_TIMINGS_S, paper_scenario
-from spat_feed.corridors import TIMING_PRESETS
-from spat_feed.plans import (
+from spat_feed.timing.paper import TIMING_PRESETS
+from spat_feed.timing.plans import (
     AMBER,
     GREEN,
     RED,
@@ -28,7 +28,7 @@ from spat_feed.plans import (
     to_fixed_time_signal,
     uncertain_from_fixed,
 )
-from spat_feed.scenarios import make_scenario
+from spat_feed.transport.scenarios import make_scenario
 
 TIMES_S = np.arange(-100.0, 200.0, 2.5)  # includes every change instant of the paper's plans
 

@@ -1,4 +1,4 @@
-"""spat_feed.recorded (the shared recordings' CSV format), the J2735 phase table, and the 'an hour ahead' rule."""
+"""spat_feed.transport.recorded (the shared recordings' CSV format), the J2735 phase table, and the 'an hour ahead' rule."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from spat_feed.messages import plan_from_movement, to_unix_s
-from spat_feed.plans import GO_STATES, J2735_STATE_NUMBERS, STOP_STATES, UNKNOWN_STATES, MovementPhaseState, PhaseClass, phase_class
-from spat_feed.recorded import RecordedLogError, read_spat_csv
+from spat_feed.timing.messages import plan_from_movement, to_unix_s
+from spat_feed.timing.plans import GO_STATES, J2735_STATE_NUMBERS, STOP_STATES, UNKNOWN_STATES, MovementPhaseState, PhaseClass, phase_class
+from spat_feed.transport.recorded import RecordedLogError, read_spat_csv
 
 from tests.conftest import SHARED_DATA
 

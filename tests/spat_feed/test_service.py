@@ -7,11 +7,11 @@ from datetime import datetime, timezone
 import pytest
 from fastapi.testclient import TestClient
 
-from spat_feed.messages import SpatMessage, from_j2735, parse_spat_text, to_unix_s
-from spat_feed.plans import GREEN, RED, seconds_to_next_green, state_at
-from spat_feed.scenarios import make_scenario
-from spat_feed.service import FeedSettings, create_app
-from spat_feed.source import InProcessSpatSource
+from spat_feed.timing.messages import SpatMessage, from_j2735, parse_spat_text, to_unix_s
+from spat_feed.timing.plans import GREEN, RED, seconds_to_next_green, state_at
+from spat_feed.transport.scenarios import make_scenario
+from spat_feed.transport.service import FeedSettings, create_app
+from spat_feed.transport.store import InProcessSpatSource
 
 ENTRY_S = datetime(2024, 5, 1, 12, 0, tzinfo=timezone.utc).timestamp()
 

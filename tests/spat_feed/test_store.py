@@ -7,13 +7,13 @@ import logging
 
 import pytest
 
-from spat_feed.corridors import load_corridor, paper_corridor, preset_names
-from spat_feed.messages import UNKNOWN_MAX_END_S, to_unix_s
-from spat_feed.observe import light_view
-from spat_feed.player import JsonlRecorder, LogPlayer, read_spat_log
-from spat_feed.recorded import RecordedLogError
-from spat_feed.simulator import IntersectionSimulator, shared_scenario, simulated_plans
-from spat_feed.source import SpatStore, TimeRules
+from spat_feed.road.corridors import load_corridor, paper_corridor, preset_names
+from spat_feed.timing.messages import UNKNOWN_MAX_END_S, to_unix_s
+from spat_feed.prediction.observe import light_view
+from spat_feed.transport.player import JsonlRecorder, LogPlayer, read_spat_log
+from spat_feed.transport.recorded import RecordedLogError
+from spat_feed.transport.simulator import IntersectionSimulator, shared_scenario, simulated_plans
+from spat_feed.transport.store import SpatStore, TimeRules
 
 from tests.conftest import recorded_spat_slice
 
@@ -94,7 +94,7 @@ def test_sweep_warns_once_per_outage(caplog):
     clock = Clock(T0)
     store = SpatStore(TimeRules(stale_after_s=2.0), clock)
     store.offer(states(T0)[0])
-    with caplog.at_level(logging.INFO, logger="spat_feed.source"):
+    with caplog.at_level(logging.INFO, logger="spat_feed.transport.store"):
         clock.t = T0 + 5
         assert store.sweep([1, 9]) == {1: "stale", 9: "no_spat"}
         store.sweep([1, 9])
@@ -124,7 +124,7 @@ def test_simulator_publishes_each_intersection_once_with_the_shared_plans():
 def test_one_intersection_id_with_two_plans_is_refused(tmp_path):
     from importlib import resources
 
-    from spat_feed.corridors import load_corridor_dir
+    from spat_feed.road.corridors import load_corridor_dir
 
     presets = resources.files("spat_feed") / "presets"
     corridor = (presets / "oakland_7th_westbound.json").read_text().replace('"id": 7001', '"id": 1').replace('"id": 7002', '"id": 2')
@@ -214,7 +214,7 @@ def test_simulator_and_its_recording_give_identical_trip_views(tmp_path):
 
 
 def _reading(plan, r):
-    from spat_feed.observe import PlanReading
+    from spat_feed.prediction.observe import PlanReading
 
     return PlanReading(plan, fresh=r.fresh, age_s=r.age_s)
 
@@ -223,8 +223,8 @@ def test_the_store_learns_each_group_and_hands_it_to_the_observation(tmp_path):
     """What a group has been seen to do travels with its reading (PlanReading.cycle), as a receiver fed the
     same messages directly learns it (durations, how soon after a resumed minEndTime phases end, and the changes of
     other groups its phases follow); the controller's clock offset comes along (feed minus ours)."""
-    from spat_feed.messages import plan_from_movement
-    from spat_feed.observe import IntersectionHistory
+    from spat_feed.timing.messages import plan_from_movement
+    from spat_feed.prediction.observe import IntersectionHistory
 
     log = read_spat_log(recorded_spat_slice(tmp_path, 30000))
     clock = Clock(T0)

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from spat_feed.timemark import (
+from spat_feed.timing.timemark import (
     FUTURE_WINDOW_START_S,
     PAST_WINDOW_START_S,
     TIMEMARK_BEYOND_HOUR,

@@ -2,7 +2,7 @@
 
 Pure (no clock, no I/O except :func:`fit_switches`, which reads recordings). Three parts:
 
-* **The fit** (:func:`fit_switches`, ``python -m spat_feed.actuated [CSV ...]``): on recorded SPaT (the
+* **The fit** (:func:`fit_switches`, ``python -m spat_feed.transport.actuated [CSV ...]``): on recorded SPaT (the
   ``../shared/data/spat`` format) every phase's *first* published window ``[minEnd, maxEnd]`` against the
   instant it really ended (midway between the last snapshot in the phase and the first after it: the
   recordings are 1 Hz). Per phase class (red, and not red): the share that ends after ``maxEnd``, the
@@ -16,9 +16,9 @@ Pure (no clock, no I/O except :func:`fit_switches`, which reads recordings). Thr
   at each instant: the windows narrow as time passes (``minEnd`` never in the past), become exact
   ``decide_s`` before the switch (the controller has decided), and past ``maxEnd`` a late phase's
   ``maxEnd`` is pushed ``late_push_s`` ahead, as the recorded controller does. :class:`ActuatedFeed` turns
-  that into J2735 events (:func:`spat_feed.messages.movement_events`), reads them back as a receiver does
-  (:func:`spat_feed.messages.plan_from_movement`) and gives the advisor its
-  :class:`~advisory.advice.advisor.Observation` through :func:`spat_feed.observe.light_view`, with dropouts
+  that into J2735 events (:func:`spat_feed.timing.messages.movement_events`), reads them back as a receiver does
+  (:func:`spat_feed.timing.messages.plan_from_movement`) and gives the advisor its
+  :class:`~advisory.advice.advisor.Observation` through :func:`spat_feed.prediction.observe.light_view`, with dropouts
   (no message: the last one ages and goes stale), a skewed feed clock (the receiver is told only a bound,
   ``clock_uncertainty_s``) and what the receiver learnt of each intersection beforehand (``IntersectionHistory``:
   the light's phases, and with a :func:`conflicting_light` the changes of that stage its phases follow).
@@ -36,10 +36,10 @@ import numpy as np
 
 from advisory.advice.advisor import LightView, Observation
 from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
-from spat_feed.corridors import IntersectionSpec, SignalGroupSpec
-from spat_feed.messages import MovementState, confidence_index, movement_events, plan_from_movement, to_unix_s
-from spat_feed.observe import IntersectionHistory, PlanReading, light_view
-from spat_feed.plans import GREEN, RED, STOP_STATES, ChangeWindow, MovementPhaseState, UncertainPlan
+from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
+from spat_feed.timing.messages import MovementState, confidence_index, movement_events, plan_from_movement, to_unix_s
+from spat_feed.prediction.observe import IntersectionHistory, PlanReading, light_view
+from spat_feed.timing.plans import GREEN, RED, STOP_STATES, ChangeWindow, MovementPhaseState, UncertainPlan
 
 SAMPLE_S = 1.0
 """The recordings' snapshot interval: a switch is known to within this. [s]"""
@@ -76,7 +76,7 @@ class SwitchFit:
 def switch_observations(snapshots) -> list[tuple[bool, float, float, float]]:
     """``(red, minEnd, maxEnd, end)`` for every phase whose start and end the recording holds and whose first
     window is bounded (a ``maxEnd`` about an hour ahead means unknown). [s, Unix]"""
-    from spat_feed.messages import UNKNOWN_MAX_END_S
+    from spat_feed.timing.messages import UNKNOWN_MAX_END_S
 
     series: dict[tuple[int, int], list[tuple[float, MovementPhaseState, float, float]]] = {}
     for ix in snapshots:
@@ -99,7 +99,7 @@ def switch_observations(snapshots) -> list[tuple[bool, float, float, float]]:
 
 def fit_switches(paths: Iterable[str | Path]) -> dict[str, SwitchFit]:
     """Fit :class:`SwitchFit` for red and for green on the recorded SPaT CSVs at ``paths``."""
-    from spat_feed.recorded import read_spat_csv
+    from spat_feed.transport.recorded import read_spat_csv
 
     obs = [o for p in paths for o in switch_observations(read_spat_csv(p))]
     fits = {}
@@ -223,7 +223,7 @@ def conflicting_light(light: ActuatedLight, rng: np.random.Generator, *, after_s
     an intergreen after each of its reds begins to a fixed lead before it ends (an intergreen and any fixed stage
     between them; each drawn once, in ``after_start_s`` and ``before_end_s``: a controller's are fixed). In
     ``misfire_frac`` of its greens another stage comes in between: the green ends ``misfire_s`` earlier, so a
-    receiver that learnt "``light``'s red ends the lead after this green" (:class:`~spat_feed.observe.ChangeLinks`)
+    receiver that learnt "``light``'s red ends the lead after this green" (:class:`~spat_feed.prediction.observe.ChangeLinks`)
     is told too early an end, or, with too many such, learns no link. Its windows are exact."""
     after_start, before_end = float(rng.uniform(*after_start_s)), float(rng.uniform(*before_end_s))
     states, switches = [RED], []
@@ -347,7 +347,7 @@ def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3
 
 def recordings() -> list[str]:
     """The shared recordings (``../shared/data/spat``, or ``../../shared/data/spat`` from a worktree)."""
-    repo = Path(__file__).resolve().parents[1]
+    repo = Path(__file__).resolve().parents[2]
     folder = next((p for p in (repo.parent / "shared", repo.parents[1] / "shared") if p.is_dir()), repo.parent / "shared")
     return sorted(str(p) for p in (folder / "data" / "spat").glob("*.csv.gz"))
 

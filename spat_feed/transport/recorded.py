@@ -10,7 +10,7 @@ phase's ``minEndTime`` / ``maxEndTime``. Only the current phase is published (no
 ``likelyTime``, no ``confidence``). :func:`read_spat_csv` returns one :class:`IntersectionState` per
 (snapshot, intersection), in time order, each signal group with one event carrying exactly what the row
 says: reading is lossless; what the values *mean* (a ``maxEndTime`` about an hour ahead is unknown, a
-missing confidence is not a low one) is decided where plans are made (:func:`spat_feed.messages.plan_from_movement`).
+missing confidence is not a low one) is decided where plans are made (:func:`spat_feed.timing.messages.plan_from_movement`).
 
 Intersection ids: J2735 ids are integers, the log names controllers (``K648``). By default the id is the
 name's digits (``K648`` -> 648); pass ``intersection_ids`` to choose others. The name is kept in ``name``.
@@ -28,8 +28,8 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from spat_feed.messages import IntersectionState, MovementState, _short
-from spat_feed.plans import J2735_STATE_NUMBERS
+from spat_feed.timing.messages import IntersectionState, MovementState, _short
+from spat_feed.timing.plans import J2735_STATE_NUMBERS
 
 CSV_COLUMNS = ("generated_utc", "intersection", "signal_group", "phase", "min_end_utc", "max_end_utc")
 

@@ -2,7 +2,7 @@
 
 ``corridors_from_osm(path, street)`` reads an OSM XML file (``.osm``, ``.osm.bz2``, ``.osm.gz``; the
 standard library's ``xml.etree.ElementTree.iterparse``) or a ``.pbf`` (with the optional ``osmium``
-package: ``pip install 'ecodrive[osm]'``) and returns one :class:`~spat_feed.corridors.Corridor` per
+package: ``pip install 'ecodrive[osm]'``) and returns one :class:`~spat_feed.road.corridors.Corridor` per
 direction of travel. What it does, by OSM's tag meanings (https://wiki.openstreetmap.org):
 
 1. **Ways**: vehicular ``highway=*`` ways (``ROAD_CLASSES``) whose ``name`` (or ``alt_name``,
@@ -50,7 +50,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from spat_feed.corridors import (
+from spat_feed.road.corridors import (
     SCHEMA_VERSION,
     WGS84,
     Corridor,

@@ -29,10 +29,10 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from spat_feed.messages import IntersectionState, SpatMessage, plan_from_movement, to_unix_s
-from spat_feed.observe import IntersectionHistory, PlanReading
-from spat_feed.plans import UncertainPlan
-from spat_feed.scenarios import FeedScenario, spat_message_at
+from spat_feed.timing.messages import IntersectionState, SpatMessage, plan_from_movement, to_unix_s
+from spat_feed.prediction.observe import IntersectionHistory, PlanReading
+from spat_feed.timing.plans import UncertainPlan
+from spat_feed.transport.scenarios import FeedScenario, spat_message_at
 
 Clock = Callable[[], float]
 """Returns Unix seconds. ``time.time`` by default; tests pass their own."""
@@ -41,7 +41,7 @@ DEFAULT_STALE_AFTER_S = 2.0
 REJECT_REASONS = ("malformed", "duplicate", "out_of_order", "clock_ahead", "unknown_intersection")
 STATUSES = ("ok", "stale", "clock_skew", "no_spat")
 
-log = logging.getLogger("spat_feed.source")
+log = logging.getLogger("spat_feed.transport.store")
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,7 +70,7 @@ class SpatReading:
     clock_offset_s: float = 0.0
 
     def plan(self, signal_group: int) -> UncertainPlan | None:
-        """The signal group's plan on the Unix axis (see :func:`spat_feed.messages.plan_from_movement`)."""
+        """The signal group's plan on the Unix axis (see :func:`spat_feed.timing.messages.plan_from_movement`)."""
         movement = self.intersection.movement(signal_group)
         return None if movement is None else plan_from_movement(movement, self.timestamp_unix_s)
 
@@ -107,7 +107,7 @@ class IntersectionStats:
 
 class _Entry:
     """The latest state of one intersection, its plans parsed once per signal group, its clock offsets, and
-    what its signal groups have been seen to do (:class:`~spat_feed.observe.IntersectionHistory`)."""
+    what its signal groups have been seen to do (:class:`~spat_feed.prediction.observe.IntersectionHistory`)."""
 
     __slots__ = ("state", "stamp", "received", "plans", "offsets", "ahead_unix_s", "history")
 
@@ -232,7 +232,7 @@ class SpatStore:
             return plan, SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset)
 
     def plan_reading(self, intersection_id: int, signal_group: int) -> PlanReading:
-        """What the advisor's observation needs of one light (:class:`~spat_feed.observe.PlanReading`): the plan,
+        """What the advisor's observation needs of one light (:class:`~spat_feed.prediction.observe.PlanReading`): the plan,
         freshness and age, what the group has been seen to do (bounds the phases after the published one), and
         the controller's clock offset (within the tolerance; beyond it the reading is not fresh anyway)."""
         plan, reading = self.plan(intersection_id, signal_group)

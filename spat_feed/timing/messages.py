@@ -5,7 +5,7 @@ The JSON uses J2735's names (``intersections``, ``signalGroup``, ``eventState``,
 MovementPhaseState spellings, but every time is an absolute UTC instant (ISO 8601 with ``Z``), so a
 receiver needs no knowledge of the sender's hour. :func:`to_j2735` / :func:`from_j2735` convert to and
 from the J2735 form, where times are TimeMarks (tenths of a second in the hour; see
-:mod:`spat_feed.timemark`) and the message time is MinuteOfTheYear + DSecond.
+:mod:`spat_feed.timing.timemark`) and the message time is MinuteOfTheYear + DSecond.
 
 One message carries several intersections; :func:`parse_spat_text` validates each intersection on its
 own, so one malformed intersection is dropped (and reported) without losing the others.
@@ -25,8 +25,8 @@ from typing import Annotated, Any
 from pydantic import AfterValidator, AwareDatetime, BaseModel, ConfigDict, Field, PlainSerializer, ValidationError, model_validator
 from pydantic.alias_generators import to_camel
 
-from spat_feed.plans import ChangeWindow, MovementPhaseState, Plan, UncertainPlan, next_changes, state_at, state_start_s
-from spat_feed.timemark import PAST_WINDOW_START_S, timemark_to_unix, unix_to_timemark
+from spat_feed.timing.plans import ChangeWindow, MovementPhaseState, Plan, UncertainPlan, next_changes, state_at, state_start_s
+from spat_feed.timing.timemark import PAST_WINDOW_START_S, timemark_to_unix, unix_to_timemark
 
 # J2735 DE_TimeIntervalConfidence: index -> probability that the change falls inside [minEnd, maxEnd].
 CONFIDENCE_FRAC = (0.21, 0.36, 0.47, 0.56, 0.62, 0.68, 0.73, 0.77, 0.81, 0.85, 0.88, 0.91, 0.94, 0.96, 0.98, 1.00)
@@ -176,7 +176,7 @@ write "an hour from now" (J2735 TimeMark 36000, "more than an hour") when they c
 
 
 def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None = None) -> UncertainPlan:
-    """An :class:`~spat_feed.plans.UncertainPlan` on the Unix axis from a received movement state.
+    """An :class:`~spat_feed.timing.plans.UncertainPlan` on the Unix axis from a received movement state.
 
     ``timestamp_unix_s`` is the intersection's timestamp: a ``maxEndTime`` :data:`UNKNOWN_MAX_END_S` or
     more after it is read as absent (unbounded), as J2735's 36000 is.

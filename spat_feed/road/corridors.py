@@ -8,12 +8,12 @@ uses; coordinates place the route on a map and let a GPS fix be projected onto i
 Shipped presets (``spat_feed/presets/*.json``) reproduce the paper's zone: 100 m approach, light 2
 ``s`` = 200/400/600/800 m after light 1, 100 m exit, laid westbound along the Avenue des
 Champs-Élysées in Paris (see ``CHAMPS_ELYSEES`` and docs/SPAT.md). Regenerate them with
-``python -m spat_feed.corridors``; a test checks the shipped files equal the generated ones.
+``python -m spat_feed.road.corridors``; a test checks the shipped files equal the generated ones.
 
 Schema version 2 (``schema_version``; files without it are version 1 and still load) adds the corridor's
 speed limits and grades per segment (``segments``, with ``speed_limit_mps`` as the default), its spoken units
 (``units``: metric or imperial) and the signal plans known for it (``plans``, ``default_plan``; plan files
-can also be loaded on their own, :mod:`spat_feed.signal_plans`). The whole schema: docs/CORRIDORS.md, or
+can also be loaded on their own, :mod:`spat_feed.timing.signal_plans`). The whole schema: docs/CORRIDORS.md, or
 ``ecodrive corridor schema`` (JSON Schema). Errors name the file, the field and the reason
 (:class:`spat_feed.files.FileFormatError`).
 
@@ -37,16 +37,10 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 from pyproj import Geod
 
-from advisory.signals import (
-    PAPER_APPROACH_M,
-    PAPER_EXIT_M,
-    PAPER_SPACINGS_M,
-    PAPER_TIMINGS_S,
-)
+from advisory.signals import PAPER_APPROACH_M, PAPER_EXIT_M, PAPER_SPACINGS_M
 from advisory.physics.params import SPEED_LIMIT_MPS
 from spat_feed.files import FileFormatError, read_document, validate
-from spat_feed.plans import FixedTimePlan
-from spat_feed.signal_plans import SignalPlan
+from spat_feed.timing.signal_plans import SignalPlan
 
 WGS84 = Geod(ellps="WGS84")
 PRESET_DIR = "presets"
@@ -581,67 +575,6 @@ def paper_corridor(spacing_m: float, road: StraightRoad = CHAMPS_ELYSEES) -> Cor
 PAPER_CORRIDOR_NAMES = tuple(f"paper_s{s:g}" for s in PAPER_SPACINGS_M)
 
 
-# --------------------------------------------------------------------------------------------------
-# Timings: when each light turns red, relative to the car's zone entry
-
-
-@dataclass(frozen=True, slots=True)
-class Timing:
-    """Fixed-time plans for a corridor's lights, relative to the instant a car enters the zone.
-
-    ``red_starts_s[i]``: seconds after entry at which light ``i`` turns red (the paper's x, y). [s]
-    """
-
-    name: str
-    red_starts_s: tuple[float, ...]
-    red_s: float = 30.0
-    green_s: float = 30.0
-    amber_s: float = 0.0
-    description: str = ""
-
-    def check(self, corridor: Corridor) -> None:
-        """``ValueError`` unless the timing has one red start per light of ``corridor``."""
-        if len(self.red_starts_s) != len(corridor.intersections):
-            raise ValueError(f"timing {self.name!r} has {len(self.red_starts_s)} lights, corridor {corridor.name!r} has {len(corridor.intersections)}")
-
-    def fixed_plans(self, corridor: Corridor, entry_unix_s: float) -> dict[tuple[int, int], FixedTimePlan]:
-        """(intersection id, signal group) -> fixed-time plan on the Unix axis for a trip entering at ``entry_unix_s``."""
-        return {
-            (ix.id, sg.id): FixedTimePlan(self.red_s, self.green_s, self.amber_s, entry_unix_s + red_start_s)
-            for ix, red_start_s in zip(corridor.intersections, self.red_starts_s)
-            for sg in ix.signal_groups
-        }
-
-
-def _paper_timing(x_s: float, y_s: float) -> Timing:
-    return Timing(f"{x_s:g}_{y_s:g}", (x_s, y_s), description=f"paper [{x_s:g} {y_s:g}]")
-
-
-TIMING_PRESETS: dict[str, Timing] = {t.name: t for t in (_paper_timing(x, y) for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S)}
-"""The paper's 16 timings ``"x_y"`` (e.g. ``"-15_15"``), plus ``"field_test"``."""
-
-TIMING_PRESETS["field_test"] = Timing(
-    "field_test",
-    (-15.0, 30.0),
-    description="paper Sec. 4.4 field test: light 1 turns green 15 s and light 2 turns red 30 s after entry",
-)
-
-PAPER_TIMING_NAMES = tuple(f"{x:g}_{y:g}" for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S)
-
-
-def timing_for_trip(entry_unix_s: float, period_s: float = 60.0) -> Timing:
-    """One of the paper's 16 timings picked from a trip's entry time: ``floor(entry / period) mod 16``.
-
-    Lets a fleet of test trips cover all 16 cases without configuring each one.
-
-    Examples
-    --------
-    >>> timing_for_trip(0.0).name, timing_for_trip(61.0).name
-    ('-30_-30', '-30_-15')
-    """
-    return TIMING_PRESETS[PAPER_TIMING_NAMES[int(math.floor(entry_unix_s / period_s)) % len(PAPER_TIMING_NAMES)]]
-
-
 def write_presets(folder: Path) -> list[Path]:
     """Write the paper corridors as JSON into ``folder``; returns the paths."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -655,5 +588,5 @@ def write_presets(folder: Path) -> list[Path]:
 
 
 if __name__ == "__main__":
-    for written in write_presets(Path(__file__).with_name(PRESET_DIR)):
+    for written in write_presets(Path(__file__).resolve().parents[1] / PRESET_DIR):
         sys.stdout.write(f"wrote {written}\n")

@@ -1,12 +1,12 @@
 """A feed scenario: a corridor, a timing and a trip's entry instant, giving every light's plan in Unix time.
 
-The timing is a paper-style :class:`~spat_feed.corridors.Timing` (relative to the entry) or a signal-plan
-file (:class:`~spat_feed.signal_plans.SignalPlan`: the pattern in force at the entry, on the Unix axis);
+The timing is a paper-style :class:`~spat_feed.timing.paper.Timing` (relative to the entry) or a signal-plan
+file (:class:`~spat_feed.timing.signal_plans.SignalPlan`: the pattern in force at the entry, on the Unix axis);
 lights a plan marks ``live`` have no simulated plan (their SPaT comes from a live source).
 :func:`resolve_timing` turns a timing name into one of these for a corridor.
 
 Pure: :func:`spat_message_at` builds the SPaT message of a scenario at an instant it is handed. The
-service (``spat_feed.service``) and the in-process source (``spat_feed.source``) both call it.
+service (``spat_feed.transport.service``) and the in-process source (``spat_feed.transport.store``) both call it.
 """
 
 from __future__ import annotations
@@ -16,12 +16,11 @@ from functools import lru_cache
 
 from advisory.physics.params import SPEED_LIMIT_MPS
 from advisory.signals import Scenario
-from spat_feed.corridors import TIMING_PRESETS, Corridor, Timing, load_corridor, load_plan, timing_for_trip
-from spat_feed.messages import IntersectionState, MovementState, SpatMessage, from_unix_s, movement_events
-from spat_feed.plans import FixedTimePlan, Plan, to_fixed_time_signal, uncertain_from_fixed
-from spat_feed.signal_plans import SignalPlan
-
-TimingLike = Timing | SignalPlan
+from spat_feed.road.corridors import Corridor, load_corridor, load_plan
+from spat_feed.timing.messages import IntersectionState, MovementState, SpatMessage, from_unix_s, movement_events
+from spat_feed.timing.plans import FixedTimePlan, Plan, to_fixed_time_signal, uncertain_from_fixed
+from spat_feed.timing.paper import TIMING_PRESETS, Timing, timing_for_trip
+from spat_feed.timing.signal_plans import SignalPlan, TimingLike
 
 
 @dataclass(frozen=True, slots=True)

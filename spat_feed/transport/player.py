@@ -2,18 +2,18 @@
 
 Two log formats:
 
-* the shared recordings' CSV (``../shared/data/spat``, :mod:`spat_feed.recorded`), ``.csv`` or ``.csv.gz``;
-* JSON lines of our own messages (``.jsonl`` or ``.jsonl.gz``): one :class:`~spat_feed.messages.SpatMessage`
-  or one :class:`~spat_feed.messages.IntersectionState` per line, as :class:`JsonlRecorder` writes them
+* the shared recordings' CSV (``../shared/data/spat``, :mod:`spat_feed.transport.recorded`), ``.csv`` or ``.csv.gz``;
+* JSON lines of our own messages (``.jsonl`` or ``.jsonl.gz``): one :class:`~spat_feed.timing.messages.SpatMessage`
+  or one :class:`~spat_feed.timing.messages.IntersectionState` per line, as :class:`JsonlRecorder` writes them
   (``python -m spat_feed --record``, ``ECO_SPAT_RECORD``).
 
 Time mapping (:func:`map_times`): a recorded instant ``t`` plays at ``start + (t - t0) / speedup``, and every
 time in the state (timestamp, minEndTime, maxEndTime, likelyTime, ...) is mapped the same way, so the windows
 keep their meaning relative to the state. A ``maxEndTime`` that means "unknown" (about an hour after the
-timestamp, :data:`~spat_feed.messages.UNKNOWN_MAX_END_S`) keeps its distance unscaled: still unknown at any
+timestamp, :data:`~spat_feed.timing.messages.UNKNOWN_MAX_END_S`) keeps its distance unscaled: still unknown at any
 speed. With ``loop`` the log starts again one recorded second after its end, forever.
 
-Pure: :meth:`LogPlayer.due` is handed the instant; :class:`spat_feed.pump.SpatPump` calls it on a timer.
+Pure: :meth:`LogPlayer.due` is handed the instant; :class:`spat_feed.transport.pump.SpatPump` calls it on a timer.
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from spat_feed.messages import UNKNOWN_MAX_END_S, IntersectionState, MovementEvent, SpatMessage, from_unix_s, to_unix_s
-from spat_feed.recorded import RecordedLogError, read_spat_csv
+from spat_feed.timing.messages import UNKNOWN_MAX_END_S, IntersectionState, MovementEvent, SpatMessage, from_unix_s, to_unix_s
+from spat_feed.transport.recorded import RecordedLogError, read_spat_csv
 
 _TIME_FIELDS = ("start_time", "min_end_time", "max_end_time", "likely_time", "next_time")
 
@@ -42,7 +42,7 @@ def _open(path: Path, mode: str = "rt") -> io.TextIOBase:
 def read_jsonl(path: str | Path) -> list[IntersectionState]:
     """Every intersection state of a JSON-lines SPaT log (messages or single states), in time order.
 
-    Raises :class:`~spat_feed.recorded.RecordedLogError` naming the file and line of a bad record.
+    Raises :class:`~spat_feed.transport.recorded.RecordedLogError` naming the file and line of a bad record.
     """
     path = Path(path)
     out: list[IntersectionState] = []
@@ -80,7 +80,7 @@ def map_times(state: IntersectionState, shift_s: float, t0_s: float, speedup: fl
 
     Examples
     --------
-    >>> from spat_feed.recorded import iter_spat_csv
+    >>> from spat_feed.transport.recorded import iter_spat_csv
     >>> row = dict(generated_utc="2019-05-01T16:00:00Z", intersection="K648", signal_group="1", phase="3",
     ...            min_end_utc="2019-05-01T16:00:10Z", max_end_utc="2019-05-01T17:00:00Z")
     >>> s = next(iter_spat_csv([row]))

@@ -3,7 +3,7 @@
 :class:`SpatClient` runs one background task on the caller's event loop. It connects to the feed's
 ``/spat/stream`` WebSocket, validates every message intersection by intersection (a malformed one is
 logged and counted, the others are kept), and stores the newest state of each intersection in a
-:class:`~spat_feed.source.SpatStore` (its own, or one shared with other sources: ``store=``). When the connection drops, or goes silent for
+:class:`~spat_feed.transport.store.SpatStore` (its own, or one shared with other sources: ``store=``). When the connection drops, or goes silent for
 ``silence_timeout_s``, it reconnects with exponential backoff and jitter. Readers ask
 ``fresh(intersection_id)``, which returns ``None`` once the data is older than ``stale_after_s``
 (default 2 s), whatever the connection is doing; ``reading(...)`` returns it with its age and a
@@ -27,10 +27,10 @@ import httpx
 import websockets
 from websockets.asyncio.client import connect
 
-from spat_feed.messages import IntersectionState, ParsedSpat, parse_spat_text
-from spat_feed.source import DEFAULT_STALE_AFTER_S, Clock, SpatReading, SpatStore, TimeRules
+from spat_feed.timing.messages import IntersectionState, ParsedSpat, parse_spat_text
+from spat_feed.transport.store import DEFAULT_STALE_AFTER_S, Clock, SpatReading, SpatStore, TimeRules
 
-log = logging.getLogger("spat_feed.client")
+log = logging.getLogger("spat_feed.transport.client")
 
 
 @dataclass
@@ -76,7 +76,7 @@ class SpatClient:
     params : dict, optional
         Scenario query parameters (``corridor``, ``timing``, ``entry_unix_s``, ...).
     stale_after_s : float
-        Readings older than this are not fresh (see :mod:`spat_feed.source` for "older"). [s]
+        Readings older than this are not fresh (see :mod:`spat_feed.transport.store` for "older"). [s]
     clock : callable
         Unix seconds; ``time.time`` by default.
     backoff_initial_s, backoff_max_s : float

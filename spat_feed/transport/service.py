@@ -16,8 +16,8 @@ entry time), ``entry_unix_s`` (the trip's zone-entry instant: the timing is rela
 ``early_s``/``late_s``/``confidence`` (actuated-style change windows).
 
 **Per intersection** (what a city runs; the advisory service subscribes once): the simulator publishes every
-intersection of the served corridors under its shared timing (``spat_feed.simulator``), a recorded log plays
-on the present clock (``--log``, ``spat_feed.player``); each tick's states go to the shared stream, to an MQTT
+intersection of the served corridors under its shared timing (``spat_feed.transport.simulator``), a recorded log plays
+on the present clock (``--log``, ``spat_feed.transport.player``); each tick's states go to the shared stream, to an MQTT
 broker (``--mqtt``) and to a JSON-lines recording (``--record``). One text per tick whatever the number of
 subscribers.
 
@@ -43,16 +43,17 @@ from typing import Annotated, Any
 from fastapi import Depends, FastAPI, HTTPException, Query, WebSocket, WebSocketDisconnect
 from fastapi.responses import JSONResponse
 
-from spat_feed.corridors import TIMING_PRESETS, load_corridor, preset_names
-from spat_feed.messages import IntersectionState, SpatMessage, from_unix_s, to_j2735
-from spat_feed.mqtt import MqttPublisher
-from spat_feed.player import JsonlRecorder, LogPlayer, read_spat_log
-from spat_feed.pump import SpatPump, run_every
-from spat_feed.scenarios import FeedScenario, Uncertainty, make_scenario, spat_message_at
-from spat_feed.simulator import IntersectionSimulator
-from spat_feed.source import Clock
+from spat_feed.road.corridors import load_corridor, preset_names
+from spat_feed.timing.paper import TIMING_PRESETS
+from spat_feed.timing.messages import IntersectionState, SpatMessage, from_unix_s, to_j2735
+from spat_feed.transport.mqtt import MqttPublisher
+from spat_feed.transport.player import JsonlRecorder, LogPlayer, read_spat_log
+from spat_feed.transport.pump import SpatPump, run_every
+from spat_feed.transport.scenarios import FeedScenario, Uncertainty, make_scenario, spat_message_at
+from spat_feed.transport.simulator import IntersectionSimulator
+from spat_feed.transport.store import Clock
 
-log = logging.getLogger("spat_feed.service")
+log = logging.getLogger("spat_feed.transport.service")
 
 
 @dataclass(frozen=True, slots=True)

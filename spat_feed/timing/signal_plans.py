@@ -33,10 +33,11 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from spat_feed.plans import FixedTimePlan
+from spat_feed.timing.paper import TIMING_PRESETS, Timing
+from spat_feed.timing.plans import FixedTimePlan
 
 if TYPE_CHECKING:  # pragma: no cover
-    from spat_feed.corridors import Corridor
+    from spat_feed.road.corridors import Corridor
 
 PLAN_SCHEMA_VERSION = 1
 DAYS = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
@@ -263,6 +264,10 @@ class SignalPlan(BaseModel):
         return any(light.intersection_id == intersection_id and light.kind == "live" for light in lights)
 
 
+TimingLike = Timing | SignalPlan
+"""A corridor's timing for a trip: one of the paper's (relative to the zone entry) or a plan file."""
+
+
 def light_plans_at(corridor: Corridor, plan: SignalPlan | None = None, t_unix_s: float = 0.0, entry_unix_s: float = 0.0) -> dict[tuple[int, int], FixedTimePlan | None]:
     """Every light's plan on the Unix axis at ``t_unix_s``: (intersection id, signal group) -> plan, None = live.
 
@@ -271,8 +276,6 @@ def light_plans_at(corridor: Corridor, plan: SignalPlan | None = None, t_unix_s:
     minute of ``entry_unix_s``'s axis). What a per-intersection simulator runs; re-ask at
     :meth:`SignalPlan.next_switch_unix_s`.
     """
-    from spat_feed.corridors import TIMING_PRESETS
-
     plan = plan or corridor.plan()
     if plan is None:
         timing = TIMING_PRESETS["15_15"]

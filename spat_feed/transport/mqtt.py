@@ -3,16 +3,16 @@
 Cities publish live traffic-light data over MQTT (Hamburg's SensorThings/MQTT service, for one). Our layout:
 
 * **Topic** ``<prefix>/<intersection id>``, default prefix ``ecodrive/spat`` (e.g. ``ecodrive/spat/648``).
-* **Payload**: one :class:`~spat_feed.messages.IntersectionState` as JSON, camelCase, UTC times ending in
+* **Payload**: one :class:`~spat_feed.timing.messages.IntersectionState` as JSON, camelCase, UTC times ending in
   ``Z`` (the schema of ``GET /spat``'s items, docs/SPAT.md). A whole
-  :class:`~spat_feed.messages.SpatMessage` is accepted too.
+  :class:`~spat_feed.timing.messages.SpatMessage` is accepted too.
 * **QoS 0, retained**: SPaT is a latest-value stream; a lost message is replaced by the next one (0.1-1 s), and
   a new subscriber gets each intersection's last state at once (the store's time rules judge its age).
 
 URL: ``mqtt://[user:password@]host[:port][/prefix]`` (port 1883 by default).
 
 :class:`MqttSubscriber` runs paho's network thread (reconnecting with backoff by itself) and offers every
-state to a :class:`~spat_feed.source.SpatStore`, which is thread-safe; malformed payloads are counted there.
+state to a :class:`~spat_feed.transport.store.SpatStore`, which is thread-safe; malformed payloads are counted there.
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from urllib.parse import unquote, urlsplit
 import paho.mqtt.client as paho
 from pydantic import ValidationError
 
-from spat_feed.messages import IntersectionState, SpatMessage
-from spat_feed.source import SpatStore
+from spat_feed.timing.messages import IntersectionState, SpatMessage
+from spat_feed.transport.store import SpatStore
 
-log = logging.getLogger("spat_feed.mqtt")
+log = logging.getLogger("spat_feed.transport.mqtt")
 
 DEFAULT_PREFIX = "ecodrive/spat"
 

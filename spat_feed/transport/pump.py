@@ -7,10 +7,10 @@ import asyncio
 import logging
 from collections.abc import Callable, Sequence
 
-from spat_feed.messages import IntersectionState
-from spat_feed.source import Clock
+from spat_feed.timing.messages import IntersectionState
+from spat_feed.transport.store import Clock
 
-log = logging.getLogger("spat_feed.pump")
+log = logging.getLogger("spat_feed.transport.pump")
 
 Producer = Callable[[float], list[IntersectionState]]
 """Given now (Unix s), the states to send now."""

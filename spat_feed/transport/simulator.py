@@ -6,7 +6,7 @@ the pattern of the hour, cycles anchored on the local midnight), or, for a corri
 paper's ``15_15`` timing anchored on the Unix epoch (every light turns red 15 s past each minute). Lights a
 plan marks ``live`` are not simulated: their SPaT comes from a real source (a log, MQTT).
 
-:func:`shared_scenario` is the :class:`~spat_feed.scenarios.FeedScenario` a trip entering at an instant runs
+:func:`shared_scenario` is the :class:`~spat_feed.transport.scenarios.FeedScenario` a trip entering at an instant runs
 under (its fixed plans are what the simulator publishes); :class:`IntersectionSimulator` renders every
 intersection's J2735 state at an instant, the same text for every subscriber.
 
@@ -19,11 +19,12 @@ import math
 from collections.abc import Iterable
 from dataclasses import replace
 
-from spat_feed.corridors import TIMING_PRESETS, Corridor
-from spat_feed.messages import IntersectionState, MovementState, from_unix_s, movement_events
-from spat_feed.plans import FixedTimePlan, next_changes
-from spat_feed.scenarios import FeedScenario
-from spat_feed.signal_plans import light_plans_at
+from spat_feed.road.corridors import Corridor
+from spat_feed.timing.paper import TIMING_PRESETS
+from spat_feed.timing.messages import IntersectionState, MovementState, from_unix_s, movement_events
+from spat_feed.timing.plans import FixedTimePlan, next_changes
+from spat_feed.transport.scenarios import FeedScenario
+from spat_feed.timing.signal_plans import light_plans_at
 
 SHARED_TIMING = "15_15"
 """The timing of a corridor without plans, anchored on the Unix epoch (a paper timing: red 30 s, green 30 s)."""
@@ -37,7 +38,7 @@ def shared_scenario(corridor: Corridor, entry_unix_s: float) -> FeedScenario:
 
     Examples
     --------
-    >>> from spat_feed.corridors import paper_corridor
+    >>> from spat_feed.road.corridors import paper_corridor
     >>> sc = shared_scenario(paper_corridor(400.0), 1_000_000.0)
     >>> plan = sc.fixed_plans()[(1, 2)]
     >>> plan.offset_s % 60.0, plan.red_s

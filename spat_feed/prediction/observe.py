@@ -49,8 +49,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 from advisory.advice.advisor import LightView, Observation
-from spat_feed.corridors import Corridor, IntersectionSpec
-from spat_feed.plans import (
+from spat_feed.road.corridors import Corridor, IntersectionSpec
+from spat_feed.timing.plans import (
     STOP_STATES,
     UNKNOWN_STATES,
     FixedTimePlan,

@@ -27,10 +27,10 @@ from advisory.advice import tables as tables_module
 from advisory.advice.tables import TABLES_VERSION, AdviceTables, TableGrid
 from advisory.physics.params import SPEED_LIMIT_MPS, ModelParams
 from advisory.signals import FixedTimeSignal, Scenario
-from spat_feed.corridors import PAPER_TIMING_NAMES, TIMING_PRESETS, Corridor
-from spat_feed.plans import to_fixed_time_signal
-from spat_feed.scenarios import TimingLike
-from spat_feed.signal_plans import SignalPlan
+from spat_feed.road.corridors import Corridor
+from spat_feed.timing.plans import to_fixed_time_signal
+from spat_feed.timing.paper import PAPER_TIMING_NAMES, TIMING_PRESETS
+from spat_feed.timing.signal_plans import SignalPlan, TimingLike
 
 log = logging.getLogger("spat_feed.tables")
 
