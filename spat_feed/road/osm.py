@@ -24,10 +24,12 @@ direction of travel. What it does, by OSM's tag meanings (https://wiki.openstree
    junction with that cross street when a crossing way links them within ``MERGE_M``. Signal nodes within
    ``MERGE_M`` of each other along the route (the two nodes of a dual-carriageway crossing) are one
    intersection: one stop line, at the first. Pedestrian-crossing signals (``highway=crossing`` +
-   ``crossing=traffic_signals``) are left out (push-button, no fixed plan). Intersection ids: 1, 2, ... along
-   the street, the same physical intersection keeping one id in both directions; signal group 2 for the
-   first route and 6 for the opposite one (NEMA main-street through phases). Replace them with the
-   operator's J2735 ids to use a live SPaT feed.
+   ``crossing=traffic_signals``) are left out (push-button, no fixed plan). Intersection ids: one per
+   physical intersection, the same in both directions, counting up (1, 2, ...) along the first route (the
+   longest; of two as long, the one heading north or east), so the opposite route meets them counting down;
+   an intersection only the opposite route has is numbered where it lies along the first. The order of the
+   file's nodes and ways changes nothing. Signal group 2 for the first route and 6 for the opposite one
+   (NEMA main-street through phases). Replace them with the operator's J2735 ids to use a live SPaT feed.
 4. **Speed limits** per way from ``maxspeed`` (``maxspeed:forward``/``:backward`` by direction):
    ``"50"`` km/h, ``"25 mph"``, ``"50 km/h"``, ``"walk"``, country codes (``"US:urban"``, ``"DE:rural"``,
    ... the zone part mapped by ``ZONE_LIMITS_KMH``), ``"none"`` and anything unreadable -> the default of
@@ -385,7 +387,12 @@ def street_routes(data: OsmData, max_steps: int = 200_000) -> list[Route]:
                 stack.append((e.v, path + [e], dist + length[(e.u, e.v, e.way)], seen | {e.v}))
     if not best:
         raise OsmError("the street's ways do not chain into a route")
-    best.sort(key=lambda bp: -bp[0])
+    # longest first; of two as long (a two-way street: the same nodes both ways), the one heading north or
+    # east first, then by node ids: the same first route whatever order the file lists its nodes and ways in
+    def heading_back(path: list[Edge]) -> bool:
+        return not 0.0 <= _azimuth(nodes[path[0].u], nodes[path[-1].v]) < 180.0
+
+    best.sort(key=lambda bp: (-round(bp[0], 1), heading_back(bp[1]), [e.u for e in bp[1]]))
     routes = []
 
     def to_route(dist: float, path: list[Edge]) -> Route:
@@ -500,6 +507,21 @@ class ImportResult:
     notes: list[str]
 
 
+def _station_along(data: OsmData, route: Route, stations: list[float], point: tuple[float, float]) -> float:
+    """Station of the point of ``route`` nearest to ``point`` (lat, lon), in a local flat frame. [m]"""
+    lat0 = math.radians(point[0])
+    best = (math.inf, 0.0)
+    for (a, b), s0, s1 in zip(zip(route.nodes, route.nodes[1:]), stations, stations[1:]):
+        (ya, xa), (yb, xb) = data.nodes[a], data.nodes[b]
+        ax, ay = (xa - point[1]) * math.cos(lat0), ya - point[0]
+        dx, dy = (xb - xa) * math.cos(lat0), yb - ya
+        f = min(max(-(ax * dx + ay * dy) / max(dx * dx + dy * dy, 1e-30), 0.0), 1.0)
+        d2 = (ax + f * dx) ** 2 + (ay + f * dy) ** 2
+        if d2 < best[0]:
+            best = (d2, s0 + f * (s1 - s0))
+    return best[1]
+
+
 def corridors_from_osm(
     path: str | Path, street: str, *, name: str | None = None, units: str | None = None, direction: str | None = None, first_id: int = 1
 ) -> ImportResult:
@@ -523,8 +545,11 @@ def corridors_from_osm(
         heading = compass(_azimuth(data.nodes[route.nodes[0]], data.nodes[route.nodes[-1]]))
         notes += [f"{heading}: {n}" for n in route_notes]
         results.append((route, stations, lights))
-    # one id per physical intersection, shared by both directions
+    # one id per physical intersection, shared by both directions, counting up along the first route (the
+    # opposite route meets them counting down); one only the other route has is numbered where it lies
+    # along the first (before: by each one's rank on either route, 1, 3, 4, 2 one way and 2, 4, 3, 1 back)
     centres: list[tuple[float, float]] = []
+    along: list[float] = []
     ids: list[list[int]] = []
     for _route, _stations, lights in results:
         row = []
@@ -533,10 +558,11 @@ def corridors_from_osm(
             match = next((k for k, c in enumerate(centres) if _dist_m(c, here) <= 2 * MERGE_M), None)
             if match is None:
                 centres.append(here)
+                along.append(light.station_m if not ids else _station_along(data, results[0][0], results[0][1], here))
                 match = len(centres) - 1
             row.append(match)
         ids.append(row)
-    order = sorted(range(len(centres)), key=lambda k: (min(r.index(k) if k in r else 1e9 for r in ids), k))
+    order = sorted(range(len(centres)), key=lambda k: (along[k], k))
     number = {k: first_id + n for n, k in enumerate(order)}
     out: list[Corridor] = []
     for r_index, ((route, stations, lights), row) in enumerate(zip(results, ids)):
@@ -586,7 +612,7 @@ def corridors_from_osm(
                 source=f"OpenStreetMap data (c) OpenStreetMap contributors, ODbL; file {path.name}; ways {', '.join(str(w) for w in dict.fromkeys(e.way for e in route.edges))}",
                 note="Route = the street's ways chained in travel order; stop lines from highway=traffic_signals nodes "
                      "(docs/CORRIDORS.md: placement and merging); speed limits from maxspeed or class defaults. "
-                     "Intersection ids are assigned along the street: use the operator's J2735 ids for a live SPaT feed.",
+                     "Intersection ids count up along the first route imported (down along the opposite one): use the operator's J2735 ids for a live SPaT feed.",
             ),
             units="imperial" if imperial else "metric",
             length_m=length_m,

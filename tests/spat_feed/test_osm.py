@@ -212,3 +212,68 @@ def test_pbf_through_the_optional_osmium_package(tmp_path):
     from_xml = corridors_from_osm(xml, "Main Street").corridors
     from_pbf = corridors_from_osm(pbf, "Main Street").corridors
     assert [(c.polyline, c.intersections, c.segments) for c in from_pbf] == [(c.polyline, c.intersections, c.segments) for c in from_xml]
+
+
+def _shuffled_osm(tmp_path: Path, nodes: dict, ways: list, seed: int, name: str) -> Path:
+    """The same extract with its nodes and ways listed in another order (as a real file lists them: by id,
+    by edit, nothing to do with the street's order)."""
+    import random
+
+    rng = random.Random(seed)
+    keys = list(nodes)
+    rng.shuffle(keys)
+    ways = list(ways)
+    rng.shuffle(ways)
+    return write_osm(tmp_path, {k: nodes[k] for k in keys}, ways, name)
+
+
+def test_ids_count_up_along_the_street_whatever_the_files_order(tmp_path):
+    """Finding: on an unseen file the ids ran 1, 3, 4, 2 westbound and 2, 4, 3, 1 eastbound. Four signalised
+    crossings of a dual carriageway, each carriageway drawn in three ways; node ids, ways and nodes listed out
+    of street order. Ids count up along the first route (of two as long, the eastbound one), count down along
+    the opposite one, one id per crossing, whatever the order in the file."""
+    nodes, ways = {}, []
+    ids = list(range(500, 620))
+    import random
+
+    random.Random(3).shuffle(ids)  # node ids unrelated to the street's order
+    north = [ids[i] for i in range(60)]
+    south = [ids[60 + i] for i in range(60)]
+    for i in range(60):
+        nodes[north[i]] = (LAT + 2e-4, -122.30 + i * DLON, {})
+        nodes[south[i]] = (LAT, -122.30 + i * DLON, {})
+    cross = {10: "Ash", 25: "Birch", 40: "Cedar", 52: "Dogwood"}
+    for n, (i, street) in enumerate(cross.items()):
+        for side in (north, south):
+            nodes[side[i]] = (nodes[side[i]][0], nodes[side[i]][1], {"highway": "traffic_signals"})
+        ways.append((900 + n, [north[i], south[i]], {"highway": "residential", "name": f"{street} Street"}))
+    tags = {"highway": "primary", "name": "Elm Street", "oneway": "yes"}
+    for k, (a, b) in enumerate(((0, 21), (20, 41), (40, 60))):  # three ways a carriageway, listed out of order
+        ways.append((700 + k, [north[i] for i in range(b - 1, a - 1, -1)], tags))  # westbound
+        ways.append((800 + k, [south[i] for i in range(a, b)], tags))  # eastbound
+    names = [f"Elm Street & {s} Street" for s in cross.values()]  # west to east
+    seen = []
+    for seed in (1, 2, 3):
+        result = corridors_from_osm(_shuffled_osm(tmp_path, nodes, ways, seed, f"elm{seed}.osm"), "Elm Street")
+        by_dir = {c.name.rsplit("_", 1)[1]: c for c in result.corridors}
+        east, west = by_dir["eastbound"], by_dir["westbound"]
+        assert [ix.name for ix in east.intersections] == names and [ix.name for ix in west.intersections] == names[::-1]
+        assert [ix.id for ix in east.intersections] == [1, 2, 3, 4] and [ix.id for ix in west.intersections] == [4, 3, 2, 1]
+        assert east.intersections[0].signal_groups[0].id == 2 and west.intersections[0].signal_groups[0].id == 6
+        seen.append([(c.name, [(ix.id, ix.stop_line_m) for ix in c.intersections]) for c in result.corridors])
+    assert seen[0] == seen[1] == seen[2]
+    # a two-way street: the same, both directions on the same ways, whatever order they come in
+    path = main_street(tmp_path)
+    for k, p in enumerate((path, _shuffled_osm(tmp_path, *_read_back(path), 5, "main5.osm"))):
+        east, west = sorted(corridors_from_osm(p, "Main Street").corridors, key=lambda c: c.name)
+        assert [ix.id for ix in east.intersections] == [1, 2, 3] and [ix.id for ix in west.intersections] == [3, 1], k
+
+
+def _read_back(path: Path) -> tuple[dict, list]:
+    """Nodes and ways of a file written by :func:`write_osm` (to list them again in another order)."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(bz2.decompress(path.read_bytes()) if path.suffix == ".bz2" else path.read_bytes())
+    nodes = {int(n.get("id")): (float(n.get("lat")), float(n.get("lon")), {t.get("k"): t.get("v") for t in n.findall("tag")}) for n in root.findall("node")}
+    ways = [(int(w.get("id")), [int(r.get("ref")) for r in w.findall("nd")], {t.get("k"): t.get("v") for t in w.findall("tag")}) for w in root.findall("way")]
+    return nodes, ways
