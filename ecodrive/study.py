@@ -26,6 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from advisory.evaluation.study import (
+    OFF_PAPER_POINTS,
     PAPER_15_15_S800_PCT,
     PAPER_M15_15_COST,
     PAPER_NCA_15_15_COST,
@@ -36,6 +37,7 @@ from advisory.evaluation.study import (
     STUDY_GRID,
     TIMINGS,
     VARIANTS,
+    WHY_OFF_PAPER,
     CaseResult,
     StudyCase,
     by_scenario,
@@ -43,6 +45,8 @@ from advisory.evaluation.study import (
     run_cases,
     table2,
     table3,
+    why_table2_cell,
+    why_table3_cell,
 )
 from advisory.optimizer.dp import GridSpec
 from advisory.physics.params import VehicleParams
@@ -96,6 +100,23 @@ def _ours_vs_paper(ours: np.ndarray, paper: np.ndarray, header) -> str:
     return _md_table(header, rows)
 
 
+def _off_cells(results: dict, ours: np.ndarray, paper: np.ndarray, columns: Sequence[tuple[str, int, str | None]], why) -> list[str]:
+    """The report's lines under a table: each cell more than OFF_PAPER_POINTS from the paper's, why (a kind of
+    WHY_OFF_PAPER and what in this cell), and each kind explained once."""
+    rows, kinds = [], []
+    for r, (x, y) in enumerate(TIMINGS):
+        for c, (label, s, who) in enumerate(columns):
+            if np.isfinite(ours[r, c]) and abs(round(ours[r, c], 1) - paper[r, c]) > OFF_PAPER_POINTS:
+                reasons = why(results, x, y, s) if who is None else why(results, x, y, s, who)
+                kinds += [k for k, _ in reasons if k not in kinds]
+                text = "; ".join(f"**{k}**" + (f": {detail}" if detail else "") for k, detail in reasons)
+                rows.append([f"[{x} {y}] {label}", f"{_pct(ours[r, c])} / {paper[r, c]:.1f}", f"{ours[r, c] - paper[r, c]:+.1f}", text or "-"])
+    if not rows:
+        return ["", f"Every cell within {OFF_PAPER_POINTS:g} points of the paper's."]
+    return ["", f"### The {len(rows)} cells more than {OFF_PAPER_POINTS:g} points off the paper, and why", "",
+            _md_table(["cell", "ours / paper", "points", "why"], rows), "", *[f"* **{k}**: {WHY_OFF_PAPER[k]}." for k in kinds]]
+
+
 def render_report(results: dict, grid: GridSpec, elapsed_s: float, overrides: dict | None = None) -> str:
     """REPORT.md: every table of the paper, ours / paper cell by cell."""
     ours2 = table2(results)
@@ -113,6 +134,7 @@ def render_report(results: dict, grid: GridSpec, elapsed_s: float, overrides: di
         _ours_vs_paper(ours2, PAPER_TABLE2_COST_REDUCTION_PCT, ["timing [x y]"] + [f"s = {s} m" for s in SPACINGS]),
         "",
         f"Average over the 64 cases: ours {np.nanmean(ours2):.1f} %, paper {PAPER_TABLE2_COST_REDUCTION_PCT.mean():.1f} %.",
+        *_off_cells(results, ours2, PAPER_TABLE2_COST_REDUCTION_PCT, [(f"{s} m", s, None) for s in SPACINGS], why_table2_cell),
     ]
     for x, y in ((15, 15), (-15, 15)):
         rows = []
@@ -140,7 +162,10 @@ def render_report(results: dict, grid: GridSpec, elapsed_s: float, overrides: di
             parts += ["", f"Average cost reduction over the 64 cases, {variant}: {np.nanmean(ours):.1f} %"]
     header = ["timing"] + [f"{s} m {who}" for s in SPACINGS for who in ("reg", "eco")]
     parts += ["", "## Table 3: decay reduction (%) from 54 to 75 kWh (10x decay), ours / paper", "",
-              _ours_vs_paper(table3(results), PAPER_TABLE3_DECAY_REDUCTION_PCT, header), "", "## Figures", ""]
+              _ours_vs_paper(table3(results), PAPER_TABLE3_DECAY_REDUCTION_PCT, header),
+              *_off_cells(results, table3(results), PAPER_TABLE3_DECAY_REDUCTION_PCT,
+                          [(f"{s} m {'reg' if who == 'regular' else 'eco'}", s, who) for s in SPACINGS for who in ("regular", "eco")], why_table3_cell),
+              "", "## Figures", ""]
     return "\n".join(parts) + "\n"
 
 

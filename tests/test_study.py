@@ -5,7 +5,7 @@ import csv
 import numpy as np
 import pytest
 
-from advisory.evaluation.study import SPACINGS, TIMINGS, StudyCase, paper_cases, run_case, table2
+from advisory.evaluation.study import SPACINGS, TIMINGS, WHY_OFF_PAPER, StudyCase, paper_cases, run_case, table2, why_table2_cell, why_table3_cell
 from advisory.optimizer.dp import GridSpec
 from advisory.signals import paper_scenario
 from ecodrive.cli import main as ecodrive
@@ -24,6 +24,25 @@ def test_study_command_writes_report_csv_and_figures(tmp_path, capsys):
     assert len(pngs) >= 5
     assert all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in pngs)
     assert "64 cases" in capsys.readouterr().out
+    # beside Table 2: every cell more than 3 points off the paper, each with a reason, no claim of the paper's pattern
+    off = report[report.index("points off the paper, and why"):report.index("## [15 15]")]
+    rows = [line for line in off.splitlines() if line.startswith("| [")]
+    assert len(rows) >= 20 and all("**" in row for row in rows) and "not classified" not in off
+    assert "**stop at light 1**" in off and "**passes a light**" in off and "**slip**" in off and "pattern" not in report
+
+
+def test_why_a_cell_is_off_the_paper():
+    """Issue 29, item 10: each kind of difference, read off what the two drivers did in the cell."""
+    results = {case.key: run_case(case, COARSE) for case in paper_cases(["lfp54"]) if case.label in
+               {(0.0, 0.0, 400.0), (15.0, 15.0, 800.0), (-30.0, 15.0, 600.0), (-15.0, 15.0, 400.0)}}  # fmt: skip
+    assert [k for k, _ in why_table2_cell(results, 0, 0, 400)] == ["stop at light 1"]  # 6.7 vs 11.7: both stop at light 1
+    assert [k for k, _ in why_table2_cell(results, 15, 15, 800)] == ["passes a light"]  # 52.5 vs 41.6
+    assert [k for k, _ in why_table2_cell(results, -30, 15, 600)] == ["slip", "passes a light"]  # 46.2 vs the paper's 0.0 (its [15 15]: 39.2)
+    assert why_table2_cell(results, -15, 15, 400) == [] and why_table2_cell(results, 0, 15, 200) == []  # within 3 points; not run
+    assert set(WHY_OFF_PAPER) >= {"stop at light 1", "passes a light", "slip", "launch wear"}
+    both = {case.key: run_case(case, COARSE) for case in paper_cases(["nca54", "nca75"]) if case.label == (15.0, 15.0, 800.0)}
+    ((kind, detail),) = why_table3_cell(both, 15, 15, 800, "eco")  # 14.9 vs 21.0
+    assert kind == "launch wear" and "% of the wear on 54 kWh" in detail
 
 
 @pytest.mark.parametrize("args", [["--set", "warp_drive=1"], ["--set", "mass_kg=heavy"], ["--set", "name=x"], ["--stage-m", "30"]])
