@@ -70,6 +70,8 @@ class Settings(BaseSettings):
     trip_idle_ttl_s: float = Field(default=1800.0, gt=0)
     max_body_bytes: int = Field(default=16_384, ge=256)
     ws_max_message_bytes: int = Field(default=16_384, ge=256)
+    ws_max_frame_bytes: int = Field(default=262_144, ge=256, description="WebSocket messages above this are not read: closed 1009 (uvicorn's ws_max_size); "
+                                    "above ws_max_message_bytes only: a 413 error message, the stream goes on")  # fmt: skip
     rate_per_s: float = Field(default=5.0, gt=0, description="per-trip token bucket: refill rate [1/s]")
     rate_burst: float = Field(default=20.0, ge=1, description="per-trip token bucket: capacity")
     create_rate_per_s: float = Field(default=500.0, gt=0, description="trip creation, whole service [1/s]")

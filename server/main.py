@@ -7,6 +7,7 @@ import logging
 import os
 import re
 from collections.abc import Sequence
+from urllib.parse import unquote_plus
 
 import uvicorn
 
@@ -16,8 +17,15 @@ from server.protocol import protocol_class
 
 log = logging.getLogger("server")
 
-SECRET_IN_URL = re.compile(r"((?:^|[?&])(?:token|api_key|apikey|key|access_token)=)[^&\s\"]*", re.IGNORECASE)
-"""Query parameters that carry a credential: their values never reach a log line."""
+SECRET_WORDS = ("token", "key", "secret", "passw", "pwd", "auth", "signature", "session", "credential", "jwt", "bearer")
+"""A query parameter whose name, percent-decoded, contains one of these (any case, any punctuation: ``X-API-Key``,
+``api_key``, ``apiKey``, ``access_token``, ``X%2DAPI%2DKey``) carries a credential: its value never reaches a log."""
+_QUERY_PARAM = re.compile(r"(?:^|(?<=[?&;]))([^=&;?#\s\"'<>]+)=([^&;#\s\"'<>]*)")
+
+
+def _secret_name(name: str) -> bool:
+    plain = re.sub(r"[^a-z0-9]", "", unquote_plus(name).lower())
+    return any(word in plain for word in SECRET_WORDS)
 
 
 def redact(text: str) -> str:
@@ -25,27 +33,43 @@ def redact(text: str) -> str:
 
     >>> redact("/v1/trips/abc/stream?token=abc.def&x=1")
     '/v1/trips/abc/stream?token=***&x=1'
+    >>> redact('"GET /health?X-API-Key=k1&x%2Dapi%2Dkey=k2&a=1 HTTP/1.1" 200')
+    '"GET /health?X-API-Key=***&x%2Dapi%2Dkey=***&a=1 HTTP/1.1" 200'
     """
-    return SECRET_IN_URL.sub(r"\1***", text)
+    if "=" not in text:
+        return text
+    return _QUERY_PARAM.sub(lambda m: f"{m.group(1)}=***" if m.group(2) and m.group(2) != "***" and _secret_name(m.group(1)) else m.group(0), text)
 
 
 class RedactSecrets(logging.Filter):
-    """Rewrites a record's message and arguments with :func:`redact` (uvicorn's access and WebSocket lines
-    carry the full path with its query)."""
+    """Rewrites a record's message, arguments and traceback text with :func:`redact` (uvicorn's access and
+    WebSocket lines carry the full path with its query; an exception's text may quote a URL)."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         if isinstance(record.msg, str) and "=" in record.msg:
             record.msg = redact(record.msg)
         if isinstance(record.args, tuple):
             record.args = tuple(redact(a) if isinstance(a, str) and "=" in a else a for a in record.args)
+        elif isinstance(record.args, dict):
+            record.args = {k: redact(v) if isinstance(v, str) and "=" in v else v for k, v in record.args.items()}
+        if record.exc_info and record.exc_info[0] is not None and not record.exc_text:
+            record.exc_text = _FORMATTER.formatException(record.exc_info)
+        if record.exc_text and "=" in record.exc_text:
+            record.exc_text = redact(record.exc_text)
         return True
 
 
+_FORMATTER = logging.Formatter()
+
+
 def install_log_redaction() -> None:
-    for name in ("uvicorn.access", "uvicorn.error", "uvicorn"):
-        logger = logging.getLogger(name)
-        if not any(isinstance(f, RedactSecrets) for f in logger.filters):
-            logger.addFilter(RedactSecrets())
+    """:class:`RedactSecrets` on every handler of the root and uvicorn loggers (a handler's filter sees every
+    record it writes, whichever logger made it: ``server``, ``uvicorn.error``, ``uvicorn.access``, a library's),
+    and on those loggers themselves."""
+    loggers = [logging.getLogger(name) for name in ("", "uvicorn", "uvicorn.error", "uvicorn.access")]
+    for owner in loggers + [h for logger in loggers for h in logger.handlers]:
+        if not any(isinstance(f, RedactSecrets) for f in owner.filters):
+            owner.addFilter(RedactSecrets())
 
 
 def warn_if_open(settings: Settings) -> None:
@@ -102,7 +126,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         log_level=args.log_level,
         access_log=not args.no_access_log,
         ws=args.ws,
-        ws_max_size=settings.ws_max_message_bytes,
+        ws_max_size=max(settings.ws_max_frame_bytes, settings.ws_max_message_bytes),  # above ws_max_message_bytes: a 413 message (server.routes.stream)
         ws_per_message_deflate=False,
         timeout_keep_alive=settings.keep_alive_s,
         timeout_graceful_shutdown=5,

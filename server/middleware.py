@@ -12,6 +12,7 @@ from fastapi import HTTPException
 from starlette.requests import ClientDisconnect
 
 from server.metrics import Metrics
+from server.protocol import READ_TIMED_OUT
 
 log = logging.getLogger("server")
 CLIENT_CLOSED = 499
@@ -74,7 +75,9 @@ class GuardMiddleware:
         except ClientDisconnect:
             gone = True
         finally:
-            if gone:  # whatever the app made of it (FastAPI answers a body it could not read with 400), nobody heard it
+            if scope.get(READ_TIMED_OUT):  # answered 408 and logged by the protocol (server.protocol)
+                status = 408
+            elif gone:  # whatever the app made of it (FastAPI answers a body it could not read with 400), nobody heard it
                 status = CLIENT_CLOSED
                 client = scope.get("client") or ("?",)
                 log.info("%s: client disconnected before its %s %s request was complete", client[0], scope.get("method", ""), scope.get("path", ""))

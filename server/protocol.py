@@ -26,6 +26,9 @@ from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
 log = logging.getLogger("server")
 
+READ_TIMED_OUT = "ecodrive.read_timed_out"
+"""Scope key set on a request the read deadline cut off (answered 408 by the protocol itself)."""
+
 FD_RESERVE = 64
 """File descriptors kept free for the process itself (logs, tables, the SPaT feed) when capping connections."""
 
@@ -117,8 +120,13 @@ def protocol_class(read_timeout_s: float, max_connections: int, max_per_client: 
             if self.cycle is None or not self.cycle.response_started:
                 body = {"error": "request_timeout", "message": f"the request was not received within {read_timeout_s:g} s", "detail": None}
                 self.transport.write(_raw_response(408, "Request Timeout", body))
-                if self.cycle is not None:
-                    self.cycle.response_complete = True  # the app, if waiting for the body, hears a disconnect
+            if self.cycle is not None:
+                # The app, if waiting for the body, hears a disconnect, and what it sends is dropped: the 408 is
+                # the answer (before, its 400 went to the closed transport: a 500 and a traceback per timeout).
+                # The scope says why, so the request is counted as 408 (server.middleware), not as a 499.
+                self.cycle.scope[READ_TIMED_OUT] = True
+                self.cycle.disconnected = True
+                self.cycle.message_event.set()
             self.transport.close()
 
     return GuardedHttpToolsProtocol

@@ -92,12 +92,15 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
             text = message.get("text")
             if text is None:
                 data = message.get("bytes") or b""
-                text = data.decode("utf-8", errors="replace")
+                size = len(data)
+                text = data.decode("utf-8", errors="replace") if size <= limit else ""
+            else:  # the limit is in bytes, as uvicorn's ws_max_size (a character is 1 to 4 of them)
+                size = len(text) if len(text) * 4 <= limit else len(text.encode("utf-8", "surrogatepass"))
             try:
                 await counts.renew(handle)
-                if len(text) > limit:
+                if size > limit:
                     await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
-                    raise ApiError(413, "payload_too_large", f"message larger than {limit} bytes")
+                    raise ApiError(413, "payload_too_large", f"message of {size} bytes, larger than {limit}")
                 out = await engine.apply_fix(trip_id, token, lambda: _parse(text))
                 await ws.send_text(to_json(out).decode())
             except ApiError as exc:

@@ -57,6 +57,8 @@ def test_half_sent_requests_are_timed_out_and_capped(start_proc, tmp_path):
     half_body = _sock(svc.port)
     half_body.sendall(f"POST /v1/trips/{trip['trip_id']}/fixes HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {trip['token']}\r\n"
                       "Content-Type: application/json\r\nContent-Length: 200\r\n\r\n{\"t_unix_s\": 1".encode())  # fmt: skip
+    half_create = _sock(svc.port)  # a body FastAPI reads itself (the fix route reads its own)
+    half_create.sendall(b'POST /v1/trips HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 200\r\n\r\n{"corridor": ')
     # over the per-address cap: answered 503 at once and closed
     extra = [_sock(svc.port) for _ in range(15)]
     refused = [_read_all(s, 10) for s in extra]
@@ -64,10 +66,10 @@ def test_half_sent_requests_are_timed_out_and_capped(start_proc, tmp_path):
     # honest clients from another address are served throughout
     assert all(httpx.get(svc.base_url + "/health", timeout=10).status_code == 200 for _ in range(20))
     # the read deadline closes every half-sent request, with a 408 where nothing was answered
-    answers = [_read_all(s) for s in half_header + silent + [half_body]]
+    answers = [_read_all(s) for s in half_header + silent + [half_body, half_create]]
     assert all(a.startswith(b"HTTP/1.1 408") for a in answers[:40]), set(a[:20] for a in answers)
-    assert answers[-1].startswith(b"HTTP/1.1 408")
-    for s in half_header + silent + extra + [half_body]:
+    assert answers[-2].startswith(b"HTTP/1.1 408") and answers[-1].startswith(b"HTTP/1.1 408"), answers[-2:]
+    for s in half_header + silent + extra + [half_body, half_create]:
         s.close()
     # the caps are released: the attacker's address may connect again, a keep-alive client works
     s = _sock(svc.port)
@@ -75,6 +77,11 @@ def test_half_sent_requests_are_timed_out_and_capped(start_proc, tmp_path):
     assert _read_all(s, 10).startswith(b"HTTP/1.1 200")
     metrics = httpx.get(svc.base_url + "/metrics", timeout=10).text
     assert 'status="500"' not in metrics and "process_open_fds" in metrics
+    # a timed-out body is a 408, counted as one and logged in one line (issue 30: each was a 500 with a traceback)
+    assert 'route="/v1/trips/{trip_id}/fixes",status="408"' in metrics and 'route="/v1/trips",status="408"' in metrics, metrics
+    log = svc.log_path.read_text()
+    assert "Traceback" not in log and "ERROR" not in log and "client disconnected" not in log, log[-3000:]
+    assert log.count("request not received within 2 s") >= len(answers), log[-3000:]
 
 
 def test_client_disconnects_mid_body_are_not_server_errors(start_proc, tmp_path):
@@ -103,6 +110,10 @@ def test_tokens_never_reach_the_log_and_open_creation_is_announced(start_proc, t
     assert httpx.get(f"{svc.base_url}/v1/trips/{trip['trip_id']}/advice?token={token}", timeout=10).status_code == 401
     assert httpx.get(f"{svc.base_url}/v1/trips/{trip['trip_id']}/advice", headers={"Authorization": f"Bearer {token}"}, timeout=10).status_code == 200
     httpx.get(f"{svc.base_url}/health?api_key=operator-secret", timeout=10)
+    # issue 30: a key under any spelling of its name, on a 2xx, a 4xx and a WebSocket refused
+    secrets = [f"operator-key-{i}" for i in range(5)]
+    httpx.get(f"{svc.base_url}/health?X-API-Key={secrets[0]}&x%2Dapi%2Dkey={secrets[1]}&apiKey={secrets[2]}", timeout=10)
+    assert httpx.post(f"{svc.base_url}/v1/trips?X-API-Key={secrets[3]}", content=b"{", headers={"Content-Type": "application/json"}, timeout=10).status_code == 422
 
     async def stream():
         url = svc.base_url.replace("http", "ws") + f"/v1/trips/{trip['trip_id']}/stream?token={token}"
@@ -110,11 +121,18 @@ def test_tokens_never_reach_the_log_and_open_creation_is_announced(start_proc, t
             await ws.send(json.dumps({"t_unix_s": time.time(), "lat_deg": 0.0, "lon_deg": 0.0}))
             return json.loads(await asyncio.wait_for(ws.recv(), 10))
 
+    async def refused():
+        url = svc.base_url.replace("http", "ws") + f"/v1/trips/{trip['trip_id']}/stream?X-Api-Key={secrets[4]}"
+        async with websockets.connect(url, open_timeout=10) as ws:
+            return json.loads(await asyncio.wait_for(ws.recv(), 10))
+
     assert asyncio.run(stream())["trip_id"] == trip["trip_id"]
+    assert asyncio.run(refused())["status"] == 401
     time.sleep(0.5)
     log = svc.log_path.read_text()
     assert "/advice" in log and "stream" in log  # the lines are there, redacted
     assert token not in log and token.split(".")[1] not in log and "operator-secret" not in log and "token=***" in log
+    assert not [s for s in secrets if s in log] and "X-API-Key=***" in log and "X-Api-Key=***" in log, log[-3000:]
     assert "TRIP CREATION IS OPEN" in log and "WARNING" in log
 
 
@@ -125,3 +143,35 @@ def test_creation_needs_a_key_when_keys_are_set_and_quotas_hold_per_client(start
     codes = [httpx.post(svc.base_url + "/v1/trips", json={}, headers={"X-API-Key": keys}, timeout=10).status_code for _ in range(3)]
     assert codes == [201, 201, 429]
     assert "TRIP CREATION IS OPEN" not in svc.log_path.read_text()
+
+
+def test_invalid_unicode_is_one_4xx_line_and_big_websocket_messages_are_413(start_proc, tmp_path):
+    """Findings (issue 30): a lone surrogate in a trip-creation body was a 500 with a traceback every time; a
+    WebSocket message over 16 KiB closed the stream (1009) instead of the documented 413 error message."""
+    svc = start_proc(_proc(tmp_path, access_log=True, ECO_WS_MAX_FRAME_BYTES="65536"))
+    for body in (b'{"corridor": "\\ud800"}', b'{"vehicle": "a\\udc00"}', '{"corridor": "\ud800"}'.encode("utf-8", "surrogatepass"), b"\xff\xfe{}"):
+        r = httpx.post(svc.base_url + "/v1/trips", content=body, headers={"Content-Type": "application/json"}, timeout=10)
+        assert r.status_code == 422 and r.json()["error"] == "malformed_json" and "Unicode" in r.json()["message"], (body, r.text)
+    trip = httpx.post(svc.base_url + "/v1/trips", json={}, timeout=10).json()
+
+    async def stream():
+        url = svc.base_url.replace("http", "ws") + f"/v1/trips/{trip['trip_id']}/stream?token={trip['token']}"
+        async with websockets.connect(url, open_timeout=10, max_size=None) as ws:
+            out = []
+            for message in ("x" * 17_000, "\u00e9" * 9_000, b"y" * 60_000, json.dumps({"t_unix_s": time.time(), "lat_deg": 0.0, "lon_deg": 0.0})):
+                await ws.send(message)
+                out.append(json.loads(await asyncio.wait_for(ws.recv(), 10)))
+            await ws.send("z" * 70_000)  # over the frame cap: not even read
+            with pytest.raises(websockets.ConnectionClosed) as closed:
+                await asyncio.wait_for(ws.recv(), 10)
+            return out, closed.value.rcvd.code
+
+    answers, code = asyncio.run(stream())
+    assert [a.get("status") for a in answers[:3]] == [413, 413, 413] and "18000 bytes" in answers[1]["message"], answers
+    assert answers[3]["trip_id"] == trip["trip_id"] and code == 1009, (answers[3], code)
+    time.sleep(0.3)
+    log = svc.log_path.read_text()
+    assert "Traceback" not in log and "ERROR" not in log, log[-3000:]
+    assert log.count('"POST /v1/trips HTTP/1.1" 422') == 4, log[-3000:]
+    metrics = httpx.get(svc.base_url + "/metrics", timeout=10).text
+    assert 'status="500"' not in metrics and 'route="/v1/trips",status="422"} 4.0' in metrics
