@@ -16,21 +16,28 @@ from spat_feed.timing.messages import to_unix_s
 from spat_feed.timing.plans import STOP_STATES
 
 from tests.conftest import SHARED_DATA
+from tests.conftest import SPAT_RECORDINGS as RECORDINGS
 
-RECORDINGS = sorted((SHARED_DATA / "spat").glob("*.csv.gz"))
 pytestmark = pytest.mark.skipif(not RECORDINGS, reason="shared/data/spat not present")
 SLICE_S = 900.0
+MAY_17 = SHARED_DATA / "spat" / "antwerp-2019-05-17.csv.gz"
+
+
+@pytest.fixture(scope="module", params=RECORDINGS, ids=lambda p: p.name)
+def recording(request):
+    """Each shared recording, whatever its controller (Antwerp's publishes windows, the US one its state only)."""
+    return request.param
 
 
 @pytest.fixture(scope="module")
-def head():
-    return spat_eval._read_head(str(RECORDINGS[-1]), SLICE_S)
+def head(recording):
+    return spat_eval._read_head(str(recording), SLICE_S)
 
 
 def test_the_truth_is_the_logs_own_phases(head):
     """At every snapshot the truth is red exactly when the row says a stop state; switches lie between snapshots."""
     logs = spat_eval.group_logs(head)
-    assert len(logs) >= 8  # K648 publishes 9-10 signal groups
+    assert [log.key for log in logs] == sorted({(ix.id, m.signal_group) for ix in head for m in ix.states})  # one per group
     for log in logs:
         states = [m.state_time_speed[0].event_state for m in log.movements]
         assert [log.truth.is_red(float(t)) for t in log.t_s] == [s in STOP_STATES for s in states]
@@ -43,12 +50,14 @@ def test_the_truth_is_the_logs_own_phases(head):
     assert ambers and all(b <= r for log in ambers for (_, b), (r, _) in zip(log.truth.ambers_s, log.truth.reds_s[1:]))
 
 
-def test_spat_eval_on_a_slice_of_a_real_recording(head, monkeypatch):
+def test_spat_eval_on_a_slice_of_a_real_recording(recording, head, monkeypatch):
     monkeypatch.setattr(spat_eval, "_read_head", lambda path, limit_s: head)
-    out = spat_eval.evaluate_log(str(RECORDINGS[-1]), spat_eval.Setup(every_s=120.0), workers=1, limit_s=SLICE_S, progress=False)
+    setup = spat_eval.Setup(every_s=120.0)
+    out = spat_eval.evaluate_log(str(recording), setup, workers=1, limit_s=SLICE_S, progress=False)
     for key in ("approaches", "red_entries", "hard_brakes", "saving_frac", "hindsight_saving_frac", "advice_availability_frac", "time_lost_s"):
         assert key in out
-    assert out["approaches"] >= 40 and out["by_kind"]["pair"]["approaches"] > 0
+    # nearly every approach the slice holds is run (left out: a light that stays red past the horizon)
+    assert out["approaches"] >= 0.9 * len(spat_eval.jobs(spat_eval.group_logs(head), setup)) and out["by_kind"]["pair"]["approaches"] > 0
     assert out["red_entries"] == 0 and out["hard_brakes"] == 0  # the issue's target, on this slice
     assert 0.0 <= out["advice_availability_frac"] <= 1.0
     assert out["hindsight_saving_frac"] > 0.1  # knowing the truth pays on an actuated controller (issue: 24-39 %)
@@ -76,19 +85,20 @@ def test_cli_names_the_bad_line(tmp_path, capsys):
     assert "line 2" in capsys.readouterr().err
 
 
-def test_cli_json(head, monkeypatch, capsys):
+def test_cli_json(recording, head, monkeypatch, capsys):
     monkeypatch.setattr(spat_eval, "_read_head", lambda path, limit_s: head[:400])
-    assert cli(["spat-eval", str(RECORDINGS[-1]), "--json", "--limit-s", "400", "--workers", "1", "--every-s", "60"]) == 0
+    assert cli(["spat-eval", str(recording), "--json", "--limit-s", "400", "--workers", "1", "--every-s", "60"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["approaches"] >= 1 and set(out["by_kind"]) == {"single", "pair"}
 
 
+@pytest.mark.skipif(not MAY_17.exists(), reason=f"{MAY_17} not present")
 def test_recorded_approaches_that_crossed_a_red_no_longer_do():
     """Two approaches of 2019-05-17 that ended in a red (found by spat-eval while the advisor changed): group 12 at
     1558113872.65, a crawling car committed to go, the controller held the red 4 s longer and the silent advisor let
     it roll on (now the driver's last call stops it); groups 1 and 3 at 1558117672.65, a car creeping at 0.15 m/s
     committed to a green its display put before its arrival, and crept over the line (now it waits at the line)."""
-    spat_eval._LOGS = spat_eval.group_logs(spat_eval._read_head(str(RECORDINGS[-1]), 5400.0))
+    spat_eval._LOGS = spat_eval.group_logs(spat_eval._read_head(str(MAY_17), 5400.0))
     keys = [log.key[1] for log in spat_eval._LOGS]
     for groups, entry in (((12,), 1558113872.65), ((1, 3), 1558117672.65)):
         row = spat_eval.approach((tuple(keys.index(g) for g in groups), entry, spat_eval.Setup()))

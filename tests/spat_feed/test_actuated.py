@@ -11,15 +11,18 @@ from advisory.signals import FixedTimeSignal, paper_scenario
 from spat_feed.transport.actuated import ActuatedFeed, SwitchFit, actuated_light, actuated_scenario, fit_switches, switch_observations
 from spat_feed.timing.messages import to_unix_s
 
-from tests.conftest import SHARED_DATA
+from tests.conftest import SPAT_RECORDINGS as RECORDINGS
+from tests.conftest import publishes_windows
 
-RECORDINGS = sorted((SHARED_DATA / "spat").glob("*.csv.gz"))
+WINDOWED = [p for p in RECORDINGS if publishes_windows(p)]
+STATE_ONLY = [p for p in RECORDINGS if not publishes_windows(p)]
 
 
-@pytest.mark.skipif(not RECORDINGS, reason="shared/data/spat not present")
-def test_fit_on_a_real_recording():
-    """README: windows red 80-97 s / green 18 s wide, never ended before minEnd, after maxEnd 6-12 % of the time."""
-    fits = fit_switches(RECORDINGS[-1:])
+@pytest.mark.parametrize("path", WINDOWED, ids=lambda p: p.name)
+def test_fit_on_a_real_recording(path):
+    """README (Antwerp): windows red 80-97 s / green 18 s wide, never ended before minEnd, after maxEnd 6-12 % of the
+    time; on each recording whose controller publishes windows."""
+    fits = fit_switches([path])
     red, green = fits["red"], fits["green"]
     assert red.n > 300 and green.n > 1000
     assert red.before_min_n == 0 and green.before_min_n == 0
@@ -29,6 +32,16 @@ def test_fit_on_a_real_recording():
         q = np.array(fit.inside_quantiles)
         assert q[0] >= 0 and q[-1] <= 1 and np.all(np.diff(q) >= 0)
         assert 0 < fit.late_mean_s < 30
+
+
+@pytest.mark.parametrize("path", STATE_ONLY, ids=lambda p: p.name)
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="fit_switches on a recording with no bounded window fails in numpy "
+                   "('not enough values to unpack (expected 3, got 0)', so does python -m spat_feed.transport.actuated "
+                   "on it) instead of saying there is nothing to fit")
+def test_a_recording_without_windows_has_nothing_to_fit(path):
+    """A controller that publishes its state only (the US one): no phase has a bounded window, and the fit says so."""
+    with pytest.raises(ValueError, match="no phase with a bounded window"):
+        fit_switches([path])
 
 
 def test_draws_follow_the_fit():
@@ -115,12 +128,16 @@ def test_dropouts_age_the_last_message_and_skew_shifts_the_times():
     assert dropped(20.0, 0.0, 20.0).lights[0].fresh
 
 
-@pytest.mark.skipif(not RECORDINGS, reason="shared/data/spat not present")
-def test_switch_observations_match_the_raw_rows():
+@pytest.mark.parametrize("path", RECORDINGS, ids=lambda p: p.name)
+def test_switch_observations_match_the_raw_rows(path):
+    """A phase is observed where its first window is bounded: on every recording that publishes windows, none other."""
     from ecodrive.spat_eval import _read_head
 
-    head = _read_head(str(RECORDINGS[0]), 600.0)
+    head = _read_head(str(path), 600.0)
     obs = switch_observations(head)
+    if not publishes_windows(path):
+        assert obs == []
+        return
     assert obs
     for red, lo, hi, end in obs:
         assert lo <= hi and end >= lo - 1.0  # never before minEnd (within the 1 s sampling)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gzip
 import math
 from pathlib import Path
 
@@ -12,9 +11,8 @@ from spat_feed.timing.messages import plan_from_movement, to_unix_s
 from spat_feed.timing.plans import GO_STATES, J2735_STATE_NUMBERS, STOP_STATES, UNKNOWN_STATES, MovementPhaseState, PhaseClass, phase_class
 from spat_feed.transport.recorded import RecordedLogError, read_spat_csv
 
-from tests.conftest import SHARED_DATA
-
-RECORDINGS = sorted((SHARED_DATA / "spat").glob("*.csv.gz"))
+from tests.conftest import SPAT_RECORDINGS as RECORDINGS
+from tests.conftest import recording_facts
 
 HEADER = "generated_utc,intersection,signal_group,phase,min_end_utc,max_end_utc\n"
 
@@ -100,12 +98,16 @@ def test_missing_columns_are_named(tmp_path):
 @pytest.mark.skipif(not RECORDINGS, reason="shared recordings not present")
 @pytest.mark.parametrize("path", RECORDINGS, ids=lambda p: p.name)
 def test_the_shared_recordings_read_whole(path):
+    """Every row, from the first snapshot to the last, with the signal groups the file names (whatever its controller:
+    its facts come from its raw rows, :func:`~tests.conftest.recording_facts`)."""
+    facts = recording_facts(path)
     snaps = read_spat_csv(path)
-    with gzip.open(path, "rt") as fh:
-        rows = sum(1 for _ in fh) - 1
-    assert sum(len(s.states) for s in snaps) == rows  # lossless: one movement per row
+    assert sum(len(s.states) for s in snaps) == facts.rows  # lossless: one movement per row
     stamps = [to_unix_s(s.timestamp) for s in snaps]
-    assert stamps == sorted(stamps) and 3.0 * 3600 < stamps[-1] - stamps[0] < 3.6 * 3600
+    assert stamps == sorted(stamps)
+    assert stamps[0] == pytest.approx(facts.first_unix_s, abs=1e-3) and stamps[-1] == pytest.approx(facts.last_unix_s, abs=1e-3)
+    assert len({s.id for s in snaps}) == len({ix for ix, _ in facts.groups})
+    assert {m.signal_group for s in snaps for m in s.states} == {g for _, g in facts.groups}
     # the README's facts, read through our semantics: minEnd never in the past, windows well formed
     for s in snaps[::500]:
         for m in s.states:
