@@ -16,6 +16,7 @@ COMMANDS = {
     "serve": "server.main",
     "corridor": "ecodrive.corridor",
     "spat-eval": "ecodrive.spat_eval",
+    "predict-eval": "ecodrive.predict_eval",
 }
 
 

@@ -48,7 +48,10 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
-from advisory.advice.advisor import LightView, Observation
+import numpy as np
+
+from advisory.advice.advisor import AdvisorParams, LightView, Observation
+from spat_feed.prediction.predictor import EXACT_S, ChangeForecast, current_end, cycle_period_s, next_end, scored_errors_s
 from spat_feed.road.corridors import Corridor, IntersectionSpec
 from spat_feed.timing.plans import (
     STOP_STATES,
@@ -101,6 +104,15 @@ class CycleStats:
     resumed: bool = False  # the current phase's minEndTime was held and runs again (:class:`PhaseHistory`)
     resumed_excess_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # end - minEnd, resumed phases
     linked_end_unix_s: tuple[float, float] | None = None  # the current phase's (likely, late) end from another group's change (:class:`ChangeLinks`)
+    linked_ends_unix_s: tuple[float, ...] = ()  # the current phase's end from another group's change, one per lag seen (:class:`ChangeLinks`)
+    ends_unix_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # when phases of each class ended
+    cycle_classes: frozenset = frozenset()  # classes told better by the point of the cycle they end at than by their durations
+    period_s: float | None = None  # the controller's fixed cycle, if its changes keep to one (:func:`~spat_feed.prediction.predictor.cycle_period_s`)
+
+    def ends(self, cls: PhaseClass) -> tuple[float, ...]:
+        """The instants phases of ``cls`` ended at, if enough are seen, else ()."""
+        e = self.ends_unix_s.get(cls, ())
+        return e if len(e) >= MIN_PHASES_SEEN else ()
 
     def after_resumed(self, cls: PhaseClass) -> tuple[float, ...]:
         """How long after their ``minEndTime`` resumed phases of ``cls`` ended (sorted), if enough are seen, else ()."""
@@ -121,6 +133,11 @@ class CycleStats:
             total += _quantile(d, 0.5)
             cls = self.following.get(cls)
         return total if cls is not None and cls == self.current and seen else None
+
+
+def _sample_quantile(sorted_s: np.ndarray, q: float) -> float:
+    """The ``q`` quantile of sorted forecast samples (as :meth:`~spat_feed.prediction.predictor.ChangeForecast.quantile`)."""
+    return ChangeForecast(PhaseClass.UNKNOWN, None, -math.inf, sorted_s, "").quantile(q)
 
 
 def _quantile(sorted_s: Sequence[float], q: float) -> float:
@@ -145,7 +162,7 @@ class PhaseHistory:
     """
 
     __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
-                 "_resumed_min_ends", "_excess", "_sorted")  # fmt: skip
+                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
         self.keep, self.max_gap_s = keep, max_gap_s
@@ -160,6 +177,8 @@ class PhaseHistory:
         self._resumed_min_ends: list[float] = []  # ... its minEndTime at each reading since it resumed
         self._excess: dict[PhaseClass, deque[float]] = {}
         self._sorted: tuple | None = None  # the two above, sorted (until a phase ends)
+        self._ends: dict[PhaseClass, deque[float]] = {}  # when phases of each class were seen to end
+        self.ended: tuple | None = None  # the phase seen whole that the last reading ended: (class, start, end, durations and ends before it)
 
     def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
         """Take one reading at ``t_unix_s`` (:meth:`record`) and return the :meth:`stats` after it."""
@@ -182,10 +201,13 @@ class PhaseHistory:
             gap = False
         was_resumed = self._resumed
         if changed or gap:
+            self.ended = None
             if changed and not gap and self._current is not None:
                 if self._exact:
+                    self.ended = (self._current, self._since, t_unix_s, self.stats().durations(self._current), self.stats().ends(self._current))
                     self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
                 self._following[self._current] = cls
+                self._ends.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s)
                 excess = self._excess.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
                 excess.extend(t_unix_s - m for m in self._resumed_min_ends)
                 self._sorted = None
@@ -220,7 +242,8 @@ class PhaseHistory:
         if self._sorted is None:
             self._sorted = tuple({c: tuple(sorted(d)) for c, d in dd.items()} for dd in (self._durations, self._excess))
         durations, excess = self._sorted
-        return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess)
+        ends = {c: tuple(e) for c, e in self._ends.items()}
+        return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess, ends_unix_s=ends)
 
     @property
     def current(self) -> PhaseClass | None:
@@ -295,29 +318,43 @@ class ChangeLinks:
             self._last_change[key] = t_unix_s
         return bool(changes)
 
-    def _link(self, index: tuple[int, PhaseClass, tuple]) -> tuple[float, float] | None:
+    def _link(self, index: tuple[int, PhaseClass, tuple]) -> tuple[float, float, tuple[float, ...]] | None:
+        """(median, late, every lag) of a link that holds, else None."""
         if index not in self._links:
             lags = sorted(self._lags.get(index, ()))
             link = None
             if len(lags) >= MIN_LINKS_SEEN:
                 median = _quantile(lags, 0.5)
                 if sum(abs(x - median) <= LINK_TOLERANCE_S for x in lags) >= LINK_SHARE * len(lags):
-                    link = (median, _quantile(lags, LATE_QUANTILE))
+                    link = (median, _quantile(lags, LATE_QUANTILE), tuple(lags))
             self._links[index] = link
         return self._links[index]
 
     def end_of(self, group: int) -> tuple[float, float] | None:
         """(likely, late) end of ``group``'s phase in progress from the latest linked change seen in it, else None."""
+        ends = self.ends_of(group)
+        return None if not ends else (_quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE))
+
+    def ends_of(self, group: int) -> tuple[float, ...]:
+        """The end of ``group``'s phase in progress after the latest linked change seen in it, one instant per lag
+        seen (sorted), else ()."""
         now = self._current.get(group)
         if now is None:
-            return None
+            return ()
         best = None  # the latest change; of changes at one instant, the link whose lags spread least
         for key, at in self._last_change.items():
             if key[0] != group and at >= now[1] and (link := self._link((group, now[0], key))):
-                rank = (at, link[0] - link[1], -link[0])
+                rank = (at, link[0] - link[1], -link[0], key)  # (the key: one answer whatever order the groups came in)
                 if best is None or rank > best[0]:
-                    best = (rank, (at + link[0], at + link[1]))
-        return None if best is None else best[1]
+                    best = (rank, tuple(at + x for x in link[2]))
+        return () if best is None else best[1]
+
+
+METHOD_MEMORY = 10
+"""Phases over which the running error of each method is kept (an exponential mean). [-]"""
+
+PERIOD_EVERY = 20
+"""Phase ends (of all groups) between two searches for the controller's cycle. [-]"""
 
 
 class IntersectionHistory:
@@ -325,12 +362,15 @@ class IntersectionHistory:
     :class:`ChangeLinks` between them. ``record`` each message's plans; ``stats(group)`` is the group's
     :class:`CycleStats` (cached until the group's history or a link changes)."""
 
-    __slots__ = ("groups", "links", "_stats")
+    __slots__ = ("groups", "links", "_stats", "period_s", "_ends_since_period", "_errors")
 
     def __init__(self) -> None:
         self.groups: dict[int, PhaseHistory] = {}
         self.links = ChangeLinks()
         self._stats: dict[int, CycleStats] = {}
+        self.period_s: float | None = None  # the controller's cycle, if its changes keep to one (cycle_period_s)
+        self._ends_since_period = 0
+        self._errors: dict[tuple[int, PhaseClass], list[float]] = {}  # (group, class) -> [n, cycle's mean error, durations']
 
     def record(self, t_unix_s: float, plans: Mapping[int, Plan | MovementPhaseState | None]) -> None:
         """Take one message: each signal group's plan (or state) at ``t_unix_s``."""
@@ -342,14 +382,42 @@ class IntersectionHistory:
             if history.record(t_unix_s, plan):
                 self._stats.pop(g, None)
                 changed[g] = history.current
+                if history.ended is not None:
+                    self._score(g, history.ended)
         if self.links.record(t_unix_s, changed):
             self._stats.clear()  # a change may start a link for any group
+            self._ends_since_period += len(changed)
+            if self._ends_since_period >= PERIOD_EVERY:
+                self._ends_since_period = 0
+                ends = [e for h in self.groups.values() for e in h.stats().ends_unix_s.values()]
+                self.period_s = cycle_period_s(ends)
+
+    def _score(self, group: int, ended: tuple) -> None:
+        """Score the cycle and the durations on a phase seen whole (:func:`~spat_feed.prediction.predictor.scored_errors_s`):
+        a running mean of each one's error over about the last :data:`METHOD_MEMORY` phases of the class."""
+        cls, since, end, durations, ends = ended
+        errors = scored_errors_s(since, end, durations, ends, self.period_s)
+        if errors is None:
+            return
+        score = self._errors.setdefault((group, cls), [0, 0.0, 0.0])
+        score[0] += 1
+        w = max(1.0 / score[0], 1.0 / METHOD_MEMORY)
+        score[1] += w * (errors[0] - score[1])
+        score[2] += w * (errors[1] - score[2])
+
+    def cycle_classes(self, group: int) -> frozenset:
+        """The classes of ``group`` whose ends the cycle has told better than the durations (at least
+        :data:`MIN_PHASES_SEEN` phases scored)."""
+        return frozenset(c for (g, c), (n, by_cycle, by_duration) in self._errors.items() if g == group and n >= MIN_PHASES_SEEN and by_cycle < by_duration)
 
     def stats(self, group: int) -> CycleStats | None:
         """``group``'s snapshot (:meth:`PhaseHistory.stats` with the linked end of its phase in progress)."""
         cycle = self._stats.get(group)
         if cycle is None and (history := self.groups.get(group)) is not None:
-            cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=self.links.end_of(group))
+            ends = self.links.ends_of(group)
+            linked = (_quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE)) if ends else None
+            cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=linked, linked_ends_unix_s=ends, period_s=self.period_s,
+                                                 cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset())  # fmt: skip
         return cycle
 
 
@@ -483,25 +551,15 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
     maxEndTime), else, for an amber or go phase read from "unavailable", in its ``published`` window (when finite),
     then the classes that followed it for ``horizon_s``, then the unknown; None when neither says."""
     inf = math.inf
-    ends = [max(since_unix_s + x, after_s) for x in cycle.durations(cls) if since_unix_s + x >= now_s] if since_unix_s is not None else []
     max_end = published[2] if published is not None else inf
-    linked = cycle.linked_end_unix_s if current else None
-    if linked is not None and linked[1] >= now_s:  # a change of another group that it follows has come (ChangeLinks)
-        likely, late = min(linked[0], max_end), linked[1]
-    elif ends:
-        # what this group has done bounds the late end (maxEndTime is soft: 6-12 % of phases outlast it, some by
-        # minutes); the likely end is the durations' median, but no later than the controller's own maxEndTime
-        likely, late = min(_quantile(ends, 0.5), max_end), _quantile(ends, LATE_QUANTILE)
-        if current and cycle.resumed and published is not None and (excess := cycle.after_resumed(cls)):
-            # its minEndTime runs again after a hold: as such phases ended (likely at their median, late at their
-            # 90th percentile: 10 % of them later, as for the durations)
-            likely = min(published[0] + _quantile(excess, 0.5), max_end)
-            late = published[0] + _quantile(excess, LATE_QUANTILE)
-    elif cls is PhaseClass.UNKNOWN and math.isfinite(max_end):  # an amber or go phase longer than any seen: as published
-        likely, late = published[1], max_end
-    else:
+    min_end = published[0] if published is not None else -inf
+    got = current_end(cycle, cls, since_unix_s, now_s, min_end, max_end, current)
+    if got is None or (got[1] == "window" and cls is not PhaseClass.UNKNOWN):  # no history: the published window stands
         return None
-    likely, late = max(likely, after_s), max(late, after_s)
+    samples = np.sort(got[0])
+    # the likely end is the forecast's median, but no later than the controller's own maxEndTime; the late end its
+    # LATE_QUANTILE (maxEndTime is soft: 6-12 % of phases outlast it, some by minutes)
+    likely, late = max(min(_sample_quantile(samples, 0.5), max_end), after_s), max(_sample_quantile(samples, LATE_QUANTILE), after_s)
     start: Bound = (after_s, likely, max(late, likely))
     unknown_as = _unknown_as(cycle)  # the group's amber or go phase published as "unavailable"
     out: list[tuple[PhaseClass, Bound, Bound]] = [(unknown_as if cls is PhaseClass.UNKNOWN else cls, begun, start)]
@@ -511,7 +569,9 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
         if not d:
             break
         cls = nxt
-        end = (start[0] + d[0], start[1] + _quantile(d, 0.5), start[2] + _quantile(d, LATE_QUANTILE))
+        samples = next_end(cycle, cls, samples)
+        late = _sample_quantile(samples, LATE_QUANTILE)
+        end = (start[0] + d[0], min(max(_sample_quantile(samples, 0.5), start[1] + d[0]), late), late)
         out.append((unknown_as if cls is PhaseClass.UNKNOWN else cls, start, end))
         start = end
     out.append((PhaseClass.UNKNOWN, start, (inf, inf, inf)))
@@ -586,10 +646,46 @@ def _widened(windows: tuple[tuple[float, float], ...], widen_s: float) -> tuple[
     return tuple((a, b) for a, b in out)
 
 
+READING_PERIOD_S = 1.0
+"""A published red lasts at least until the next reading could say otherwise (SPaT comes at 1-10 Hz). [s]"""
+
+
+
+def red_hold_s(plan: UncertainPlan, t_reading_unix_s: float, speed_mps: float, params: AdvisorParams = AdvisorParams()) -> float:
+    """How long from now a light whose latest reading is red (or amber, a red to come) stays red in every view: **the
+    safety rule**. No prediction, countdown or clock correction ends such a red before the next reading could say
+    otherwise (:data:`READING_PERIOD_S`) and the driver, told then, could still stop at the advisor's firm braking
+    (``reaction_s + v / (2 firm_decel_mps2)``): a plan never crosses a published red on a guess. 0 where the red's
+    end is exact (:data:`EXACT_S`) or the light is not red. [s]"""
+    i = _published_index(plan, t_reading_unix_s)
+    cls = phase_class(plan.states[i])
+    k = i if cls is PhaseClass.RED else i + 1 if cls is PhaseClass.AMBER else None  # the change out of the red
+    if k is None or (k < len(plan.changes) and plan.changes[k].max_end_s - plan.changes[k].min_end_s < EXACT_S):
+        return 0.0
+    return READING_PERIOD_S + params.reaction_s + max(speed_mps, 0.0) / (2.0 * params.firm_decel_mps2)
+
+
+def _held(windows: tuple[tuple[float, float], ...], hold_s: float, red_now: bool) -> tuple[tuple[float, float], ...]:
+    """Windows with the first red (the published one, or the one after a published amber) lasting at least ``hold_s``
+    from now; a red now that the windows lost is put back."""
+    if hold_s <= 0.0:
+        return windows
+    out = [list(w) for w in windows]
+    if out and out[0][0] < hold_s and (red_now or out[0][0] > 0.0):
+        out[0][1] = max(out[0][1], hold_s)
+    elif red_now:
+        out.insert(0, [0.0, hold_s])
+    while len(out) > 1 and out[1][0] <= out[0][1]:
+        out[0][1] = max(out[0][1], out.pop(1)[1])
+    return tuple((a, b) for a, b in out)
+
+
 def light_view(
-    intersection: IntersectionSpec, reading: PlanReading | None, station_m: float, t_unix_s: float, horizon_s: float = HORIZON_S
+    intersection: IntersectionSpec, reading: PlanReading | None, station_m: float, t_unix_s: float, horizon_s: float = HORIZON_S,
+    speed_mps: float = 0.0,
 ) -> LightView:
-    """The advisor's view of one light ahead at the fix time (see the module docstring)."""
+    """The advisor's view of one light ahead at the fix time (see the module docstring); ``speed_mps``: the car's, for
+    how long a published red holds (:func:`red_hold_s`)."""
     distance_m = float(intersection.stop_line_m - station_m)
     if reading is None or reading.plan is None:
         return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s) if reading is not None else math.inf)
@@ -609,6 +705,9 @@ def light_view(
         unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
     if u > 0.0:
         windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
+    if not isinstance(plan, FixedTimePlan) and reading.fresh and (hold := red_hold_s(plan, t_feed - reading.age_s, speed_mps)) > 0.0:
+        red_now = phase_class(published_state(plan, t_feed - reading.age_s)) is PhaseClass.RED
+        windows, likely, late = (_held(w, hold, red_now) for w in (windows, likely, late))
     return LightView(
         intersection.id,
         distance_m,
@@ -645,6 +744,6 @@ def observation(
         exit_ = station_m is not None and not intersections_ahead(corridor, station_m, 1)
         return Observation(speed_mps=speed_mps, speed_limit_mps=speed_limit_mps, lights=(), position_m=station_m, on_route=False, zone_exit=exit_)
     lights: Sequence[LightView] = tuple(
-        light_view(ix, readings.get(ix.id), station_m, t_unix_s, horizon_s) for ix in intersections_ahead(corridor, station_m, n_lights)
+        light_view(ix, readings.get(ix.id), station_m, t_unix_s, horizon_s, speed_mps) for ix in intersections_ahead(corridor, station_m, n_lights)
     )
     return Observation(speed_mps=speed_mps, speed_limit_mps=speed_limit_mps, lights=tuple(lights), position_m=station_m, on_route=True)

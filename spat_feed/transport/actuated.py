@@ -298,7 +298,7 @@ class ActuatedFeed:
                                       clock_uncertainty_s=self.clock_uncertainty_s)  # fmt: skip
             spec = IntersectionSpec(id=n + 1, name=f"light {n + 1}", stop_line_m=light.position_m, lat_deg=0.0, lon_deg=0.0,
                                     approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
-            views.append(light_view(spec, reading, x_m, t_s + self.epoch_unix_s))
+            views.append(light_view(spec, reading, x_m, t_s + self.epoch_unix_s, speed_mps=v_mps))
         return Observation(v_mps, self.speed_limit_mps, tuple(views), position_m=x_m)
 
 

@@ -583,7 +583,7 @@ def test_links_on_a_real_controller_tell_when_a_red_ends():
                 continue
             stats = history.stats(g)
             if stats.linked_end_unix_s is not None:
-                ends = [predicted_phases(plan, t, 150.0, c)[0][2][1] for c in (stats, replace(stats, linked_end_unix_s=None))]
+                ends = [predicted_phases(plan, t, 150.0, c)[0][2][1] for c in (stats, replace(stats, linked_end_unix_s=None, linked_ends_unix_s=()))]
                 reds.setdefault(g, []).append((t, *ends))
             else:
                 reds.setdefault(g, [])

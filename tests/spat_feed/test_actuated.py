@@ -178,10 +178,14 @@ def test_a_conflicting_stage_leads_each_red_end_and_the_receiver_links_them():
         published = feed._last[0][1].changes[0]  # the controller's window of this red's end
         first = (view.likely_red_windows_s or view.red_windows_s)[0]
         likely = t + first[1] if first[0] <= 0.0 else t  # (a red likely ending now is out of the windows)
-        assert likely == pytest.approx(min(max(told, published.min_end_s - feed.epoch_unix_s, t), published.max_end_s - feed.epoch_unix_s), abs=1e-3)
+        # as the link says, within the controller's window, but never before the published red could be seen to end and
+        # the car (10 m/s) still stop at firm braking (the safety rule: 1 s reading + 1 s reaction + v / (2 x 3 m/s2))
+        # (where the controller's window for it is still open: a red whose end it publishes exactly ends then)
+        hold_s = 1.0 + 1.0 + 10.0 / (2.0 * 3.0) if published.max_end_s - published.min_end_s >= 0.5 else 0.0
+        assert likely == pytest.approx(max(min(max(told, published.min_end_s - feed.epoch_unix_s, t), published.max_end_s - feed.epoch_unix_s), t + hold_s), abs=1e-3)
         assert view.red_windows_s[0][0] <= 0.0 and view.red_windows_s[0][1] + t >= likely - 1e-6  # the late end: later, if anything
         spoke += 1
-        if red[1] not in misfired:  # (after a misfire the link is early: the red outlasts it, the late windows tell)
+        if red[1] not in misfired and red[1] > t + hold_s:  # (after a misfire the link is early: the red outlasts it)
             assert likely == pytest.approx(red[1], abs=1.5)
     assert spoke > 5
 

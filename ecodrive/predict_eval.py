@@ -1,0 +1,197 @@
+"""`ecodrive predict-eval LOG [--json] [--plot FILE]`: every phase-end prediction of a recording, scored.
+
+The log (``../shared/data/spat`` CSV, ``.csv`` or ``.csv.gz``) is replayed second by second as the service reads
+it: each snapshot's movements become plans (:func:`spat_feed.timing.messages.plan_from_movement`), the
+intersection's :class:`~spat_feed.prediction.observe.IntersectionHistory` learns from the past only, and at every
+snapshot each signal group's current phase gets a forecast (:func:`spat_feed.prediction.predictor.forecast`). When
+the phase really ended is the first snapshot that shows another phase class (red, amber, green, unknown), as the
+history times it; a change seen only after a gap of more than :data:`MAX_GAP_S` in the group's snapshots is not
+scored (when it came is not known).
+
+Keys: ``changes`` (phase ends scored), ``predictions`` (forecasts of them made 0-60 s ahead), ``predicted_frac``
+(share of those with a finite likely time), ``mae_s`` (mean absolute error of the likely time, changes 0-60 s ahead,
+over the predictions the baseline makes too: the same changes at the same horizons), ``mae_s_all`` (over all of
+ours: also the first minutes, before any history, on the controller's window alone), ``mae_s_by_horizon``
+(``"0-10"``, ``"10-30"``, ``"30-60"``: by how far ahead the change really was; same predictions as ``mae_s``),
+``within_2s_frac`` / ``within_5s_frac`` (all of ours), ``baseline_mae_s`` and ``baseline_mae_s_by_horizon`` (the
+median of the past durations of the same group and class from the phase's start, or now once that has passed),
+``interval_coverage`` (share of changes inside the stated central 50 / 80 / 90 % intervals: keys ``"50"``, ``"80"``,
+``"90"``; a change is known only to lie between the last snapshot before it and the first after it, and an interval
+holds it when it meets that span: a controller's exact window is judged as exact), ``early_red_frac`` (changes to red that came before the forecast's earliest instant,
+the hard bound the advisor plans against), ``method_frac`` (share of predictions by method).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections import Counter
+from collections.abc import Sequence
+
+import numpy as np
+
+from spat_feed.prediction.observe import IntersectionHistory
+from spat_feed.prediction.predictor import forecast
+from spat_feed.timing.messages import plan_from_movement, to_unix_s
+from spat_feed.timing.plans import PhaseClass, phase_class
+
+MAX_GAP_S = 2.0
+"""Snapshots further apart than this around a change leave it unscored. [s]"""
+
+HORIZONS_S = {"0-10": (0.0, 10.0), "10-30": (10.0, 30.0), "30-60": (30.0, 60.0)}
+LEVELS = (0.5, 0.8, 0.9)
+
+
+def predictions(snapshots) -> dict[tuple[int, int], list[tuple]]:
+    """Per (intersection, group): one row per snapshot, ``(t, class, forecast of the current phase's end or None,
+    baseline likely end or None)``, each made from the snapshots up to it."""
+    histories: dict[int, IntersectionHistory] = {}
+    rows: dict[tuple[int, int], list[tuple]] = {}
+    for ix in snapshots:
+        t = to_unix_s(ix.timestamp)
+        plans = {}
+        for m in ix.states:
+            plans.setdefault(m.signal_group, plan_from_movement(m, t))
+        history = histories.setdefault(ix.id, IntersectionHistory())
+        history.record(t, plans)
+        for g, plan in plans.items():
+            stats = history.stats(g)
+            cls = phase_class(plan.states[sum(1 for c in plan.changes if c.max_end_s <= t)])
+            fc = forecast(plan, t, stats)
+            durations = stats.durations(cls) if stats is not None else ()
+            since = stats.since_unix_s if stats is not None and stats.current is cls else None
+            base = max(since + float(np.median(durations)), t) if durations and since is not None else None
+            rows.setdefault((ix.id, g), []).append((t, cls, fc[0] if fc else None, base))
+    return rows
+
+
+def scored(rows: dict[tuple[int, int], list[tuple]]) -> list[dict]:
+    """One dict per prediction of a change that was seen (no gap around it) 0-60 s ahead."""
+    out = []
+    for key, items in rows.items():
+        start = 0
+        for k in range(1, len(items)):
+            if items[k][1] is items[k - 1][1]:
+                continue
+            t_change, cls_before, cls_after = items[k][0], items[k - 1][1], items[k][1]
+            if t_change - items[k - 1][0] <= MAX_GAP_S:
+                for j in range(start, k):
+                    t, cls, fc, base = items[j]
+                    ahead = t_change - t
+                    if ahead > 60.0 or cls is not cls_before or (j > start and items[j][0] - items[j - 1][0] > MAX_GAP_S):
+                        continue
+                    row = {"key": key, "t": t, "ahead_s": ahead, "change_unix_s": t_change, "last_before_unix_s": items[k - 1][0], "to": cls_after, "base": base}
+                    if fc is not None:
+                        row.update(likely=fc.likely_unix_s, earliest=fc.earliest_unix_s, method=fc.method,
+                                   intervals={lv: fc.interval(lv) for lv in LEVELS})  # fmt: skip
+                    out.append(row)
+            start = k
+    return out
+
+
+def _mae(errors: list[float]) -> float | None:
+    return float(np.mean(errors)) if errors else None
+
+
+def summarize(rows: list[dict]) -> dict:
+    """The keys of the module docstring from :func:`scored` rows."""
+    ours = [r for r in rows if math.isfinite(r.get("likely", math.inf))]
+    both = [r for r in ours if r["base"] is not None]
+    err = [abs(r["likely"] - r["change_unix_s"]) for r in ours]
+    by_h = {name: _mae([abs(r["likely"] - r["change_unix_s"]) for r in both if lo <= r["ahead_s"] < hi]) for name, (lo, hi) in HORIZONS_S.items()}
+    base_by_h = {name: _mae([abs(r["base"] - r["change_unix_s"]) for r in both if lo <= r["ahead_s"] < hi]) for name, (lo, hi) in HORIZONS_S.items()}
+    reds = [r for r in rows if r["to"] is PhaseClass.RED and "earliest" in r]
+    methods = Counter(r.get("method", "none") for r in rows)
+    return {
+        "changes": len({(r["key"], r["change_unix_s"]) for r in rows}),
+        "predictions": len(rows),
+        "predicted_frac": len(ours) / len(rows) if rows else None,
+        "mae_s": _mae([abs(r["likely"] - r["change_unix_s"]) for r in both]),
+        "mae_s_all": _mae(err),
+        "mae_s_by_horizon": by_h,
+        "within_2s_frac": float(np.mean([e <= 2.0 for e in err])) if err else None,
+        "within_5s_frac": float(np.mean([e <= 5.0 for e in err])) if err else None,
+        "baseline_mae_s": _mae([abs(r["base"] - r["change_unix_s"]) for r in both]),
+        "baseline_mae_s_by_horizon": base_by_h,
+        "interval_coverage": {f"{round(100 * lv)}": float(np.mean([lo <= r["change_unix_s"] and hi > r["last_before_unix_s"] for r in ours for lo, hi in [r["intervals"][lv]]]))
+                              if ours else None for lv in LEVELS},  # fmt: skip
+        "early_red_frac": float(np.mean([r["change_unix_s"] < r["earliest"] for r in reds])) if reds else 0.0,
+        "method_frac": {m: n / len(rows) for m, n in sorted(methods.items())},
+    }
+
+
+def evaluate_log(path: str, limit_s: float | None = None) -> tuple[dict, list[dict]]:
+    """Replay the log at ``path`` (its first ``limit_s`` seconds if given): the summary and the scored rows."""
+    from spat_feed.transport.recorded import read_spat_csv
+
+    snapshots = read_spat_csv(path)
+    if limit_s is not None and snapshots:
+        t0 = to_unix_s(snapshots[0].timestamp)
+        snapshots = [s for s in snapshots if to_unix_s(s.timestamp) - t0 <= limit_s]
+    rows = scored(predictions(snapshots))
+    return {"log": path, **summarize(rows)}, rows
+
+
+def plot(results: list[tuple[str, list[dict]]], path: str) -> None:
+    """Mean absolute error against how far ahead the change was (5 s bins), ours and the baseline, per log."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.2), dpi=120)
+    edges = np.arange(0.0, 61.0, 5.0)
+    mids = 0.5 * (edges[:-1] + edges[1:])
+    for k, (name, rows) in enumerate(results):
+        color = f"C{k}"
+        ours = [r for r in rows if math.isfinite(r.get("likely", math.inf)) and r["base"] is not None]
+        for field, style, label in (("likely", "-", "ecodrive"), ("base", ":", "median of past durations")):
+            mae = [np.mean([abs(r[field] - r["change_unix_s"]) for r in ours if a <= r["ahead_s"] < b] or [np.nan]) for a, b in zip(edges[:-1], edges[1:])]
+            ax.plot(mids, mae, style, color=color, marker="o" if field == "likely" else None, ms=3, label=f"{name}: {label}")
+    ax.set_xlabel("how far ahead the change really was [s]")
+    ax.set_ylabel("mean absolute error of the likely time [s]")
+    ax.set_title("Phase-end prediction on recorded controllers (ecodrive predict-eval)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=1)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="ecodrive predict-eval", description=__doc__.split("\n\n")[0])
+    ap.add_argument("logs", nargs="+", metavar="LOG", help="recorded SPaT CSV (.csv or .csv.gz), the shared format")
+    ap.add_argument("--json", action="store_true", help="print the summary as JSON")
+    ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
+    ap.add_argument("--plot", metavar="FILE", help="write the error-against-horizon figure (PNG)")
+    args = ap.parse_args(argv)
+    from spat_feed.transport.recorded import RecordedLogError
+
+    results, all_rows = [], []
+    for path in args.logs:
+        print(f"predict-eval: {path} ...", file=sys.stderr)
+        try:
+            summary, rows = evaluate_log(path, args.limit_s)
+        except (OSError, RecordedLogError) as exc:
+            print(f"ecodrive predict-eval: {exc}", file=sys.stderr)
+            return 2
+        results.append(summary)
+        all_rows.append((path.rsplit("/", 1)[-1].split(".")[0], rows))
+    if args.plot:
+        plot(all_rows, args.plot)
+    if args.json:
+        print(json.dumps(results[0] if len(results) == 1 else results, indent=2))
+        return 0
+    for r in results:
+        h = r["mae_s_by_horizon"]
+        print(f"{r['log']}: {r['changes']} changes, {r['predictions']} predictions ({100 * (r['predicted_frac'] or 0):.0f} % bounded); "
+              f"MAE {r['mae_s']:.2f} s (0-10 s: {h['0-10']:.2f}, 10-30 s: {h['10-30']:.2f}, 30-60 s: {h['30-60']:.2f}) "
+              f"against {r['baseline_mae_s']:.2f} s for the median of past durations; 80 % interval holds "
+              f"{100 * r['interval_coverage']['80']:.0f} %; early reds {100 * r['early_red_frac']:.1f} %")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

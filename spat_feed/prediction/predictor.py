@@ -1,0 +1,319 @@
+r"""When a signal group's phases end: a distribution for each coming change, from the past only.
+
+One interface for every kind of controller: :func:`forecast` takes what the controller publishes now (the plan of
+a reading: the current state, its ``minEndTime``, ``maxEndTime``) and what the group has been seen to do
+(:class:`~spat_feed.prediction.observe.CycleStats`, learnt reading by reading by
+:class:`~spat_feed.prediction.observe.IntersectionHistory`), and returns a :class:`ChangeForecast` for the end
+of the current phase and of the phases after it (up to ``horizon_s``). Each forecast is a set of equally likely
+instants (at most :data:`N_SAMPLES`; ``inf`` where nothing seen bounds it), so any quantile (the inverse of their
+distribution function, as ``observe``'s quantiles of durations), the likely time
+(median) and central intervals (:meth:`ChangeForecast.interval`) come from one object, and a hard lower bound
+``earliest_unix_s`` (no change comes before it) that advice may rely on.
+
+Where the samples come from, in the order they are trusted (each *method* names one):
+
+``linked``
+    A change of another group of the intersection that this group's phases end a steady time after has come
+    (the controller's stage sequence, :class:`~spat_feed.prediction.observe.ChangeLinks`): the instant of that
+    change plus each lag seen.
+``resumed``
+    The published ``minEndTime`` was held (moved later with the clock) and runs again: it plus each excess
+    (end - minEndTime) seen of resumed phases of the class.
+``cycle``
+    A coordinated controller (its changes come back at the same point of a fixed cycle, the period found by
+    :func:`cycle_period_s`): each past duration from the phase's start, moved to the nearest point of the cycle
+    where phases of the class ended (every pair of the two), and a cycle later for each one that has passed
+    while the phase goes on (a phase not ended at its force-off ends at a later one).
+``duration``
+    Each past duration of the class from the phase's start, given that it has run this long (the empirical
+    conditional distribution: durations it has already outlasted are out).
+``published``
+    The controller's window is exact (``maxEndTime - minEndTime`` under :data:`EXACT_S`): then.
+``window``
+    No history yet and a finite published window: evenly spread in ``[minEndTime, maxEndTime]``.
+
+Between ``cycle`` and ``duration`` the one that has erred less for that (group, class) wins: at each phase end the
+likely end each would have said :data:`SCORE_AHEAD_S` before it is scored (:func:`scored_errors_s`, a running mean kept by
+:class:`~spat_feed.prediction.observe.IntersectionHistory`). A state-only coordinated controller earns the cycle
+(2024-04-15, device 1136: ends within a few seconds of a fixed point of its 75 s cycle); the actuated Antwerp
+controller, whose changes drift off any period, keeps the durations. Nothing here is fitted to one controller.
+
+Every sample is at least the hard bound (``max(now, minEndTime)``; a published phase never ends before its
+``minEndTime``, :mod:`spat_feed.transport.recorded`'s README): one that would end earlier ends there (the
+controller holds it). ``maxEndTime`` is soft (real phases outlast it 6-12 % of the time) and is not a bound.
+The phases after the current one chain the same way: their ends are every sum of the previous end's samples and
+the next class's durations (moved to the cycle where that class is ``cycle``), reduced to :data:`N_SAMPLES`
+quantiles.
+
+Pure: no clock, no I/O; the caller passes the instant. Numbers in seconds on the plan's (Unix) axis.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from spat_feed.timing.plans import PhaseClass, UncertainPlan, phase_class
+
+EXACT_S = 0.5
+"""A published window narrower than this is exact (fixed-time, exact SPaT): the change comes then. [s]"""
+
+N_SAMPLES = 64
+"""Samples kept per forecast (its quantiles, evenly spaced). [-]"""
+
+MIN_SEEN = 3
+"""Phases of a class needed before their durations say anything (as ``observe.MIN_PHASES_SEEN``). [-]"""
+
+PERIOD_RANGE_S = (30.0, 240.0)
+"""Cycle lengths searched by :func:`cycle_period_s` (traffic signal cycles: 30 s to 4 min). [s]"""
+
+MIN_PERIOD_ENDS = 20
+"""Changes of a (group, class) needed before they count towards a period (with fewer, chance alone concentrates
+them: the mean resultant length of ``n`` uniform angles is about ``0.89 / sqrt(n)``). [-]"""
+
+MIN_PERIOD_CONCENTRATION = 0.5
+"""Mean resultant length of the changes on the cycle below which no period is said (uniform phases give
+~1/sqrt(n); a controller with a fixed cycle 0.8-1). [-]"""
+
+
+@dataclass(frozen=True, slots=True)
+class ChangeForecast:
+    """When the phase of class ``ends`` (followed by ``then``) ends: equally likely instants, and a hard bound.
+
+    ``samples_unix_s``: sorted, shape ``(n,)``, ``n <= N_SAMPLES``; ``inf`` for "not before anything seen".
+    ``earliest_unix_s``: no change before it (``minEndTime``, or the shortest durations seen after a hard bound).
+    """
+
+    ends: PhaseClass
+    then: PhaseClass | None
+    earliest_unix_s: float
+    samples_unix_s: np.ndarray
+    method: str
+
+    def quantile(self, q: float) -> float:
+        """The ``q`` quantile of the end instant: the inverse of the samples' distribution function (the smallest
+        sample with at least ``q`` of them at or before it; ``inf`` in an unbounded tail). [s]"""
+        s = self.samples_unix_s
+        return float(s[min(len(s) - 1, max(0, math.ceil(q * len(s) - 1e-9) - 1))])
+
+    @property
+    def likely_unix_s(self) -> float:
+        """The median end: J2735 ``likelyTime``. [s]"""
+        return self.quantile(0.5)
+
+    def interval(self, level: float) -> tuple[float, float]:
+        """The central ``level`` interval (``0.8``: the 10 % and 90 % quantiles). [s]"""
+        return self.quantile(0.5 - level / 2.0), self.quantile(0.5 + level / 2.0)
+
+    def within_frac(self, t_unix_s: float, half_width_s: float) -> float:
+        """Share of the samples within ``half_width_s`` of ``t_unix_s``: the chance the change comes there. [-]"""
+        s = self.samples_unix_s
+        return float(np.count_nonzero(np.abs(s - t_unix_s) <= half_width_s)) / len(s)
+
+
+N_PAIRED = 16
+"""Samples of each side paired where two sets combine (durations with cycle points, ends with durations). [-]"""
+
+
+def _reduced(samples, n: int = N_SAMPLES) -> np.ndarray:
+    """Sorted samples, at most ``n`` of them (evenly spaced quantiles, ``inf`` kept)."""
+    s = np.sort(np.asarray(samples, dtype=float))
+    return s if len(s) <= n else s[_spread_indices(len(s), n)]
+
+
+@lru_cache(maxsize=1024)
+def _spread_indices(length: int, n: int) -> np.ndarray:
+    """``n`` indices evenly spread over ``range(length)``, first and last included."""
+    return np.round(np.linspace(0, length - 1, n)).astype(np.int64)
+
+
+def cycle_period_s(ends_unix_s: Sequence[Sequence[float]], step_s: float = 0.1) -> float | None:
+    """The cycle of a controller whose changes come back at fixed points of it, else None. [s]
+
+    ``ends_unix_s``: one sequence of change instants per (group, class). The period is the one in
+    :data:`PERIOD_RANGE_S` at which those instants are most concentrated on the circle (the mean, over the
+    sequences, of the resultant length of ``exp(2 pi i t / P)``), searched on a coarse grid then refined to
+    ``step_s``; of periods within 5 % of the best concentration the longest (a period's divisors concentrate
+    the changes as well). None when even the best is below :data:`MIN_PERIOD_CONCENTRATION`.
+
+    Examples
+    --------
+    >>> ends = [[1000.0 + 75.0 * k + j for k in range(MIN_PERIOD_ENDS)] for j in (3.0, 40.0)]
+    >>> round(cycle_period_s(ends), 1)
+    75.0
+    """
+    seqs = [np.asarray(e, dtype=float) for e in ends_unix_s if len(e) >= MIN_PERIOD_ENDS]
+    if not seqs:
+        return None
+
+    def concentration(periods: np.ndarray) -> np.ndarray:
+        total = np.zeros(len(periods))
+        for e in seqs:
+            phase = 2.0 * np.pi * (e - e[0])[None, :] / periods[:, None]
+            total += np.hypot(np.cos(phase).mean(axis=1), np.sin(phase).mean(axis=1))
+        return total / len(seqs)
+
+    coarse = np.arange(PERIOD_RANGE_S[0], PERIOD_RANGE_S[1] + 1e-9, 1.0)
+    r = concentration(coarse)
+    good = coarse[r >= 0.95 * r.max()]
+    best = None
+    for p in good[::-1]:  # the longest first
+        fine = np.arange(p - 1.0, p + 1.0 + 1e-9, step_s)
+        rf = concentration(fine)
+        if rf.max() >= MIN_PERIOD_CONCENTRATION and (best is None or rf.max() >= 0.95 * best[1]):
+            best = (float(fine[rf.argmax()]), float(rf.max()))
+            break
+    return None if best is None else best[0]
+
+
+def _wrap(x: np.ndarray, period_s: float) -> np.ndarray:
+    """``x`` moved into ``[-period/2, period/2)``."""
+    return (x + 0.5 * period_s) % period_s - 0.5 * period_s
+
+
+@lru_cache(maxsize=4096)
+def _class_model(durations_s: tuple[float, ...], ends_unix_s: tuple[float, ...], on_cycle: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """A class's durations (:data:`N_PAIRED` quantiles) and, where the class is told by the cycle, the instants its
+    phases ended (as many), else None. Cached: a group's history changes only when a phase ends."""
+    return _reduced(durations_s, N_PAIRED), (_reduced(ends_unix_s, N_PAIRED) if on_cycle and len(ends_unix_s) >= MIN_SEEN else None)
+
+
+SCORE_AHEAD_S = 20.0
+"""Methods are scored on what they said this long before a phase ended (the horizon advice leans on most). [s]"""
+
+
+def scored_errors_s(since_unix_s: float, end_unix_s: float, durations_s: tuple[float, ...], ends_unix_s: tuple[float, ...],
+                    period_s: float | None) -> tuple[float, float] | None:  # fmt: skip
+    """How far off the ``cycle`` and the ``duration`` method's likely end were :data:`SCORE_AHEAD_S` before a phase
+    that began at ``since_unix_s`` ended at ``end_unix_s`` (or at its start, if shorter), on the history before it;
+    None where either cannot say. [s] What :class:`~spat_feed.prediction.observe.IntersectionHistory` scores each
+    class's methods by."""
+    if period_s is None or len(durations_s) < MIN_SEEN or len(ends_unix_s) < MIN_SEEN:
+        return None
+    at = max(since_unix_s, end_unix_s - SCORE_AHEAD_S)
+    d, ends = _class_model(durations_s, ends_unix_s, True)
+    ahead = since_unix_s + d[since_unix_s + d > at]
+    if not len(ahead):
+        return None
+    by_duration = ChangeForecast(PhaseClass.UNKNOWN, None, at, ahead, "duration").likely_unix_s
+    on_cycle = _after(_on_cycle(since_unix_s + d, ends, period_s), at, period_s)
+    by_cycle = ChangeForecast(PhaseClass.UNKNOWN, None, at, _reduced(on_cycle), "cycle").likely_unix_s
+    return abs(by_cycle - end_unix_s), abs(by_duration - end_unix_s)
+
+
+def _on_cycle(raw_unix_s: np.ndarray, ends_unix_s: np.ndarray, period_s: float) -> np.ndarray:
+    """Each raw end (a start plus a duration) moved to the nearest point of the cycle where a phase ended, for every
+    pair of the two (``len(raw) * len(ends)`` instants)."""
+    raw = _reduced(raw_unix_s, N_PAIRED)
+    return (raw[:, None] + _wrap(ends_unix_s[None, :] - raw[:, None], period_s)).ravel()
+
+
+def _after(samples: np.ndarray, floor_unix_s: float, period_s: float | None) -> np.ndarray:
+    """Samples no earlier than the hard bound: on a cycle, one that has passed moves a cycle on (the phase went on
+    past that point); otherwise it is held at the bound (the controller holds a phase to its minEndTime)."""
+    if period_s is not None:
+        behind = samples < floor_unix_s
+        if behind.any():
+            samples = samples.copy()
+            samples[behind] += np.ceil((floor_unix_s - samples[behind]) / period_s) * period_s
+    return np.maximum(samples, floor_unix_s)
+
+
+def _durations_ahead(since_unix_s: float | None, durations_s: Sequence[float], now_unix_s: float) -> np.ndarray:
+    """End instants of the durations seen that the phase has not yet outlasted (empty if none is left)."""
+    if since_unix_s is None or not durations_s:
+        return np.empty(0)
+    ends = since_unix_s + np.asarray(durations_s, dtype=float)
+    return ends[ends > now_unix_s]
+
+
+def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: float, published_min_unix_s: float = -math.inf,
+                published_max_unix_s: float = math.inf, current: bool = True) -> tuple[np.ndarray, str] | None:  # fmt: skip
+    """Samples of the end of the phase of class ``cls`` that began at ``since_unix_s`` (None: unknown), in progress
+    at ``now_unix_s`` with the published window ``[minEndTime, maxEndTime]`` (module docstring), and the method; None
+    when nothing bounds it. ``cycle``: the group's :class:`~spat_feed.prediction.observe.CycleStats`; ``current``:
+    the phase is the one the group is in (its hold and links are known), not a later one of the plan."""
+    inf = math.inf
+    floor_unix_s = max(now_unix_s, published_min_unix_s)
+    if published_max_unix_s - published_min_unix_s < EXACT_S:  # an exact window: the controller says when
+        return np.array([max(floor_unix_s, published_max_unix_s)]), "published"
+    if cycle is not None and current:
+        linked = cycle.linked_ends_unix_s or cycle.linked_end_unix_s or ()  # every lag seen, or (likely, late)
+        if linked and linked[-1] >= now_unix_s:
+            return _after(np.asarray(linked, dtype=float), floor_unix_s, None), "linked"
+        if cycle.resumed and (excess := cycle.after_resumed(cls)) and math.isfinite(published_min_unix_s):
+            return _after(published_min_unix_s + np.asarray(excess, dtype=float), floor_unix_s, None), "resumed"
+    durations = cycle.durations(cls) if cycle is not None else ()
+    since = since_unix_s
+    if durations and since is not None:
+        period = cycle.period_s
+        d, cycle_ends = _class_model(durations, cycle.ends(cls), period is not None and cls in cycle.cycle_classes)
+        if cycle_ends is not None:
+            return _after(_on_cycle(since + d, cycle_ends, period), floor_unix_s, period), "cycle"
+        ahead = _durations_ahead(since, durations, now_unix_s)
+        if len(ahead):
+            return _after(ahead, floor_unix_s, None), "duration"
+    if math.isfinite(published_max_unix_s) and published_max_unix_s > floor_unix_s:
+        return np.linspace(floor_unix_s, published_max_unix_s, 9), "window"
+    if math.isfinite(published_max_unix_s):
+        return np.array([max(floor_unix_s, published_max_unix_s)]), "window"
+    return None if not durations else (np.array([inf]), "duration")
+
+
+def next_end(cycle, cls: PhaseClass, start: np.ndarray) -> np.ndarray | None:
+    """Samples of the end of a phase of class ``cls`` that starts at one of ``start`` (sorted samples), or None when
+    no duration of the class is known."""
+    durations = cycle.durations(cls) if cycle is not None else ()
+    if not durations:
+        return None
+    d, cycle_ends = _class_model(durations, cycle.ends(cls), cycle.period_s is not None and cls in cycle.cycle_classes)
+    raw = (_reduced(start, N_PAIRED)[:, None] + d[None, :]).ravel()
+    if cycle_ends is not None:
+        finite = np.isfinite(raw)
+        if finite.all():
+            raw = _on_cycle(raw, cycle_ends, cycle.period_s)
+        elif finite.any():
+            raw = np.concatenate([_on_cycle(raw[finite], cycle_ends, cycle.period_s), raw[~finite]])
+    return _reduced(raw)
+
+
+def forecast(plan: UncertainPlan, t_unix_s: float, cycle, horizon_s: float = 180.0) -> list[ChangeForecast]:
+    """The coming changes of a signal group at ``t_unix_s``: the end of the published phase, then the phases the
+    history says follow, while they begin within ``horizon_s`` (module docstring). Empty when the published phase's
+    end is bounded by nothing.
+
+    ``plan``: the group's latest reading as a plan (:func:`spat_feed.timing.messages.plan_from_movement`: the
+    published state and its window); ``cycle``: the group's :class:`~spat_feed.prediction.observe.CycleStats` or None.
+    """
+    i = sum(1 for c in plan.changes if c.max_end_s <= t_unix_s)  # the published phase (changes that surely came)
+    if i >= len(plan.changes):
+        return []
+    state_cls = phase_class(plan.states[i])
+    change = plan.changes[i]
+    floor = max(t_unix_s, change.min_end_s)
+    since = cycle.since_unix_s if cycle is not None and cycle.current is state_cls else None
+    got = current_end(cycle, state_cls, since, t_unix_s, change.min_end_s, change.max_end_s, current=True)
+    if got is None:
+        return []
+    samples, method = got
+    then = phase_class(plan.states[i + 1]) if i + 1 < len(plan.states) else None
+    if then is PhaseClass.UNKNOWN and cycle is not None:
+        then = cycle.following.get(state_cls, then)
+    out = [ChangeForecast(state_cls, then, floor, _reduced(samples), method)]
+    earliest = floor
+    while cycle is not None and then is not None and then in cycle.following and out[-1].samples_unix_s[0] < t_unix_s + horizon_s:
+        durations = cycle.durations(then)
+        ends = next_end(cycle, then, out[-1].samples_unix_s)
+        if ends is None:
+            break
+        earliest += min(durations)
+        nxt = cycle.following.get(then)
+        out.append(ChangeForecast(then, nxt, earliest, np.maximum(ends, earliest), "chain"))
+        then = nxt
+        if len(out) > 8:
+            break
+    return out

@@ -1,0 +1,167 @@
+"""The phase-end predictor: calibrated against known distributions, the cycle of a coordinated controller found, the
+hard bounds kept; ``predict-eval`` on every recording, scored independently of the code under test."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from spat_feed.prediction.observe import IntersectionHistory, PhaseHistory
+from spat_feed.prediction.predictor import ChangeForecast, cycle_period_s, forecast
+from spat_feed.timing.plans import ChangeWindow, MovementPhaseState, PhaseClass, UncertainPlan
+from tests.conftest import SHARED_DATA
+
+RED, GREEN, AMBER = MovementPhaseState.STOP_AND_REMAIN, MovementPhaseState.PROTECTED_MOVEMENT_ALLOWED, MovementPhaseState.PROTECTED_CLEARANCE
+T0 = 1_700_000_000.0
+UNKNOWN_END_S = 3600.0
+
+
+def state_only(state: MovementPhaseState, t: float) -> UncertainPlan:
+    """What a controller that publishes its state only says: the phase may end now, the latest end is unknown."""
+    return UncertainPlan((state, MovementPhaseState.UNAVAILABLE), (ChangeWindow(t, t, math.inf),))
+
+
+def test_quantiles_are_the_inverse_of_the_samples_distribution():
+    fc = ChangeForecast(PhaseClass.RED, PhaseClass.GREEN, 0.0, np.array([1.0, 2.0, 3.0, 4.0]), "duration")
+    assert [fc.quantile(q) for q in (0.0, 0.25, 0.26, 0.5, 0.9, 1.0)] == [1.0, 1.0, 2.0, 2.0, 4.0, 4.0]
+    assert fc.interval(0.5) == (1.0, 3.0) and fc.within_frac(2.5, 0.5) == 0.5
+    tail = ChangeForecast(PhaseClass.RED, None, 0.0, np.array([1.0, math.inf]), "duration")
+    assert tail.likely_unix_s == 1.0 and tail.quantile(0.9) == math.inf
+
+
+def _drive(history: PhaseHistory | IntersectionHistory, phases, t: float, group: int = 1, on_step=None) -> float:
+    """Feed ``(state, duration)`` phases at 1 Hz from ``t``; ``on_step(t, state, since, duration)`` at each reading."""
+    for state, duration in phases:
+        start = t
+        while t < start + duration - 1e-9:
+            plan = state_only(state, t)
+            if isinstance(history, IntersectionHistory):
+                history.record(t, {group: plan})
+            else:
+                history.record(t, plan)
+            if on_step is not None:
+                on_step(t, state, start, duration)
+            t += 1.0
+    return t
+
+
+def test_state_only_reds_of_random_length_are_forecast_with_calibrated_intervals():
+    """Reds drawn from 20..60 s (uniform, whole seconds), greens of 30 s, published as state only. Once 40 reds are
+    seen, at every second of a red's first 45 s the stated 80 % interval of its end holds about 80 % of the true ends, and the
+    likely end errs by about what the conditional distribution of a uniform red says (its mean absolute deviation
+    from the median: a quarter of the remaining range on average)."""
+    rng = np.random.default_rng(7)
+    history = IntersectionHistory()
+    reds = [float(rng.integers(20, 61)) for _ in range(160)]
+    phases = [p for r in reds for p in ((RED, r), (GREEN, 30.0))]
+    inside, errors, expected = [], [], []
+
+    def check(t, state, start, duration):
+        if state is not RED or start < T0 + 40 * 75.0 or t - start > 45.0:  # (later, few reds seen last as long)
+            return
+        fc = forecast(state_only(RED, t), t, history.stats(1))[0]
+        lo, hi = fc.interval(0.8)
+        inside.append(lo <= start + duration <= hi)
+        errors.append(abs(fc.likely_unix_s - (start + duration)))
+        left = np.arange(max(20.0, t - start + 1.0), 61.0)  # the reds that have lasted this long, equally likely
+        expected.append(np.mean(np.abs(left - np.median(left))))
+
+    _drive(history, phases, T0, on_step=check)
+    assert len(inside) > 3000
+    assert 0.75 <= np.mean(inside) <= 0.88, np.mean(inside)
+    assert np.mean(errors) == pytest.approx(np.mean(expected), rel=0.25)
+
+
+def test_the_cycle_of_a_coordinated_controller_is_found_and_tells_the_end_of_a_green_of_any_length():
+    """A coordinated controller with a 90 s cycle: the main green ends at its force-off (20 s past each cycle's start)
+    unless no side street called, then at the next one (green 1-3 cycles long); the side phase (red for this group)
+    lasts 25-35 s. The durations spread over three cycles; the cycle point does not: once the period is known, the
+    likely end is a force-off (within a second), the right one at least half the time (the rest a whole cycle off: a
+    side street called or not), and the 80 % interval holds the real end at least 80 % of the time (the law is
+    discrete: an interval from one force-off to another holds more)."""
+    rng = np.random.default_rng(3)
+    history = IntersectionHistory()
+    t, phases = T0 + 20.0, []
+    while t < T0 + 200 * 90.0:
+        red = float(rng.integers(25, 36))
+        cycles = int(rng.choice([1, 1, 2, 3]))
+        force_off = math.floor((t + red) / 90.0) * 90.0 + 20.0 + 90.0 * cycles  # a later force-off
+        green = force_off - (t + red) - 4.0
+        phases += [(RED, red), (GREEN, green), (AMBER, 4.0)]
+        t += red + green + 4.0
+    errors = []
+
+    def check(t, state, start, duration):
+        if state is GREEN and start > T0 + 100 * 90.0 and 10.0 <= start + duration - t <= 30.0:
+            fc = forecast(state_only(GREEN, t), t, history.stats(1))[0]
+            lo, hi = fc.interval(0.8)
+            errors.append((fc.likely_unix_s - (start + duration), fc.method, lo <= start + duration <= hi))
+
+    _drive(history, phases, T0 + 20.0, on_step=check)
+    assert history.period_s == pytest.approx(90.0, abs=0.5)
+    assert len(errors) > 100 and all(m == "cycle" for _, m, _ in errors)
+    off = np.array([e for e, _, _ in errors])
+    assert np.all(np.abs((off + 45.0) % 90.0 - 45.0) <= 1.0)  # a whole number of cycles off, to a second
+    assert np.mean(np.abs(off) <= 1.0) >= 0.5 and np.mean([c for _, _, c in errors]) >= 0.8  # (a discrete law: at least)
+
+
+def test_cycle_period_needs_enough_changes_and_a_real_cycle():
+    rng = np.random.default_rng(1)
+    assert cycle_period_s([[T0 + 60.0 * k for k in range(5)]]) is None  # too few to tell
+    random_ends = [np.cumsum(rng.uniform(30.0, 120.0, 40)) + T0 for _ in range(6)]
+    assert cycle_period_s(random_ends) is None  # an actuated controller with no cycle
+    assert cycle_period_s([[T0 + 120.0 * k + j for k in range(25)] for j in (0.0, 47.0, 90.0)]) == pytest.approx(120.0, abs=0.2)
+
+
+def test_no_forecast_ends_a_phase_before_its_min_end_and_an_exact_window_is_kept():
+    history = PhaseHistory()
+    t = T0
+    for _ in range(10):
+        t = _drive(history, [(RED, 30.0), (GREEN, 20.0)], t)
+    published = UncertainPlan((RED, GREEN), (ChangeWindow(t + 40.0, t + 45.0, t + 90.0),))
+    stats = history.update(t, published)
+    fc = forecast(published, t, stats)[0]
+    assert fc.earliest_unix_s == t + 40.0 and fc.samples_unix_s.min() >= t + 40.0  # the reds of 30 s are held to it
+    exact = UncertainPlan((RED, GREEN), (ChangeWindow(t + 12.0, t + 12.0, t + 12.0),))
+    assert forecast(exact, t, stats)[0].samples_unix_s.tolist() == [t + 12.0]
+
+
+def test_the_phases_after_the_current_one_chain_on_the_history():
+    """Reds of 30 s, greens of 20 s: seen from 10 s into a red, the red ends in 20 s, the green after it 20 s later."""
+    history = PhaseHistory()
+    t = T0
+    for _ in range(10):
+        t = _drive(history, [(RED, 30.0), (GREEN, 20.0)], t)
+    t = _drive(history, [(RED, 10.0)], t)
+    changes = forecast(state_only(RED, t), t, history.update(t, state_only(RED, t)))
+    assert [c.ends for c in changes[:2]] == [PhaseClass.RED, PhaseClass.GREEN]
+    assert changes[0].likely_unix_s == pytest.approx(t + 20.0) and changes[1].likely_unix_s == pytest.approx(t + 40.0)
+
+
+@pytest.mark.parametrize("path", sorted((SHARED_DATA / "spat").glob("*.csv.gz")), ids=lambda p: p.name)
+def test_predict_eval_on_every_recording(path):
+    """``ecodrive predict-eval``'s keys on the first 40 minutes of each recording, its errors recomputed here from the
+    log itself (the first snapshot of another phase class is the change) for a sample of its predictions."""
+    from ecodrive.predict_eval import evaluate_log
+    from spat_feed.timing.plans import phase_class
+    from spat_feed.transport.recorded import read_spat_csv
+
+    for path in [path]:
+        summary, rows = evaluate_log(str(path), limit_s=2400.0)
+        assert {"changes", "mae_s", "mae_s_by_horizon", "within_2s_frac", "within_5s_frac", "baseline_mae_s", "interval_coverage", "early_red_frac"} <= set(summary)
+        assert set(summary["mae_s_by_horizon"]) == {"0-10", "10-30", "30-60"} and set(summary["interval_coverage"]) == {"50", "80", "90"}
+        assert summary["changes"] > 50 and summary["early_red_frac"] == 0.0
+        assert summary["mae_s"] < summary["baseline_mae_s"]
+        snapshots = read_spat_csv(path)
+        series: dict = {}
+        for ix in snapshots:
+            for m in ix.states:
+                series.setdefault(m.signal_group, []).append((ix.timestamp.timestamp(), phase_class(m.state_time_speed[0].event_state)))
+        for row in rows[:: max(1, len(rows) // 200)]:
+            seen = series[row["key"][1]]
+            k = next(i for i, (ts, _) in enumerate(seen) if ts >= row["t"] - 1e-6)
+            cls = seen[k][1]
+            change = next(ts for ts, c in seen[k:] if c is not cls)
+            assert change == pytest.approx(row["change_unix_s"], abs=1e-3)
