@@ -12,8 +12,10 @@
 * a **recorded log** played in process (``ECO_SPAT_LOG``, ``ECO_SPAT_LOG_SPEEDUP``, ``ECO_SPAT_LOG_LOOP``).
 
 A trip reads its lights from the hub (:class:`SharedSpat`): no per-trip connection, no per-trip work per
-message. A trip created with an explicit ``timing`` (the paper's scenarios, for research and demos) is
-simulated for itself (:class:`ScenarioSpat`), as before.
+message. A trip's SPaT message re-serves each live intersection's latest state with every movement's predicted
+``likelyTime`` and ``confidence`` (:mod:`spat_feed.transport.republish`). A trip created with an explicit
+``timing`` (the paper's scenarios, for research and demos) is simulated for itself (:class:`ScenarioSpat`), as
+before.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from spat_feed.prediction.observe import PlanReading
 from spat_feed.transport.player import JsonlRecorder, LogPlayer, read_spat_log
 from spat_feed.timing.plans import Plan
 from spat_feed.transport.pump import SpatPump, run_every
+from spat_feed.transport.republish import Republisher
 from spat_feed.transport.scenarios import FeedScenario, spat_message_at
 from spat_feed.transport.simulator import shared_scenario
 from spat_feed.transport.store import Clock, InProcessSpatSource, SpatStore, TimeRules
@@ -74,6 +77,9 @@ class SpatHub:
         self.recorder = JsonlRecorder(settings.spat_record) if settings.spat_record else None
         if self.recorder is not None:
             self.store.observers.append(self.recorder)
+        self.republisher = Republisher()
+        """Every accepted state with its movements' predicted likelyTime and confidence: what a trip's SPaT re-serves."""
+        self.store.observers.append(self.republisher)
         self._tasks: list[asyncio.Task] = []
         self.statuses: dict[int, str] = {}
 
@@ -193,7 +199,7 @@ class SharedSpat:
             r = self.hub.store.reading(ident)
             fresh[str(ident)] = bool(r and r.fresh)
             if r is not None:
-                items.append(r.intersection)
+                items.append(self.hub.republisher.republished(r.intersection))
         msg = SpatMessage(timestamp=from_unix_s(now), name=f"{self.scenario.corridor.name} shared", intersections=items[:32])
         out = msg.model_dump(mode="json", by_alias=True, exclude_none=True)
         out["fresh"] = fresh

@@ -28,7 +28,9 @@ from pydantic.alias_generators import to_camel
 from spat_feed.timing.plans import ChangeWindow, MovementPhaseState, Plan, UncertainPlan, next_changes, state_at, state_start_s
 from spat_feed.timing.timemark import PAST_WINDOW_START_S, timemark_to_unix, unix_to_timemark
 
-# J2735 DE_TimeIntervalConfidence: index -> probability that the change falls inside [minEnd, maxEnd].
+# J2735 DE_TimeIntervalConfidence: index -> probability. A controller's own confidence is read as that of its change
+# window [minEnd, maxEnd] (plan_from_movement); the one our republisher adds is that of its likelyTime
+# (spat_feed.transport.republish, docs/SPAT.md section 2).
 CONFIDENCE_FRAC = (0.21, 0.36, 0.47, 0.56, 0.62, 0.68, 0.73, 0.77, 0.81, 0.85, 0.88, 0.91, 0.94, 0.96, 0.98, 1.00)
 
 UNSTATED_CONFIDENCE_FRAC = 0.9
@@ -97,11 +99,41 @@ class TimeChangeDetails(_Model):
         return self
 
 
+PREDICTED_REGION_ID = 128
+"""``regionId`` of the regional extension by which our republisher marks the ``likelyTime`` / ``confidence`` it
+predicted (:func:`predicted_fields`; J2735 assigns 1-3 to its add-on groups A-C, none to 128). [-]"""
+
+
+class RegionalExtension(_Model):
+    """J2735 DF_RegionalExtension: what a region (or a local system) adds to a frame, kept as received."""
+
+    region_id: int = Field(ge=0, le=255)
+    reg_ext_value: dict[str, Any]
+
+
 class MovementEvent(_Model):
-    """J2735 DF_MovementEvent: a state and when it ends."""
+    """J2735 DF_MovementEvent: a state and when it ends (and J2735's ``regional`` extensions, if any)."""
 
     event_state: MovementPhaseState
     timing: TimeChangeDetails | None = None
+    regional: list[RegionalExtension] | None = Field(default=None, max_length=4)
+
+
+def predicted_fields(event: MovementEvent) -> frozenset[str]:
+    """The timing fields (J2735 names: ``likelyTime``, ``confidence``) of ``event`` that a republisher of ours
+    predicted, not the controller (its :data:`PREDICTED_REGION_ID` extension's ``predicted``); empty for a
+    controller's own event.
+
+    Examples
+    --------
+    >>> ext = RegionalExtension(region_id=PREDICTED_REGION_ID, reg_ext_value={"predicted": ["likelyTime", "confidence"]})
+    >>> sorted(predicted_fields(MovementEvent(event_state="stop-And-Remain", regional=[ext])))
+    ['confidence', 'likelyTime']
+    """
+    if not event.regional:
+        return frozenset()
+    marked = (ext.reg_ext_value.get("predicted") for ext in event.regional if ext.region_id == PREDICTED_REGION_ID)
+    return frozenset(f for fields in marked if isinstance(fields, list) for f in fields if isinstance(f, str))
 
 
 class MovementState(_Model):
@@ -186,6 +218,8 @@ def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None =
     taken as the middle of the window (``minEndTime`` if the window is open-ended); a missing
     ``maxEndTime`` is unbounded on the last event and the next event's ``minEndTime`` otherwise;
     a missing confidence is not a low one: :data:`UNSTATED_CONFIDENCE_FRAC`. Windows that overlap a later one are cut to fit.
+    A ``likelyTime`` or ``confidence`` that a republisher of ours predicted (:func:`predicted_fields`) is read as
+    absent: the plan is the controller's own, the window's confidence only ever one the controller stated.
     """
     states = []
     changes: list[ChangeWindow] = []
@@ -206,11 +240,14 @@ def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None =
             max_s = max(to_unix_s(events[i + 1].timing.min_end_time), min_s)
         else:
             max_s = math.inf
-        if ev.timing.likely_time is not None:
-            likely_s = min(max(to_unix_s(ev.timing.likely_time), min_s), max_s)
+        predicted = predicted_fields(ev) if ev.regional else ()
+        likely_time = None if "likelyTime" in predicted else ev.timing.likely_time
+        confidence = None if "confidence" in predicted else ev.timing.confidence
+        if likely_time is not None:
+            likely_s = min(max(to_unix_s(likely_time), min_s), max_s)
         else:
             likely_s = min_s if math.isinf(max_s) else 0.5 * (min_s + max_s)
-        conf = CONFIDENCE_FRAC[ev.timing.confidence] if ev.timing.confidence is not None else UNSTATED_CONFIDENCE_FRAC
+        conf = CONFIDENCE_FRAC[confidence] if confidence is not None else UNSTATED_CONFIDENCE_FRAC
         changes.append(ChangeWindow(min_s, likely_s, max_s, conf))
     states.append(MovementPhaseState.UNAVAILABLE)
     if len(states) > len(changes) + 1:  # stopped at an event without timing: its state holds for good
@@ -311,6 +348,8 @@ def to_j2735(message: SpatMessage) -> dict:
                     if ev.timing.confidence is not None:
                         timing["confidence"] = ev.timing.confidence
                     event["timing"] = timing
+                if ev.regional:
+                    event["regional"] = [x.model_dump(by_alias=True) for x in ev.regional]
                 events.append(event)
             state: dict[str, Any] = {"signalGroup": mv.signal_group, "state-time-speed": events}
             if mv.movement_name is not None:
@@ -358,7 +397,7 @@ def from_j2735(data: dict, ref_unix_s: float) -> SpatMessage:
                     if "confidence" in raw:
                         fields["confidence"] = raw["confidence"]
                     timing = TimeChangeDetails(**fields)
-                events.append(MovementEvent(event_state=MovementPhaseState(ev["eventState"]), timing=timing))
+                events.append(MovementEvent(event_state=MovementPhaseState(ev["eventState"]), timing=timing, regional=ev.get("regional")))
             states.append(MovementState(signal_group=st["signalGroup"], movement_name=st.get("movementName"), state_time_speed=events))
         intersections.append(
             IntersectionState(

@@ -19,7 +19,8 @@ entry time), ``entry_unix_s`` (the trip's zone-entry instant: the timing is rela
 intersection of the served corridors under its shared timing (``spat_feed.transport.simulator``), a recorded log plays
 on the present clock (``--log``, ``spat_feed.transport.player``); each tick's states go to the shared stream, to an MQTT
 broker (``--mqtt``) and to a JSON-lines recording (``--record``). One text per tick whatever the number of
-subscribers.
+subscribers. Each state goes out with every movement's predicted ``likelyTime`` and ``confidence`` where its
+controller did not state them, marked as ours (``spat_feed.transport.republish``).
 
 **Per scenario** (research and tests): ``/spat`` and ``/spat/stream`` with a scenario in the query.
 Streaming: subscribers with the same scenario share one group; each tick builds that group's message
@@ -49,6 +50,7 @@ from spat_feed.timing.messages import IntersectionState, SpatMessage, from_unix_
 from spat_feed.transport.mqtt import MqttPublisher
 from spat_feed.transport.player import JsonlRecorder, LogPlayer, read_spat_log
 from spat_feed.transport.pump import SpatPump, run_every
+from spat_feed.transport.republish import Republisher
 from spat_feed.transport.scenarios import FeedScenario, Uncertainty, make_scenario, spat_message_at
 from spat_feed.transport.simulator import IntersectionSimulator
 from spat_feed.transport.store import Clock
@@ -155,6 +157,7 @@ class _Shared:
         names = preset_names() if settings.corridors is None else list(settings.corridors)
         self.simulator = IntersectionSimulator([load_corridor(n) for n in names], settings.n_events) if names else None
         self.player = LogPlayer(read_spat_log(settings.log), clock(), settings.speedup, settings.loop) if settings.log else None
+        self.republisher = Republisher()  # every movement's likelyTime and confidence, predicted where not stated
         self.latest: dict[int, IntersectionState] = {}
         self.group = _Group(None)  # type: ignore[arg-type]
         self.sinks: list = []
@@ -170,7 +173,7 @@ class _Shared:
         states = self.simulator.states_at(now_unix_s) if self.simulator is not None else []
         if self.player is not None:
             states += self.player.due(now_unix_s)
-        return states
+        return [self.republisher(s) for s in states]
 
     def keep(self, state: IntersectionState) -> None:
         self.latest[state.id] = state

@@ -16,8 +16,9 @@ import httpx
 import pytest
 
 from spat_feed.road.corridors import load_corridor_dir
-from spat_feed.timing.messages import to_unix_s
-from spat_feed.transport.mqtt import MqttPublisher
+from spat_feed.timing.messages import PREDICTED_REGION_ID, UNKNOWN_MAX_END_S, to_unix_s
+from spat_feed.transport.mqtt import MqttPublisher, MqttSubscriber
+from spat_feed.transport.store import SpatStore
 from spat_feed.transport.player import read_spat_log
 
 from tests.conftest import recorded_spat_slice
@@ -139,6 +140,21 @@ def test_recorded_day_through_mqtt_reaches_trips_and_survives_a_broker_restart(s
 
         seen_shape = shape(seen["states"], stamp)
         assert any(shape(rec.states, to_unix_s(rec.timestamp)) == seen_shape for rec in recorded), seen_shape
+
+        # J2735 out: the broker's payloads and the trip's SPaT carry each movement's predicted likelyTime and
+        # confidence (where a published window bounds the change, from the first message on), marked as ours
+        def predicted(events_and_stamps) -> list[bool]:
+            return [{"likelyTime", "confidence"} <= ev["timing"].keys() and ev["regional"][0]["regionId"] == PREDICTED_REGION_ID
+                    for ev, stamp_s in events_and_stamps if _unix(ev["timing"]["maxEndTime"]) - stamp_s < UNKNOWN_MAX_END_S]  # fmt: skip
+
+        mine = SpatStore()
+        sub = MqttSubscriber(broker.url, mine, (648,))
+        sub.start()
+        payload = until("a payload from the broker", lambda: mine.reading(648)).intersection.model_dump(mode="json", by_alias=True, exclude_none=True)
+        sub.stop()
+        for got in (predicted((m["stateTimeSpeed"][0], _unix(payload["timestamp"])) for m in payload["states"]),
+                    predicted((m["stateTimeSpeed"][0], stamp) for m in seen["states"])):  # fmt: skip
+            assert got and all(got), got
 
         # the broker dies: stale within the stale age (2 s), said plainly; health degraded; one WARNING logged
         last_fresh = fix()
