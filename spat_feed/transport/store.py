@@ -5,16 +5,25 @@ Real controllers publish SPaT per intersection. :class:`SpatStore` keeps the lat
 subscriber, a remote feed), and answers readers with that state, its age and a status. Every trip on a
 corridor reads the same entries: the SPaT work per message does not grow with the number of trips.
 
+J2735 movements update independently, and controllers publish partial messages (Antwerp's K648 on 2019-05-01:
+1,384 of 13,275 messages carry 9 of its 10 signal groups, 150 one): a message updates the groups it carries, a
+group it omits keeps its latest state, aging from the message that carried it. Each group has its own timestamp,
+age and status (:meth:`SpatStore.plan`, :meth:`SpatStore.plan_reading`, ``status(id, group)``); the intersection's
+(:meth:`SpatStore.reading`, ``status(id)``) are its latest message's.
+
 Time rules (:class:`TimeRules`), judged on the controller's own timestamp:
 
-* **rejected** (counted per reason, never stored): ``malformed`` (not our schema), ``duplicate`` (the same
-  timestamp again), ``out_of_order`` (older than the one held), ``clock_ahead`` (dated more than
-  ``clock_tolerance_s`` after its arrival: it would look fresher than it is), ``unknown_intersection``
-  (a store told which intersections to keep, ``only=``).
-* **age** = now - the older of timestamp and arrival; older than ``stale_after_s`` (default 2 s): ``stale``.
+* **rejected** (counted per reason, never stored), judged per signal group: a message is stored for the groups it
+  has newer news of (one older than the latest message too), else rejected as ``duplicate`` (the timestamp of
+  some group's state held) or ``out_of_order`` (older than every group's state held); ``malformed`` (not our
+  schema), ``clock_ahead`` (dated more than ``clock_tolerance_s`` after its arrival: it would look fresher than it
+  is), ``unknown_intersection`` (a store told which intersections to keep, ``only=``).
+* **age** = now - the older of timestamp and arrival, per group; older than ``stale_after_s`` (default 2 s):
+  ``stale``, the group alone when the others of its intersection are heard.
 * **clock offset** = arrival - timestamp, its floor (the smallest over ``skew_window_s``, which strips the
   network delay): beyond ``clock_tolerance_s`` either way the controller's clock is off ours, its windows
-  would put advice seconds into a red: ``clock_skew``, never served as fresh.
+  would put advice seconds into a red: ``clock_skew`` (one clock per intersection: every group), never served
+  as fresh.
 
 Statuses: ``ok``, ``stale``, ``clock_skew``, ``no_spat`` (never heard). Only ``ok`` is fresh.
 """
@@ -59,7 +68,10 @@ class TimeRules:
 
 @dataclass(frozen=True, slots=True)
 class SpatReading:
-    """One intersection's latest state as seen at ``now``: its age, status and the controller's clock offset. [s]"""
+    """One intersection's latest state as seen at ``now``: its age, status and the controller's clock offset. [s]
+
+    From :meth:`SpatStore.plan`: a signal group's, the message that carried its latest state, that state's age.
+    """
 
     intersection: IntersectionState
     timestamp_unix_s: float
@@ -106,18 +118,29 @@ class IntersectionStats:
 
 
 class _Entry:
-    """The latest state of one intersection, its plans parsed once per signal group, its clock offsets, and
-    what its signal groups have been seen to do (:class:`~spat_feed.prediction.observe.IntersectionHistory`)."""
+    """One intersection: its latest message, each signal group's latest state (its plan parsed once, the
+    timestamp and arrival of the message that carried it), its clock offsets, and what its signal groups have been
+    seen to do (:class:`~spat_feed.prediction.observe.IntersectionHistory`)."""
 
-    __slots__ = ("state", "stamp", "received", "plans", "offsets", "ahead_unix_s", "history")
+    __slots__ = ("state", "stamp", "received", "heard_unix_s", "groups", "offsets", "ahead_unix_s", "history")
 
     def __init__(self) -> None:
-        self.state: IntersectionState | None = None
+        self.state: IntersectionState | None = None  # the latest message (the newest timestamp)
         self.stamp = self.received = float("-inf")
-        self.plans: dict[int, UncertainPlan | None] = {}
+        self.heard_unix_s = float("-inf")  # arrival of the last message stored (for some group)
+        self.groups: dict[int, _Group] = {}  # signal group -> its latest state
         self.offsets: deque[tuple[float, float]] = deque()  # (arrival, arrival - timestamp), offsets increasing
         self.ahead_unix_s = float("-inf")  # arrival of the last message rejected as clock_ahead
         self.history = IntersectionHistory()
+
+
+class _Group:
+    """A signal group's latest state: the stamp and arrival of the message that carried it, its plan, the message."""
+
+    __slots__ = ("stamp", "received", "plan", "state")
+
+    def __init__(self, stamp: float, received: float, plan: UncertainPlan, state: IntersectionState) -> None:
+        self.stamp, self.received, self.plan, self.state = stamp, received, plan, state
 
 
 class SpatStore:
@@ -171,18 +194,34 @@ class SpatStore:
             if stamp > received + self.rules.clock_tolerance_s:
                 entry.ahead_unix_s = received
                 verdict = "clock_ahead"
-            elif stamp == entry.stamp:
-                verdict = "duplicate"
-            elif stamp < entry.stamp:
-                verdict = "out_of_order"
             else:
-                verdict = "ok"
-                entry.state, entry.stamp, entry.received, entry.plans = state, stamp, received, {}
+                groups, plans, seen = entry.groups, {}, False
                 for movement in state.states:
+                    g = movement.signal_group
+                    if g in plans:
+                        continue  # a group's first movement, as IntersectionState.movement finds it
+                    held = groups.get(g)
+                    if held is not None and held.stamp >= stamp:
+                        seen = seen or held.stamp == stamp
+                        continue  # this group's state held is as new or newer
                     # parsed once per message: the plan the history records (its minEndTime too: held, resumed) is the
-                    # one readings get (the first movement of a group, as IntersectionState.movement finds it)
-                    entry.plans.setdefault(movement.signal_group, plan_from_movement(movement, stamp))
-                entry.history.record(stamp, entry.plans)  # each group's phases, and the links between groups
+                    # one readings get
+                    plans[g] = plan_from_movement(movement, stamp)
+                if not plans:
+                    verdict = "duplicate" if seen else "out_of_order"  # news held of some group, or older than all
+                else:
+                    verdict = "ok"
+                    for g, plan in plans.items():
+                        held = groups.get(g)
+                        if held is None:
+                            groups[g] = _Group(stamp, received, plan, state)
+                        else:
+                            held.stamp, held.received, held.plan, held.state = stamp, received, plan, state
+                    if stamp > entry.stamp:
+                        entry.state, entry.stamp, entry.received = state, stamp, received
+                    entry.history.record(stamp, plans)  # each group's phases (its own readings), the links between groups
+            if verdict == "ok":
+                entry.heard_unix_s = received
                 offsets, offset = entry.offsets, received - stamp  # a monotonic deque: its head is the window's floor
                 while offsets and offsets[-1][1] >= offset:
                     offsets.pop()
@@ -202,44 +241,58 @@ class SpatStore:
 
     # reading ------------------------------------------------------------------------------------
 
-    def _status(self, entry: _Entry, now: float) -> tuple[float, str, float]:
-        age = data_age_s(entry.stamp, entry.received, now)
+    def _status(self, entry: _Entry, stamp: float, received: float, now: float) -> tuple[float, str, float]:
+        """(age, status, clock offset) of a state of ``entry`` stamped ``stamp``, arrived at ``received``."""
+        age = data_age_s(stamp, received, now)
         offset = entry.offsets[0][1] if entry.offsets else 0.0
-        if abs(offset) > self.rules.clock_tolerance_s or entry.ahead_unix_s > entry.received:
+        if abs(offset) > self.rules.clock_tolerance_s or entry.ahead_unix_s > entry.heard_unix_s:
             return age, "clock_skew", offset
         return age, ("ok" if age <= self.rules.stale_after_s else "stale"), offset
 
     def reading(self, intersection_id: int) -> SpatReading | None:
-        """The intersection's latest state with its age and status; ``None`` if never heard."""
+        """The intersection's latest message with its age and status, its ``intersection`` holding every signal group
+        not stale (a group the message omits: its latest state); ``None`` if never heard."""
         with self._lock:
             entry = self._entries.get(intersection_id)
             if entry is None or entry.state is None:
                 return None
-            age, status, offset = self._status(entry, self.clock())
-            return SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset)
+            now = self.clock()
+            age, status, offset = self._status(entry, entry.stamp, entry.received, now)
+            state = entry.state
+            if any(g.state is not state for g in entry.groups.values()):  # a group the latest message omits
+                carried = {m.signal_group for m in state.states}
+                held = [g.state.movement(k) for k, g in entry.groups.items()
+                        if k not in carried and data_age_s(g.stamp, g.received, now) <= self.rules.stale_after_s]  # fmt: skip
+                if held:
+                    state = state.model_copy(update={"states": [*state.states, *held]})
+            return SpatReading(state, entry.stamp, entry.received, age, status == "ok", status, offset)
+
+    def _plan(self, entry: _Entry | None, signal_group: int) -> tuple[UncertainPlan | None, SpatReading | None]:
+        if entry is None or entry.state is None:
+            return None, None
+        held, now = entry.groups.get(signal_group), self.clock()
+        if held is None:  # a group the intersection never published: no plan, the intersection's reading
+            age, status, offset = self._status(entry, entry.stamp, entry.received, now)
+            return None, SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset)
+        age, status, offset = self._status(entry, held.stamp, held.received, now)
+        return held.plan, SpatReading(held.state, held.stamp, held.received, age, status == "ok", status, offset)
 
     def plan(self, intersection_id: int, signal_group: int) -> tuple[UncertainPlan | None, SpatReading | None]:
-        """The signal group's plan (parsed once per message) and the intersection's reading."""
+        """The signal group's latest plan (parsed once) and its reading: the message that carried it, its age and
+        status (``None`` plan and the intersection's reading for a group never published; ``None, None``: never heard)."""
         with self._lock:
-            entry = self._entries.get(intersection_id)
-            if entry is None or entry.state is None:
-                return None, None
-            plan = entry.plans.get(signal_group, ...)
-            if plan is ...:
-                movement = entry.state.movement(signal_group)
-                plan = entry.plans[signal_group] = None if movement is None else plan_from_movement(movement, entry.stamp)
-            age, status, offset = self._status(entry, self.clock())
-            return plan, SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset)
+            return self._plan(self._entries.get(intersection_id), signal_group)
 
     def plan_reading(self, intersection_id: int, signal_group: int) -> PlanReading:
         """What the advisor's observation needs of one light (:class:`~spat_feed.prediction.observe.PlanReading`): the plan,
-        freshness and age, what the group has been seen to do (bounds the phases after the published one), and
-        the controller's clock offset (within the tolerance; beyond it the reading is not fresh anyway)."""
-        plan, reading = self.plan(intersection_id, signal_group)
-        if reading is None:
-            return PlanReading(None, fresh=False, age_s=float("inf"))
+        freshness and age (the group's own), what the group has been seen to do (bounds the phases after the published
+        one), and the controller's clock offset (within the tolerance; beyond it the reading is not fresh anyway)."""
         with self._lock:
-            cycle = self._entries[intersection_id].history.stats(signal_group)
+            entry = self._entries.get(intersection_id)
+            plan, reading = self._plan(entry, signal_group)
+            if reading is None:
+                return PlanReading(None, fresh=False, age_s=float("inf"))
+            cycle = entry.history.stats(signal_group)
         return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s)
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:
@@ -251,15 +304,19 @@ class SpatStore:
             ids = list(self._entries)
         return {i: r for i in ids if (r := self.reading(i)) is not None}
 
-    def status(self, intersection_id: int) -> str:
-        """``ok``, ``stale``, ``clock_skew`` (also when every message so far came from a clock ahead) or ``no_spat``."""
+    def status(self, intersection_id: int, signal_group: int | None = None) -> str:
+        """``ok``, ``stale``, ``clock_skew`` (also when every message so far came from a clock ahead) or ``no_spat``:
+        of the intersection's latest message, or of ``signal_group``'s latest state (``no_spat``: never published)."""
         with self._lock:
             entry = self._entries.get(intersection_id)
             if entry is None:
                 return "no_spat"
             if entry.state is None:
-                return "clock_skew" if entry.ahead_unix_s > entry.received else "no_spat"
-            return self._status(entry, self.clock())[1]
+                return "clock_skew" if entry.ahead_unix_s > entry.heard_unix_s else "no_spat"
+            held = entry if signal_group is None else entry.groups.get(signal_group)
+            if held is None:
+                return "no_spat"
+            return self._status(entry, held.stamp, held.received, self.clock())[1]
 
     def sweep(self, expected: Iterable[int] = ()) -> dict[int, str]:
         """Status of every intersection held (and of ``expected`` ones); logs one WARNING when one goes

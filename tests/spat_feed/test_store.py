@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 
 import pytest
 
 from spat_feed.road.corridors import load_corridor, paper_corridor, preset_names
-from spat_feed.timing.messages import UNKNOWN_MAX_END_S, to_unix_s
+from spat_feed.timing.messages import UNKNOWN_MAX_END_S, plan_from_movement, to_unix_s
 from spat_feed.prediction.observe import light_view
 from spat_feed.transport.player import JsonlRecorder, LogPlayer, read_spat_log
-from spat_feed.transport.recorded import RecordedLogError
+from spat_feed.transport.recorded import RecordedLogError, read_spat_csv
 from spat_feed.transport.simulator import IntersectionSimulator, shared_scenario, simulated_plans
 from spat_feed.transport.store import SpatStore, TimeRules
 
@@ -245,3 +246,98 @@ def test_the_store_learns_each_group_and_hands_it_to_the_observation(tmp_path):
     assert reading.cycle.cycle_s is not None and len(reading.cycle.durations_s) >= 2 and linked > 0
     assert reading.clock_offset_s == pytest.approx(-0.6)
     assert store.plan_reading(648, 99).plan is None and store.plan_reading(9, 1).fresh is False
+
+
+# per signal group: J2735 movements update independently -----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def k648_2019_05_01():
+    """The whole 2019-05-01 recording of K648 (its snapshots 4- omit group 3; 1,384 carry 9 of its 10 groups)."""
+    from tests.conftest import SHARED_DATA
+
+    path = SHARED_DATA / "spat" / "antwerp-2019-05-01.csv.gz"
+    if not path.exists():
+        pytest.skip(f"{path} not present")
+    return read_spat_csv(path)
+
+
+def test_a_partial_message_keeps_the_omitted_groups_plan_with_its_own_age(k648_2019_05_01):
+    snaps = k648_2019_05_01[:5]
+    assert snaps[3].movement(3) is not None and snaps[4].movement(3) is None  # group 3 last heard in snapshot 3
+    stamps = [to_unix_s(s.timestamp) for s in snaps]
+    clock = Clock(stamps[0])
+    store = SpatStore(TimeRules(stale_after_s=2.0), clock)
+    for snap, stamp in zip(snaps, stamps):
+        clock.t = stamp + 0.2
+        assert store.offer(snap) == "ok"
+    clock.t = stamps[4] + 0.5
+    plan, reading = store.plan(648, 3)
+    assert plan == plan_from_movement(snaps[3].movement(3), stamps[3])  # the omitted group's latest plan, held
+    assert reading.fresh and reading.age_s == pytest.approx(clock.t - stamps[3]) and reading.timestamp_unix_s == stamps[3]
+    seen = store.plan_reading(648, 3)
+    assert seen.plan == plan and seen.fresh and seen.age_s == pytest.approx(clock.t - stamps[3])
+    assert store.plan_reading(648, 1).age_s == pytest.approx(0.5)  # the groups the message carried: its own age
+    assert store.reading(648).intersection.movement(3) == snaps[3].movement(3)  # the intersection: every group held
+
+
+def test_an_omitted_group_goes_stale_alone(k648_2019_05_01):
+    snaps = k648_2019_05_01[:8]
+    stamps = [to_unix_s(s.timestamp) for s in snaps]
+    clock = Clock(stamps[0])
+    store = SpatStore(TimeRules(stale_after_s=2.0), clock)
+    for snap, stamp in zip(snaps, stamps):
+        clock.t = stamp + 0.1
+        assert store.offer(snap) == "ok"
+    plan, reading = store.plan(648, 3)  # not heard for 4.1 s, while the others are heard every second
+    assert plan is not None and not reading.fresh and reading.status == "stale" and reading.age_s == pytest.approx(clock.t - stamps[3])
+    assert not store.plan_reading(648, 3).fresh and store.status(648, 3) == "stale"
+    assert store.plan_reading(648, 1).fresh and store.status(648, 1) == "ok" and store.status(648) == "ok"
+    assert store.reading(648).intersection.movement(3) is None  # a fresh intersection does not serve a stale group
+
+
+def test_time_rules_per_group(k648_2019_05_01):
+    """A message is judged group by group: one with a newer stamp is not out of order for the groups it omits, and
+    an older one that carries a group newer news of it than the store holds is that group's latest."""
+    full, partial = k648_2019_05_01[3], k648_2019_05_01[4]  # partial omits group 3
+    t_full, t_partial = to_unix_s(full.timestamp), to_unix_s(partial.timestamp)
+    clock = Clock(t_partial + 0.2)
+    store = SpatStore(TimeRules(stale_after_s=2.0, clock_tolerance_s=2.0), clock)
+    assert store.offer(partial) == "ok"
+    assert store.offer(full) == "ok"  # late, but group 3's only news
+    assert store.plan(648, 3)[0] == plan_from_movement(full.movement(3), t_full)
+    assert store.plan(648, 1)[0] == plan_from_movement(partial.movement(1), t_partial)  # not overwritten by the older
+    assert store.offer(full) == "duplicate" and store.offer(partial) == "duplicate"
+    assert store.offer(k648_2019_05_01[2]) == "out_of_order"  # older than every group it carries
+    assert store.reading(648).timestamp_unix_s == t_partial
+    assert dict(store.stats[648].rejected) == {"duplicate": 2, "out_of_order": 1}
+
+
+def test_a_real_recording_through_the_store_keeps_every_steady_group_planned(k648_2019_05_01):
+    """2019-05-01: every group the controller publishes at least every 2 s has a fresh plan at every second, though
+    1,384 messages carry 9 of its 10 groups and 150 one (the store kept only the last message: 1-3 % of seconds
+    without a plan)."""
+    snaps = k648_2019_05_01
+    stamps = [to_unix_s(s.timestamp) for s in snaps]
+    heard: dict[int, list[float]] = {}
+    for snap, stamp in zip(snaps, stamps):
+        for m in snap.states:
+            heard.setdefault(m.signal_group, []).append(stamp)
+    steady = sorted(g for g, ts in heard.items() if max(b - a for a, b in zip(ts, ts[1:])) <= 2.0)
+    assert steady and sum(len(s.states) < len(heard) for s in snaps) > 1000  # (1, 4, 6; partial messages)
+    clock = Clock(stamps[0])
+    store = SpatStore(TimeRules(stale_after_s=2.0), clock)
+    missing: dict[int, int] = {}
+    i, t = 0, math.ceil(stamps[0])
+    while t <= stamps[-1]:
+        while i < len(snaps) and stamps[i] <= t:
+            clock.t = stamps[i]
+            assert store.offer(snaps[i]) == "ok"
+            i += 1
+        clock.t = t
+        for g in steady:
+            r = store.plan_reading(648, g)
+            if r.plan is None or not r.fresh:
+                missing[g] = missing.get(g, 0) + 1
+        t += 1
+    assert missing == {}
