@@ -2,7 +2,7 @@
 
 Commands: ``study`` (the paper's study), ``score`` (same as ``replay``: score a trace), ``serve``, ``corridor``
 (corridor and plan files: ``from-osm``, ``show``, ``tables``, ``schema``), ``spat-eval`` (the advisor
-on a recorded SPaT log).
+on a recorded SPaT log), ``predict-eval``, ``traffic-eval`` (the advisor among other cars in Eclipse SUMO).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ COMMANDS = {
     "corridor": "ecodrive.corridor",
     "spat-eval": "ecodrive.spat_eval",
     "predict-eval": "ecodrive.predict_eval",
+    "traffic-eval": "ecodrive.traffic_eval",
 }
 
 

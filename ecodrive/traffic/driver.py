@@ -1,0 +1,196 @@
+"""The virtual driver of a connected car in SUMO: follows the service's advice, sees the lights, stays in traffic.
+
+The same person as :func:`advisory.drivers.closed_loop.simulate`'s driver, stepped by SUMO instead of stepping
+itself: it asks once a second (the caller posts the car's fix to the service and hands the advice back), acts on
+it after a 1 s reaction, tracks an advised speed at comfortable rates (1.5 m/s² up and down, firm 3 m/s² for
+"brake to", a lift-off at the car's own coast-down), drifts up 1 m/s below 25 mph, lifts off for "Red light ahead.",
+prepares to stop and stops at the line for "stop". Its own eyes decide at the regular driver's decision point
+before each line, on the light's real colour (SUMO's) and the phone's display of the countdowns
+(:func:`advisory.drivers.closed_loop.belief` of the views the advice came from): it brakes for a light that will be
+red on arrival at its speed or whose red can begin before it is over the line, never slows down so much that a red
+catches it after deciding to go, waits at a line still red, and stops for an amber it can stop for at the regular
+driver's hardest braking (4 m/s², as SUMO's own drivers do with this project's vehicle type).
+
+:meth:`AdvisedDriver.command` returns the speed the car should have one step later, or None where the advice asks
+nothing (no speed advised, "drive normally", before the zone, past the last light): SUMO's own driver then drives,
+the same person the unadvised run has. SUMO applies a commanded speed within the vehicle type's acceleration and
+braking and below its car-following safe speed (``setSpeedMode`` left at SUMO's default, every check on): the car
+never drives into the one ahead, whatever it was advised.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from advisory.advice.advisor import Advice, AdvisorParams, LightView, coast_decel_mps2
+from advisory.drivers.closed_loop import DriverModel, _silent, _time_to_cover_s, belief
+from advisory.signals import TimelineSignal
+
+TRAFFIC_DRIVER = replace(DriverModel(), amber="stop")
+"""Follows advice as the closed loop's driver does; on amber it stops where it can stop at 4 m/s², as SUMO's drivers
+of :data:`ecodrive.traffic.network.VTYPE` do (SUMO treats an amber as a red for a car that can stop with its decel)."""
+
+
+@dataclass(frozen=True, slots=True)
+class LightNow:
+    """The next light as the driver's eyes see it: its stop line, red or amber now, and (amber) when red begins."""
+
+    index: int  # which light of the corridor (0-based)
+    station_m: float
+    red: bool
+    amber: bool = False
+    red_at_s: float = np.inf  # amber: the instant its red begins (SUMO's program) [s]
+
+
+@dataclass
+class AdvisedDriver:
+    """One connected car's driver (see the module docstring). Times on one axis (the simulation's Unix seconds)."""
+
+    stop_lines_m: tuple[float, ...]
+    advisor: AdvisorParams = field(default_factory=AdvisorParams)
+    model: DriverModel = TRAFFIC_DRIVER
+    pending: list = field(default_factory=list)  # (when acted on, advice, its stop line)
+    active: Advice | None = None
+    stop_line_m: float = np.inf
+    shown: dict = field(default_factory=dict)  # light index -> TimelineSignal | None: the display
+    green_since: dict = field(default_factory=dict)
+    committed: set = field(default_factory=set)
+    braking_for: int | None = None
+    surprised: dict = field(default_factory=dict)
+    amber_seen: dict = field(default_factory=dict)
+    amber_stop: set = field(default_factory=set)
+    amber_go: set = field(default_factory=set)
+    overrides: int = 0
+    surprises: int = 0
+    controlling: bool = False
+
+    def heard(self, t_s: float, x_m: float, advice: Advice, views: dict[int, LightView]) -> None:
+        """The advice for the fix at ``t_s`` (station ``x_m``) and the views it came from: light index -> view."""
+        for n, line in enumerate(self.stop_lines_m):
+            d = belief(views.get(n), t_s, line) if line > x_m else None
+            self.shown[n] = d
+            if d is not None and (d.is_red(t_s) or self.green_since.get(n, np.inf) > t_s):
+                self.green_since[n] = d.next_green_start_s(t_s) if d.is_red(t_s) else t_s
+        line = min((s for s in self.stop_lines_m if s > x_m + 1e-9), default=np.inf)
+        self.pending.append((t_s + self.model.reaction_s, advice, line))
+
+    def command(self, t_s: float, x_m: float, v_mps: float, dt_s: float, v_lim_mps: float, light: LightNow | None) -> float | None:
+        """The speed one step (``dt_s``) later, or None: SUMO's own driver drives (see the module docstring)."""
+        adv, drv = self.advisor, self.model
+        rules = drv.regular()
+        while self.pending and self.pending[0][0] <= t_s + 1e-9:
+            _, new, line = self.pending.pop(0)
+            if not _silent(new):
+                self.active, self.stop_line_m = new, line
+        active, x, v, t = self.active, x_m, v_mps, t_s
+        free = False  # nothing asked for: SUMO's driver drives unless the eyes below say otherwise
+        if active is not None and active.action == "none" and active.reason == "red_ahead":
+            v_cmd = min(max(v, adv.min_cruise_speed_mps), v_lim_mps)
+        elif active is None or active.target_speed_mps is None or active.action in ("none", "resume"):
+            v_cmd, free = v_lim_mps, True
+        elif active.action == "stop":
+            v_cmd = 0.0 if x < self.stop_line_m else v_lim_mps
+            free = x >= self.stop_line_m
+        else:
+            v_cmd = active.target_speed_mps + (drv.drift_mps if active.target_speed_mps < drv.low_speed_mps else 0.0)
+            v_cmd = min(max(v_cmd, 0.0), v_lim_mps)
+        rate_up, rate_down = drv.accel_mps2, drv.decel_mps2
+        if active is None or active.target_speed_mps is None or active.action in ("none", "resume", "stop"):
+            rate_up = rules.accel_mps2
+        if active is not None and active.action == "brake_to":
+            rate_down = adv.firm_decel_mps2
+        if active is not None and active.action == "stop" and x < self.stop_line_m:
+            to_line_m = self.stop_line_m - rules.stop_gap_m - x
+            if v * v < 2.0 * drv.decel_mps2 * to_line_m:
+                rate_down = coast_decel_mps2(v, adv.vehicle)
+            else:
+                rate_down = max(rate_down, min(v * v / (2.0 * max(to_line_m, 1e-6)), rules.brake_max_mps2))
+        clearing = False
+        if light is not None:
+            n = light.index
+            dist = light.station_m - x
+            room = dist - rules.stop_gap_m
+            decision_m = rules.decision_distance_m(v_lim_mps)
+            red_now = light.red
+            display: TimelineSignal | None = self.shown.get(n)
+            if display is None:
+                green_at, next_red = (np.inf, np.inf) if red_now else (t, np.inf)
+            elif red_now and not display.is_red(t):
+                green_at, next_red = np.inf, np.inf
+            else:
+                green_at = display.next_green_start_s(t) if red_now else t
+                next_red = display.next_red_start_s(display.next_green_start_s(green_at)) if red_now or not display.is_red(t) else np.inf
+            heeded_m = max(decision_m, v * v / (2.0 * drv.decel_mps2) + rules.stop_gap_m)
+            amber = dist <= heeded_m and light.amber
+            if amber and self.amber_seen.get(n) != light.red_at_s:
+                self.amber_seen[n] = light.red_at_s
+                late = rules.amber == "stop" or t + dist / max(v, 0.5) > light.red_at_s
+                if late and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+                    self.committed.discard(n)
+                    self.amber_stop.add(n)
+                    self.surprises += 1
+                else:
+                    self.amber_stop.discard(n)
+                    self.amber_go.add(n)
+                    self.committed.add(n)
+            overdue = display is None or (not display.is_red(t) and t - self.green_since.get(n, -np.inf) >= drv.reaction_s)
+            overdue = overdue or (red_now and v_cmd > 0.0 and v * v >= 2.0 * drv.last_call_decel_mps2 * max(room - v * dt_s, 1e-6))
+            if n in self.committed and red_now and self.surprised.get(n) is None and overdue:
+                self.surprises += 1
+                self.surprised[n] = t
+                if v * v / (2.0 * max(room, 1e-6)) <= drv.emergency_decel_mps2:
+                    self.committed.discard(n)
+            if not red_now:
+                self.surprised.pop(n, None)
+            if amber and n in self.amber_stop and n not in self.committed:
+                self.braking_for = n
+            elif n not in self.committed and dist - v * dt_s <= decision_m:
+                arrival = t + (dist / v if v > 0.1 else np.sqrt(2.0 * dist / drv.accel_mps2) + drv.reaction_s)
+                if (red_now and (v <= 0.1 or green_at > arrival - drv.red_end_margin_s)) or next_red <= arrival:
+                    if self.braking_for != n and (active is None or active.action != "stop"):
+                        self.overrides += 1
+                    self.braking_for = n
+                else:
+                    self.committed.add(n)
+                    self.braking_for = None
+            if self.braking_for == n:
+                free = False
+                v_cmd = 0.0
+                hardest = drv.emergency_decel_mps2 if n in self.surprised else rules.brake_max_mps2
+                rate_down = min(v * v / (2.0 * room), hardest) if room > 1e-6 else hardest
+            elif n in self.committed:
+                if red_now:
+                    free = False
+                    v_cmd = min(v_cmd, v)
+                    if room <= v * dt_s:
+                        v_cmd, rate_down = 0.0, min(v * v / (2.0 * max(dist - 0.05, 1e-3)), rules.brake_max_mps2)
+                elif active is not None and active.action == "stop":
+                    v_cmd, free = v_lim_mps, True
+                if v_cmd < v and not free:
+                    coasting = active is not None and active.action in ("coast", "ease_off", "cruise")
+                    v_to = max(drv.coast_floor_frac * v_cmd, drv.min_coast_mps) if coasting else v_cmd
+                    rate = coast_decel_mps2(v, adv.vehicle) if active is not None and active.action in ("ease_off", "cruise") else rate_down
+                    if next_red <= t + _time_to_cover_s(dist, v, v_to, rate) + 1.0:
+                        v_cmd = v
+            clearing = n in self.amber_go and self.braking_for != n and not red_now
+            if clearing and not free:
+                v_cmd = max(v_cmd, v)
+        else:
+            self.braking_for = None
+        if self.braking_for is None and not free and active is not None and active.action in ("ease_off", "cruise") and v_cmd < v:
+            rate_down = min(rate_down, coast_decel_mps2(v, adv.vehicle))
+        if self.braking_for is None and not free and not clearing and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
+            if v > drv.min_coast_mps:
+                v_cmd, rate_down = 0.0, coast_decel_mps2(v, adv.vehicle)
+            elif light is not None and light.red:
+                room = light.station_m - x - rules.stop_gap_m
+                v_cmd, rate_down = 0.0, (min(v * v / (2.0 * room), rules.brake_max_mps2) if room > 1e-6 else rules.brake_max_mps2)
+            else:
+                free = True
+        self.controlling = not free
+        if free:
+            return None
+        a = min(max((v_cmd - v) / dt_s, -rate_down), rate_up)
+        return max(v + a * dt_s, 0.0)

@@ -1,0 +1,219 @@
+"""`ecodrive traffic-eval`: the advisor among other cars, in Eclipse SUMO; the same scenario three ways.
+
+    ecodrive traffic-eval --corridor NAME_OR_FILE [--plan FILE_OR_NAME] [--control fixed|actuated]
+                          --demand VEH_PER_HOUR_PER_LANE --penetration FRAC --seed N [--json]
+
+One scenario (corridor, plan, control, demand, penetration, seed) runs three times on the same SUMO network, with
+the same ``--seed``, demand and so the same arrivals (every car's scheduled departure is checked to agree across the
+runs) and the same connected cars (:func:`ecodrive.traffic.sim.connected_ids`): advised by ecodrive through the
+service's own path, with SUMO's GLOSA device (``use-queue`` on), and unadvised (:mod:`ecodrive.traffic.sim`).
+
+Every car is scored from its SUMO trajectory with this project's EV model (the paper's preset unless
+``--vehicle``): energy, battery wear and their cost from its insertion (the lead-in's start, ``lead_in_m`` before
+the zone entry) to the zone's end, plus the re-acceleration penalty of the common end state
+(:func:`advisory.evaluation.endstate.score_in_end_state`: a car leaving slower still has to speed up); its time from
+its *scheduled* departure (a car held at the entry by the queue loses that time too) to the zone's end, plus the
+penalty's time. Only cars that reach the zone's end in all three runs count.
+
+Keys (``--json``): ``advised_cars`` (connected cars counted), ``red_entries`` (stop lines crossed by advised cars
+while their light was red, in the advised run), ``hard_brakes`` (advised cars that braked harder than 3.5 m/s² at
+any step, in the advised run), ``saving_frac`` (1 - the advised cars' summed cost / the same cars' unadvised),
+``glosa_saving_frac`` (the same with GLOSA), ``energy_saving_frac`` and ``glosa_energy_saving_frac`` (energy
+alone), ``stops_per_advised_car`` (advised run), ``stops_per_glosa_car``, ``stops_per_unadvised_car`` (the same cars
+unadvised), ``time_change_frac`` (advised cars' summed time / unadvised - 1), ``glosa_time_change_frac``,
+``others_time_change_frac`` and ``others_energy_change_frac`` (the cars that are not connected, advised run against
+unadvised: does advice slow the traffic behind?), ``glosa_others_time_change_frac``, ``glosa_others_energy_change_frac``,
+``glosa_red_entries``, ``glosa_hard_brakes``, ``unadvised_red_entries``, ``unadvised_hard_brakes`` (the connected cars
+in those runs), ``cars`` (every car counted), ``spat_messages`` (SUMO's states the store accepted in the advised run),
+``advice_actions`` (advised cars' fixes by action), ``setup``, ``wall_s``.
+
+A stop: the speed falls to 0.5 m/s or below after having been above 3 m/s since the last stop (a car creeping up in
+a queue stops once). A hard brake: speed falling faster than 3.5 m/s² over a step (:data:`HARD_BRAKE_MPS2`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from advisory.evaluation.endstate import score_in_end_state
+from advisory.physics.params import model_params
+from advisory.trajectory import Trajectory
+
+HARD_BRAKE_MPS2 = 3.5
+STOP_MPS = 0.5
+MOVING_MPS = 3.0
+
+
+@dataclass(frozen=True, slots=True)
+class CarScore:
+    cost_usd: float
+    energy_kwh: float
+    time_s: float
+    stops: int
+    hard_brake: bool
+    red_entries: int
+
+
+def score_car(car, zone_end_m: float, speed_limit_mps: float, params) -> CarScore | None:
+    """One car's score over its run up to the zone's end (None if it never got there)."""
+    t, x, v = (np.asarray(a, dtype=float) for a in (car.t, car.x, car.v))
+    k = int(np.searchsorted(x, zone_end_m, side="left"))
+    if k >= len(x) or k == 0:
+        return None
+    # the crossing of the zone's end within step k - 1 .. k (constant acceleration within it)
+    t0, x0, v0, t1, v1 = t[k - 1], x[k - 1], v[k - 1], t[k], v[k]
+    a = (v1 - v0) / (t1 - t0)
+    d = zone_end_m - x0
+    tau = d / v0 if abs(a) < 1e-9 and v0 > 0 else ((-v0 + math.sqrt(max(v0 * v0 + 2 * a * d, 0.0))) / a if abs(a) > 1e-9 else t1 - t0)
+    tau = min(max(tau, 0.0), t1 - t0)
+    tt = np.append(t[:k], t0 + tau)
+    vv = np.append(v[:k], v0 + a * tau)
+    xx = np.append(x[:k], zone_end_m)
+    if tt[-1] - tt[-2] < 1e-6:
+        tt, vv, xx = tt[:-1], vv[:-1], xx[:-1]
+        xx[-1] = zone_end_m
+    s = score_in_end_state(Trajectory(tt, xx, vv), params, speed_limit_mps)
+    acc = np.diff(v[:k + 1]) / np.diff(t[:k + 1])
+    return CarScore(s.cost_usd, s.energy_kwh, float(tt[-1] - car.depart_s + (s.time_s - (tt[-1] - tt[0]))), count_stops(vv),
+                    bool((acc < -HARD_BRAKE_MPS2 - 1e-6).any()), sum(1 for c in car.crossings if c[2] == "red"))  # fmt: skip
+
+
+def count_stops(v_mps) -> int:
+    """Stops in a speed trace: falls to :data:`STOP_MPS` or below after being above :data:`MOVING_MPS`.
+
+    Examples
+    --------
+    >>> count_stops([10, 5, 0.2, 0.0, 1.0, 0.3, 4.0, 0.0])
+    2
+    """
+    stops, moving = 0, True
+    for s in v_mps:
+        if moving and s <= STOP_MPS:
+            stops, moving = stops + 1, False
+        elif s > MOVING_MPS:
+            moving = True
+    return stops
+
+
+def _frac(new: float, old: float) -> float:
+    return float(new / old - 1.0) if old > 0 else float("nan")
+
+
+def paired_summary(results: dict, network, params) -> dict:
+    """The keys (see the module docstring) from the three runs' :class:`~ecodrive.traffic.sim.RunResult`."""
+    scores = {}
+    for mode, r in results.items():
+        scores[mode] = {vid: score_car(car, network.corridor.length_m, network.speed_limit_mps, params) for vid, car in r.cars.items()}
+    base = results["unadvised"].cars
+    for mode, r in results.items():
+        for vid, car in r.cars.items():
+            if vid in base and abs(car.depart_s - base[vid].depart_s) > 1e-6:
+                raise RuntimeError(f"{mode} run: car {vid} scheduled at {car.depart_s:.3f} s, unadvised at {base[vid].depart_s:.3f} s: the runs are not paired")
+    common = [vid for vid in base if all(scores[m].get(vid) is not None for m in results)]
+    conn = [vid for vid in common if base[vid].connected]
+    others = [vid for vid in common if not base[vid].connected]
+
+    def total(mode, ids, what):
+        return float(sum(getattr(scores[mode][vid], what) for vid in ids))
+
+    out = {"advised_cars": len(conn), "cars": len(common)}
+    out["red_entries"] = int(total("advised", conn, "red_entries"))
+    out["hard_brakes"] = int(sum(scores["advised"][vid].hard_brake for vid in conn))
+    out["saving_frac"] = -_frac(total("advised", conn, "cost_usd"), total("unadvised", conn, "cost_usd"))
+    out["glosa_saving_frac"] = -_frac(total("glosa", conn, "cost_usd"), total("unadvised", conn, "cost_usd"))
+    out["energy_saving_frac"] = -_frac(total("advised", conn, "energy_kwh"), total("unadvised", conn, "energy_kwh"))
+    out["glosa_energy_saving_frac"] = -_frac(total("glosa", conn, "energy_kwh"), total("unadvised", conn, "energy_kwh"))
+    n = max(len(conn), 1)
+    out["stops_per_advised_car"] = total("advised", conn, "stops") / n
+    out["stops_per_glosa_car"] = total("glosa", conn, "stops") / n
+    out["stops_per_unadvised_car"] = total("unadvised", conn, "stops") / n
+    out["time_change_frac"] = _frac(total("advised", conn, "time_s"), total("unadvised", conn, "time_s"))
+    out["glosa_time_change_frac"] = _frac(total("glosa", conn, "time_s"), total("unadvised", conn, "time_s"))
+    out["others_time_change_frac"] = _frac(total("advised", others, "time_s"), total("unadvised", others, "time_s"))
+    out["others_energy_change_frac"] = _frac(total("advised", others, "energy_kwh"), total("unadvised", others, "energy_kwh"))
+    out["glosa_others_time_change_frac"] = _frac(total("glosa", others, "time_s"), total("unadvised", others, "time_s"))
+    out["glosa_others_energy_change_frac"] = _frac(total("glosa", others, "energy_kwh"), total("unadvised", others, "energy_kwh"))
+    for mode in ("glosa", "unadvised"):
+        out[f"{mode}_red_entries"] = int(total(mode, conn, "red_entries"))
+        out[f"{mode}_hard_brakes"] = int(sum(scores[mode][vid].hard_brake for vid in conn))
+    for mode, r in results.items():  # SUMO's collisions (bumpers overlapping; the pairs), never a teleport (--collision.action warn)
+        out[f"{mode}_collisions"] = len({(c[1], c[2]) for c in r.collisions})
+    out["spat_messages"] = int(results["advised"].spat_verdicts.get("ok", 0))
+    out["spat_rejected"] = int(sum(n for k, n in results["advised"].spat_verdicts.items() if k != "ok"))
+    actions = Counter()
+    for vid in conn:
+        actions.update(results["advised"].cars[vid].advice)
+    out["advice_actions"] = dict(sorted(actions.items()))
+    return out
+
+
+def evaluate(corridor: str, plan: str | None = None, control: str = "fixed", demand_vph_per_lane: float = 600.0, penetration_frac: float = 0.5,
+             seed: int = 1, duration_s: float = 900.0, lanes: int = 1, cross_demand_vph: float | None = None, vehicle: str = "paper_54kwh",
+             modes: Sequence[str] = ("advised", "glosa", "unadvised")) -> dict:  # fmt: skip
+    """One scenario run three ways (see the module docstring): the summary."""
+    from ecodrive.traffic.network import build_network
+    from ecodrive.traffic.sim import RunSetup, run
+    from spat_feed.road.corridors import load_corridor
+
+    started = time.perf_counter()
+    c = load_corridor(corridor)
+    if cross_demand_vph is None:
+        cross_demand_vph = 300.0 if control == "actuated" else 0.0
+    setup = RunSetup(demand_vph_per_lane, penetration_frac, seed, duration_s, cross_demand_vph=cross_demand_vph)
+    with tempfile.TemporaryDirectory(prefix="ecodrive-traffic-") as tmp:
+        network = build_network(c, tmp, plan, control, lanes)
+        results = {mode: run(network, setup, mode, tmp) for mode in modes}
+    out = paired_summary(results, network, model_params(vehicle))
+    out["setup"] = {"corridor": c.name, "plan": plan, "control": control, "lanes": lanes, "vehicle": vehicle, **asdict(setup)}
+    out["wall_s"] = round(time.perf_counter() - started, 2)
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="ecodrive traffic-eval", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--corridor", required=True, help="a corridor name (paper_s400, oakland_7th_westbound, ...) or file")
+    ap.add_argument("--plan", default=None, help="a plan of the corridor by name, a paper timing (15_15, field_test) or a plan file (default: the corridor's default plan, else 15_15)")
+    ap.add_argument("--control", choices=("fixed", "actuated"), default="fixed", help="fixed-time lights from the plan, or SUMO's actuated controller around it")
+    ap.add_argument("--demand", type=float, required=True, metavar="VEH_PER_HOUR", help="corridor traffic, vehicles per hour per lane")
+    ap.add_argument("--penetration", type=float, required=True, metavar="FRAC", help="share of the corridor's cars that are connected (0..1)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--duration", type=float, default=900.0, help="seconds during which cars depart (default %(default)s)")
+    ap.add_argument("--lanes", type=int, default=1)
+    ap.add_argument("--cross-demand", type=float, default=None, help="each cross street, each way [veh/h] (default: 300 actuated, 0 fixed)")
+    ap.add_argument("--vehicle", default="paper_54kwh", help="EV model preset for the scores (default %(default)s)")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    if not 0.0 <= args.penetration <= 1.0:
+        ap.error("--penetration must be within 0..1")
+    if args.demand < 0:
+        ap.error("--demand must be >= 0")
+    try:
+        out = evaluate(args.corridor, args.plan, args.control, args.demand, args.penetration, args.seed, args.duration, args.lanes, args.cross_demand, args.vehicle)
+    except (OSError, KeyError, ValueError, RuntimeError) as exc:
+        print(f"ecodrive traffic-eval: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    pct = lambda x: f"{100 * x:+.1f} %"  # noqa: E731
+    print(f"{out['setup']['corridor']} ({args.control}), {args.demand:g} veh/h/lane, {100 * args.penetration:g} % connected, seed {args.seed}: "
+          f"{out['advised_cars']} advised cars of {out['cars']}")  # fmt: skip
+    print(f"  saving: ecodrive {pct(out['saving_frac'])}, GLOSA {pct(out['glosa_saving_frac'])} (cost against the same cars unadvised)")
+    print(f"  stops per car: ecodrive {out['stops_per_advised_car']:.2f}, GLOSA {out['stops_per_glosa_car']:.2f}, unadvised {out['stops_per_unadvised_car']:.2f}")
+    print(f"  time: advised cars {pct(out['time_change_frac'])}, the others {pct(out['others_time_change_frac'])} (energy {pct(out['others_energy_change_frac'])})")
+    print(f"  red entries {out['red_entries']}, hard brakes {out['hard_brakes']} (advised cars)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
