@@ -30,9 +30,10 @@ antwerp: $(STAMP)  # the service on the Antwerp controller's recorded SPaT, thro
 	sh scripts/system-deps.sh
 	sh scripts/antwerp.sh
 
-app-figure: $(STAMP)  # the README's screenshots of the phone app (a demo drive in headless chromium)
+app-figure: $(STAMP)  # the README's and docs/APP.md's screenshots of the phone app (headless chromium)
 	sh scripts/system-deps.sh
 	ECODRIVE_APP_FIGURE=docs/figures/app_demo_drive.png $(PY) -m pytest -q tests/browser -k demo_drive
+	ECODRIVE_APP_FIGURE_DIR=docs/figures $(PY) -m pytest -q tests/browser/test_countdown.py
 
 bench: $(STAMP)
 	for b in bench/bench_*.py; do $(PY) $$b || exit 1; done

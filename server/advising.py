@@ -199,6 +199,7 @@ class Engine:
                 trip_id=trip.id, seq=0, t_unix_s=None, fix_status=fix_status, on_route=False, station_m=None, cross_track_m=None,
                 offset_m=None, speed_mps=None, speed_source="none", next_intersection_id=None, distance_to_line_m=None,
                 spat_fresh=None, action="none", reason="no_fix", target_speed_mps=None, light_red=None, seconds_to_change_s=None,
+                light_intersection_id=None, light_distance_m=None, counts_down_to=None,
                 message=SERVER_PHRASES["no_fix"], speak=False, source="service", fix_note=None,
             )  # fmt: skip
         return trip.last if trip.last["fix_status"] == fix_status else {**trip.last, "fix_status": fix_status}
@@ -246,6 +247,9 @@ class Engine:
             trip.trace_v.append(speed)
             trip.trace_x.append(m.route_m)
         nxt = lights[0] if lights else None
+        # the light the countdown is about (the next one, or the one after it when that one binds), named with it
+        named = next((light for light in lights if light.intersection_id == advice.light_id), None) if advice.light_red is not None else None
+        countdown = _finite(advice.seconds_to_change_s) if named is not None else None
         out = dict(
             trip_id=trip.id, seq=trip.n_fixes, t_unix_s=round(fix.t_unix_s, 3), fix_status="ok", on_route=on_route,
             station_m=round(m.station_m, 2), cross_track_m=round(m.cross_track_m, 2), offset_m=round(m.offset_m, 2),
@@ -254,7 +258,10 @@ class Engine:
             next_intersection_id=nxt.intersection_id if nxt else None, distance_to_line_m=round(nxt.distance_m, 2) if nxt else None,
             spat_fresh=spat_fresh, action=advice.action, reason=advice.reason,
             target_speed_mps=None if advice.target_speed_mps is None else math.floor(advice.target_speed_mps * 100.0 + 1e-9) / 100.0,  # down: never above the limit
-            light_red=advice.light_red, seconds_to_change_s=_finite(advice.seconds_to_change_s), message=advice.message,
+            light_red=advice.light_red if named is not None else None, seconds_to_change_s=countdown,
+            light_intersection_id=named.intersection_id if named is not None else None,
+            light_distance_m=round(named.distance_m, 2) if named is not None else None,
+            counts_down_to=advice.counts_down_to if countdown is not None else None, message=advice.message,
             speak=advice.speak, source=advice.source, fix_note=None,
         )  # fmt: skip
         trip.last = out

@@ -147,8 +147,15 @@ class AdviceOut(_Out):
     action: Action
     reason: Reason
     target_speed_mps: float | None = Field(default=None, description="advised speed [m/s, 0.01, rounded down: never above the limit]")
-    light_red: bool | None = Field(default=None, description="the next light is red now")
-    seconds_to_change_s: float | None = Field(default=None, description="until the next light changes (to green when red, else to red) [s, 0.1]")
+    light_red: bool | None = Field(default=None, description="the light named by `light_intersection_id` is red now (amber counts as not red)")
+    seconds_to_change_s: float | None = Field(
+        default=None, description="until that light's next change, the one `counts_down_to` names: to green when it is red now, else to red (after any amber); never a later change [s, 0.1]; null: unknown"
+    )
+    light_intersection_id: int | None = Field(
+        default=None, description="the light that `light_red`, `seconds_to_change_s` and `counts_down_to` are about: the next light (`next_intersection_id`), or the one after it when the advice is for that one (the message then says 'Second light: ...')"
+    )
+    light_distance_m: float | None = Field(default=None, description="to that light's stop line [m, 0.01]")
+    counts_down_to: Literal["red", "green"] | None = Field(default=None, description="what `seconds_to_change_s` counts down to: 'green' when `light_red`, else 'red'; null when there is no countdown")
     message: str = Field(description="what the driver hears, in the trip's units")
     speak: bool = Field(default=False, description="say the message now (it changed meaningfully)")
     source: Literal["rules", "dp_table", "service"] = Field(default="rules", description="rules, the DP lookup tables, or the service itself (pauses)")

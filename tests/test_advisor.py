@@ -310,9 +310,13 @@ def test_a_red_that_never_ends_gives_a_stop_without_a_countdown():
     """Reproducer from the real controller: a "stop" with seconds_to_change_s = inf raised OverflowError in phrase()."""
     adv = advise(Observation(13.89, 13.89, (LightView(1, 300.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
     assert (adv.action, adv.reason) == ("coast", "red_ahead")  # far out: no stop asked for yet, but lift off
-    assert adv.message == "Red light ahead. Lift off and coast." and adv.target_speed_mps == pytest.approx(13.89)
+    # green now: the countdown is to the coming red (issue 29), not to a green that never comes
+    assert (adv.light_red, adv.seconds_to_change_s, adv.counts_down_to, adv.light_id) == (False, 5.2, "red", 1)
+    assert adv.message == "Red in 5 seconds. Lift off and coast." and adv.target_speed_mps == pytest.approx(13.89)
     adv = advise(Observation(13.89, 13.89, (LightView(1, 100.0, True, 1.0, ((5.2, float("inf")),)),), position_m=0.0))[0]
-    assert adv.action == "stop" and adv.message == "Red light ahead. Prepare to stop."
+    assert adv.action == "stop" and adv.message == "Red in 5 seconds. Prepare to stop."
+    adv = advise(Observation(13.89, 13.89, (LightView(1, 100.0, True, 1.0, ((0.0, float("inf")),)),), position_m=0.0))[0]
+    assert adv.action == "stop" and adv.message == "Red light ahead. Prepare to stop." and adv.counts_down_to is None
     assert phrase(Advice("none", "too_close", None, True, float("inf"))) == ""
     assert phrase(Advice("cruise", "green_wave", V, False, float("inf"))) == "Hold 55 miles per hour."
 

@@ -144,6 +144,15 @@ class Advice:
     source: str = "rules"  # "dp_table" when the target came from the lookup tables
     current_speed_mps: float | None = None  # the car's speed when advised ("Slow to X, then coast" vs "Lift off")
     light_ahead: int = 1  # which light the countdown (light_red, seconds_to_change_s) is about: 1 next, 2 the one after
+    light_id: int | None = None  # that light's intersection id (None: no countdown)
+
+    @property
+    def counts_down_to(self) -> str | None:
+        """What ``seconds_to_change_s`` counts down to: "green" while the light is red now, "red" while it is not;
+        None without a countdown (unknown or never). Always the light's next change (``light_id``), never a later one."""
+        if self.light_red is None or self.seconds_to_change_s is None or not math.isfinite(self.seconds_to_change_s):
+            return None
+        return "green" if self.light_red else "red"
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__slots__}
@@ -496,10 +505,13 @@ def _say_speed(speed_mps: float, units: str) -> str:
 
 
 def _say_seconds(t_s: float | None) -> str:
-    """"1 second", "12 seconds"; "" when unknown, infinite or under half a second."""
-    if t_s is None or not math.isfinite(t_s) or round(t_s) < 1:
+    """"1 second", "12 seconds"; "" when unknown, infinite or under half a second. Whole seconds as a display shows
+    the API's ``seconds_to_change_s`` (0.1 s, then halves up): the number heard is the number seen."""
+    if t_s is None or not math.isfinite(t_s):
         return ""
-    n = round(t_s)
+    n = math.floor(round(t_s, 1) + 0.5)
+    if n < 1:
+        return ""
     return "1 second" if n == 1 else f"{n:d} seconds"
 
 
@@ -515,6 +527,8 @@ def phrase(advice: Advice, units: str = "mph") -> str:
         return f"Signal data delayed. Keep to {speed}." if advice.action != "stop" else "Signal data delayed. Prepare to stop."
     if advice.action == "none":
         if advice.reason == "red_ahead":
+            if advice.light_red is False:  # green now, red before the car gets there: the countdown is to that red
+                return f"Red in {when}." if when else "Red light ahead."
             return f"Red light ahead. Green in {when}." if when else "Red light ahead."
         if advice.reason == "tight_green":
             return f"Red in {when}. Drive normally." if when else "Drive normally."
@@ -533,11 +547,15 @@ def phrase(advice: Advice, units: str = "mph") -> str:
         if advice.light_ahead == 2:
             light = f"Second light: {light[0].lower()}{light[1:]}"
     if advice.action == "stop":
+        if advice.light_red is False and when:  # green now, red on arrival: the number is the time to that red
+            return f"Red in {when}. Prepare to stop."
         return f"Red light ahead. Prepare to stop. Green in {when}." if when else "Red light ahead. Prepare to stop."
     if advice.action == "resume":
         return f"Last light passed. Resume {speed}."
     if advice.action == "coast":
         if advice.reason == "red_ahead":  # a red whose end is uncertain, far ahead: lift off, no stop yet
+            if advice.light_red is False and when:
+                return f"Red in {when}. Lift off and coast."
             return f"Red light ahead. Green in {when}. Lift off and coast." if when else "Red light ahead. Lift off and coast."
         speed_now = advice.current_speed_mps if advice.current_speed_mps is not None else np.inf
         if advice.target_speed_mps is not None and advice.target_speed_mps < SLOW_FIRST_FRAC * speed_now:
@@ -573,7 +591,7 @@ def _binding(lights: tuple[LightView, ...], obs: Observation, params: AdvisorPar
 def _timed(action: str, reason: str, target: float | None, lights: tuple[LightView, ...], i: int, source: str = "rules") -> Advice:
     """An advice whose countdown is light ``i``'s."""
     red, to_change = _light_timing(lights[i])
-    return Advice(action, reason, target, red, to_change, source=source, light_ahead=i + 1)
+    return Advice(action, reason, target, red, to_change, source=source, light_ahead=i + 1, light_id=lights[i].intersection_id)
 
 
 def _kept(lines: _Lines, usable: tuple[LightView, ...], obs: Observation, params: AdvisorParams, last: Advice) -> bool:
@@ -779,10 +797,11 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             # sheds the stop would have braked away anyway. Not at a crawl (launching from the light before): there
             # only what is ahead. A known end keeps the early gentle stop (the advisor re-plans from it)
             if v < params.min_cruise_speed_mps:
-                return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_green)
+                return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_change)
             keep = last is not None and last.action == "coast" and last.reason == "red_ahead" and last.target_speed_mps is not None
-            return Advice("coast", "red_ahead", last.target_speed_mps if keep else v, red, to_green)
-        return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_green)
+            return Advice("coast", "red_ahead", last.target_speed_mps if keep else v, red, to_change)
+        # the countdown is the light's next change (to red while it is green now), never the green after a red to come
+        return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_change)
     target, source = float(feasible.max()), "rules"
     if tables is not None:
         wanted = tables.target_speed_mps(obs)
@@ -842,11 +861,13 @@ def advise(
     params = params or AdvisorParams()
     a = _decide(obs, memory, params, tables)
     # (constructor calls, not dataclasses.replace: this runs once a second per car)
+    # the light the countdown is about: the next one unless the advice named another (the one after it, ``_timed``)
+    light_id = a.light_id if a.light_id is not None or a.light_red is None or not obs.lights else obs.lights[0].intersection_id
     advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, source=a.source, current_speed_mps=obs.speed_mps,
-                    light_ahead=a.light_ahead)
+                    light_ahead=a.light_ahead, light_id=light_id)
     message = phrase(advice, params.units)
     speak = bool(message) and _meaningful_change(advice, memory.spoken, params)
-    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps, a.light_ahead)
+    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps, a.light_ahead, light_id)
     spoken, last = (advice if advice.speak else memory.spoken), advice
     if advice.reason == "stale_spat" and advice.light_red is not None:
         # a short dropout: the driver goes on with the plan it follows; that stays the plan when data returns

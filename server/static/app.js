@@ -53,6 +53,11 @@ function capitalise(text) {
   return text ? text[0].toUpperCase() + text.slice(1) : text;
 }
 
+/** A light's name from the corridor's list ("light 7001" until the list has come). */
+function lightName(current, id) {
+  return capitalise(current.names.get(id) ?? `light ${id}`);
+}
+
 // -- settings: theme, mute, units, pace ------------------------------------------------------------
 function applyTheme(theme) {
   document.documentElement.dataset.theme = theme;
@@ -197,6 +202,7 @@ function resetDrive(current) {
   $("light").dataset.color = "none";
   setText("countdown", "");
   setText("countdown-label", "");
+  setText("countdown-light", "");
   setText("link", "");
   $("drive").dataset.seq = "0";
 }
@@ -229,12 +235,18 @@ function render(a) {
   $("fresh").dataset.fresh = fresh;
   setText("fresh", { yes: "live", no: "out of date", none: "–" }[fresh]);
 
-  // the light that binds: its colour now and the seconds to its next change (only from fresh SPaT)
+  // the light the advice is about (the next one, or the one after it when that one binds): its colour now and
+  // the seconds to its next change, saying to which change and of which light (only from fresh SPaT)
   const light = a.light_red == null || fresh === "no" ? "none" : a.light_red ? "red" : "green";
+  const lightId = a.light_intersection_id ?? (a.light_red == null ? null : a.next_intersection_id); // an older service: the next light
   $("light").dataset.color = fresh === "no" ? "unknown" : light;
+  $("light").dataset.lightId = light === "none" || lightId == null ? "" : String(lightId);
   const seconds = a.seconds_to_change_s;
-  setText("countdown", light !== "none" && Number.isFinite(seconds) ? String(Math.max(0, Math.round(seconds))) : "");
-  setText("countdown-label", light === "none" ? (fresh === "no" ? "signal data out of date" : "") : `s to ${light === "red" ? "green" : "red"}`);
+  const to = a.counts_down_to ?? (light === "red" ? "green" : "red");
+  const counting = light !== "none" && Number.isFinite(seconds);
+  setText("countdown", counting ? String(Math.max(0, Math.round(seconds))) : "");
+  setText("countdown-label", counting ? `s to ${to}` : fresh === "no" ? "signal data out of date" : "");
+  setText("countdown-light", light === "none" || lightId == null ? "" : lightName(current, lightId));
 
   setText("link", [current.link.via === "websocket" ? "WebSocket" : "REST", `fix ${a.seq ?? 0}`, speaker.muted ? "muted" : speaker.engine, current.awake]
     .filter(Boolean).join(" · "));

@@ -47,3 +47,12 @@ def shots(tmp_path) -> Path:
 def figure_path() -> Path | None:
     value = os.environ.get(FIGURE_ENV)
     return Path(value) if value else None
+
+
+FIGURE_DIR_ENV = "ECODRIVE_APP_FIGURE_DIR"
+"""Set to a folder to also write docs/APP.md's figures of the countdown and of a lost service (``make app-figure``)."""
+
+
+def figure_dir() -> Path | None:
+    value = os.environ.get(FIGURE_DIR_ENV)
+    return Path(value) if value else None

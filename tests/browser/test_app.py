@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import re
 import shutil
 import ssl
 import subprocess
@@ -55,9 +56,10 @@ REFUSED_SOCKETS = """(() => {
 NO_WEB_SPEECH = "delete window.SpeechSynthesisUtterance; window.__spoken = [];"  # a browser without the Web Speech API
 
 SNAPSHOT = """JSON.stringify(Object.fromEntries(["target", "target-unit", "action", "message", "countdown", "countdown-label",
-  "speed", "distance", "next-name", "fresh", "link", "status"].map((id) => [id, document.getElementById(id).textContent]).concat(
+  "countdown-light", "speed", "distance", "next-name", "fresh", "link", "status"].map((id) => [id, document.getElementById(id).textContent]).concat(
   [["seq", Number(document.getElementById("drive").dataset.seq)], ["state", document.body.dataset.state],
-   ["light", document.getElementById("light").dataset.color]])))"""
+   ["light", document.getElementById("light").dataset.color], ["light-id", document.getElementById("light").dataset.lightId ?? ""],
+   ["stale", document.body.dataset.stale ?? ""], ["at", Date.now() / 1000]])))"""
 
 
 def run(coro):
@@ -118,9 +120,16 @@ def check_rendering(shown: dict, advice: dict, units: str) -> None:
     assert shown["fresh"] == fresh
     if advice["light_red"] is not None and advice["spat_fresh"] is not False:
         assert shown["light"] == ("red" if advice["light_red"] else "green")
+        # the countdown says which light (the advisory's) and to which change (its next one)
+        assert shown["light-id"] == str(advice["light_intersection_id"]) and shown["countdown-light"]
         if advice["seconds_to_change_s"] is not None:
             assert shown["countdown"] == str(max(0, math.floor(advice["seconds_to_change_s"] + 0.5)))
-            assert shown["countdown-label"] == f"s to {'green' if advice['light_red'] else 'red'}"
+            assert advice["counts_down_to"] == ("green" if advice["light_red"] else "red")
+            assert shown["countdown-label"] == f"s to {advice['counts_down_to']}"
+            for change, n in re.findall(r"\b(green|red) in (\d+) seconds?", advice["message"], re.IGNORECASE):
+                assert (change.lower(), n) == (advice["counts_down_to"], shown["countdown"]), (shown, advice)  # heard = seen
+    else:
+        assert shown["countdown"] == "" and shown["countdown-light"] == ""
     if advice["speed_mps"] is not None:
         assert shown["speed"] == f"{speed_text(advice['speed_mps'], units)} {'mph' if units == 'mph' else 'km/h'}"
 
