@@ -204,7 +204,8 @@ class PhaseHistory:
             self.ended = None
             if changed and not gap and self._current is not None:
                 if self._exact:
-                    self.ended = (self._current, self._since, t_unix_s, self.stats().durations(self._current), self.stats().ends(self._current))
+                    before = self.stats()
+                    self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current))
                     self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
                 self._following[self._current] = cls
                 self._ends.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s)
@@ -353,8 +354,9 @@ class ChangeLinks:
 METHOD_MEMORY = 10
 """Phases over which the running error of each method is kept (an exponential mean). [-]"""
 
-PERIOD_EVERY = 20
-"""Phase ends (of all groups) between two searches for the controller's cycle. [-]"""
+PERIOD_EVERY = (20, 640)
+"""Phase ends (of all groups) between two searches for the controller's cycle (~5-10 ms each): the first after 20,
+each next one twice as far off while none is found (an actuated controller), at most 640 apart. [-]"""
 
 
 class IntersectionHistory:
@@ -362,7 +364,7 @@ class IntersectionHistory:
     :class:`ChangeLinks` between them. ``record`` each message's plans; ``stats(group)`` is the group's
     :class:`CycleStats` (cached until the group's history or a link changes)."""
 
-    __slots__ = ("groups", "links", "_stats", "period_s", "_ends_since_period", "_errors")
+    __slots__ = ("groups", "links", "_stats", "period_s", "_ends_since_period", "_period_every", "_errors")
 
     def __init__(self) -> None:
         self.groups: dict[int, PhaseHistory] = {}
@@ -370,6 +372,7 @@ class IntersectionHistory:
         self._stats: dict[int, CycleStats] = {}
         self.period_s: float | None = None  # the controller's cycle, if its changes keep to one (cycle_period_s)
         self._ends_since_period = 0
+        self._period_every = PERIOD_EVERY[0]
         self._errors: dict[tuple[int, PhaseClass], list[float]] = {}  # (group, class) -> [n, cycle's mean error, durations']
 
     def record(self, t_unix_s: float, plans: Mapping[int, Plan | MovementPhaseState | None]) -> None:
@@ -387,10 +390,11 @@ class IntersectionHistory:
         if self.links.record(t_unix_s, changed):
             self._stats.clear()  # a change may start a link for any group
             self._ends_since_period += len(changed)
-            if self._ends_since_period >= PERIOD_EVERY:
+            if self._ends_since_period >= self._period_every:
                 self._ends_since_period = 0
                 ends = [e for h in self.groups.values() for e in h.stats().ends_unix_s.values()]
                 self.period_s = cycle_period_s(ends)
+                self._period_every = min(2 * self._period_every, PERIOD_EVERY[1])
 
     def _score(self, group: int, ended: tuple) -> None:
         """Score the cycle and the durations on a phase seen whole (:func:`~spat_feed.prediction.predictor.scored_errors_s`):
@@ -654,15 +658,18 @@ READING_PERIOD_S = 1.0
 def red_hold_s(plan: UncertainPlan, t_reading_unix_s: float, speed_mps: float, params: AdvisorParams = AdvisorParams()) -> float:
     """How long from now a light whose latest reading is red (or amber, a red to come) stays red in every view: **the
     safety rule**. No prediction, countdown or clock correction ends such a red before the next reading could say
-    otherwise (:data:`READING_PERIOD_S`) and the driver, told then, could still stop at the advisor's firm braking
-    (``reaction_s + v / (2 firm_decel_mps2)``): a plan never crosses a published red on a guess. 0 where the red's
-    end is exact (:data:`EXACT_S`) or the light is not red. [s]"""
+    otherwise (:data:`READING_PERIOD_S`), and no plan reaches the line before the car, told of the red at that
+    reading, could still stop at the advisor's firm braking: the crossing (at least ``green_margin_s`` after a red's
+    end, the advisor's own rule) is at least ``READING_PERIOD_S + reaction_s + v / (2 firm_decel_mps2)`` away, the
+    time the car takes at its speed to its point of no return and one reading more. A plan never crosses a published
+    red on a guess. 0 where the red's end is exact (:data:`EXACT_S`) or the light is not red. [s]"""
     i = _published_index(plan, t_reading_unix_s)
     cls = phase_class(plan.states[i])
     k = i if cls is PhaseClass.RED else i + 1 if cls is PhaseClass.AMBER else None  # the change out of the red
     if k is None or (k < len(plan.changes) and plan.changes[k].max_end_s - plan.changes[k].min_end_s < EXACT_S):
         return 0.0
-    return READING_PERIOD_S + params.reaction_s + max(speed_mps, 0.0) / (2.0 * params.firm_decel_mps2)
+    no_return_s = params.reaction_s + max(speed_mps, 0.0) / (2.0 * params.firm_decel_mps2)
+    return READING_PERIOD_S + max(0.0, no_return_s - params.green_margin_s)
 
 
 def _held(windows: tuple[tuple[float, float], ...], hold_s: float, red_now: bool) -> tuple[tuple[float, float], ...]:
@@ -705,7 +712,7 @@ def light_view(
         unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
     if u > 0.0:
         windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
-    if not isinstance(plan, FixedTimePlan) and reading.fresh and (hold := red_hold_s(plan, t_feed - reading.age_s, speed_mps)) > 0.0:
+    if not isinstance(plan, FixedTimePlan) and (hold := red_hold_s(plan, t_feed - reading.age_s, speed_mps)) > 0.0:  # fresh or not: the latest reading
         red_now = phase_class(published_state(plan, t_feed - reading.age_s)) is PhaseClass.RED
         windows, likely, late = (_held(w, hold, red_now) for w in (windows, likely, late))
     return LightView(

@@ -150,12 +150,15 @@ def cycle_period_s(ends_unix_s: Sequence[Sequence[float]], step_s: float = 0.1) 
     if not seqs:
         return None
 
+    times = np.concatenate([e - e[0] for e in seqs])
+    which = np.repeat(np.arange(len(seqs)), [len(e) for e in seqs])
+    counts = np.array([len(e) for e in seqs], dtype=float)
+
     def concentration(periods: np.ndarray) -> np.ndarray:
-        total = np.zeros(len(periods))
-        for e in seqs:
-            phase = 2.0 * np.pi * (e - e[0])[None, :] / periods[:, None]
-            total += np.hypot(np.cos(phase).mean(axis=1), np.sin(phase).mean(axis=1))
-        return total / len(seqs)
+        phase = 2.0 * np.pi * times[None, :] / periods[:, None]
+        c = np.stack([np.bincount(which, weights=row, minlength=len(seqs)) for row in np.cos(phase)]) / counts
+        s = np.stack([np.bincount(which, weights=row, minlength=len(seqs)) for row in np.sin(phase)]) / counts
+        return np.hypot(c, s).mean(axis=1)
 
     coarse = np.arange(PERIOD_RANGE_S[0], PERIOD_RANGE_S[1] + 1e-9, 1.0)
     r = concentration(coarse)

@@ -101,10 +101,13 @@ def fit_switches(paths: Iterable[str | Path]) -> dict[str, SwitchFit]:
     """Fit :class:`SwitchFit` for red and for green on the recorded SPaT CSVs at ``paths``."""
     from spat_feed.transport.recorded import read_spat_csv
 
+    paths = list(paths)
     obs = [o for p in paths for o in switch_observations(read_spat_csv(p))]
     fits = {}
     for name, red in (("red", True), ("green", False)):
         rows = np.array([(lo, hi, end) for r, lo, hi, end in obs if r == red])
+        if not len(rows):  # a controller that publishes its state only: nothing to fit
+            raise ValueError(f"no phase with a bounded window ({name}) in {', '.join(map(str, paths))}: nothing to fit")
         lo, hi, end = rows.T
         late = end > hi + 0.5 * SAMPLE_S
         inside = ~late & (hi - lo > 0)
@@ -314,15 +317,17 @@ CURRENT_ONLY_FRAC = 0.5
 """Share of :func:`random_case` cases whose controller publishes the current phase only, as Antwerp's. [-]"""
 
 
-def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3.0, dropouts: bool = True):
+def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3.0, dropouts: bool = True, amber_s: float | None = None):
     """One randomized closed-loop case (the tests' and the bench's): two lights 150-1000 m apart, cycle 40-120 s,
     red 30-70 %, actuated with windows up to ``±max_half_width_s`` (the real switch anywhere inside and up to
     10 % beyond), up to two dropouts of 2-10 s in the first minute, a feed clock off by up to ``±max_skew_s``,
     tracking noise up to 1 m/s. In :data:`CURRENT_ONLY_FRAC` of the cases (drawn apart, so the others are the
     cases they always were) each controller publishes its current phase only, as Antwerp's: what comes after it
     is what the receiver learnt over the 25 minutes before the car (the light's phases, and the changes of its
-    conflicting stage, :func:`conflicting_light`, with 10 % of misfires, that its reds follow).
-    Returns ``(truth scenario, feed, tracking noise [m/s])``."""
+    conflicting stage, :func:`conflicting_light`, with 10 % of misfires, that its reds follow). ``amber_s``: the
+    amber the lights really show before each red (default :attr:`ActuatedLight.amber_s`; 0: none, the stress case of
+    a green that turns red at once, which no driver can see coming). Returns ``(truth scenario, feed, tracking noise
+    [m/s])``."""
     from advisory.signals import paper_scenario
 
     rng = np.random.default_rng(seed)
@@ -332,6 +337,9 @@ def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3
     fixed = paper_scenario(rng.uniform(-cycle, cycle), rng.uniform(-cycle, cycle), rng.uniform(150, 1000),
                            red_s=cycle * share, green_s=cycle * (1 - share))  # fmt: skip
     truth, lights = actuated_scenario(fixed, rng.uniform(0, max_half_width_s), rng, **({"t0_s": -1600.0} if current_only else {}))
+    if amber_s is not None:
+        lights = [replace(light, amber_s=amber_s) for light in lights]
+        truth = replace(truth, signals=tuple(light.truth() for light in lights))
     gaps = []
     for _ in range(rng.integers(0, 3) if dropouts else 0):
         start = rng.uniform(0, 60)
@@ -356,7 +364,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Print the fit on the given recordings (default: the shared Antwerp ones)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     paths = argv or recordings()
-    for fit in fit_switches(paths).values():
+    try:
+        fits = fit_switches(paths)
+    except ValueError as exc:
+        print(f"spat_feed.transport.actuated: {exc}", file=sys.stderr)
+        return 2
+    for fit in fits.values():
         q = ", ".join(f"{x:.2f}" for x in fit.inside_quantiles)
         print(f"{fit.phase}: {fit.n} phases with a bounded first window (median width {fit.median_width_s:.0f} s); "
               f"ended before minEnd: {fit.before_min_n}; after maxEnd: {100 * fit.late_frac:.1f} % (mean overshoot "

@@ -1,0 +1,85 @@
+"""Phase prediction on a recorded controller: what a reading costs the history, what a light's view costs, in one run.
+
+Run: .venv/bin/python bench/bench_predictor.py [LOG ...]   (default: every recording in ../shared/data/spat)
+
+For each recording, the same snapshots in the same process:
+
+* parse: each movement read into a plan (``plan_from_movement``), the receiver's unavoidable work per reading;
+* update: the intersection's history fed with those plans (``IntersectionHistory.record``: durations, links, the
+  cycle and the scores of its methods), per reading per group (target <= 50 us), and its ratio to parsing;
+* view: one light's view with the whole forecast chain over 150 s (``light_view``), p50 / p99;
+* advise: ``advise()`` on an observation of two such lights, p50 / p99 (target p99 <= 0.5 ms).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from advisory.advice.advisor import AdvisorMemory, Observation, advise
+from spat_feed.prediction.observe import IntersectionHistory, PlanReading, light_view
+from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
+from spat_feed.timing.messages import plan_from_movement, to_unix_s
+from spat_feed.transport.recorded import read_spat_csv
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "spat"
+
+
+def spec(n: int, stop_line_m: float) -> IntersectionSpec:
+    return IntersectionSpec(id=n, name=f"light {n}", stop_line_m=stop_line_m, lat_deg=0.0, lon_deg=0.0, approach_heading_deg=0.0,
+                            signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
+
+
+def bench(path: Path, limit: int = 4000) -> None:
+    snapshots = read_spat_csv(path)[:limit]
+    t_parse = t_update = 0.0
+    n_readings = 0
+    views, advice = [], []
+    history = IntersectionHistory()
+    lights = (spec(1, 300.0), spec(2, 600.0))
+    memory = AdvisorMemory()
+    for k, ix in enumerate(snapshots):
+        t = to_unix_s(ix.timestamp)
+        t0 = time.perf_counter()
+        plans = {m.signal_group: plan_from_movement(m, t) for m in ix.states}
+        t1 = time.perf_counter()
+        history.record(t, plans)
+        t2 = time.perf_counter()
+        t_parse += t1 - t0
+        t_update += t2 - t1
+        n_readings += len(plans)
+        if k < 600:  # the first minutes: no history to speak of
+            continue
+        groups = sorted(plans)[:2]
+        readings = [PlanReading(plans[g], cycle=history.stats(g)) for g in groups]
+        a = time.perf_counter()
+        obs_lights = tuple(light_view(spec_, r, 0.0, t, speed_mps=12.0) for spec_, r in zip(lights, readings))
+        b = time.perf_counter()
+        adv, memory = advise(Observation(12.0, 50 / 3.6, obs_lights, position_m=0.0), memory)
+        c = time.perf_counter()
+        views.append((b - a) / len(obs_lights))
+        advice.append(c - b)
+    per_parse, per_update = 1e6 * t_parse / n_readings, 1e6 * t_update / n_readings
+    v, a = 1e3 * np.array(views), 1e3 * np.array(advice)
+    print(f"{path.name}: {len(snapshots)} snapshots, {n_readings} group readings")
+    print(f"   parse {per_parse:.1f} us, history update {per_update:.1f} us per reading per group "
+          f"(ratio {per_update / per_parse:.2f}; target <= 50 us)")
+    print(f"   light_view p50 {np.percentile(v, 50):.3f} ms p99 {np.percentile(v, 99):.3f} ms; "
+          f"advise() p50 {np.percentile(a, 50):.3f} ms p99 {np.percentile(a, 99):.3f} ms (target p99 <= 0.5 ms)")
+
+
+def main(argv: list[str]) -> int:
+    paths = [Path(p) for p in argv] or sorted(SHARED.glob("*.csv.gz"))
+    if not paths:
+        print("bench_predictor: no recordings (../shared/data/spat)")
+        return 0
+    for p in paths:
+        bench(p)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
