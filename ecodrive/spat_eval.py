@@ -1,29 +1,60 @@
-"""`ecodrive spat-eval LOG [--json]`: the advisor on a recorded controller, judged on what really happened.
+"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient]`: the advisor on a recorded controller, judged on
+what really happened.
 
-The log (the ``../shared/data/spat`` CSV format) is replayed through the whole advisory path: its rows become
-J2735 movement states (:func:`spat_feed.transport.recorded.read_spat_csv`), each second's state becomes a plan
-(:func:`spat_feed.timing.messages.plan_from_movement`) and a :class:`~spat_feed.prediction.observe.PlanReading` (fresh while
-the last snapshot is under ``stale_after_s`` old), the advisor's observation comes from
-:func:`spat_feed.prediction.observe.light_view`, and the virtual driver of :func:`advisory.drivers.closed_loop.simulate`
-follows the advice, seeing the light's real colour. The source has watched the log from its start: each
-intersection's :class:`~spat_feed.prediction.observe.IntersectionHistory` (what the advisor knows of the phases after the
-published one: each group's durations, and the changes of other groups its phases follow) holds every snapshot up
-to the reading's. The truth is the log itself: a phase switches midway
+The log (the ``../shared/data/spat`` CSV, or our JSON lines: any format
+:func:`spat_feed.transport.player.read_spat_log` reads) is replayed through the service's own SPaT path, as
+``make antwerp`` feeds it: each snapshot (a J2735 intersection state) is offered to a
+:class:`~spat_feed.transport.store.SpatStore` at its own time on an injected clock (the service's time rules:
+stale after ``stale_after_s`` = 2 s), and whenever the driver asks (each whole second) the advisor's reading of a
+group is the store's ``plan_reading(intersection, group)`` at that instant (its plan, freshness, age and the
+store's own :class:`~spat_feed.prediction.observe.IntersectionHistory`), turned into a view by
+:func:`spat_feed.prediction.observe.light_view`; the virtual driver of :func:`advisory.drivers.closed_loop.simulate`
+follows the advice, seeing the light's real colour. So whatever the store does (partial messages, stale data,
+what it learns), spat-eval measures. The readings come from one pass through one store
+(:func:`replay_store`: a reading at ``t`` depends on the messages up to ``t`` only), every whole second from
+the first snapshot; entries are whole seconds from it. The truth is the log itself: a phase switches midway
 between the last snapshot in it and the first after it; red is every J2735 stop state (unavailable and dark
 are not red: one recording publishes the non-red state of some groups as unavailable). Amber (J2735 clearance)
-is green for the rules and a warning to the driver's eye, who stops at it if that takes at most 4 m/s²; a
-group whose log never shows amber is given :data:`AMBER_S` before each red.
+is green for the rules and a warning to the driver's eye; a group whose log never shows amber is given
+:data:`AMBER_S` before each red.
+
+Drivers (``--driver``, :data:`advisory.drivers.closed_loop.DRIVERS`): ``careful`` (the default) stops for any
+amber it can stop for at 4 m/s² and launches at 1.5 m/s²; ``lenient`` clears an amber it would cross before
+the red and launches at 2 m/s² (this command's driver before issue 31). Both follow the advice with a 1 s
+reaction. The comparison is the same person with and without advice: each approach's regular driver is
+:meth:`DriverModel.regular <advisory.drivers.closed_loop.DriverModel.regular>` of the chosen driver, the
+paper's regular driver with that driver's amber rule and launch rate (a careful regular driver stops for the
+amber too, and is slower off the line). The hindsight DP keeps its own limits (amber is green for it) within
+that regular driver's trip time.
 
 Approaches: each signal group in turn as the one light (entry ``approach_m`` before its stop line, zone end
 ``exit_m`` past it), and pairs of groups in series as a two-light corridor (``spacing_m`` apart), entered at
 the limit at instants spread evenly over the recording. Each is scored against the paper's regular driver
 on the same truth and against a DP that knows the truth (``hindsight``; 20 m stages, see below).
 
-Output keys: ``approaches``, ``red_entries`` (advised crossings while the recorded phase is red),
+Output keys: ``driver``, ``approaches``, ``red_entries`` (advised crossings while the recorded phase is red),
 ``hard_brakes`` (runs that needed more than 4 m/s²), ``saving_frac`` (mean cost saving against the regular
 driver), ``hindsight_saving_frac`` (the DP's), ``kept_frac`` (their ratio), ``worst_cost_frac`` (the
-costliest approach against the regular driver), ``advice_availability_frac`` (share of approach seconds with
-speed advice), ``time_lost_s`` (mean, against the regular driver), and the same per kind (single / pair).
+costliest approach against the regular driver), ``costlier_than_regular_by_10pct`` and its share of the
+approaches ``costlier_than_regular_by_10pct_frac`` (advised cost > 1.1 x the regular driver's on the same
+truth), ``advice_availability_frac`` (share of approach seconds with speed advice), ``time_lost_s`` (mean,
+against the regular driver; each approach's time includes getting back to the limit past the zone end),
+``worst_time_lost_s``, ``time_lost_over_60s`` and ``time_lost_over_60s_all`` (below), the same per kind
+(single / pair) under ``by_kind``, and ``store_verdicts`` (what the store said to each message: ``ok``,
+``duplicate``, ...).
+
+``time_lost_over_60s``: the approaches whose advised car took more than 60 s longer than the regular driver on
+the same truth, counted only where the regular driver did not itself lose the cycle, i.e. where its own delay
+(its time, back at the limit, minus the zone's length at the limit: ``regular_delay_s`` of a row) is at most
+60 s. Where the regular driver itself waited more than a minute (a skipped phase, a red held long), the
+approach is a long wait with or without advice; it counts only in ``time_lost_over_60s_all`` (every approach
+losing more than 60 s against the regular driver).
+
+Measured (``ecodrive spat-eval FILE --json --driver D``, the store keeping each group's latest state; careful /
+lenient): 2019-05-01 saving 16.4 / 16.5 % against hindsight 25.0 / 24.0 % (65 / 69 % kept), 0.6 / 0.3 % of
+approaches above +10 %, 11 / 8 losing > 60 s; 2019-05-17 18.0 / 17.4 % against 27.9 / 26.6 % (64 / 65 %), 1.7 /
+1.9 %, 14 / 20; US 1136 (state only) 14.2 / 13.1 % against 28.9 / 24.4 % (49 / 54 %), 3.3 / 4.2 %, 1 / 3; no red
+entry, no hard brake. Every key: ``docs/ADVISOR.md``.
 
 The hindsight DP is :func:`advisory.drivers.closed_loop.hindsight_optimum`; approaches where it fails are left out
 of the hindsight mean (``hindsight_invalid``). 20 m stages instead of the study's 10 m keep a recording within
@@ -37,6 +68,7 @@ import json
 import math
 import multiprocessing as mp
 import sys
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
@@ -44,19 +76,22 @@ from functools import lru_cache
 import numpy as np
 
 from advisory.advice.advisor import AdvisorParams, LightView, Observation
-from advisory.drivers.closed_loop import DriverModel, hindsight_optimum, red_light_violations, simulate
+from advisory.drivers.closed_loop import DRIVERS, hindsight_optimum, red_light_violations, simulate
 from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import score_in_end_state
 from advisory.optimizer.dp import GridSpec
 from advisory.physics.params import model_params
 from advisory.signals import Scenario, TimelineSignal
 from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
-from spat_feed.timing.messages import MovementState, plan_from_movement, to_unix_s
-from spat_feed.prediction.observe import CycleStats, IntersectionHistory, PlanReading, light_view
+from spat_feed.timing.messages import IntersectionState, MovementState, to_unix_s
+from spat_feed.prediction.observe import PlanReading, light_view
 from spat_feed.timing.plans import STOP_STATES, PhaseClass, phase_class
+from spat_feed.transport.store import DEFAULT_STALE_AFTER_S, SpatStore, TimeRules
 
 HINDSIGHT_GRID = GridSpec(stage_m=20.0)
 HARD_BRAKE_MPS2 = 4.0
+LOST_S = 60.0
+"""An approach losing more than this against the regular driver counts in ``time_lost_over_60s``. [s]"""
 AMBER_S = 3.0
 """Amber before each red of a group whose log never shows one (Belgian urban signals: 3 s at 50 km/h). [s]"""
 
@@ -71,7 +106,8 @@ class Setup:
     exit_m: float = 100.0
     every_s: float = 180.0  # single-light entries this far apart (pairs twice as far)
     horizon_s: float = 240.0  # an approach needs this much recording after its entry
-    stale_after_s: float = 3.0
+    stale_after_s: float = DEFAULT_STALE_AFTER_S  # the store's (the service's ``spat_stale_after_s``)
+    driver: str = "careful"  # the virtual driver (advisory.drivers.closed_loop.DRIVERS); the regular driver is the same person
 
 
 @dataclass
@@ -82,31 +118,15 @@ class GroupLog:
     t_s: np.ndarray
     movements: list[MovementState]
     truth: TimelineSignal  # position 0: placed by the approach
-    plans: list = None  # each snapshot read as a receiver does (plan_from_movement)
-    cycles: list = None  # what the receiver had learnt of the group by then (IntersectionHistory), one per snapshot
-
-    def reading(self, t_s: float, stale_after_s: float) -> PlanReading | None:
-        """What the SPaT source holds at ``t_s``: the latest snapshot, aged, with the history learnt so far."""
-        i = int(np.searchsorted(self.t_s, t_s, side="right")) - 1
-        if i < 0:
-            return None
-        age = t_s - float(self.t_s[i])
-        return PlanReading(self.plans[i], fresh=age <= stale_after_s, age_s=age, cycle=self.cycles[i])
 
 
 def group_logs(snapshots) -> list[GroupLog]:
     """Per (intersection, signal group): its snapshots and the truth (switches midway between snapshots)."""
-    rows: dict[tuple[int, int], list[tuple[float, MovementState, object, CycleStats]]] = {}
-    histories: dict[int, IntersectionHistory] = {}
-    for ix in snapshots:  # read as a receiver does: each message's plans, and what was learnt by then
+    rows: dict[tuple[int, int], list[tuple[float, MovementState]]] = {}
+    for ix in snapshots:
         t = to_unix_s(ix.timestamp)
-        plans = {}
         for m in ix.states:
-            plans.setdefault(m.signal_group, plan_from_movement(m, t))
-        history = histories.setdefault(ix.id, IntersectionHistory())
-        history.record(t, plans)
-        for m in ix.states:
-            rows.setdefault((ix.id, m.signal_group), []).append((t, m, plans[m.signal_group], history.stats(m.signal_group)))
+            rows.setdefault((ix.id, m.signal_group), []).append((t, m))
     out = []
     for key, items in sorted(rows.items()):
         t = np.array([r[0] for r in items])
@@ -129,11 +149,66 @@ def group_logs(snapshots) -> list[GroupLog]:
         if not amber.any():  # a group that never publishes its amber (its non-red state as unavailable): it had one
             ends = [-math.inf] + [b for _, b in reds]
             ambers = tuple((max(a - AMBER_S, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a))
-        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers), [r[2] for r in items], [r[3] for r in items]))
+        out.append(GroupLog(key, t, [r[1] for r in items], TimelineSignal(0.0, tuple(reds), ambers)))
     return out
 
 
+@dataclass
+class StoreReplay:
+    """What the service's :class:`~spat_feed.transport.store.SpatStore` answers, every whole second from ``t0_s``.
+
+    ``readings[key][k]`` is ``store.plan_reading(*key)`` at ``t0_s + k``, every message up to that instant offered
+    at its own time (:func:`replay_store`); ``verdicts`` counts what the store said to each message."""
+
+    t0_s: float
+    rules: TimeRules
+    readings: dict[tuple[int, int], list[PlanReading]]
+    verdicts: Counter
+
+    def reading(self, key: tuple[int, int], t_s: float) -> PlanReading:
+        """The store's reading of ``key`` (intersection, signal group) at ``t_s``, a whole second from ``t0_s``."""
+        k = t_s - self.t0_s
+        i = round(k)
+        seq = self.readings[key]
+        if abs(k - i) > 1e-6 or not 0 <= i < len(seq):
+            raise ValueError(f"spat-eval: no store reading at {t_s:.3f} (whole seconds from {self.t0_s:.3f}, {len(seq)} of them)")
+        return seq[i]
+
+
+def replay_store(snapshots: Sequence[IntersectionState], keys: Sequence[tuple[int, int]], rules: TimeRules, tail_s: float = 600.0) -> StoreReplay:
+    """One pass of the log through a :class:`SpatStore` as the service is fed (``offer`` of each snapshot at its
+    own time on an injected clock), reading ``plan_reading`` of every key at each whole second from the first
+    snapshot to ``tail_s`` after the last (a reading at ``t`` depends on the messages up to ``t`` only)."""
+    stamps = [to_unix_s(ix.timestamp) for ix in snapshots]
+    t0 = stamps[0]
+    now = [t0]
+    store = SpatStore(rules, clock=lambda: now[0])
+    verdicts: Counter = Counter()
+    readings: dict[tuple[int, int], list[PlanReading]] = {key: [] for key in keys}
+    i = 0
+    for k in range(int(math.floor(stamps[-1] - t0 + tail_s)) + 1):
+        t = t0 + k
+        while i < len(snapshots) and stamps[i] <= t:
+            now[0] = stamps[i]  # arrives at its own time (the player maps the recorded clock onto now)
+            verdicts[store.offer(snapshots[i])] += 1
+            i += 1
+        now[0] = t
+        for key in keys:
+            readings[key].append(store.plan_reading(*key))
+    return StoreReplay(t0, rules, readings, verdicts)
+
+
 _LOGS: list[GroupLog] = []
+_REPLAY: StoreReplay | None = None
+
+
+def load(snapshots: Sequence[IntersectionState], stale_after_s: float = DEFAULT_STALE_AFTER_S) -> list[GroupLog]:
+    """Make ``snapshots`` (in time order) the log that :func:`approach` drives through: the truth per group and the
+    store's readings (the service's time rules, ``stale_after_s``); returns the groups."""
+    global _LOGS, _REPLAY
+    _LOGS = group_logs(snapshots)
+    _REPLAY = replay_store(snapshots, [g.key for g in _LOGS], TimeRules(stale_after_s))
+    return _LOGS
 
 
 @lru_cache(maxsize=64)
@@ -145,6 +220,8 @@ def _spec(n: int, position_m: float) -> IntersectionSpec:
 def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     """One approach: groups ``job[0]`` in series entered at Unix time ``job[1]``; None if the truth runs out."""
     groups, entry_s, setup = job
+    if _REPLAY is None or _REPLAY.rules.stale_after_s != setup.stale_after_s:
+        raise RuntimeError("spat-eval: load() the log with the setup's stale_after_s first")
     v_lim = setup.speed_limit_mps
     positions = [setup.approach_m + k * setup.spacing_m for k in range(len(groups))]
     zone_m = positions[-1] + setup.exit_m
@@ -157,13 +234,14 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
         views: list[LightView] = []
         for n, (g, p) in enumerate(zip(groups, positions)):
             if p > x_m and len(views) < 2:
-                reading = _LOGS[g].reading(entry_s + t_s, setup.stale_after_s)
-                views.append(light_view(_spec(n, p), reading, x_m, entry_s + t_s))
+                reading = _REPLAY.reading(_LOGS[g].key, entry_s + t_s)
+                views.append(light_view(_spec(n, p), reading, x_m, entry_s + t_s, speed_mps=v_mps))
         return Observation(v_mps, v_lim, tuple(views), position_m=x_m)
 
     params = model_params()
-    run = simulate(scenario, AdvisorParams(units="kmh"), None, DriverModel(), feed=feed)
-    regular = regular_driver(scenario)
+    driver = DRIVERS[setup.driver]
+    run = simulate(scenario, AdvisorParams(units="kmh"), None, driver, feed=feed)
+    regular = regular_driver(scenario, driver.regular())  # the same person without advice
     reg = score_in_end_state(regular, params, v_lim)
     adv = score_in_end_state(run.trajectory, params, v_lim)
     at_m = np.interp([t for t, _ in run.advice], run.trajectory.t_s, run.trajectory.x_m)
@@ -175,7 +253,10 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
         "red_entry": bool(red_light_violations(run.trajectory, scenario)),
         "hard_brake": bool(run.trajectory.accel_mps2.min() < -HARD_BRAKE_MPS2 - 1e-9),
         "saving_frac": 1.0 - adv.cost_usd / reg.cost_usd,
+        "cost_usd": adv.cost_usd,
+        "regular_cost_usd": reg.cost_usd,
         "time_lost_s": adv.time_s - reg.time_s,
+        "regular_delay_s": reg.time_s - zone_m / v_lim,  # the regular driver's own wait against the zone at the limit
         "advice_s": int(sum(a.target_speed_mps is not None for a in ahead)),
         "approach_s": len(ahead),
         "hindsight_saving_frac": None,
@@ -186,15 +267,20 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     return out
 
 
-def jobs(logs: Sequence[GroupLog], setup: Setup) -> list:
-    """Single groups every ``every_s``, and each group with the next one as a pair every ``2 every_s``."""
+def jobs(logs: Sequence[GroupLog], setup: Setup, anchor_s: float | None = None) -> list:
+    """Single groups every ``every_s``, and each group with the next one as a pair every ``2 every_s``, from 5 s
+    after every group has been heard; each entry a whole number of seconds after ``anchor_s`` (the store
+    replay's first second) when given."""
     t0 = max(float(g.t_s[0]) for g in logs) + 5.0
+    if anchor_s is not None:
+        t0 = anchor_s + math.ceil(t0 - anchor_s - 1e-6)
     t1 = min(float(g.t_s[-1]) for g in logs) - setup.horizon_s
+    snap = (lambda t: t) if anchor_s is None else (lambda t: t0 + round(t - t0))
     out = []
     for n in range(len(logs)):
-        out += [((n,), float(t), setup) for t in np.arange(t0 + n * setup.every_s / len(logs), t1, setup.every_s)]
+        out += [((n,), float(snap(t)), setup) for t in np.arange(t0 + n * setup.every_s / len(logs), t1, setup.every_s)]
     for n in range(len(logs) - 1):
-        out += [((n, n + 1), float(t), setup) for t in np.arange(t0 + n * setup.every_s / len(logs), t1, 2 * setup.every_s)]
+        out += [((n, n + 1), float(snap(t)), setup) for t in np.arange(t0 + n * setup.every_s / len(logs), t1, 2 * setup.every_s)]
     return out
 
 
@@ -216,19 +302,26 @@ def summarize(rows: list[dict]) -> dict:
         "hindsight_invalid": len(rows) - len(hind),
         "worst_cost_frac": float(max(-r["saving_frac"] for r in rows)),
         "costlier_than_regular_by_10pct": int(sum(r["saving_frac"] < -0.10 for r in rows)),
+        "costlier_than_regular_by_10pct_frac": float(sum(r["saving_frac"] < -0.10 for r in rows) / len(rows)),
         "advice_availability_frac": float(sum(r["advice_s"] for r in rows) / max(sum(r["approach_s"] for r in rows), 1)),
         "time_lost_s": float(np.mean([r["time_lost_s"] for r in rows])),
         "worst_time_lost_s": float(max(r["time_lost_s"] for r in rows)),
+        "time_lost_over_60s": int(sum(r["time_lost_s"] > LOST_S and r["regular_delay_s"] <= LOST_S for r in rows)),
+        "time_lost_over_60s_all": int(sum(r["time_lost_s"] > LOST_S for r in rows)),
     }
 
 
 def _read_head(path: str, limit_s: float) -> list:
-    """The snapshots of the log's first ``limit_s`` seconds, reading no further."""
+    """The snapshots of the log's first ``limit_s`` seconds (a CSV is read no further; JSON lines whole)."""
     import csv
     import gzip
 
+    from spat_feed.transport.player import read_spat_log
     from spat_feed.transport.recorded import iter_spat_csv
 
+    if not str(path).lower().removesuffix(".gz").endswith(".csv"):
+        states = read_spat_log(path)
+        return [ix for ix in states if (ix.timestamp - states[0].timestamp).total_seconds() <= limit_s]
     out = []
     with (gzip.open(path, "rt", encoding="utf-8", newline="") if str(path).endswith(".gz") else open(path, encoding="utf-8", newline="")) as fh:
         for ix in iter_spat_csv(csv.DictReader(fh), source=str(path)):
@@ -238,17 +331,20 @@ def _read_head(path: str, limit_s: float) -> list:
     return sorted(out, key=lambda ix: ix.timestamp)
 
 
-def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_s: float | None = None, progress: bool = True) -> dict:
-    """Replay the log at ``path`` (optionally only its first ``limit_s`` seconds); the summary and its rows."""
+def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_s: float | None = None, progress: bool = True,
+                 rows_out: list | None = None) -> dict:  # fmt: skip
+    """Replay the log at ``path`` (any format :func:`spat_feed.transport.player.read_spat_log` reads; optionally
+    only its first ``limit_s`` seconds); the summary (and the rows, appended to ``rows_out`` if given)."""
     from tqdm import tqdm
 
-    from spat_feed.transport.recorded import read_spat_csv
+    from spat_feed.transport.player import read_spat_log
 
-    global _LOGS
     setup = setup or Setup()
-    snapshots = read_spat_csv(path) if limit_s is None else _read_head(path, limit_s)
-    _LOGS = group_logs(snapshots)
-    todo = jobs(_LOGS, setup)
+    if setup.driver not in DRIVERS:
+        raise ValueError(f"unknown driver {setup.driver!r} (one of {', '.join(DRIVERS)})")
+    snapshots = read_spat_log(path) if limit_s is None else _read_head(path, limit_s)
+    load(snapshots, setup.stale_after_s)
+    todo = jobs(_LOGS, setup, _REPLAY.t0_s)
     bar = dict(total=len(todo), desc=f"spat-eval {path.rsplit('/', 1)[-1]}", disable=not progress, file=sys.stderr)
     if workers > 1:
         with mp.get_context("fork").Pool(workers) as pool:
@@ -256,16 +352,21 @@ def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_
     else:
         rows = [approach(j) for j in tqdm(todo, **bar)]
     rows = [r for r in rows if r is not None]
-    out = {"log": path, **summarize(rows)}
+    if rows_out is not None:
+        rows_out.extend(rows)
+    out = {"log": path, "driver": setup.driver, **summarize(rows)}
     out["by_kind"] = {k: summarize([r for r in rows if r["kind"] == k]) for k in ("single", "pair")}
+    out["store_verdicts"] = dict(_REPLAY.verdicts)
     out["setup"] = {k: getattr(setup, k) for k in Setup.__slots__}
     return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="ecodrive spat-eval", description=__doc__.split("\n\n")[0])
-    ap.add_argument("logs", nargs="+", metavar="LOG", help="recorded SPaT CSV (.csv or .csv.gz), the shared format")
+    ap.add_argument("logs", nargs="+", metavar="LOG", help="recorded SPaT: the shared CSV (.csv[.gz]) or our JSON lines (.jsonl[.gz])")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
+    ap.add_argument("--driver", choices=sorted(DRIVERS), default=Setup().driver,
+                    help="the virtual driver, and the regular driver it is judged against (default %(default)s)")  # fmt: skip
     ap.add_argument("--every-s", type=float, default=Setup().every_s, help="seconds between single-light entries (default %(default)s)")
     ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
     ap.add_argument("--workers", type=int, default=2)
@@ -275,7 +376,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = []
     for path in args.logs:
         try:
-            results.append(evaluate_log(path, Setup(every_s=args.every_s), args.workers, args.limit_s, progress=True))
+            results.append(evaluate_log(path, Setup(every_s=args.every_s, driver=args.driver), args.workers, args.limit_s, progress=True))
         except (OSError, RecordedLogError) as exc:
             print(f"ecodrive spat-eval: {exc}", file=sys.stderr)
             return 2
@@ -283,10 +384,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(json.dumps(results[0] if len(results) == 1 else results, indent=2))
         return 0
     for r in results:
-        print(f"{r['log']}: {r['approaches']} approaches; red entries {r['red_entries']}, hard brakes {r['hard_brakes']}; "
+        print(f"{r['log']} ({r['driver']} driver): {r['approaches']} approaches; red entries {r['red_entries']}, hard brakes {r['hard_brakes']}; "
               f"saving {100 * r['saving_frac']:.1f} % vs hindsight DP {100 * r['hindsight_saving_frac']:.1f} % "
               f"(kept {100 * (r['kept_frac'] or 0):.0f} %); worst {100 * r['worst_cost_frac']:+.1f} % cost; "
-              f"speed advice {100 * r['advice_availability_frac']:.0f} % of approach seconds; time lost {r['time_lost_s']:+.1f} s")
+              f"speed advice {100 * r['advice_availability_frac']:.0f} % of approach seconds; time lost {r['time_lost_s']:+.1f} s; "
+              f"> +10 % cost {100 * r['costlier_than_regular_by_10pct_frac']:.1f} %; > 60 s lost {r['time_lost_over_60s']}")
     return 0
 
 

@@ -8,12 +8,16 @@ import numpy as np
 import pytest
 
 import ecodrive.spat_eval as spat_eval
-from advisory.drivers.closed_loop import red_light_violations
-from advisory.drivers.regular import regular_driver
-from advisory.signals import Scenario
+from advisory.advice.advisor import LightView, Observation
+from advisory.drivers.closed_loop import DRIVERS, red_light_violations, simulate
+from advisory.drivers.regular import DriverParams, regular_driver
+from advisory.signals import Scenario, TimelineSignal
 from ecodrive.cli import main as cli
+from ecodrive.spat_eval import Setup
 from spat_feed.timing.messages import to_unix_s
 from spat_feed.timing.plans import STOP_STATES
+from spat_feed.transport.player import JsonlRecorder
+from spat_feed.transport.store import SpatStore, TimeRules
 
 from tests.conftest import SHARED_DATA
 from tests.conftest import SPAT_RECORDINGS as RECORDINGS
@@ -66,7 +70,7 @@ def test_spat_eval_on_a_slice_of_a_real_recording(recording, head, monkeypatch):
 
 
 def test_the_regular_driver_and_the_hindsight_dp_never_cross_a_recorded_red(head):
-    spat_eval._LOGS = spat_eval.group_logs(head)
+    spat_eval.load(head)
     setup = spat_eval.Setup()
     t0 = to_unix_s(head[0].timestamp) + 5.0
     for g in range(len(spat_eval._LOGS)):
@@ -98,8 +102,99 @@ def test_recorded_approaches_that_crossed_a_red_no_longer_do():
     1558113872.65, a crawling car committed to go, the controller held the red 4 s longer and the silent advisor let
     it roll on (now the driver's last call stops it); groups 1 and 3 at 1558117672.65, a car creeping at 0.15 m/s
     committed to a green its display put before its arrival, and crept over the line (now it waits at the line)."""
-    spat_eval._LOGS = spat_eval.group_logs(spat_eval._read_head(str(MAY_17), 5400.0))
+    spat_eval.load(spat_eval._read_head(str(MAY_17), 5400.0))
     keys = [log.key[1] for log in spat_eval._LOGS]
     for groups, entry in (((12,), 1558113872.65), ((1, 3), 1558117672.65)):
         row = spat_eval.approach((tuple(keys.index(g) for g in groups), entry, spat_eval.Setup()))
         assert row is not None and not row["red_entry"] and not row["hard_brake"], (groups, entry)
+
+
+def _amber_at_35m() -> tuple[Scenario, float]:
+    """A light 200 m ahead whose 3 s amber begins as a car at 50 km/h is 35 m from it: it clears the line 0.5 s
+    before the red at the limit, and stops for it at 2.8 m/s²."""
+    v = 50 / 3.6
+    onset = (200.0 - 35.0) / v
+    light = TimelineSignal(200.0, ((onset + 3.0, onset + 33.0),), ((onset, onset + 3.0),))
+    return Scenario("amber", (light,), 300.0, v, v), onset
+
+
+def test_the_careful_driver_stops_at_an_amber_it_can_stop_for_where_the_lenient_one_goes():
+    """Both drivers see the amber with no advice ("No signal data."); so does the same person without advice."""
+    sc, onset = _amber_at_35m()
+    light = sc.signals[0]
+
+    def feed(t_s, x_m, v_mps):
+        return Observation(v_mps, sc.speed_limit_mps, (LightView(1, light.position_m - x_m, fresh=False),), position_m=x_m)
+
+    crossings = {}
+    for name, driver in DRIVERS.items():
+        run = simulate(sc, driver=driver, feed=feed)
+        assert red_light_violations(run.trajectory, sc) == []
+        crossings[name] = run.trajectory.crossing_time_s(light.position_m), regular_driver(sc, driver.regular()).crossing_time_s(light.position_m)
+    assert all(onset < t < onset + 3.0 for t in crossings["lenient"])  # through in the amber
+    assert all(t >= onset + 33.0 for t in crossings["careful"])  # waited for the green
+    assert DRIVERS["careful"].regular().accel_mps2 == 1.5 and DRIVERS["lenient"].regular() == DriverParams()
+    assert Setup().driver == "careful"
+
+
+FAST_S = 600.0  # a short slice of each recording: seconds, not minutes
+
+
+@pytest.fixture(scope="module", params=RECORDINGS, ids=lambda p: p.name)
+def short(request):
+    return request.param, spat_eval._read_head(str(request.param), FAST_S)
+
+
+def test_spat_eval_reads_what_the_store_answers(short):
+    """At every second the driver may ask, spat-eval's reading of each group is the service's SpatStore's, fed the
+    same messages at their own time (a store of its own here, rebuilt for each instant)."""
+    _, snaps = short
+    logs = spat_eval.load(snaps)
+    replay = spat_eval._REPLAY
+    stamps = np.array([to_unix_s(ix.timestamp) for ix in snaps])
+    for t in replay.t0_s + np.arange(0.0, FAST_S + 10.0, 37.0):
+        now = [0.0]
+        store = SpatStore(TimeRules(spat_eval.Setup().stale_after_s), clock=lambda: now[0])
+        for ix, stamp in zip(snaps, stamps):
+            if stamp <= t:
+                now[0] = stamp
+                store.offer(ix)
+        now[0] = t
+        for log in logs:
+            assert replay.reading(log.key, float(t)) == store.plan_reading(*log.key), (log.key, t)
+    with pytest.raises(ValueError):
+        replay.reading(logs[0].key, replay.t0_s + 0.5)  # only whole seconds were replayed
+
+
+def test_the_new_keys_count_the_rows(short, monkeypatch):
+    path, snaps = short
+    monkeypatch.setattr(spat_eval, "_read_head", lambda p, limit_s: snaps)
+    for driver in DRIVERS:
+        rows: list[dict] = []
+        out = spat_eval.evaluate_log(str(path), Setup(every_s=60.0, driver=driver), workers=1, limit_s=FAST_S, progress=False, rows_out=rows)
+        assert out["driver"] == driver and out["setup"]["driver"] == driver and out["approaches"] == len(rows) > 0
+        assert out["costlier_than_regular_by_10pct_frac"] == sum(r["cost_usd"] > 1.1 * r["regular_cost_usd"] for r in rows) / len(rows)
+        assert out["costlier_than_regular_by_10pct"] == round(out["costlier_than_regular_by_10pct_frac"] * len(rows))
+        assert all(r["regular_delay_s"] >= -1e-6 for r in rows)  # its time (back at the limit) past the zone at the limit
+        lost = [r for r in rows if r["time_lost_s"] > 60.0]
+        assert out["time_lost_over_60s_all"] == len(lost)
+        assert out["time_lost_over_60s"] == len([r for r in lost if r["regular_delay_s"] <= 60.0]) <= len(lost)
+        assert sum(out["by_kind"][k]["time_lost_over_60s"] for k in ("single", "pair")) == out["time_lost_over_60s"]
+        assert out["store_verdicts"].get("ok", 0) > 0
+
+
+def test_spat_eval_reads_our_json_lines_logs_as_the_csv(short, tmp_path, monkeypatch):
+    """The same slice as JSON lines (as JsonlRecorder writes it) gives the same numbers as the CSV."""
+    path, snaps = short
+    snaps = snaps[: len(snaps) // 2]
+    jsonl = tmp_path / "slice.jsonl"
+    recorder = JsonlRecorder(jsonl)
+    for ix in snaps:
+        recorder(ix)
+    recorder.close()
+    setup = Setup(every_s=60.0)
+    from_jsonl = spat_eval.evaluate_log(str(jsonl), setup, workers=1, progress=False)
+    monkeypatch.setattr(spat_eval, "_read_head", lambda p, limit_s: snaps)
+    from_csv = spat_eval.evaluate_log(str(path), setup, workers=1, limit_s=FAST_S, progress=False)
+    assert from_jsonl["approaches"] > 0
+    assert {k: v for k, v in from_jsonl.items() if k != "log"} == {k: v for k, v in from_csv.items() if k != "log"}

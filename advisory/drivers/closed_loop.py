@@ -11,6 +11,12 @@ rate, or harder if that no longer stops it at the line, only until its line is b
 ahead." alone: no speeding up towards it; advice that asks nothing new, such as "Signal data delayed.": it goes on
 with what it was told);
 ``overrides`` counts the times the driver's own braking was needed although the advice did not say "stop".
+
+Two named drivers (:data:`DRIVERS`), the same but on amber and at launch: :data:`LENIENT` clears an amber it
+reaches before the red (the regular driver's rule) and speeds up at the regular driver's 2 m/s² when no speed
+is advised; :data:`CAREFUL` stops for any amber it can stop for at the regular driver's hardest braking
+(4 m/s²) and launches at 1.5 m/s². Both follow the advice with a 1 s reaction. :meth:`DriverModel.regular` is
+the same person without advice (the regular driver with its amber rule and launch), the fair baseline.
 """
 
 from __future__ import annotations
@@ -42,6 +48,20 @@ class DriverModel:
     coast_floor_frac: float = 0.7  # a coasting car keeps slowing past its target: plan with this share of it [-]
     last_call_decel_mps2: float = 3.0  # a car that went on towards a red still red where stopping takes this: it stops
     seed: int = 0
+    amber: str = "clear"  # "clear": stops for an amber only if it would not clear the line before the red; "stop": for any it can stop for
+    launch_accel_mps2: float | None = None  # speeding up with no speed advised (from a stop, back to the limit); None: the regular driver's
+
+    def regular(self) -> DriverParams:
+        """The regular driver this person is without advice: the paper's, with this driver's amber rule and launch."""
+        base = DriverParams()
+        return replace(base, amber=self.amber, accel_mps2=base.accel_mps2 if self.launch_accel_mps2 is None else self.launch_accel_mps2)
+
+
+LENIENT = DriverModel()
+"""Clears an amber it reaches before the red, launches at the regular driver's 2 m/s² (spat-eval's driver until issue 31)."""
+CAREFUL = DriverModel(amber="stop", launch_accel_mps2=1.5)
+"""Stops for any amber it can stop for at 4 m/s², launches at 1.5 m/s², otherwise follows the advice with a 1 s reaction."""
+DRIVERS = {"lenient": LENIENT, "careful": CAREFUL}
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,7 +126,7 @@ def simulate(
     driver stops if it can (up to ``emergency_decel_mps2``), else goes on (a red entry, counted by the checks)."""
     advisor = advisor or AdvisorParams()
     driver = driver or DriverModel()
-    rules = DriverParams()
+    rules = driver.regular()  # the regular driver's look-ahead, hardest braking, launch and amber rule
     rng = np.random.default_rng(driver.seed)
     v_lim = scenario.speed_limit_mps
     decision_m = rules.decision_distance_m(v_lim)
@@ -191,8 +211,9 @@ def simulate(
             amber = dist <= heeded_m and bool(getattr(light, "is_amber", lambda _: False)(t))
             red_at = light.next_red_start_s(t) if amber else None
             if amber and amber_seen.get(n) != red_at:  # the regular driver's amber rule, wherever it is seen: stop if it
-                amber_seen[n] = red_at  # would not clear the line before the red and can stop at its hardest braking
-                if t + dist / max(v, 0.5) > red_at and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+                amber_seen[n] = red_at  # would not clear the line before the red (any amber: careful) and can stop at its hardest braking
+                late = rules.amber == "stop" or t + dist / max(v, 0.5) > red_at
+                if late and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
                     committed.discard(n)
                     amber_stop.add(n)
                     surprises += 1

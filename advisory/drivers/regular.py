@@ -27,6 +27,8 @@ For a :class:`~advisory.signals.TimelineSignal` (an actuated or a recorded light
 evaluation, not to a driver) the driver decides on what it sees (:meth:`_Sim.handle_seen`): red at the
 decision point, stop and go at green; otherwise go, and at an amber's onset stop if the car would not clear
 the line before the red and can stop at ``brake_max_mps2``, else go on (crossing in amber is legal).
+``DriverParams(amber="stop")`` is a more careful person: it stops for any amber it can stop for at
+``brake_max_mps2``, whether or not it would clear the line before the red.
 """
 
 from __future__ import annotations
@@ -49,6 +51,11 @@ class DriverParams:
     brake_max_mps2: float = 4.0
     look_ahead_m: float = 75.0
     stop_gap_m: float = 1.0
+    amber: str = "clear"  # "clear": stop for an amber only if the line is not cleared before the red; "stop": for any amber it can stop for
+
+    def __post_init__(self) -> None:
+        if self.amber not in ("clear", "stop"):
+            raise ValueError(f"amber must be 'clear' or 'stop', not {self.amber!r}")
 
     def decision_distance_m(self, speed_limit_mps: float) -> float:
         """Distance before a stop line at which the driver decides. [m]"""
@@ -127,7 +134,8 @@ class _Sim:
     def handle_seen(self, light: TimelineSignal) -> None:
         """A light whose future the driver cannot know (actuated, recorded): it sees the colour. Red at the
         decision point: stop, go at green. Otherwise go, unless an amber shows before the car is over the line
-        and, at its onset, the car would not clear the line before the red and can stop at ``brake_max_mps2``."""
+        and, at its onset, the car would not clear the line before the red (any amber for ``amber="stop"``) and
+        can stop at ``brake_max_mps2``."""
         if bool(light.is_red(self.t)):
             return self.stop_until(light, light.next_green_start_s(self.t))
         a = self.dr.accel_mps2
@@ -139,8 +147,9 @@ class _Sim:
         v_on = min(self.v + a * (onset - self.t), self.v_max)
         red_at = light.next_red_start_s(onset)
         room = light.position_m - self.dr.stop_gap_m - x_on
-        if onset + time_to_cover_s(light.position_m - x_on, v_on, a, self.v_max) <= red_at or v_on**2 > 2.0 * self.dr.brake_max_mps2 * max(room, 0.0):
-            return  # clears the line in the amber, or cannot stop for it: go
+        clears = self.dr.amber == "clear" and onset + time_to_cover_s(light.position_m - x_on, v_on, a, self.v_max) <= red_at
+        if clears or v_on**2 > 2.0 * self.dr.brake_max_mps2 * max(room, 0.0):
+            return  # clears the line in the amber (a careful driver does not count on it), or cannot stop for it: go
         self.go_until(x_on)
         self.stop_until(light, light.next_green_start_s(red_at))
 
