@@ -15,7 +15,7 @@ LATENCY_BUCKETS_S = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25,
 
 class SpatCollector:
     """SPaT per intersection and per source, read from the hub at each scrape (nothing on the hot path):
-    ``ecodrive_spat_age_seconds``, ``ecodrive_spat_fresh`` (1 when ok), ``ecodrive_spat_messages_total``
+    ``ecodrive_spat_age_seconds``, ``ecodrive_spat_fresh`` (1 when ok), ``ecodrive_spat_clock_offset_seconds``, ``ecodrive_spat_messages_total``
     (``rate()`` gives messages/s), ``ecodrive_spat_rejected_total`` by reason, and per source
     ``ecodrive_spat_source_connected`` and ``ecodrive_spat_source_reconnects_total``."""
 
@@ -31,12 +31,14 @@ class SpatCollector:
         fresh = GaugeMetricFamily("ecodrive_spat_fresh", "1 when the intersection's SPaT is fresh (status ok)", labels=["intersection", "status"])
         messages = CounterMetricFamily("ecodrive_spat_messages", "SPaT states accepted", labels=["intersection"])
         rejected = CounterMetricFamily("ecodrive_spat_rejected", "SPaT states rejected, by reason", labels=["intersection", "reason"])
+        offset = GaugeMetricFamily("ecodrive_spat_clock_offset_seconds", "arrival - controller timestamp (its floor; clock_skew beyond the tolerance)", labels=["intersection"])
         readings = store.readings()
         for ident in sorted(set(hub.needed) | set(store.stats)):
             label = str(ident)
             r = readings.get(ident)
             if r is not None:
                 age.add_metric([label], r.age_s)
+                offset.add_metric([label], r.clock_offset_s)
             status = store.status(ident)
             fresh.add_metric([label, status], 1.0 if status == "ok" else 0.0)
             st = store.stats.get(ident)
@@ -51,7 +53,7 @@ class SpatCollector:
             connected.add_metric([source["kind"]], 1.0 if source["connected"] else 0.0)
             if "reconnects" in source:
                 reconnects.add_metric([source["kind"]], source["reconnects"])
-        yield from (age, fresh, messages, rejected, connected, reconnects)
+        yield from (age, fresh, offset, messages, rejected, connected, reconnects)
 
 
 class Metrics:

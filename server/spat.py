@@ -141,7 +141,8 @@ class SpatHub:
         intersections = []
         for ident in self.needed:
             r = self.store.reading(ident)
-            intersections.append({"id": ident, "status": self.store.status(ident), "age_s": None if r is None else round(r.age_s, 3)})
+            intersections.append({"id": ident, "status": self.store.status(ident), "age_s": None if r is None else round(r.age_s, 3),
+                                  "clock_offset_s": None if r is None else round(r.clock_offset_s, 3)})
         ok = all(s["connected"] for s in sources) and all(i["status"] == "ok" for i in intersections)
         return {"status": "ok" if ok else "degraded", "source": self.description, "sources": sources, "intersections": intersections}
 

@@ -21,9 +21,13 @@ Time rules (:class:`TimeRules`), judged on the controller's own timestamp:
 * **age** = now - the older of timestamp and arrival, per group; older than ``stale_after_s`` (default 2 s):
   ``stale``, the group alone when the others of its intersection are heard.
 * **clock offset** = arrival - timestamp, its floor (the smallest over ``skew_window_s``, which strips the
-  network delay): beyond ``clock_tolerance_s`` either way the controller's clock is off ours, its windows
-  would put advice seconds into a red: ``clock_skew`` (one clock per intersection: every group), never served
-  as fresh.
+  network delay), the offset readings correct by. A controller clock off ours by more than ``clock_tolerance_s``,
+  its windows would put advice seconds into a red: ``clock_skew`` (one clock per intersection: every group), never
+  served as fresh, as soon as every offset of the last ``skew_detect_s`` is beyond it (a clock behind; within 5 s
+  of the step, whatever the long window still holds) or a message was dated that far ahead (``clock_ahead``).
+  Until then, and within the tolerance, readings carry ``clock_uncertainty_s`` = the largest offset of the last
+  ``skew_detect_s`` minus the one corrected by: every red window widened by it both ways, so a clock that has just
+  moved never shifts a window into a red.
 
 Statuses: ``ok``, ``stale``, ``clock_skew``, ``no_spat`` (never heard). Only ``ok`` is fresh.
 """
@@ -60,9 +64,10 @@ class TimeRules:
     stale_after_s: float = DEFAULT_STALE_AFTER_S
     clock_tolerance_s: float = 1.0
     skew_window_s: float = 30.0
+    skew_detect_s: float = 4.0  # a steady offset beyond the tolerance for this long is clock_skew (flagged within 5 s)
 
     def __post_init__(self) -> None:
-        if not (self.stale_after_s > 0 and self.clock_tolerance_s > 0 and self.skew_window_s > 0):
+        if not (self.stale_after_s > 0 and self.clock_tolerance_s > 0 and self.skew_window_s > 0 and 0 < self.skew_detect_s <= self.skew_window_s):
             raise ValueError(f"time rules must be > 0: {self}")
 
 
@@ -80,6 +85,7 @@ class SpatReading:
     fresh: bool
     status: str = "ok"
     clock_offset_s: float = 0.0
+    clock_uncertainty_s: float = 0.0  # how far the offset may be off (a clock that has just moved; network jitter)
 
     def plan(self, signal_group: int) -> UncertainPlan | None:
         """The signal group's plan on the Unix axis (see :func:`spat_feed.timing.messages.plan_from_movement`)."""
@@ -122,7 +128,8 @@ class _Entry:
     timestamp and arrival of the message that carried it), its clock offsets, and what its signal groups have been
     seen to do (:class:`~spat_feed.prediction.observe.IntersectionHistory`)."""
 
-    __slots__ = ("state", "stamp", "received", "heard_unix_s", "groups", "offsets", "ahead_unix_s", "history")
+    __slots__ = ("state", "stamp", "received", "heard_unix_s", "groups", "offsets", "recent_low", "recent_high", "offset",
+                 "uncertainty", "skewed", "ahead_unix_s", "ahead_offset", "history")
 
     def __init__(self) -> None:
         self.state: IntersectionState | None = None  # the latest message (the newest timestamp)
@@ -130,7 +137,12 @@ class _Entry:
         self.heard_unix_s = float("-inf")  # arrival of the last message stored (for some group)
         self.groups: dict[int, _Group] = {}  # signal group -> its latest state
         self.offsets: deque[tuple[float, float]] = deque()  # (arrival, arrival - timestamp), offsets increasing
+        self.recent_low: deque[tuple[float, float]] = deque()  # the same over skew_detect_s
+        self.recent_high: deque[tuple[float, float]] = deque()  # offsets decreasing, over skew_detect_s
+        self.offset = self.uncertainty = 0.0  # the offset readings are corrected by, how far it may be off [s]
+        self.skewed = False  # every offset of the last skew_detect_s beyond the tolerance
         self.ahead_unix_s = float("-inf")  # arrival of the last message rejected as clock_ahead
+        self.ahead_offset = 0.0  # its arrival - timestamp (< -clock_tolerance_s)
         self.history = IntersectionHistory()
 
 
@@ -192,7 +204,7 @@ class SpatStore:
             if entry is None:
                 entry = self._entries[ident] = _Entry()
             if stamp > received + self.rules.clock_tolerance_s:
-                entry.ahead_unix_s = received
+                entry.ahead_unix_s, entry.ahead_offset = received, received - stamp
                 verdict = "clock_ahead"
             else:
                 groups, plans, seen = entry.groups, {}, False
@@ -222,12 +234,7 @@ class SpatStore:
                     entry.history.record(stamp, plans)  # each group's phases (its own readings), the links between groups
             if verdict == "ok":
                 entry.heard_unix_s = received
-                offsets, offset = entry.offsets, received - stamp  # a monotonic deque: its head is the window's floor
-                while offsets and offsets[-1][1] >= offset:
-                    offsets.pop()
-                offsets.append((received, offset))
-                while offsets[0][0] < received - self.rules.skew_window_s:
-                    offsets.popleft()
+                self._clock_offset(entry, received, received - stamp)
         if verdict != "ok":
             return self.reject(verdict, ident)
         self.stats.setdefault(ident, IntersectionStats()).messages += 1
@@ -239,13 +246,31 @@ class SpatStore:
         """Offer each state; returns how many were stored."""
         return sum(self.offer(s, received_unix_s) == "ok" for s in states)
 
+    def _clock_offset(self, entry: _Entry, received: float, offset: float) -> None:
+        """Update the intersection's clock offset with one accepted message's (monotonic deques: heads are the floors
+        of ``skew_window_s`` and ``skew_detect_s``, the top of the latter)."""
+        rules = self.rules
+        for dq, horizon, sign in ((entry.offsets, rules.skew_window_s, 1.0), (entry.recent_low, rules.skew_detect_s, 1.0),
+                                  (entry.recent_high, rules.skew_detect_s, -1.0)):  # fmt: skip
+            while dq and sign * dq[-1][1] >= sign * offset:
+                dq.pop()
+            dq.append((received, offset))
+            while dq[0][0] < received - horizon:
+                dq.popleft()
+        floor, recent, top = entry.offsets[0][1], entry.recent_low[0][1], entry.recent_high[0][1]
+        entry.skewed = recent > rules.clock_tolerance_s or floor < -rules.clock_tolerance_s
+        entry.offset = recent if recent > rules.clock_tolerance_s else floor
+        entry.uncertainty = max(0.0, top - entry.offset)
+
     # reading ------------------------------------------------------------------------------------
 
     def _status(self, entry: _Entry, stamp: float, received: float, now: float) -> tuple[float, str, float]:
         """(age, status, clock offset) of a state of ``entry`` stamped ``stamp``, arrived at ``received``."""
         age = data_age_s(stamp, received, now)
-        offset = entry.offsets[0][1] if entry.offsets else 0.0
-        if abs(offset) > self.rules.clock_tolerance_s or entry.ahead_unix_s > entry.heard_unix_s:
+        if entry.ahead_unix_s > entry.heard_unix_s:
+            return age, "clock_skew", entry.ahead_offset
+        offset = entry.offset
+        if entry.skewed:
             return age, "clock_skew", offset
         return age, ("ok" if age <= self.rules.stale_after_s else "stale"), offset
 
@@ -265,7 +290,7 @@ class SpatStore:
                         if k not in carried and data_age_s(g.stamp, g.received, now) <= self.rules.stale_after_s]  # fmt: skip
                 if held:
                     state = state.model_copy(update={"states": [*state.states, *held]})
-            return SpatReading(state, entry.stamp, entry.received, age, status == "ok", status, offset)
+            return SpatReading(state, entry.stamp, entry.received, age, status == "ok", status, offset, entry.uncertainty)
 
     def _plan(self, entry: _Entry | None, signal_group: int) -> tuple[UncertainPlan | None, SpatReading | None]:
         if entry is None or entry.state is None:
@@ -273,9 +298,9 @@ class SpatStore:
         held, now = entry.groups.get(signal_group), self.clock()
         if held is None:  # a group the intersection never published: no plan, the intersection's reading
             age, status, offset = self._status(entry, entry.stamp, entry.received, now)
-            return None, SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset)
+            return None, SpatReading(entry.state, entry.stamp, entry.received, age, status == "ok", status, offset, entry.uncertainty)
         age, status, offset = self._status(entry, held.stamp, held.received, now)
-        return held.plan, SpatReading(held.state, held.stamp, held.received, age, status == "ok", status, offset)
+        return held.plan, SpatReading(held.state, held.stamp, held.received, age, status == "ok", status, offset, entry.uncertainty)
 
     def plan(self, intersection_id: int, signal_group: int) -> tuple[UncertainPlan | None, SpatReading | None]:
         """The signal group's latest plan (parsed once) and its reading: the message that carried it, its age and
@@ -286,14 +311,16 @@ class SpatStore:
     def plan_reading(self, intersection_id: int, signal_group: int) -> PlanReading:
         """What the advisor's observation needs of one light (:class:`~spat_feed.prediction.observe.PlanReading`): the plan,
         freshness and age (the group's own), what the group has been seen to do (bounds the phases after the published
-        one), and the controller's clock offset (within the tolerance; beyond it the reading is not fresh anyway)."""
+        one), and the controller's clock offset (within the tolerance; beyond it the reading is not fresh anyway) with
+        how far it may be off (red windows widened by it)."""
         with self._lock:
             entry = self._entries.get(intersection_id)
             plan, reading = self._plan(entry, signal_group)
             if reading is None:
                 return PlanReading(None, fresh=False, age_s=float("inf"))
             cycle = entry.history.stats(signal_group)
-        return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s)
+        return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s,
+                           clock_uncertainty_s=reading.clock_uncertainty_s)
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:
         r = self.reading(intersection_id)

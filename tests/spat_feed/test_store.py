@@ -341,3 +341,49 @@ def test_a_real_recording_through_the_store_keeps_every_steady_group_planned(k64
                 missing[g] = missing.get(g, 0) + 1
         t += 1
     assert missing == {}
+
+
+def _covered(true_windows, served_windows, tol=0.1):
+    """Every true red instant lies in some served window (windows relative to the same instant), up to ``tol`` (the
+    least network delay: the offset's floor cannot tell it from the clock's)."""
+    for a, b in true_windows:
+        pieces = sorted((max(a, c), min(b, d)) for c, d in served_windows if min(b, d) > max(a, c))
+        t = a
+        for c, d in pieces:
+            if c > t + tol:
+                return False
+            t = max(t, d)
+        if t < min(b, 1e9) - tol:
+            return False
+    return True
+
+
+@pytest.mark.parametrize("step_s", [1.5, -1.5])
+def test_a_controller_clock_that_moves_1p5_s_is_flagged_within_5_s_never_shifted_into_a_red(step_s):
+    """Issue 30: a clock that steps 1.5 s behind (or ahead) after 40 s right: clock_skew within 5 s, whatever the 30 s
+    window still holds; until then every fresh reading's red windows cover the light's true reds (10 Hz)."""
+    corridor = load_corridor("paper_s200")
+    ix, sg = corridor.intersections[0], corridor.intersections[0].signal_groups[0].id
+    clock = Clock(T0)
+    store = SpatStore(TimeRules(stale_after_s=2.0, clock_tolerance_s=1.0, skew_window_s=30.0), clock)
+    sim = IntersectionSimulator([corridor])
+    flagged_at, fresh_checked, held_behind = None, 0, 0.0
+    for k in range(700):  # 70 s at 10 Hz, each message 20-80 ms on the way; the clock moves at 40 s
+        t = T0 + k / 10
+        behind = step_s if t >= T0 + 40.0 else 0.0
+        clock.t = t + 0.02 + 0.06 * ((k * 7) % 10) / 10
+        if store.offer(sim.states_at(t - behind)[0]) == "ok":  # (a clock stepping back: out_of_order for 1.5 s)
+            held_behind = behind
+        reading = store.plan_reading(1, sg)
+        if t >= T0 + 40.0 and flagged_at is None and store.status(1) == "clock_skew":
+            flagged_at = t - (T0 + 40.0)
+        if reading.fresh:
+            served = light_view(ix, reading, 0.0, clock.t)
+            truth = light_view(ix, type(reading)(reading.plan, clock_offset_s=-held_behind), 0.0, clock.t)  # read on its own clock
+            assert _covered(truth.red_windows_s, served.red_windows_s), (k, truth.red_windows_s, served.red_windows_s)
+            fresh_checked += 1
+    assert flagged_at is not None and flagged_at <= 5.0, flagged_at
+    assert fresh_checked >= 400
+    assert store.status(1) == "clock_skew" and not store.plan_reading(1, sg).fresh
+    health = store.reading(1)
+    assert health.status == "clock_skew" and health.clock_offset_s == pytest.approx(step_s, abs=0.1)
