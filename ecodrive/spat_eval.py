@@ -52,8 +52,8 @@ losing more than 60 s against the regular driver).
 
 Measured (``ecodrive spat-eval FILE --json --driver D``, the store keeping each group's latest state; careful /
 lenient): 2019-05-01 saving 16.4 / 16.5 % against hindsight 25.0 / 24.0 % (65 / 69 % kept), 0.6 / 0.3 % of
-approaches above +10 %, 11 / 8 losing > 60 s; 2019-05-17 18.0 / 17.4 % against 27.9 / 26.6 % (64 / 65 %), 1.7 /
-1.9 %, 14 / 20; US 1136 (state only) 14.2 / 13.1 % against 28.9 / 24.4 % (49 / 54 %), 3.3 / 4.2 %, 1 / 3; no red
+approaches above +10 %, 11 / 8 losing > 60 s; 2019-05-17 18.0 / 17.4 % against 27.9 / 26.6 % (64 / 66 %), 1.5 /
+1.8 %, 14 / 20; US 1136 (state only) 15.3 / 14.3 % against 28.9 / 24.4 % (53 / 58 %), 1.9 / 3.3 %, 2 / 3; no red
 entry, no hard brake. Every key: ``docs/ADVISOR.md``.
 
 The hindsight DP is :func:`advisory.drivers.closed_loop.hindsight_optimum`; approaches where it fails are left out
