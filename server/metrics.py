@@ -45,8 +45,10 @@ class SpatCollector:
             messages.add_metric([label], st.messages if st else 0)
             for reason, n in (st.rejected.items() if st else ()):
                 rejected.add_metric([label, reason], n)
-        if "malformed" in store.rejected:
-            rejected.add_metric(["", "malformed"], store.rejected["malformed"])
+        for reason in ("malformed", "too_large"):  # those not told to an intersection (malformed: never)
+            n = store.rejected[reason] - sum(st.rejected[reason] for st in list(store.stats.values()))
+            if n:
+                rejected.add_metric(["", reason], n)
         connected = GaugeMetricFamily("ecodrive_spat_source_connected", "1 when the SPaT source is connected (or playing)", labels=["kind"])
         reconnects = CounterMetricFamily("ecodrive_spat_source_reconnects", "reconnections of the SPaT source", labels=["kind"])
         for source in hub.sources():

@@ -73,7 +73,7 @@ class SpatHub:
             else None
         )
         self.mqtt = MqttSubscriber(settings.spat_mqtt_url, self.store, self.needed or None) if settings.spat_mqtt_url else None
-        self.player = LogPlayer(read_spat_log(settings.spat_log), clock(), settings.spat_log_speedup, settings.spat_log_loop) if settings.spat_log else None
+        self.player = LogPlayer(read_spat_log(settings.spat_log, lambda where: self.store.reject("too_large", None, where)), clock(), settings.spat_log_speedup, settings.spat_log_loop) if settings.spat_log else None
         self.recorder = JsonlRecorder(settings.spat_record) if settings.spat_record else None
         if self.recorder is not None:
             self.store.observers.append(self.recorder)

@@ -28,7 +28,7 @@ import websockets
 from websockets.asyncio.client import connect
 
 from spat_feed.timing.messages import IntersectionState, ParsedSpat, parse_spat_text
-from spat_feed.transport.store import DEFAULT_STALE_AFTER_S, Clock, SpatReading, SpatStore, TimeRules
+from spat_feed.transport.store import DEFAULT_STALE_AFTER_S, MAX_SPAT_BYTES, Clock, SpatReading, SpatStore, TimeRules
 
 log = logging.getLogger("spat_feed.transport.client")
 
@@ -163,6 +163,10 @@ class SpatClient:
     def handle_text(self, text: str | bytes) -> ParsedSpat:
         """Validate one received text and store its good intersections (public for tests)."""
         self.stats.messages += 1
+        if len(text) > MAX_SPAT_BYTES:  # never parsed (the WebSocket's max_size closes the stream before, 1009)
+            self.stats.rejected += 1
+            self.store.reject("too_large", None, f"{len(text)} bytes")
+            return ParsedSpat(None, (), (f"too large: {len(text)} > {MAX_SPAT_BYTES} bytes",))
         parsed = parse_spat_text(text)
         for err in parsed.errors:
             self.stats.rejected += 1
@@ -179,7 +183,7 @@ class SpatClient:
         attempt = 0
         while True:
             try:
-                async with connect(self.url, open_timeout=self._open_timeout_s, max_size=2**20, compression=None) as ws:
+                async with connect(self.url, open_timeout=self._open_timeout_s, max_size=MAX_SPAT_BYTES, compression=None) as ws:
                     self.connected = True
                     self.stats.connects += 1
                     log.info("connected to %s", self.url)
@@ -189,6 +193,13 @@ class SpatClient:
                             attempt = 0
             except asyncio.CancelledError:
                 raise
+            except websockets.exceptions.ConnectionClosed as exc:
+                if exc.sent is not None and exc.sent.code == 1009:  # we closed it: a message over max_size, unread
+                    self.stats.rejected += 1
+                    self.store.reject("too_large", None, self.url)
+                    log.warning("feed %s sent a message over %d bytes: dropped, reconnecting", self.url, MAX_SPAT_BYTES)
+                else:
+                    log.info("feed %s closed: %r", self.url, exc)
             except (OSError, asyncio.TimeoutError, websockets.exceptions.WebSocketException) as exc:
                 log.info("feed %s unavailable: %r", self.url, exc)
             except Exception:  # keep reconnecting whatever went wrong, but say what it was
@@ -202,8 +213,14 @@ class SpatClient:
 
 
 def fetch_spat(base_url: str, params: dict[str, Any] | None = None, timeout_s: float = 5.0) -> ParsedSpat:
-    """One ``GET /spat`` snapshot, validated like a streamed message. Raises ``httpx.HTTPError`` on failure."""
+    """One ``GET /spat`` snapshot, validated like a streamed message (a body over ``MAX_SPAT_BYTES``: not read further,
+    one ``too large`` error). Raises ``httpx.HTTPError`` on failure."""
     url = base_url.rstrip("/") + "/spat"
-    response = httpx.get(url, params={k: v for k, v in (params or {}).items() if v is not None}, timeout=timeout_s)
-    response.raise_for_status()
-    return parse_spat_text(response.content)
+    with httpx.stream("GET", url, params={k: v for k, v in (params or {}).items() if v is not None}, timeout=timeout_s) as response:
+        response.raise_for_status()
+        body = bytearray()
+        for chunk in response.iter_bytes():
+            body += chunk
+            if len(body) > MAX_SPAT_BYTES:
+                return ParsedSpat(None, (), (f"too large: over {MAX_SPAT_BYTES} bytes",))
+    return parse_spat_text(bytes(body))

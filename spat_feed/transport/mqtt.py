@@ -12,7 +12,8 @@ Cities publish live traffic-light data over MQTT (Hamburg's SensorThings/MQTT se
 URL: ``mqtt://[user:password@]host[:port][/prefix]`` (port 1883 by default).
 
 :class:`MqttSubscriber` runs paho's network thread (reconnecting with backoff by itself) and offers every
-state to a :class:`~spat_feed.transport.store.SpatStore`, which is thread-safe; malformed payloads are counted there.
+state to a :class:`~spat_feed.transport.store.SpatStore`, which is thread-safe; malformed payloads are counted there,
+and payloads over ``MAX_SPAT_BYTES`` are dropped unparsed (``too_large``).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import paho.mqtt.client as paho
 from pydantic import ValidationError
 
 from spat_feed.timing.messages import IntersectionState, SpatMessage
-from spat_feed.transport.store import SpatStore
+from spat_feed.transport.store import MAX_SPAT_BYTES, SpatStore
 
 log = logging.getLogger("spat_feed.transport.mqtt")
 
@@ -152,9 +153,10 @@ class MqttSubscriber(_Connection):
     """Subscribes to ``<prefix>/<id>`` for each intersection in ``intersection_ids`` (all: ``<prefix>/+``)
     and offers every state received to ``store``."""
 
-    def __init__(self, url: str, store: SpatStore, intersection_ids: tuple[int, ...] | None = None) -> None:
+    def __init__(self, url: str, store: SpatStore, intersection_ids: tuple[int, ...] | None = None, max_bytes: int = MAX_SPAT_BYTES) -> None:
         super().__init__(url, "ecodrive-sub")
         self.store = store
+        self.max_bytes = max_bytes
         self.topics = [self.target.topic(i) for i in intersection_ids] if intersection_ids else [self.target.topic("+")]
         self.messages = 0
         self.client.on_message = self._on_message
@@ -165,6 +167,10 @@ class MqttSubscriber(_Connection):
     def _on_message(self, client, userdata, msg) -> None:
         self.messages += 1
         received = self.store.clock()
+        if len(msg.payload) > self.max_bytes:  # never parsed: a flood of large payloads costs a length check each
+            ident = msg.topic.rpartition("/")[2]
+            self.store.reject("too_large", int(ident) if ident.isdigit() else None, f"{msg.topic}: {len(msg.payload)} bytes")
+            return
         try:
             states = parse_payload(msg.payload)
         except ValueError as exc:

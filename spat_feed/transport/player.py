@@ -21,14 +21,14 @@ from __future__ import annotations
 import gzip
 import io
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from datetime import datetime
 from pathlib import Path
 
 from pydantic import ValidationError
 
 from spat_feed.timing.messages import UNKNOWN_MAX_END_S, IntersectionState, MovementEvent, SpatMessage, from_unix_s, to_unix_s
-from spat_feed.transport.recorded import RecordedLogError, read_spat_csv
+from spat_feed.transport.recorded import RecordedLogError, bounded_lines, read_spat_csv
 
 _TIME_FIELDS = ("start_time", "min_end_time", "max_end_time", "likely_time", "next_time")
 
@@ -39,15 +39,16 @@ def _open(path: Path, mode: str = "rt") -> io.TextIOBase:
     return path.open(mode[0], encoding="utf-8")
 
 
-def read_jsonl(path: str | Path) -> list[IntersectionState]:
-    """Every intersection state of a JSON-lines SPaT log (messages or single states), in time order.
+def read_jsonl(path: str | Path, too_large: Callable[[str], None] | None = None) -> list[IntersectionState]:
+    """Every intersection state of a JSON-lines SPaT log (messages or single states), in time order; a line over
+    ``MAX_LINE_CHARS`` is skipped unparsed (``too_large`` told where, default a WARNING).
 
     Raises :class:`~spat_feed.transport.recorded.RecordedLogError` naming the file and line of a bad record.
     """
     path = Path(path)
     out: list[IntersectionState] = []
     with _open(path) as fh:
-        for line_no, line in enumerate(fh, start=1):
+        for line_no, line in enumerate(bounded_lines(fh, str(path), too_large), start=1):
             if not line.strip():
                 continue
             try:
@@ -62,16 +63,17 @@ def read_jsonl(path: str | Path) -> list[IntersectionState]:
     return out
 
 
-def read_spat_log(path: str | Path) -> list[IntersectionState]:
-    """A recorded log by its suffix: ``.csv[.gz]`` (shared recordings) or ``.jsonl[.gz]`` (ours)."""
+def read_spat_log(path: str | Path, too_large: Callable[[str], None] | None = None) -> list[IntersectionState]:
+    """A recorded log by its suffix: ``.csv[.gz]`` (shared recordings) or ``.jsonl[.gz]`` (ours); lines over
+    ``MAX_LINE_CHARS`` skipped unread, ``too_large`` told where."""
     path = Path(path)
     if not path.is_file():
         raise RecordedLogError(f"{path}: no such file")
     name = path.name.lower().removesuffix(".gz")
     if name.endswith(".csv"):
-        return read_spat_csv(path)
+        return read_spat_csv(path, too_large=too_large)
     if name.endswith((".jsonl", ".ndjson", ".json")):
-        return read_jsonl(path)
+        return read_jsonl(path, too_large)
     raise RecordedLogError(f"{path}: unknown log format (expected .csv, .csv.gz, .jsonl or .jsonl.gz)")
 
 

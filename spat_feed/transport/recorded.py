@@ -21,8 +21,9 @@ from __future__ import annotations
 import csv
 import gzip
 import io
+import logging
 import re
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from datetime import datetime
 from pathlib import Path
 
@@ -36,6 +37,26 @@ CSV_COLUMNS = ("generated_utc", "intersection", "signal_group", "phase", "min_en
 
 class RecordedLogError(ValueError):
     """A log that cannot be read; the message names the file and the line."""
+
+
+MAX_LINE_CHARS = 256 * 1024
+"""A log line longer than this (``spat_feed.transport.store.MAX_SPAT_BYTES``) is skipped unread, never parsed."""
+
+
+def bounded_lines(fh: io.TextIOBase, source: str, too_large: Callable[[str], None] | None = None, limit: int = MAX_LINE_CHARS) -> Iterator[str]:
+    """The lines of ``fh``; one over ``limit`` characters is read in pieces and dropped (``"\\n"`` in its place, so that
+    line numbers hold), ``too_large`` called with where it was (default: a WARNING)."""
+    line_no = 0
+    while line := fh.readline(limit + 1):
+        line_no += 1
+        if len(line.rstrip("\r\n")) <= limit:
+            yield line
+            continue
+        while not line.endswith("\n") and (line := fh.readline(65536)):
+            pass  # the rest of it, piece by piece
+        where = f"{source}, line {line_no}: over {limit} characters, skipped"
+        (too_large or logging.getLogger("spat_feed.transport.recorded").warning)(where)
+        yield "\n"
 
 
 def default_intersection_id(name: str) -> int:
@@ -123,19 +144,20 @@ def _snapshot(lines: list[tuple[int, list[str]]], ids: Mapping[str, int] | None,
         raise RecordedLogError(f"{source}, line {first_line}: {exc}") from exc
 
 
-def read_spat_csv(path: str | Path, intersection_ids: Mapping[str, int] | None = None) -> list[IntersectionState]:
-    """Every snapshot of a recorded SPaT CSV (``.csv`` or ``.csv.gz``), in time order.
+def read_spat_csv(path: str | Path, intersection_ids: Mapping[str, int] | None = None, too_large: Callable[[str], None] | None = None) -> list[IntersectionState]:
+    """Every snapshot of a recorded SPaT CSV (``.csv`` or ``.csv.gz``), in time order; a line over ``MAX_LINE_CHARS`` is
+    skipped unread (``too_large`` told where).
 
     Raises :class:`RecordedLogError` (naming the file and line) on a malformed file.
     """
     path = Path(path)
     with _open_text(path) as fh:
-        reader = csv.reader(fh)
+        reader = csv.reader(bounded_lines(fh, str(path), too_large))
         header = [h.strip() for h in next(reader, [])]
         absent = [c for c in CSV_COLUMNS if c not in header]
         if absent:
             raise RecordedLogError(f"{path}, line 1: missing column(s) {', '.join(absent)}; expected {', '.join(CSV_COLUMNS)}")
         index = [header.index(c) for c in CSV_COLUMNS]
-        snapshots = list(_snapshots(([row[i] if i < len(row) else "" for i in index] for row in reader), intersection_ids, str(path)))
+        snapshots = list(_snapshots(([row[i] if i < len(row) else "" for i in index] for row in reader if row), intersection_ids, str(path)))
     snapshots.sort(key=lambda ix: ix.timestamp)  # stable: file order within a timestamp
     return snapshots

@@ -16,7 +16,7 @@ Time rules (:class:`TimeRules`), judged on the controller's own timestamp:
 * **rejected** (counted per reason, never stored), judged per signal group: a message is stored for the groups it
   has newer news of (one older than the latest message too), else rejected as ``duplicate`` (the timestamp of
   some group's state held) or ``out_of_order`` (older than every group's state held); ``malformed`` (not our
-  schema), ``clock_ahead`` (dated more than ``clock_tolerance_s`` after its arrival: it would look fresher than it
+  schema), ``too_large`` (over ``MAX_SPAT_BYTES``, dropped before parsing), ``clock_ahead`` (dated more than ``clock_tolerance_s`` after its arrival: it would look fresher than it
   is), ``unknown_intersection`` (a store told which intersections to keep, ``only=``).
 * **age** = now - the older of timestamp and arrival, per group; older than ``stale_after_s`` (default 2 s):
   ``stale``, the group alone when the others of its intersection are heard.
@@ -51,7 +51,12 @@ Clock = Callable[[], float]
 """Returns Unix seconds. ``time.time`` by default; tests pass their own."""
 
 DEFAULT_STALE_AFTER_S = 2.0
-REJECT_REASONS = ("malformed", "duplicate", "out_of_order", "clock_ahead", "unknown_intersection")
+MAX_SPAT_BYTES = 256 * 1024
+"""The largest SPaT text any source hands the parser (an MQTT payload, a feed's WebSocket message or HTTP body, a
+log line); larger ones are dropped unparsed, rejected ``too_large``. Our JSON of K648's largest recorded state (10
+signal groups) is 1.75 KB, ~175 B a movement: a J2735 intersection at its maximum of 255 movements is ~45 KB, and a
+whole J2735 SpatMessage (at most 32 intersections) of K648-sized ones ~56 KB. [bytes]"""
+REJECT_REASONS = ("malformed", "too_large", "duplicate", "out_of_order", "clock_ahead", "unknown_intersection")
 STATUSES = ("ok", "stale", "clock_skew", "no_spat")
 
 log = logging.getLogger("spat_feed.transport.store")

@@ -232,3 +232,66 @@ def _unix(text: str) -> float:
     from datetime import datetime
 
     return datetime.fromisoformat(text.replace("Z", "+00:00")).timestamp()
+
+
+def _p99(values: list[float]) -> float:
+    values = sorted(values)
+    return values[min(len(values) - 1, int(0.99 * len(values)))]
+
+
+def test_8_mb_payloads_once_a_second_are_dropped_unparsed_and_never_slow_the_service(start_proc, tmp_path, broker):
+    """Issue 30: a source flooding 8 MB payloads once a second (over MAX_SPAT_BYTES: rejected ``too_large``, never
+    parsed) while the service answers ``/health``: its p99 within 2x of quiet, quiet and flood windows alternated in
+    the same run (the machine's other load falls on both)."""
+    import threading
+
+    svc = start_proc(Proc(["-m", "server", "--log-level", "warning", "--no-access-log"], tmp_path / "service.log", {
+        "ECO_CORRIDORS": "paper_s200", "ECO_CORRIDOR_DIR": str(LIVE_DIR), "ECO_DEFAULT_CORRIDOR": "antwerp_k648",
+        "ECO_SPAT_MQTT_URL": broker.url, "ECO_TABLES": "false", "ECO_SPEECH": "false", "ECO_METRICS_ACCESS": "public"}))  # fmt: skip
+    until("the service subscribed", lambda: httpx.get(svc.base_url + "/health").json()["spat_health"]["sources"][-1]["connected"])
+    pub = MqttPublisher(broker.url)
+    pub.start()
+    assert pub.wait_connected(WAIT_S)
+    import json
+
+    one = json.loads(read_spat_log(recorded_spat_slice(tmp_path, 2))[0].model_dump_json(by_alias=True, exclude_none=True))
+    movement = json.dumps(one["states"][0]).encode()  # a real movement, repeated to 8 MiB: costly to parse
+    n = 8 * 2**20 // (len(movement) + 2)
+    one["states"] = []
+    head = json.dumps(one).encode()[:-2]  # ... "states": [
+    big = head + b", ".join([movement] * n) + b"]}"  # parsing it held the GIL ~0.5 s
+    assert len(big) > 7 * 2**20
+    flooding, stop, sent = threading.Event(), threading.Event(), [0]
+
+    def flood() -> None:
+        while not stop.is_set():
+            if flooding.is_set():
+                pub.client.publish(pub.target.topic(648), big, qos=0)
+                sent[0] += 1
+            stop.wait(1.0)
+
+    flooder = threading.Thread(target=flood, daemon=True)
+    flooder.start()
+    quiet, loud = [], []
+    try:
+        with httpx.Client(base_url=svc.base_url, timeout=10.0) as client:
+            for _ in range(5):  # rounds of 2.5 s quiet, 2.5 s flooding (the first payload at once)
+                for on, bucket in ((False, quiet), (True, loud)):
+                    (flooding.set if on else flooding.clear)()
+                    end = time.monotonic() + 2.5
+                    while time.monotonic() < end:
+                        t = time.perf_counter()
+                        assert client.get("/health").status_code == 200
+                        bucket.append(time.perf_counter() - t)
+                        time.sleep(0.005)
+            flooding.clear()
+            counted = until("the payloads counted too_large",
+                            lambda: (n := metric(client.get("/metrics").text, "ecodrive_spat_rejected_total", reason="too_large")) >= sent[0] - 1 and n)
+    finally:
+        stop.set()
+        flooder.join(5)
+        pub.stop()
+    assert sent[0] >= 10 and counted >= sent[0] - 1
+    ratio = _p99(loud) / _p99(quiet)
+    print(f"/health p99 quiet {_p99(quiet) * 1e3:.2f} ms ({len(quiet)}), flooding {_p99(loud) * 1e3:.2f} ms ({len(loud)}): x{ratio:.2f}; {sent[0]} x 8 MiB")
+    assert ratio <= 2.0

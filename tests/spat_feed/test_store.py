@@ -387,3 +387,55 @@ def test_a_controller_clock_that_moves_1p5_s_is_flagged_within_5_s_never_shifted
     assert store.status(1) == "clock_skew" and not store.plan_reading(1, sg).fresh
     health = store.reading(1)
     assert health.status == "clock_skew" and health.clock_offset_s == pytest.approx(step_s, abs=0.1)
+
+
+def test_spat_texts_over_the_limit_are_dropped_unparsed_and_counted(tmp_path):
+    """Issue 30: log lines (JSON lines and CSV) and feed texts over MAX_SPAT_BYTES are skipped unread, ``too_large``."""
+    from spat_feed.transport.client import SpatClient
+    from spat_feed.transport.store import MAX_SPAT_BYTES
+
+    good = states(T0)[0].model_dump_json(by_alias=True)
+    huge = "{" + " " * (3 * MAX_SPAT_BYTES) + "}"
+    path = tmp_path / "log.jsonl"
+    path.write_text(f"{good}\n{huge}\n{states(T0 + 1)[0].model_dump_json(by_alias=True)}\n")
+    told: list[str] = []
+    assert len(read_spat_log(path, told.append)) == 2 and len(told) == 1 and "line 2" in told[0]
+    csv_path = tmp_path / "log.csv"
+    csv_path.write_text("generated_utc,intersection,signal_group,phase,min_end_utc,max_end_utc\n"
+                        "2019-05-01T16:04:25.609Z,K648,1,6,2019-05-01T16:04:38.009Z,2019-05-01T16:07:13.009Z\n"
+                        f"2019-05-01T16:04:26.609Z,K648,1,6,{'x' * (MAX_SPAT_BYTES + 5)},2019-05-01T16:07:13.009Z\n"
+                        "2019-05-01T16:04:27.609Z,K648,1,6,2019-05-01T16:04:38.009Z,2019-05-01T16:07:13.009Z\n")  # fmt: skip
+    told.clear()
+    assert len(read_spat_log(csv_path, told.append)) == 2 and "line 3" in told[0]
+    store = SpatStore(clock=Clock(T0))
+    client = SpatClient("http://127.0.0.1:9", store=store)
+    parsed = client.handle_text('{"timestamp": "2026-01-01T00:00:00Z", "intersections": [' + " " * MAX_SPAT_BYTES + "]}")
+    assert not parsed.intersections and "too large" in parsed.errors[0]
+    assert store.rejected["too_large"] == 1 and store.rejected["malformed"] == 0
+
+
+def test_a_feed_websocket_message_over_the_limit_is_dropped_unread_and_counted():
+    import asyncio
+
+    from websockets.asyncio.server import serve
+
+    from spat_feed.transport.client import SpatClient
+    from spat_feed.transport.store import MAX_SPAT_BYTES
+
+    async def main() -> SpatStore:
+        async def handler(ws):
+            await ws.send("x" * (MAX_SPAT_BYTES + 1))
+            await asyncio.sleep(1.0)
+
+        async with serve(handler, "127.0.0.1", 0) as server:
+            port = server.sockets[0].getsockname()[1]
+            store = SpatStore()
+            async with SpatClient(f"ws://127.0.0.1:{port}/spat/stream", store=store, backoff_initial_s=5.0, backoff_max_s=5.0):
+                for _ in range(100):
+                    if store.rejected["too_large"]:
+                        break
+                    await asyncio.sleep(0.05)
+        return store
+
+    store = asyncio.run(main())
+    assert store.rejected["too_large"] == 1 and store.rejected["malformed"] == 0
