@@ -105,8 +105,13 @@ def count_stops(v_mps) -> int:
     return stops
 
 
-def _frac(new: float, old: float) -> float:
-    return float(new / old - 1.0) if old > 0 else float("nan")
+def _frac(new: float, old: float) -> float | None:
+    """``new / old - 1``; None where there is nothing to compare (no such cars: every car connected, say)."""
+    return float(new / old - 1.0) if old > 0 else None
+
+
+def _neg(x: float | None) -> float | None:
+    return None if x is None else -x
 
 
 def paired_summary(results: dict, network, params) -> dict:
@@ -129,10 +134,10 @@ def paired_summary(results: dict, network, params) -> dict:
     out = {"advised_cars": len(conn), "cars": len(common)}
     out["red_entries"] = int(total("advised", conn, "red_entries"))
     out["hard_brakes"] = int(sum(scores["advised"][vid].hard_brake for vid in conn))
-    out["saving_frac"] = -_frac(total("advised", conn, "cost_usd"), total("unadvised", conn, "cost_usd"))
-    out["glosa_saving_frac"] = -_frac(total("glosa", conn, "cost_usd"), total("unadvised", conn, "cost_usd"))
-    out["energy_saving_frac"] = -_frac(total("advised", conn, "energy_kwh"), total("unadvised", conn, "energy_kwh"))
-    out["glosa_energy_saving_frac"] = -_frac(total("glosa", conn, "energy_kwh"), total("unadvised", conn, "energy_kwh"))
+    out["saving_frac"] = _neg(_frac(total("advised", conn, "cost_usd"), total("unadvised", conn, "cost_usd")))
+    out["glosa_saving_frac"] = _neg(_frac(total("glosa", conn, "cost_usd"), total("unadvised", conn, "cost_usd")))
+    out["energy_saving_frac"] = _neg(_frac(total("advised", conn, "energy_kwh"), total("unadvised", conn, "energy_kwh")))
+    out["glosa_energy_saving_frac"] = _neg(_frac(total("glosa", conn, "energy_kwh"), total("unadvised", conn, "energy_kwh")))
     n = max(len(conn), 1)
     out["stops_per_advised_car"] = total("advised", conn, "stops") / n
     out["stops_per_glosa_car"] = total("glosa", conn, "stops") / n
@@ -143,7 +148,12 @@ def paired_summary(results: dict, network, params) -> dict:
     out["others_energy_change_frac"] = _frac(total("advised", others, "energy_kwh"), total("unadvised", others, "energy_kwh"))
     out["glosa_others_time_change_frac"] = _frac(total("glosa", others, "time_s"), total("unadvised", others, "time_s"))
     out["glosa_others_energy_change_frac"] = _frac(total("glosa", others, "energy_kwh"), total("unadvised", others, "energy_kwh"))
-    for mode in ("glosa", "unadvised"):
+    if "blind" in results:  # the same service with queue-blind advice
+        out["blind_saving_frac"] = _neg(_frac(total("blind", conn, "cost_usd"), total("unadvised", conn, "cost_usd")))
+        out["stops_per_blind_car"] = total("blind", conn, "stops") / n
+        out["blind_time_change_frac"] = _frac(total("blind", conn, "time_s"), total("unadvised", conn, "time_s"))
+        out["blind_others_time_change_frac"] = _frac(total("blind", others, "time_s"), total("unadvised", others, "time_s"))
+    for mode in [m for m in ("blind", "glosa", "unadvised") if m in results]:
         out[f"{mode}_red_entries"] = int(total(mode, conn, "red_entries"))
         out[f"{mode}_hard_brakes"] = int(sum(scores[mode][vid].hard_brake for vid in conn))
     for mode, r in results.items():  # SUMO's collisions (bumpers overlapping; the pairs), never a teleport (--collision.action warn)
@@ -159,7 +169,7 @@ def paired_summary(results: dict, network, params) -> dict:
 
 def evaluate(corridor: str, plan: str | None = None, control: str = "fixed", demand_vph_per_lane: float = 600.0, penetration_frac: float = 0.5,
              seed: int = 1, duration_s: float = 900.0, lanes: int = 1, cross_demand_vph: float | None = None, vehicle: str = "paper_54kwh",
-             modes: Sequence[str] = ("advised", "glosa", "unadvised")) -> dict:  # fmt: skip
+             queue_aware: bool = True, blind: bool = False) -> dict:  # fmt: skip
     """One scenario run three ways (see the module docstring): the summary."""
     from ecodrive.traffic.network import build_network
     from ecodrive.traffic.sim import RunSetup, run
@@ -169,12 +179,14 @@ def evaluate(corridor: str, plan: str | None = None, control: str = "fixed", dem
     c = load_corridor(corridor)
     if cross_demand_vph is None:
         cross_demand_vph = 300.0 if control == "actuated" else 0.0
-    setup = RunSetup(demand_vph_per_lane, penetration_frac, seed, duration_s, cross_demand_vph=cross_demand_vph)
+    setup = RunSetup(demand_vph_per_lane, penetration_frac, seed, duration_s, cross_demand_vph=cross_demand_vph, queue_aware=queue_aware)
+    modes = ("advised", "blind", "glosa", "unadvised") if blind else ("advised", "glosa", "unadvised")
     with tempfile.TemporaryDirectory(prefix="ecodrive-traffic-") as tmp:
         network = build_network(c, tmp, plan, control, lanes)
         results = {mode: run(network, setup, mode, tmp) for mode in modes}
     out = paired_summary(results, network, model_params(vehicle))
     out["setup"] = {"corridor": c.name, "plan": plan, "control": control, "lanes": lanes, "vehicle": vehicle, **asdict(setup)}
+    out["queue_held_fixes"] = results["advised"].queue_held
     out["wall_s"] = round(time.perf_counter() - started, 2)
     return out
 
@@ -191,6 +203,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--lanes", type=int, default=1)
     ap.add_argument("--cross-demand", type=float, default=None, help="each cross street, each way [veh/h] (default: 300 actuated, 0 fixed)")
     ap.add_argument("--vehicle", default="paper_54kwh", help="EV model preset for the scores (default %(default)s)")
+    ap.add_argument("--queue-blind", action="store_true", help="the advised run without queue-aware advice (the advisor alone)")
+    ap.add_argument("--compare-blind", action="store_true", help="a fourth run, queue-blind advice, reported as blind_* keys")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if not 0.0 <= args.penetration <= 1.0:
@@ -198,20 +212,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.demand < 0:
         ap.error("--demand must be >= 0")
     try:
-        out = evaluate(args.corridor, args.plan, args.control, args.demand, args.penetration, args.seed, args.duration, args.lanes, args.cross_demand, args.vehicle)
+        out = evaluate(args.corridor, args.plan, args.control, args.demand, args.penetration, args.seed, args.duration, args.lanes, args.cross_demand,
+                       args.vehicle, not args.queue_blind, args.compare_blind)  # fmt: skip
     except (OSError, KeyError, ValueError, RuntimeError) as exc:
         print(f"ecodrive traffic-eval: {exc}", file=sys.stderr)
         return 2
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
-    pct = lambda x: f"{100 * x:+.1f} %"  # noqa: E731
+    pct = lambda x: "n/a" if x is None else f"{100 * x:+.1f} %"  # noqa: E731
     print(f"{out['setup']['corridor']} ({args.control}), {args.demand:g} veh/h/lane, {100 * args.penetration:g} % connected, seed {args.seed}: "
           f"{out['advised_cars']} advised cars of {out['cars']}")  # fmt: skip
     print(f"  saving: ecodrive {pct(out['saving_frac'])}, GLOSA {pct(out['glosa_saving_frac'])} (cost against the same cars unadvised)")
     print(f"  stops per car: ecodrive {out['stops_per_advised_car']:.2f}, GLOSA {out['stops_per_glosa_car']:.2f}, unadvised {out['stops_per_unadvised_car']:.2f}")
     print(f"  time: advised cars {pct(out['time_change_frac'])}, the others {pct(out['others_time_change_frac'])} (energy {pct(out['others_energy_change_frac'])})")
     print(f"  red entries {out['red_entries']}, hard brakes {out['hard_brakes']} (advised cars)")
+    if "blind_saving_frac" in out:
+        print(f"  queue-blind advice: saving {pct(out['blind_saving_frac'])}, stops per car {out['stops_per_blind_car']:.2f}, time {pct(out['blind_time_change_frac'])}, "
+              f"the others {pct(out['blind_others_time_change_frac'])}")  # fmt: skip
     return 0
 
 

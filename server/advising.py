@@ -31,6 +31,7 @@ from spat_feed.transport.scenarios import FeedScenario, Uncertainty, resolve_tim
 from server.config import Settings
 from server.errors import ApiError
 from server.gps import Fix, RouteMatcher
+from server.queue import QUEUE_MESSAGE, QueueBoard
 from spat_feed.prediction.observe import observation
 from server.ratelimit import TokenBucket
 from server.schemas import MS_TIMESTAMP_MIN, TripCreate
@@ -51,6 +52,7 @@ SERVER_PHRASES = {
     "no_speed": "Waiting for speed.",
     "no_fix": "No position yet.",
     "clock_skew": "Signal clock out of sync. Drive normally.",
+    "queue": QUEUE_MESSAGE,
 }
 """Wording for the pauses the service decides itself (the advisor words its own)."""
 
@@ -77,6 +79,8 @@ class Engine:
         self.limits = Limits(settings)
         self.trips = make_store(settings, self.limits, self.trip_from_meta, self._release, clock)
         self._params = {units: replace(self.params, units=ADVISOR_UNITS[units]) for units in ADVISOR_UNITS}
+        self.queue = QueueBoard(arrivals_vph=settings.queue_arrivals_vph, connected_share=settings.queue_connected_share) if settings.queue_aware else None
+        """Queue-aware advice (server.queue): every trip's fix a probe of its corridor's traffic; None: off."""
         self.on_advice: Callable[[Trip, Advice, str, float], None] | None = None  # metrics hooks
         self.on_ignored_fix: Callable[[str], None] | None = None
 
@@ -235,9 +239,15 @@ class Engine:
             if trip.observed is not None and readings:
                 trip.observed.add(fix.t_unix_s, readings)
             obs = observation(trip.corridor, m.station_m, speed or 0.0, fix.t_unix_s, readings, trip.corridor.advisory_limit_mps(m.station_m, s.speed_limit_mps), on_route=on_route)
+            held = None
+            if self.queue is not None:  # the lights as the car meets them in traffic, or "follow the car in front"
+                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, trip.last["reason"] if trip.last else None)
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
-            advice, memory = advise(obs, trip.memory, trip.params, trip.tables)
+            fresh = self.queue is not None and trip.last is not None and self.queue.fresh(trip.last["reason"])  # out of a queue: plan anew
+            advice, memory = (held, trip.memory) if held is not None else advise(obs, None if fresh else trip.memory, trip.params, trip.tables)
+            if self.queue is not None and held is None:  # no plan that gives up a green a normal drive makes
+                advice = self.queue.check(obs, advice, trip.params)
             if advice.action == "none" and advice.reason in ("no_spat", "stale_spat") and lights:
                 advice = _spat_reason(advice, trip.spat.status(lights[0].intersection_id))
         trip.memory = memory

@@ -13,7 +13,7 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
 from advisory.advice.advisor import ACTIONS, REASONS
 
-SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew")
+SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew", "queue")
 """Pauses the service decides itself (``server.advising.SERVER_PHRASES``)."""
 Action = Enum("Action", {a: a for a in ACTIONS}, type=str)
 Action.__doc__ = "What the driver is advised to do; `none`: no speed advice (`reason` says why)."

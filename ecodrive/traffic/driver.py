@@ -50,6 +50,7 @@ class AdvisedDriver:
 
     stop_lines_m: tuple[float, ...]
     advisor: AdvisorParams = field(default_factory=AdvisorParams)
+    vid: str = ""  # the car (SUMO's id)
     model: DriverModel = TRAFFIC_DRIVER
     pending: list = field(default_factory=list)  # (when acted on, advice, its stop line)
     active: Advice | None = None

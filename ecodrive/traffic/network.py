@@ -305,16 +305,20 @@ def _stop_line_x(net: Path, corridor: Corridor, lanes: int) -> dict[int, float]:
     return ends
 
 
-def write_routes(network: TrafficNetwork, path: str | Path, demand_vph_per_lane: float, duration_s: float, cross_demand_vph: float = 0.0) -> Path:
+def write_routes(network: TrafficNetwork, path: str | Path, demand_vph_per_lane: float, duration_s: float, cross_demand_vph: float = 0.0,
+                 departures_s: tuple[float, ...] = ()) -> Path:  # fmt: skip
     """SUMO routes: the vehicle type, the corridor's flow (``main``: ``demand_vph_per_lane`` per lane, Poisson) and
-    each cross street's (``cross<k>``), departing for ``duration_s``."""
+    each cross street's (``cross<k>``), departing for ``duration_s``. ``departures_s``: instead of the corridor's flow,
+    cars ``main.0``, ``main.1``, ... departing at these instants (a scenario built car by car, for tests)."""
     path = Path(path)
     attrs = " ".join(f'{k}="{v}"' for k, v in VTYPE.items())
     out = ["<routes>", f"  <vType {attrs}/>", f'  <route id="main" edges="{" ".join(network.main_edges)}"/>']
     for k, (a, b) in enumerate(network.cross_routes):
         out.append(f'  <route id="cross{k}" edges="{a} {b}"/>')
     rate = demand_vph_per_lane * network.lanes / 3600.0
-    if rate > 0:
+    for k, t in enumerate(sorted(departures_s)):
+        out.append(f'  <vehicle id="main.{k}" type="car" route="main" depart="{_fmt(t)}" departLane="best" departSpeed="max" departPos="base"/>')
+    if rate > 0 and not departures_s:
         out.append(f'  <flow id="main" type="car" route="main" begin="0" end="{_fmt(duration_s)}" period="exp({rate:.6g})" '
                    f'departLane="best" departSpeed="max" departPos="base"/>')  # fmt: skip
     if cross_demand_vph > 0:

@@ -1,8 +1,7 @@
 """One SUMO run of a corridor with traffic: connected cars advised by ecodrive, by SUMO's GLOSA device, or not at all.
 
 :func:`run` starts SUMO in process (``libsumo``) on a :class:`~ecodrive.traffic.network.TrafficNetwork` with the flows
-of :func:`~ecodrive.traffic.network.write_routes`, steps it (``step_s``, ballistic update: constant acceleration
-within a step, as the EV model assumes), and records every car's station and speed after each step and each light's
+of :func:`~ecodrive.traffic.network.write_routes`, steps it (``step_s``, SUMO's default Euler update), and records every car's station and speed after each step and each light's
 state. Which cars are connected is a function of the seed and the car's index in its flow only
 (:func:`connected_ids`), so the three runs of one scenario share them, as they share SUMO's ``--seed``, the demand
 and therefore the arrivals (checked by :mod:`ecodrive.traffic_eval`: every car's scheduled departure must agree).
@@ -17,6 +16,9 @@ and therefore the arrivals (checked by :mod:`ecodrive.traffic_eval`: every car's
   the car's real lat/lon on the corridor, its speed, the SPaT readings at the fix's time, the advisor with the trip's
   memory); :class:`~ecodrive.traffic.driver.AdvisedDriver` acts on the advice (``vehicle.setSpeed``; SUMO's speed
   mode left at its default, every safety check on).
+* ``"blind"``: the same with the service's queue-aware advice off (``advised`` has it on unless
+  ``RunSetup.queue_aware`` is False; the service is told the demand per lane and the penetration, as an operator's
+  detector counts and fleet share would tell it).
 * ``"glosa"``: the connected cars carry SUMO's GLOSA device (``--device.glosa.explicit``), ``use-queue`` on, each
   light heard from the zone entry or the light before it, as the advisor hears it (the light's ``device.glosa.range``
   parameter, :mod:`ecodrive.traffic.network`); SUMO's other GLOSA settings at their defaults (``max-speedfactor``
@@ -29,7 +31,7 @@ from __future__ import annotations
 import asyncio
 import math
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +42,7 @@ from ecodrive.traffic.network import TrafficNetwork, write_routes
 from spat_feed.timing.plans import PhaseClass, phase_class
 from spat_feed.transport.sumo import SumoLight, SumoSpatSource, link_state
 
-MODES = ("advised", "glosa", "unadvised")
+MODES = ("advised", "blind", "glosa", "unadvised")
 LINE_TOL_M = 0.05
 """A front this far past a stop line has crossed it (SUMO stops a car with its front on the line, to rounding). [m]"""
 MAIN_FLOW = "main"
@@ -56,8 +58,13 @@ class RunSetup:
     duration_s: float = 600.0  # cars depart during this long
     drain_s: float = 240.0  # then the simulation runs this much longer for the last ones to leave
     step_s: float = 0.5
+    ballistic: bool = False  # SUMO's ballistic update; off: its default (Euler). Ballistic jammed a queue at 900 veh/h on 7th Street: gaps
+    # under half a metre, every car creeping at 0.2-0.5 m/s for minutes, the front one with no leader on a green (SUMO 1.28, Krauss)
     cross_demand_vph: float = 0.0  # each cross street, each way (the actuated controllers' rival demand)
     fix_from_m: float = -100.0  # a connected car's phone posts fixes from this station on (off the route before 0)
+    queue_aware: bool = True  # the advised run's service with queue-aware advice (server.queue), told the demand and penetration
+    departures_s: tuple[float, ...] = ()  # instead of the Poisson flow, cars departing at these instants (tests)
+    connected: tuple[str, ...] | None = None  # instead of the penetration's draw, these cars are connected (tests)
 
 
 @dataclass
@@ -86,6 +93,7 @@ class RunResult:
     sim_end_s: float
     collisions: list = field(default_factory=list)  # SUMO's (time, collider, victim, type, speeds)
     teleports: int = 0
+    queue_held: int = 0  # fixes the service answered "follow the car in front" (queue-aware advice)
 
 
 def connected_ids(seed: int, penetration_frac: float, n: int) -> list[str]:
@@ -113,10 +121,11 @@ def run(network: TrafficNetwork, setup: RunSetup, mode: str, folder: str | Path 
 
     with tempfile.TemporaryDirectory(prefix="ecodrive-sumo-") as tmp:
         folder = Path(folder or tmp)
-        routes = write_routes(network, folder / f"routes_{setup.seed}.rou.xml", setup.demand_vph_per_lane, setup.duration_s, setup.cross_demand_vph)
-        n_max = int(setup.demand_vph_per_lane * network.lanes * setup.duration_s / 3600.0 * 3 + 50)
-        connected = set(connected_ids(setup.seed, setup.penetration_frac, n_max))
-        cmd = ["sumo", "-n", str(network.net_file), "-r", str(routes), "--step-length", f"{setup.step_s:g}", "--step-method.ballistic", "true",
+        routes = write_routes(network, folder / f"routes_{setup.seed}.rou.xml", setup.demand_vph_per_lane, setup.duration_s, setup.cross_demand_vph,
+                              setup.departures_s)  # fmt: skip
+        n_max = int(setup.demand_vph_per_lane * network.lanes * setup.duration_s / 3600.0 * 3 + 50 + len(setup.departures_s))
+        connected = set(connected_ids(setup.seed, setup.penetration_frac, n_max) if setup.connected is None else setup.connected)
+        cmd = ["sumo", "-n", str(network.net_file), "-r", str(routes), "--step-length", f"{setup.step_s:g}", "--step-method.ballistic", str(setup.ballistic).lower(),
                "--seed", str(int(setup.seed)), "--no-step-log", "true", "--no-warnings", "true", "--time-to-teleport", "-1", "--collision.action", "warn", "--collision.mingap-factor", "0",
                "--end", f"{setup.duration_s + setup.drain_s:g}", "--device.rerouting.probability", "0"]  # fmt: skip
         if mode == "glosa" and connected:
@@ -124,8 +133,8 @@ def run(network: TrafficNetwork, setup: RunSetup, mode: str, folder: str | Path 
                     "--device.glosa.range", "1e6"]  # each light's own range: the network's (from the zone entry or the light before)
         conn.start(cmd)
         try:
-            if mode == "advised":
-                return asyncio.run(_loop_advised(conn, network, setup, connected, advisor))
+            if mode in ("advised", "blind"):
+                return replace(asyncio.run(_loop_advised(conn, network, setup, connected, advisor, mode == "advised" and setup.queue_aware)), mode=mode)
             return _loop(conn, network, setup, connected, mode, None)
         finally:
             conn.close()
@@ -210,7 +219,7 @@ def _loop(conn, network, setup, connected, mode, hook) -> RunResult:
     return RunResult(mode, setup, sim.cars, dict(sim.source.verdicts), 0, t, sim.collisions, sim.teleports)
 
 
-async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connected: set[str], advisor: AdvisorParams | None) -> RunResult:
+async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connected: set[str], advisor: AdvisorParams | None, queue_aware: bool) -> RunResult:
     from server.advising import Engine
     from server.config import Settings
     from server.gps import Fix
@@ -224,7 +233,8 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
     clock = lambda: now[0]  # noqa: E731  (the service's clock is the simulation's)
     settings = Settings(spat_simulate=False, tables=False, speech=False, default_corridor=corridor.name, rate_per_s=1e6, rate_burst=1e6,
                         create_rate_per_s=1e6, create_burst=1e6, create_rate_per_client_per_s=1e6, create_burst_per_client=1e6,
-                        max_trips_per_client=0)  # fmt: skip
+                        max_trips_per_client=0, queue_aware=queue_aware, queue_arrivals_vph=setup.demand_vph_per_lane,
+                        queue_connected_share=setup.penetration_frac)  # fmt: skip
     corridors = {corridor.name: corridor}
     hub = SpatHub(settings, corridors, clock)
     engine = Engine(settings, corridors, params=advisor, spat=hub, clock=clock)
@@ -259,7 +269,7 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
                 if x < setup.fix_from_m:
                     continue
                 trips[vid] = await engine.create_trip(TripCreate(corridor=corridor.name), client=vid)
-                drivers[vid] = AdvisedDriver(tuple(sim.stop_lines), advisor or AdvisorParams())
+                drivers[vid] = AdvisedDriver(tuple(sim.stop_lines), advisor or AdvisorParams(), vid=vid)
             driver = drivers[vid]
             if second:
                 trip = trips[vid]
@@ -280,7 +290,8 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
         t = sim.after_step()
     for vid, trip in trips.items():
         await engine.end_trip(trip)
-    return RunResult("advised", setup, sim.cars, dict(sim.source.verdicts), mismatches, t, sim.collisions, sim.teleports)
+    held = engine.queue.held if engine.queue is not None else 0
+    return RunResult("advised", setup, sim.cars, dict(sim.source.verdicts), mismatches, t, sim.collisions, sim.teleports, held)
 
 
 def _before_entry(corridor, x_m: float) -> tuple[float, float]:

@@ -1,0 +1,214 @@
+"""Queue-aware advice: the lights ahead as a car in traffic meets them, not as an empty road shows them.
+
+A car arriving at the start of green behind six queued cars does not glide through: it stops. For the car that
+asks, :func:`estimate` counts the cars that will stand in front of it at each light ahead when the red it faces ends,
+and :func:`apply` moves that red's end, in the advisor's view, to the moment those cars have crossed the line: the
+advisor then aims at the queue having cleared, not at the start of green, with every rule of the advisor unchanged
+(its 2 s margin after the red, "stop" where no speed makes it, the plan kept while it works).
+
+Where the count comes from, in order of trust (issue 28):
+
+1. ``queueLength`` of the SPaT message (J2735 ``maneuverAssistList``): not read yet (no source here sends it).
+2. The connected cars ahead on the approach (:class:`Probe`: the service knows where every trip on the corridor is,
+   to the second): between this car and the line, each one that will reach the line during the red (or stands
+   before it) is in the queue.
+3. An arrival-rate estimate for the cars that are not connected: ``(1 - share) x flow x`` the time from the red's
+   start to this car's own unimpeded arrival at the line (every car arriving at the line in that time is ahead of it
+   and stands), only at the next light (at the one after it, arrivals are platoons released by the first), never more
+   than fit between the car and the line.
+
+The queue then crosses the line ``startup_s + n x headway_s`` after the red ends (:class:`QueueModel`). A car that is
+itself in a queue (slower than ``queued_mps`` and not first at the line: ``in_queue``) or right behind a slower
+connected car (within ``follow_gap_s`` plus a jam spacing: ``follow_mps``) is given no speed by the service: it
+follows the car in front, and the advice resumes, planned afresh, once it is free (never a target above what the
+traffic ahead allows; and a plan made in a queue is a crawl: every faster speed reaches the line before the queue has
+gone, and the advisor keeps a plan that still works, to the green after next).
+
+Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, crossing_time_s, phrase
+
+
+@dataclass(frozen=True, slots=True)
+class QueueModel:
+    """How a queue discharges and what a queued car is. Units in names.
+
+    Sources: start-up lost time 2 s and a saturation headway of 1.9 s (1,900 veh/h per lane) are the Highway Capacity
+    Manual's (6th ed., ch. 19) base values; field measurements cited in issue 28 give about 2.0 s between cars at the
+    stop line falling to about 1.4 s further back, after a 2-3 s start-up. 2.0 s is the headway of the first cars, the
+    ones a car arriving on the green meets; the jam spacing is a passenger car's 5 m plus a 2.5 m gap (SUMO's
+    passenger type; 7-8 m in field counts of stopped queues)."""
+
+    startup_s: float = 2.0
+    headway_s: float = 2.0
+    jam_spacing_m: float = 7.5
+    queued_mps: float = 2.0  # a car slower than this short of a line stands in a queue
+    follow_gap_s: float = 3.0  # a connected car ahead within this time gap (plus one jam spacing) sets the pace
+
+
+@dataclass(frozen=True, slots=True)
+class Probe:
+    """Another connected car on the route ahead of the one asking: how far ahead [m] and its speed [m/s]."""
+
+    ahead_m: float
+    speed_mps: float
+
+
+@dataclass(frozen=True, slots=True)
+class QueueEstimate:
+    """Per light ahead (as in the observation): the cars that cross its line before this car and hold it up (known +
+    estimated), the connected ones among them, and the earliest instant this car can cross that line for them
+    (seconds from now; 0: nothing holds it up)."""
+
+    cars: tuple[float, ...]
+    known: tuple[int, ...]
+    free_at_s: tuple[float, ...]
+    in_queue: bool = False
+    follow_mps: float | None = None
+
+
+def _first_red(light: LightView) -> tuple[float, float] | None:
+    """The red the car faces: the first window still to end."""
+    return next(((a, b) for a, b in light.red_windows_s if b > 0.0), None)
+
+
+def estimate(
+    obs: Observation,
+    probes: Sequence[Probe],
+    model: QueueModel | None = None,
+    arrivals_vps: float | None = None,
+    connected_share: float = 1.0,
+    red_elapsed_s: float | None = None,
+) -> QueueEstimate:
+    """The cars in front of the car of ``obs`` at each light and when it can cross behind them (module docstring).
+
+    The cars ahead cross each line in their order (one lane): one standing (slower than ``queued_mps``) or arriving
+    during the red waits for its end; the queue's first car crosses ``startup_s`` after it, each next one ``headway_s``
+    after the one before; a car arriving later (speeding up to the limit at 2 m/s² from its speed now, as the regular
+    driver does) joins the queue if it comes before the queue has gone, else it holds nobody up (car following keeps
+    the gap); this car can cross ``headway_s`` after the queue's last car. On a green the standing cars are a queue already
+    discharging (one a headway from now). ``arrivals_vps``: the flow arriving at the next light, per
+    lane [veh/s] (None: the connected cars alone); ``connected_share``: the share of those cars that are connected;
+    ``red_elapsed_s``: how long the next light's current red has been on (None: unknown, counted from now)."""
+    model = model or QueueModel()
+    v_free = max(obs.speed_limit_mps, 1.0)
+    cars, known, free_at = [], [], []
+    before = 0.0
+    for i, light in enumerate(obs.lights):
+        red = _first_red(light)
+        start, end = red if red is not None else (math.inf, math.inf)
+        ahead = sorted((light.distance_m - p.ahead_m, p.speed_mps) for p in probes if before < p.ahead_m < light.distance_m)
+        accel = 2.0  # a car ahead speeds up to the limit as the regular driver does (paper Sec. 2)
+        arrivals = [0.0 if v < model.queued_mps else normal_drive_s(to_line, v, obs.speed_limit_mps, accel) for to_line, v in ahead]
+        n_unseen = 0.0
+        if i == 0 and arrivals_vps is not None and arrivals_vps > 0.0 and connected_share < 1.0 and red is not None:
+            began = -(red_elapsed_s or 0.0) if start <= 0.0 else start
+            mine = light.distance_m / v_free  # this car's unimpeded arrival at the line
+            n_unseen = (1.0 - connected_share) * arrivals_vps * max(0.0, min(end, mine) - began)
+            n_unseen = min(n_unseen, max(light.distance_m / model.jam_spacing_m - 1.0 - len(ahead), 0.0))
+            arrivals = [max(start, 0.0)] * int(round(n_unseen)) + arrivals  # they arrived first: ahead in the queue
+        crossed, holding = -math.inf, 0  # the queue's last car to cross, and how many cars it holds
+        for a in arrivals:
+            if start <= a < end:  # waits for the red's end
+                crossed = max(end + (model.startup_s if holding == 0 else 0.0), crossed + model.headway_s)
+            elif a == 0.0 and start > 0.0:  # standing on a green: a queue already discharging, one car a headway
+                crossed = max(0.0, crossed + model.headway_s)
+            elif a < crossed + model.headway_s:  # arrives while the queue discharges: joins it
+                crossed += model.headway_s
+            else:  # arrives after the queue has gone: holds nobody up (car following keeps the gap)
+                continue
+            holding += 1
+        cars.append(float(holding))
+        known.append(len(ahead))
+        free_at.append(max(crossed + model.headway_s, 0.0) if holding else 0.0)
+        before = light.distance_m
+    in_queue = bool(obs.lights) and obs.speed_mps < model.queued_mps and obs.lights[0].distance_m > model.jam_spacing_m + 1.0
+    follow = None
+    ahead_cars = [p for p in probes if p.ahead_m > 0.0]
+    if ahead_cars:
+        nearest = min(ahead_cars, key=lambda p: p.ahead_m)
+        close = nearest.ahead_m <= obs.speed_mps * model.follow_gap_s + model.jam_spacing_m
+        if close and nearest.speed_mps < min(obs.speed_mps, obs.speed_limit_mps) - 1.0:  # closing in on a slower car
+            follow = nearest.speed_mps
+    return QueueEstimate(tuple(cars), tuple(known), tuple(free_at), in_queue, follow)
+
+
+def _held_until(windows, until_s: float):
+    """``windows`` (relative, sorted, disjoint) with the line also closed from now until ``until_s``: their union.
+
+    Examples
+    --------
+    >>> _held_until(((0.0, 10.0), (40.0, 70.0)), 15.0), _held_until(((5.0, 10.0),), 3.0), _held_until(((0.0, 10.0),), 5.0)
+    (((0.0, 15.0), (40.0, 70.0)), ((0.0, 3.0), (5.0, 10.0)), ((0.0, 10.0),))
+    """
+    if windows is None or until_s <= 0.0:
+        return windows
+    merged: list[tuple[float, float]] = []
+    for a, b in sorted([(0.0, until_s), *((max(a, 0.0), b) for a, b in windows if b > 0.0)]):
+        if merged and a <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], b))
+        else:
+            merged.append((a, b))
+    return tuple(merged)
+
+
+def apply(obs: Observation, est: QueueEstimate) -> Observation:
+    """``obs`` as the car meets the lights in traffic: each line closed to this car until ``est.free_at_s`` (the red it
+    faces ends no earlier; on a green, a window from now), in every view: conservative, likely, late."""
+    lights = tuple(
+        replace(lv, red_windows_s=_held_until(lv.red_windows_s, t), likely_red_windows_s=_held_until(lv.likely_red_windows_s, t),
+                late_red_windows_s=_held_until(lv.late_red_windows_s, t))  # fmt: skip
+        if t > 0.0 else lv
+        for lv, t in zip(obs.lights, est.free_at_s + (0.0,) * len(obs.lights))
+    )
+    return replace(obs, lights=lights)
+
+
+GIVE_UP_SLACK_S = 5.0
+"""A plan reaching the last light ahead this much later than a normal drive that makes every green gives one up. [s]"""
+
+
+def normal_drive_s(distance_m: float, v_mps: float, limit_mps: float, accel_mps2: float) -> float:
+    """Time to a line ``distance_m`` ahead speeding up at once at ``accel_mps2`` to the limit, then holding it. [s]
+
+    Examples
+    --------
+    >>> round(normal_drive_s(100.0, 0.0, 20.0, 2.0), 2), round(normal_drive_s(100.0, 20.0, 20.0, 2.0), 2)
+    (10.0, 5.0)
+    """
+    v, lim = max(v_mps, 0.0), max(limit_mps, 0.1)
+    if v >= lim:
+        return distance_m / v
+    d_acc = (lim * lim - v * v) / (2.0 * accel_mps2)
+    if distance_m <= d_acc:
+        return (math.sqrt(v * v + 2.0 * accel_mps2 * distance_m) - v) / accel_mps2
+    return (lim - v) / accel_mps2 + (distance_m - d_acc) / lim
+
+
+def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S) -> bool:
+    """A normal drive (speeding up to the limit at the regular driver's ``normal_accel_mps2``, no advice to react to)
+    crosses every light ahead outside its reds (the queue's included, :func:`apply`), while the advised plan reaches the
+    last of them more than ``slack_s`` later: the plan gives up a green the driver makes without advice. In traffic this
+    is a car launching from a queue at the first light, told to crawl 400 m to the second light's green after next
+    (traced in SUMO, docs/TRAFFIC.md): the advisor plans with comfortable accelerations, and the green closing at the
+    second light is one only a normal launch makes (the advisor's own ``tight_green`` rule looks at the next light)."""
+    if advice.target_speed_mps is None or advice.action not in KEEP_MODES or not obs.lights:
+        return False
+    normal = [normal_drive_s(lv.distance_m, obs.speed_mps, obs.speed_limit_mps, params.normal_accel_mps2) for lv in obs.lights]
+    if any(lv.is_red_at(t) for lv, t in zip(obs.lights, normal)):
+        return False
+    planned = crossing_time_s(obs.lights[-1].distance_m, obs.speed_mps, advice.target_speed_mps, params, KEEP_MODES[advice.action])
+    return planned > normal[-1] + slack_s
+
+
+def drive_normally(advice: Advice, units: str) -> Advice:
+    """``advice`` turned into "drive normally" (reason ``tight_green``), its countdown kept."""
+    out = replace(advice, action="none", reason="tight_green", target_speed_mps=None)
+    return replace(out, message=phrase(out, units), speak=True)

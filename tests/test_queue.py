@@ -1,0 +1,162 @@
+"""Queue-aware advice (issue 28, item 3): the queue model, the service's board, and a queue in SUMO that makes the
+queue-blind target stop while the queue-aware one glides."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from advisory.advice.advisor import Advice, AdvisorParams, LightView, Observation, advise
+from advisory.advice.queue import Probe, QueueModel, apply, estimate, gives_up_green, normal_drive_s
+from server.queue import QueueBoard
+
+M = QueueModel()
+
+
+def _obs(distance_m=300.0, speed=13.0, reds=((0.0, 20.0), (60.0, 90.0)), limit=13.4, second=None):
+    lights = (LightView(1, distance_m, red_windows_s=reds),) + ((second,) if second is not None else ())
+    return Observation(speed, limit, lights, position_m=100.0)
+
+
+def test_no_cars_ahead_no_change():
+    obs = _obs()
+    est = estimate(obs, [])
+    assert est.free_at_s == (0.0,) and est.cars == (0.0,) and not est.in_queue and est.follow_mps is None
+    assert apply(obs, est) == obs
+
+
+def test_standing_cars_hold_the_line_until_they_have_crossed():
+    """Four cars standing at a red ending in 20 s: the first crosses 2 s after it, the rest 2 s apart, this car 2 s
+    after the fourth: the line is closed to it for 20 + 2 + 3 x 2 + 2 = 30 s."""
+    probes = [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(4)]
+    est = estimate(_obs(), probes)
+    assert est.cars == (4.0,) and est.known == (4,)
+    assert est.free_at_s[0] == pytest.approx(20.0 + M.startup_s + 3 * M.headway_s + M.headway_s)
+    out = apply(_obs(), est)
+    assert out.lights[0].red_windows_s == ((0.0, 30.0), (60.0, 90.0))
+
+
+def test_a_car_arriving_after_the_queue_has_gone_holds_nobody_up():
+    probes = [Probe(50.0, 13.4)]  # 250 m from the line at the limit: there in 18.7 s, before the red ends -> queued
+    assert estimate(_obs(), probes).cars == (1.0,)
+    probes = [Probe(10.0, 13.4)]  # 290 m out, at 21.6 s: after the red (20 s) and nobody queued: free
+    assert estimate(_obs(), probes).cars == (0.0,) and estimate(_obs(), probes).free_at_s == (0.0,)
+
+
+def test_unconnected_cars_from_the_arrival_rate():
+    """Half the cars connected, 720 veh/h arriving, red on for 10 s, this car 22 s from the line: (1 - 0.5) x 0.2 x
+    (20 + 10) = 3 cars not seen stand in front of it."""
+    est = estimate(_obs(), [], arrivals_vps=0.2, connected_share=0.5, red_elapsed_s=10.0)
+    assert est.cars == (3.0,) and est.known == (0,)
+    assert estimate(_obs(), [], arrivals_vps=0.2, connected_share=1.0, red_elapsed_s=10.0).cars == (0.0,)
+
+
+def test_in_queue_and_following():
+    assert estimate(_obs(speed=0.5), []).in_queue
+    assert not estimate(_obs(distance_m=2.0, speed=0.0), []).in_queue  # first at the line
+    est = estimate(_obs(speed=12.0), [Probe(20.0, 6.0)])  # closing in on a slower car 20 m ahead
+    assert est.follow_mps == 6.0
+    assert estimate(_obs(speed=12.0), [Probe(80.0, 6.0)]).follow_mps is None
+
+
+def test_the_advisor_aims_at_the_queue_having_cleared():
+    """300 m from a red ending in 20 s with 6 cars standing: queue-blind the advice aims at the green (~22 s),
+    queue-aware at the queue having crossed (~36 s): a lower target."""
+    params = AdvisorParams(units="kmh")
+    obs = _obs(reds=((0.0, 20.0), (80.0, 110.0)))
+    blind, _ = advise(obs, None, params)
+    aware, _ = advise(apply(obs, estimate(obs, [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(6)])), None, params)
+    assert blind.target_speed_mps is not None and aware.target_speed_mps is not None
+    assert aware.target_speed_mps < blind.target_speed_mps - 2.0
+
+
+def test_normal_drive_and_given_up_greens():
+    assert normal_drive_s(100.0, 0.0, 20.0, 2.0) == pytest.approx(10.0)
+    params = AdvisorParams()
+    # 200 m to a light green for 20 s more: a normal drive from 5 m/s makes it; a crawl for the next green gives it up
+    obs = _obs(distance_m=200.0, speed=5.0, reds=((20.0, 50.0),), limit=24.6)
+    crawl = Advice("cruise", "green_wave", 4.5)
+    assert gives_up_green(obs, crawl, params)
+    assert not gives_up_green(obs, Advice("accelerate", "green_wave", 24.6), params)
+    assert not gives_up_green(_obs(distance_m=200.0, speed=5.0, reds=((5.0, 50.0),), limit=24.6), crawl, params)
+
+
+def test_board_holds_a_queued_car_until_it_is_over_the_line_then_plans_afresh():
+    board = QueueBoard()
+    t = 1000.0
+    lead = Observation(0.0, 13.4, (LightView(1, 1.0, red_windows_s=((0.0, 15.0),)),), position_m=299.0)
+    car = Observation(0.5, 13.4, (LightView(1, 9.0, red_windows_s=((0.0, 15.0),)),), position_m=291.0)
+    assert board.see("c", "lead", t, lead)[1] is None  # first at the line: the advisor's (too close)
+    obs, held = board.see("c", "car", t, car)
+    assert held is not None and (held.action, held.reason, held.light_red) == ("none", "queue", True) and held.speak
+    moving = Observation(8.0, 13.4, (LightView(1, 3.0, red_windows_s=((50.0, 80.0),)),), position_m=297.0)
+    assert board.see("c", "car", t + 12.0, moving, "queue")[1] is not None  # still short of the line: followed
+    assert board.see("c", "car", t + 12.0, moving, "queue")[1].speak is False
+    past = Observation(9.0, 13.4, (LightView(2, 300.0, red_windows_s=((50.0, 80.0),)),), position_m=303.0)
+    assert board.see("c", "car", t + 13.0, past, "queue")[1] is None and QueueBoard.fresh("queue")
+    assert board.held == 3
+
+
+def test_engine_with_queue_awareness_tells_a_car_behind_a_queue_to_follow():
+    """Through the service's own path: two trips on one corridor, the first standing at a red, the second creeping
+    up behind it: the second is told to follow (reason ``queue``) once the queue board is on (ECO_QUEUE_AWARE)."""
+    import asyncio
+
+    from server.advising import Engine
+    from server.config import Settings
+    from server.gps import Fix
+    from server.schemas import TripCreate
+    from server.spat import SpatHub
+    from spat_feed.road.corridors import load_corridor
+    from spat_feed.transport.scenarios import make_scenario, spat_message_at
+
+    corridor = load_corridor("paper_s400")
+    t0 = 1_714_590_030.0  # 15_15: red from :15 to :45, so red now for 15 s more
+    now = [t0]
+    settings = Settings(spat_simulate=False, tables=False, speech=False, queue_aware=True)
+    hub = SpatHub(settings, {corridor.name: corridor}, lambda: now[0])
+    for ix in spat_message_at(make_scenario(corridor, "15_15", 0.0), t0).intersections:
+        hub.store.offer(ix)
+    engine = Engine(settings, {corridor.name: corridor}, spat=hub, clock=lambda: now[0])
+
+    async def go():
+        a = await engine.create_trip(TripCreate(corridor=corridor.name), client="a")
+        b = await engine.create_trip(TripCreate(corridor=corridor.name), client="b")
+        lat, lon = corridor.position(98.0)
+        first = engine.on_fix(a, Fix(t0, lat, lon, speed_mps=0.0))
+        lat, lon = corridor.position(88.0)
+        second = engine.on_fix(b, Fix(t0, lat, lon, speed_mps=1.0))
+        return first, second
+
+    first, second = asyncio.run(go())
+    assert first["reason"] != "queue"
+    assert (second["action"], second["reason"], second["message"]) == ("none", "queue", "Queue ahead. Follow the car in front.")
+
+
+libsumo = pytest.importorskip("libsumo")
+
+
+def test_in_sumo_a_queue_makes_the_queue_blind_target_stop_and_the_queue_aware_one_glide(tmp_path):
+    """7th Street, Oakland (fixed, its plan at noon: light 1 red from 48 s to 90 s): ten cars reach light 1 during
+    its red and stand; an eleventh arrives as it turns green. Queue-blind, its advice aims at the green and it stops behind
+    the queue; queue-aware (every car connected: the service knows the queue), it aims at the queue having crossed the
+    line and glides through without stopping, no later."""
+    from ecodrive.traffic.network import build_network
+    from ecodrive.traffic.sim import RunSetup, run
+    from ecodrive.traffic_eval import count_stops
+    from spat_feed.road.corridors import load_corridor
+
+    corridor = load_corridor("oakland_7th_westbound")
+    net = build_network(corridor, tmp_path)
+    departures = tuple(5.0 + 3.0 * k for k in range(10)) + (44.0,)
+    ids = tuple(f"main.{k}" for k in range(len(departures)))
+    setup = RunSetup(0.0, 1.0, 1, 60.0, drain_s=150.0, departures_s=departures, connected=ids)
+    line = corridor.intersections[0].stop_line_m
+    out = {}
+    for mode in ("blind", "advised", "unadvised"):
+        car = run(net, setup, mode).cars["main.10"]
+        v, x = np.array(car.v), np.array(car.x)
+        out[mode] = (count_stops(v), float(v[(x > 0.0) & (x < line)].min()), car.crossings[0])
+    assert out["unadvised"][0] == 1 and out["blind"][0] == 1 and out["blind"][1] < 0.5
+    assert out["advised"][0] == 0 and out["advised"][1] > 3.0
+    assert out["advised"][2][1] <= out["blind"][2][1] and out["advised"][2][2] == "green"
