@@ -123,7 +123,8 @@ class Observation:
 
 ACTIONS = ("cruise", "ease_off", "coast", "slow_down", "brake_to", "accelerate", "stop", "resume", "none")
 """Every ``Advice.action`` the advisor gives (the service's API enumerates these: keep them in step)."""
-REASONS = ("green_wave", "red_ahead", "past_lights", "off_route", "no_spat", "stale_spat", "low_confidence", "too_close", "short_wait", "tight_green")
+REASONS = ("green_wave", "red_ahead", "past_lights", "off_route", "no_spat", "stale_spat", "low_confidence", "too_close", "short_wait", "tight_green",
+           "far_ahead")
 """Every ``Advice.reason`` the advisor gives (the service's API enumerates these: keep them in step)."""
 
 
@@ -540,6 +541,7 @@ def phrase(advice: Advice, units: str = "mph") -> str:
             "low_confidence": "Signal timing uncertain. Drive normally.",
             "off_route": "Off the route. Advice paused.",
             "past_lights": "Last light passed. Advice ends.",
+            "far_ahead": "Next light too far ahead for advice.",
         }.get(advice.reason, "")
     light = ""
     if when:
@@ -575,6 +577,16 @@ def _light_timing(light: LightView) -> tuple[bool, float | None]:
 
 KEEP_MODES = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", "ease_off": "auto", "accelerate": "auto", "cruise": "auto"}
 """How a driver following each action changes speed (the mode its feasibility is re-checked in)."""
+
+
+def _past_next_green(light: LightView, obs: Observation, params: AdvisorParams) -> bool:
+    """The advice's horizon: a normal drive (no advice: speeding up to the limit at ``normal_accel_mps2``) reaches the
+    line only after the light's next green to begin has ended (the start of its second red window, as each change is
+    likely). A plan then aims at a green after that one: two cycles out, on a timing that a real controller publishes
+    one phase ahead (J2735: the current phase's end, the next at best) and that a predictor knows less well the
+    farther it looks. Within it the advisor plans for the current green or the next one, never a later one. [-]"""
+    starts = sorted(start for start, end in _countdown_view(light).red_windows_s if end > 0.0)
+    return len(starts) >= 2 and _normal_drive_s(light.distance_m, obs, params) > starts[1]
 
 
 def _binding(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> int:
@@ -719,6 +731,11 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     if nxt.confidence_frac < params.min_confidence_frac:
         return Advice("none", "low_confidence")
     red, to_change = _light_timing(nxt)
+    if _past_next_green(nxt, obs, params):
+        # so far out that even a normal drive reaches the line after the light's next green has ended: any speed
+        # advised now would aim two greens or more ahead (issue 29: "Green in 24 seconds. Ease off to 43 km/h"
+        # 1.8 km out); the countdown stays (it is true), the advice waits until the next green is in reach
+        return Advice("none", "far_ahead", light_red=red, seconds_to_change_s=to_change)
     if nxt.distance_m < max(params.too_close_m, obs.speed_mps * params.too_close_s):
         return Advice("none", "too_close", light_red=red, seconds_to_change_s=to_change)
     usable = tuple(light for light in obs.lights[:2] if light.fresh and light.confidence_frac >= params.min_confidence_frac)
@@ -760,9 +777,15 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         usable = tuple(_likely_only(light) for light in usable)
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
-        # (the speed the last plan asked for counts as the car's: a driver still reacting to it is not racing)
+        # (the speed the last plan asked for counts as the car's: a driver still reacting to it is not racing). Not a
+        # cap where no racing can be: towards a light red now (the plan meets the green after it; the safety rule holds
+        # the red while it is published), nor for a car launching with no plan (from a stop or a crawl it speeds up to
+        # the limit as the regular driver does). Capped there, a car launching from the light before crawled at
+        # 16 km/h to the next light and missed its green: +150 s (US 1136, groups 2-5), +78 s (2019-05-01, 9-10)
         told = last.target_speed_mps if last is not None and last.reason == "green_wave" and last.target_speed_mps is not None else 0.0
-        feasible = feasible[feasible <= max(obs.speed_mps, told, params.min_cruise_speed_mps) + 1e-9]
+        launching = told == 0.0 and obs.speed_mps < obs.speed_limit_mps - params.hysteresis_mps
+        if not red and not launching:
+            feasible = feasible[feasible <= max(obs.speed_mps, told, params.min_cruise_speed_mps) + 1e-9]
         on_likely = True
     exact = nxt.likely_red_windows_s is None
     to_red = None if red or not (exact or on_likely) else _countdown_view(nxt).seconds_to_red()
@@ -839,7 +862,7 @@ def _meaningful_change(new: Advice, old: Advice | None, params: AdvisorParams) -
     if old is None:
         return new.action != "none" or new.reason in ("no_spat", "stale_spat", "low_confidence", "off_route", "red_ahead", "past_lights")
     if (new.action, new.reason) != (old.action, old.reason):
-        return new.reason not in ("too_close", "short_wait")
+        return new.reason not in ("too_close", "short_wait", "far_ahead")
     if new.target_speed_mps is not None and old.target_speed_mps is not None:
         return abs(new.target_speed_mps - old.target_speed_mps) >= params.speak_change_mps
     return False
@@ -872,7 +895,7 @@ def advise(
     if advice.reason == "stale_spat" and advice.light_red is not None:
         # a short dropout: the driver goes on with the plan it follows; that stays the plan when data returns
         spoken, last = (advice if advice.speak else memory.spoken), memory.last
-    if advice.action == "none" and advice.reason in ("too_close", "short_wait"):
+    if advice.action == "none" and advice.reason in ("too_close", "short_wait", "far_ahead"):
         # silence: the driver goes on with what it was told, so that stays the plan to re-check (and the
         # reference for speaking) when the advisor talks again
         spoken, last = memory.spoken, memory.last

@@ -17,7 +17,7 @@ const ACTIONS = {
 const PAUSES = {
   no_fix: "Waiting for GPS", no_speed: "Waiting for speed", poor_gps: "GPS weak", off_route: "Off the route",
   no_spat: "No signal data", stale_spat: "Signal data old", low_confidence: "Timing uncertain",
-  too_close: "At the light", short_wait: "Short wait", tight_green: "Drive normally",
+  too_close: "At the light", short_wait: "Short wait", tight_green: "Drive normally", far_ahead: "Light far ahead",
 };
 
 const $ = (id) => document.getElementById(id);
@@ -227,18 +227,23 @@ function render(a) {
 
   const speed = speedIn(a.speed_mps, units);
   setText("speed", speed === null ? "–" : `${speed} ${unit}`);
-  const name = current.names.get(a.next_intersection_id);
-  setText("next-name", a.next_intersection_id == null ? "Next light" : capitalise(name ?? `light ${a.next_intersection_id}`));
-  setText("distance", a.next_intersection_id == null ? (a.reason === "past_lights" ? "all passed" : "–") : distanceText(a.distance_to_line_m, units, locale));
+  // the light the advice is about: the next one, or the one after it when that one binds (the message then says
+  // "Second light: ..."); an older service names none: the next light. The tile names it too, with its distance
+  const lightId = a.light_red == null ? null : a.light_intersection_id ?? a.next_intersection_id;
+  const tileId = lightId ?? a.next_intersection_id;
+  const second = tileId != null && a.next_intersection_id != null && tileId !== a.next_intersection_id;
+  const tileDistance = lightId != null && a.light_distance_m != null ? a.light_distance_m : a.distance_to_line_m;
+  $("next-name").parentElement.dataset.lightId = tileId == null ? "" : String(tileId);
+  setText("next-name", tileId == null ? "Next light" : `${second ? "Second light: " : ""}${lightName(current, tileId)}`);
+  setText("distance", tileId == null ? (a.reason === "past_lights" ? "all passed" : "–") : distanceText(tileDistance, units, locale));
 
   const fresh = a.spat_fresh === true ? "yes" : a.spat_fresh === false ? "no" : "none";
   $("fresh").dataset.fresh = fresh;
   setText("fresh", { yes: "live", no: "out of date", none: "–" }[fresh]);
 
-  // the light the advice is about (the next one, or the one after it when that one binds): its colour now and
-  // the seconds to its next change, saying to which change and of which light (only from fresh SPaT)
+  // that light's colour now and the seconds to its next change, saying to which change and of which light (only
+  // from fresh SPaT)
   const light = a.light_red == null || fresh === "no" ? "none" : a.light_red ? "red" : "green";
-  const lightId = a.light_intersection_id ?? (a.light_red == null ? null : a.next_intersection_id); // an older service: the next light
   $("light").dataset.color = fresh === "no" ? "unknown" : light;
   $("light").dataset.lightId = light === "none" || lightId == null ? "" : String(lightId);
   const seconds = a.seconds_to_change_s;

@@ -59,6 +59,7 @@ SNAPSHOT = """JSON.stringify(Object.fromEntries(["target", "target-unit", "actio
   "countdown-light", "speed", "distance", "next-name", "fresh", "link", "status"].map((id) => [id, document.getElementById(id).textContent]).concat(
   [["seq", Number(document.getElementById("drive").dataset.seq)], ["state", document.body.dataset.state],
    ["light", document.getElementById("light").dataset.color], ["light-id", document.getElementById("light").dataset.lightId ?? ""],
+   ["tile-id", document.getElementById("next-name").parentElement.dataset.lightId ?? ""],
    ["stale", document.body.dataset.stale ?? ""], ["at", Date.now() / 1000]])))"""
 
 
@@ -120,8 +121,10 @@ def check_rendering(shown: dict, advice: dict, units: str) -> None:
     assert shown["fresh"] == fresh
     if advice["light_red"] is not None and advice["spat_fresh"] is not False:
         assert shown["light"] == ("red" if advice["light_red"] else "green")
-        # the countdown says which light (the advisory's) and to which change (its next one)
-        assert shown["light-id"] == str(advice["light_intersection_id"]) and shown["countdown-light"]
+        # the countdown says which light (the advisory's) and to which change (its next one); the tile names the same
+        assert shown["light-id"] == shown["tile-id"] == str(advice["light_intersection_id"]) and shown["countdown-light"]
+        assert shown["next-name"].endswith(shown["countdown-light"])
+        assert shown["next-name"].startswith("Second light: ") == (advice["light_intersection_id"] != advice["next_intersection_id"])
         if advice["seconds_to_change_s"] is not None:
             assert shown["countdown"] == str(max(0, math.floor(advice["seconds_to_change_s"] + 0.5)))
             assert advice["counts_down_to"] == ("green" if advice["light_red"] else "red")
