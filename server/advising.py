@@ -24,6 +24,7 @@ from collections.abc import Callable
 from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, advise
+from advisory.evaluation.track import RED_TOLERANCE_M
 from advisory.physics.params import VEHICLE_PRESETS
 from spat_feed.road.corridors import Corridor
 from spat_feed.transport.scenarios import FeedScenario, Uncertainty, resolve_timing
@@ -238,7 +239,9 @@ class Engine:
             readings = trip.spat.readings(fix.t_unix_s) if on_route else {}
             if trip.observed is not None and readings:
                 trip.observed.add(fix.t_unix_s, readings)
-            obs = observation(trip.corridor, m.station_m, speed or 0.0, fix.t_unix_s, readings, trip.corridor.advisory_limit_mps(m.station_m, s.speed_limit_mps), on_route=on_route)
+            # (a fix just past a stop line, within what GPS can tell, is still at it: lights_station)
+            obs = observation(trip.corridor, lights_station(trip.corridor, m.station_m, fix.accuracy_m), speed or 0.0, fix.t_unix_s, readings,
+                              trip.corridor.advisory_limit_mps(m.station_m, s.speed_limit_mps), on_route=on_route)
             held = None
             if self.queue is not None:  # the lights as the car meets them in traffic, or "follow the car in front"
                 obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, trip.last["reason"] if trip.last else None)
@@ -258,7 +261,8 @@ class Engine:
             trip.trace_x.append(m.route_m)
         nxt = lights[0] if lights else None
         # the light the countdown is about (the next one, or the one after it when that one binds), named with it
-        named = next((light for light in lights if light.intersection_id == advice.light_id), None) if advice.light_red is not None else None
+        named_id = advice.light_id if advice.light_id is not None else (nxt.intersection_id if nxt else None)
+        named = next((light for light in lights if light.intersection_id == named_id), None) if advice.light_red is not None else None
         countdown = _finite(advice.seconds_to_change_s) if named is not None else None
         out = dict(
             trip_id=trip.id, seq=trip.n_fixes, t_unix_s=round(fix.t_unix_s, 3), fix_status="ok", on_route=on_route,
@@ -284,6 +288,26 @@ def corridor_units(corridor: Corridor) -> str:
     """The corridor's ``units`` ('metric' or 'imperial'; 'kmh'/'mph' read as those), metric when it has none."""
     units = str(getattr(corridor, "units", None) or "metric").lower()
     return {"kmh": "metric", "km/h": "metric", "mph": "imperial"}.get(units, units if units in ADVISOR_UNITS else "metric")
+
+
+LINE_HOLD_MAX_M = 10.0
+"""A fix at most this far past a stop line (and no farther than its accuracy, at least ``RED_TOLERANCE_M``) is
+taken as at the line: the light stays the next one. [m]"""
+
+
+def lights_station(corridor: Corridor, station_m: float | None, accuracy_m: float | None) -> float | None:
+    """The station the lights ahead are read from: ``station_m``, unless it lies past a stop line by less than the
+    fix can tell (its accuracy, at least ``RED_TOLERANCE_M`` = 3 m, at most ``LINE_HOLD_MAX_M``): then just before that
+    line. A car waiting at a red whose position jitters 0.4 m past the line has not passed the light (it was: the
+    next light bound for one fix, the lamp turned green and "Red in 23 seconds. Drive normally." was spoken, issue 29);
+    a moving car is that far past in well under a second. The advisory's ``station_m`` stays the fix's own."""
+    if station_m is None:
+        return None
+    margin = min(max(RED_TOLERANCE_M, accuracy_m or 0.0), LINE_HOLD_MAX_M)
+    for ix in corridor.intersections:
+        if ix.stop_line_m <= station_m < ix.stop_line_m + margin:
+            return ix.stop_line_m - 0.01
+    return station_m
 
 
 def _spat_reason(advice: Advice, status: str) -> Advice:
