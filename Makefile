@@ -33,7 +33,7 @@ antwerp: $(STAMP)  # the service on the Antwerp controller's recorded SPaT, thro
 app-figure: $(STAMP)  # the README's and docs/APP.md's screenshots of the phone app (headless chromium)
 	sh scripts/system-deps.sh
 	ECODRIVE_APP_FIGURE=docs/figures/app_demo_drive.png $(PY) -m pytest -q tests/browser -k demo_drive
-	ECODRIVE_APP_FIGURE_DIR=docs/figures $(PY) -m pytest -q tests/browser/test_countdown.py
+	ECODRIVE_APP_FIGURE_DIR=docs/figures $(PY) -m pytest -q tests/browser/test_countdown.py tests/browser/test_service_lost.py
 
 bench: $(STAMP)
 	for b in bench/bench_*.py; do $(PY) $$b || exit 1; done

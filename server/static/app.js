@@ -9,6 +9,9 @@ import { chooseUnits, distanceText, normalizeUnits, speedIn, speedUnitLabel, uni
 
 const DEMO_TRACE_URL = "demo/field_test_advised.csv";
 const END_FIXES = 3; // the trip ends by itself this many fixes after the car reaches the corridor's end
+const ANSWER_LIMIT_S = 1.5; // a fix unanswered this long: the service is out of reach (a killed one: at once, the socket drops)
+const LOST_MESSAGE = "Connection to the service lost. Advice paused.";
+const TRIP_LOST = "The service restarted and did not keep this trip (it kept its trips in memory only): no score for this drive. Start a new trip for advice.";
 const THEMES = ["auto", "dark", "light"];
 const ACTIONS = {
   cruise: "Hold your speed", ease_off: "Ease off", coast: "Coast", slow_down: "Slow down", brake_to: "Brake",
@@ -135,6 +138,10 @@ async function start(mode) {
       onAdvice: (advice) => drive === current && render(advice),
       onLink: (kind, detail) => drive === current && onLink(kind, detail),
     });
+    // the service out of reach (a fix unanswered too long; a dropped socket or a failed call say so at once)
+    current.watch = setInterval(() => {
+      if (drive === current && !current.lost && current.link.waiting_s() > ANSWER_LIMIT_S) serviceLost(current, "no answer from the service");
+    }, 200);
     speaker.wav = () => fetch(new URL(current.link.links.audio.replace(/^\//, ""), SERVICE_ROOT), {
       headers: { Authorization: `Bearer ${created.token}` }, cache: "no-store",
     });
@@ -178,8 +185,11 @@ function play(timeline, current) {
 
 function onLink(kind, detail) {
   if (kind === "ended") {
-    note("the service ended this trip");
-    finish(drive, "ended by the service", { scored: false });
+    // after an outage: the service came back without the trip (it kept its trips in memory); else it ended it
+    note(drive.wasLost ? "the service restarted without this trip" : "the service ended this trip");
+    finish(drive, drive.wasLost ? "trip lost in the restart" : "ended by the service", { scored: false, summary: drive.wasLost ? TRIP_LOST : null });
+  } else if (kind === "down") {
+    serviceLost(drive, detail?.message);
   } else if (kind === "error" || kind === "rest") {
     note(detail?.message ?? kind);
   } else {
@@ -188,6 +198,7 @@ function onLink(kind, detail) {
 }
 
 function resetDrive(current) {
+  for (const key of ["stale", "staleSince", "recovered"]) delete document.body.dataset[key];
   setText("target", "–");
   $("target").className = "big empty";
   setText("target-unit", "");
@@ -207,9 +218,40 @@ function resetDrive(current) {
   $("drive").dataset.seq = "0";
 }
 
+/**
+ * The service is out of reach: the screen says so at once (greyed, the lamp hatched, no countdown, "No
+ * connection"), and the voice once; the trip goes on when the service answers again (`render`).
+ */
+function serviceLost(current, why) {
+  if (!current || current.lost || current.ended) return;
+  current.lost = current.wasLost = true;
+  document.body.dataset.stale = "1";
+  document.body.dataset.staleSince = String(Date.now() / 1000);
+  $("light").dataset.color = "unknown";
+  $("light").dataset.lightId = "";
+  setText("countdown", "");
+  setText("countdown-label", "no service");
+  setText("countdown-light", "");
+  $("action").dataset.action = "none";
+  setText("action", "No connection");
+  setText("message", LOST_MESSAGE);
+  $("fresh").dataset.fresh = "lost";
+  setText("fresh", "no service");
+  setText("link", `no service · fix ${$("drive").dataset.seq}`);
+  note(`service out of reach${why ? ` (${why})` : ""}: advice paused`);
+  speaker.alert(LOST_MESSAGE);
+}
+
 /** One advisory on screen (and in the ear when `speak` is set). Tolerates fields it does not know. */
 function render(a) {
   const current = drive;
+  if (current.lost) { // the service answers again: the same trip, kept by it
+    current.lost = false;
+    current.recovered = (current.recovered ?? 0) + 1;
+    delete document.body.dataset.stale;
+    document.body.dataset.recovered = String(current.recovered);
+    note("service back: trip kept");
+  }
   const units = current.units;
   const unit = speedUnitLabel(units);
   $("drive").dataset.seq = String(a.seq ?? 0);
@@ -265,9 +307,11 @@ function render(a) {
   }
 }
 
-async function finish(current, why, { scored = true } = {}) {
+async function finish(current, why, { scored = true, summary = null } = {}) {
   if (!current || current.ended) return;
   current.ended = true;
+  current.summary = summary;
+  clearInterval(current.watch);
   current.stop();
   speaker.stop();
   note(why);
@@ -306,7 +350,7 @@ function renderScore(score, current) {
     cells[2].textContent = Number.isFinite(frac) ? pct.format(frac) : key === "time" && you && reg ? `${Math.round(reg.duration_s - you.duration_s)} s` : "";
     cells[2].classList.toggle("worse", Number.isFinite(frac) ? frac < 0 : key === "time" && you && reg && you.duration_s > reg.duration_s);
   }
-  let summary = "No score: the trip could not be ended.";
+  let summary = current?.summary ?? "No score: the trip could not be ended.";
   if (score && you && Number.isFinite(saved.energy)) {
     const frac = Math.abs(saved.energy);
     // a trip ended early is scored over the distance it drove, the regular driver over the same distance

@@ -37,7 +37,9 @@ const RETRY_SOCKET_S = [2, 5, 10, 30];
 /**
  * One trip's fixes in, advisories out. `send(fix)` goes over the WebSocket when it is open, else as a REST
  * POST (one at a time; a newer fix replaces one still waiting). Every advisory, whichever way it came,
- * goes to `onAdvice`; transport changes and errors to `onLink(kind, detail)`.
+ * goes to `onAdvice`; transport changes and errors to `onLink(kind, detail)`. `down` says the service is out of
+ * reach (the socket dropped, not by us; a REST call failed on the network or with a 5xx) until an advisory comes
+ * again (`onLink("down", ...)` when it goes); `waiting_s()` how long the oldest fix sent has waited for its answer.
  */
 export class TripLink {
   constructor(created, { onAdvice, onLink }) {
@@ -52,6 +54,9 @@ export class TripLink {
     this.posting = false;
     this.waiting = null;
     this.unanswered = 0; // fixes sent on the socket, not answered yet
+    this.sentAt = []; // when each of them was sent [performance.now() ms]
+    this.postSince = null; // when the REST call in flight was made [ms]
+    this.down = false;
     this.opened = new Promise((resolve) => { this.settleOpened = resolve; });
     this.connect();
   }
@@ -74,12 +79,15 @@ export class TripLink {
     }
     this.ws = ws;
     ws.onopen = () => {
+      ws.opened = true;
       this.failures = 0;
       this.settleOpened(true);
       this.onLink("websocket");
     };
     ws.onmessage = (event) => {
       this.unanswered = Math.max(0, this.unanswered - 1);
+      this.sentAt.shift();
+      this.down = false;
       let message;
       try {
         message = JSON.parse(event.data);
@@ -95,11 +103,13 @@ export class TripLink {
     ws.onclose = (event) => {
       if (this.ws === ws) this.ws = null;
       this.unanswered = 0;
+      this.sentAt = [];
       if (event.code === 4404 || event.code === 4401 || event.code === 4403) {
         this.onLink("ended", { status: event.code - 4000, message: event.reason });
         return;
       }
       this.retrySocket(`socket closed (${event.code})`);
+      if (!this.closed && ws.opened) this.lost(`socket closed (${event.code})`); // the service went, or the network
     };
   }
 
@@ -117,11 +127,25 @@ export class TripLink {
     return Promise.race([this.opened, new Promise((resolve) => setTimeout(() => resolve(false), limit_s * 1000))]);
   }
 
+  /** The service is out of reach: said once until an advisory comes again. */
+  lost(why) {
+    if (this.down) return;
+    this.down = true;
+    this.onLink("down", { message: why });
+  }
+
+  /** Seconds the oldest fix sent has waited for its answer (0: none waits). */
+  waiting_s() {
+    const since = Math.min(this.sentAt[0] ?? Infinity, this.postSince ?? Infinity);
+    return Number.isFinite(since) ? (performance.now() - since) / 1000 : 0;
+  }
+
   send(fix) {
     if (this.closed) return;
     if (this.ws?.readyState === WebSocket.OPEN) {
       this.ws.send(JSON.stringify(fix));
       this.unanswered += 1;
+      this.sentAt.push(performance.now());
       return;
     }
     this.waiting = fix;
@@ -133,10 +157,17 @@ export class TripLink {
     while (this.waiting && !this.closed) {
       const fix = this.waiting;
       this.waiting = null;
+      this.postSince = performance.now();
       try {
-        this.onAdvice(await call("POST", this.links.fixes, { body: fix, token: this.trip.token }));
+        const advice = await call("POST", this.links.fixes, { body: fix, token: this.trip.token });
+        this.down = false;
+        this.onAdvice(advice);
       } catch (error) {
-        this.onLink(error.status === 404 ? "ended" : "error", { status: error.status, message: error.message });
+        if (error.status === 404) this.onLink("ended", { status: 404, message: error.message });
+        else if (error.status === undefined || error.status >= 500) this.lost(error.message); // no answer, or the service failing
+        else this.onLink("error", { status: error.status, message: error.message });
+      } finally {
+        this.postSince = null;
       }
     }
     this.posting = false;

@@ -15,6 +15,24 @@ function silentWavUrl() {
   return URL.createObjectURL(new Blob([bytes], { type: "audio/wav" }));
 }
 
+/** A short two-tone chime (880 then 660 Hz, 0.3 s), for an alert when the browser has no voice of its own. */
+function chimeWavUrl() {
+  const rate = 8000;
+  const samples = Math.round(0.3 * rate);
+  const bytes = new DataView(new ArrayBuffer(44 + 2 * samples));
+  const text = (offset, s) => [...s].forEach((c, i) => bytes.setUint8(offset + i, c.charCodeAt(0)));
+  text(0, "RIFF"); bytes.setUint32(4, 36 + 2 * samples, true); text(8, "WAVE");
+  text(12, "fmt "); bytes.setUint32(16, 16, true); bytes.setUint16(20, 1, true); bytes.setUint16(22, 1, true);
+  bytes.setUint32(24, rate, true); bytes.setUint32(28, 2 * rate, true); bytes.setUint16(32, 2, true); bytes.setUint16(34, 16, true);
+  text(36, "data"); bytes.setUint32(40, 2 * samples, true);
+  for (let i = 0; i < samples; i += 1) {
+    const f = i < samples / 2 ? 880 : 660;
+    const fade = Math.min(1, i / 80, (samples - i) / 80);
+    bytes.setInt16(44 + 2 * i, Math.round(12000 * fade * Math.sin((2 * Math.PI * f * i) / rate)), true);
+  }
+  return URL.createObjectURL(new Blob([bytes], { type: "audio/wav" }));
+}
+
 export class Speaker {
   /** `wav()` resolves to a Response with the current advice as WAV (the trip's audio link). */
   constructor({ lang, onState = () => {} }) {
@@ -62,11 +80,12 @@ export class Speaker {
     this.audio?.pause();
   }
 
-  /** Say `text` now, cutting off whatever is still being said (only the latest advice matters). */
-  say(text) {
+  /** Say `text` now, cutting off whatever is still being said (only the latest advice matters); without a
+   * working browser voice, `fallback()` (default: the service's WAV of the trip's latest advice). */
+  say(text, fallback = () => this.playWav()) {
     if (this.muted || !text) return;
     if (!this.webSpeech) {
-      this.playWav();
+      fallback();
       return;
     }
     const utterance = new SpeechSynthesisUtterance(text);
@@ -77,7 +96,7 @@ export class Speaker {
       if (!this.webSpeech) return;
       this.webSpeech = false; // this browser's voice does not work: the service's from now on
       this.onState(`browser voice failed (${why}); using the service's voice`);
-      this.playWav();
+      fallback();
     };
     utterance.onstart = () => { settled = true; };
     utterance.onend = () => { settled = true; };
@@ -91,6 +110,15 @@ export class Speaker {
     setTimeout(() => {
       if (!settled && this.current === utterance) fail("it did not start");
     }, START_WATCHDOG_S * 1000);
+  }
+
+  /** Say `text` without the service (it may be the one that is gone): the browser's voice, else a chime. */
+  alert(text) {
+    this.say(text, () => {
+      if (!this.audio || this.muted) return;
+      this.audio.src = chimeWavUrl();
+      this.audio.play().catch(() => {});
+    });
   }
 
   async playWav() {
