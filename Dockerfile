@@ -11,7 +11,7 @@ COPY replay replay
 COPY ecodrive ecodrive
 COPY deploy deploy
 RUN pip install --no-cache-dir .
-RUN useradd --create-home ecodrive && mkdir -p /app/cache /app/redis && chown ecodrive /app/cache /app/redis
+RUN useradd --create-home ecodrive && mkdir -p /app/cache /app/redis /app/mqtt-auth && chown ecodrive /app/cache /app/redis /app/mqtt-auth
 USER ecodrive
 ENV ECO_TABLES_DIR=/app/cache/tables NUMBA_CACHE_DIR=/app/cache/numba
 EXPOSE 8000 8765

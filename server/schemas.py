@@ -219,6 +219,9 @@ class SpatIntersectionOut(_Out):
     id: int = Field(description="J2735 intersection id")
     status: Literal["ok", "stale", "clock_skew", "no_spat"] = Field(description="ok: fresh; stale: older than spat_stale_after_s; clock_skew: the controller's clock is off ours; no_spat: never heard")
     age_s: float | None = Field(description="age of the latest state (controller timestamp) [s]")
+    clock_offset_s: float | None = Field(None, description="arrival - controller timestamp, its floor (clock_skew beyond the tolerance) [s]")
+    rejected: dict[str, int] = Field(default_factory=dict, description="messages rejected, by reason (implausible, too_large, clock_ahead, ...)")
+    implausible_s_ago: float | None = Field(None, description="set for a minute after a message that contradicted its controller (a red ended before its minEndTime): forged? [s]")
 
 
 class SpatSourceOut(_Out):

@@ -42,6 +42,7 @@ from spat_feed.transport.store import Clock, InProcessSpatSource, SpatStore, Tim
 from server.config import Settings
 
 log = logging.getLogger("server.spat")
+IMPLAUSIBLE_ALERT_S = 60.0  # /health degraded this long after an implausible (rejected) SPaT message
 
 
 class TripSpat(Protocol):
@@ -136,14 +137,19 @@ class SpatHub:
         return out
 
     def health(self) -> dict[str, Any]:
-        """Sources and every needed intersection's freshness; ``degraded`` when one is not ``ok`` or a source is down."""
+        """Sources and every needed intersection's freshness and rejections; ``degraded`` when one is not ``ok``, a source
+        is down or an intersection sent an ``implausible`` message in the last ``IMPLAUSIBLE_ALERT_S``."""
         sources = self.sources()
-        intersections = []
+        intersections, now, suspect = [], self.store.clock(), False
         for ident in self.needed:
-            r = self.store.reading(ident)
-            intersections.append({"id": ident, "status": self.store.status(ident), "age_s": None if r is None else round(r.age_s, 3),
-                                  "clock_offset_s": None if r is None else round(r.clock_offset_s, 3)})
-        ok = all(s["connected"] for s in sources) and all(i["status"] == "ok" for i in intersections)
+            r, st = self.store.reading(ident), self.store.stats.get(ident)
+            item = {"id": ident, "status": self.store.status(ident), "age_s": None if r is None else round(r.age_s, 3),
+                    "clock_offset_s": None if r is None else round(r.clock_offset_s, 3), "rejected": dict(st.rejected) if st else {}}
+            if st is not None and st.implausible_unix_s is not None and now - st.implausible_unix_s < IMPLAUSIBLE_ALERT_S:
+                item["implausible_s_ago"] = round(now - st.implausible_unix_s, 1)  # a controller contradicted itself: forged?
+                suspect = True
+            intersections.append(item)
+        ok = all(s["connected"] for s in sources) and all(i["status"] == "ok" for i in intersections) and not suspect
         return {"status": "ok" if ok else "degraded", "source": self.description, "sources": sources, "intersections": intersections}
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import time
 from collections.abc import Sequence
 
@@ -40,7 +41,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     shared.add_argument("--log", default=None, help="play a recorded SPaT log (.csv[.gz] as in ../shared/data/spat, or .jsonl[.gz] of our messages)")
     shared.add_argument("--speedup", type=float, default=1.0, help="recorded seconds per second of play")
     shared.add_argument("--loop", action="store_true", help="play the log again after its end, forever")
-    shared.add_argument("--mqtt", default=None, help="publish every intersection's state to mqtt://host[:port][/prefix] (topic <prefix>/<intersection id>)")
+    shared.add_argument("--mqtt", default=os.environ.get("SPAT_MQTT_URL") or None,
+                        help="publish every intersection's state to mqtt://[user:password@]host[:port][/prefix] (topic <prefix>/<intersection id>); "
+                             "default $SPAT_MQTT_URL (keeps the password off the command line)")
     shared.add_argument("--record", default=None, help="append every intersection's state to a .jsonl[.gz] log")
     parser.add_argument("--log-level", default="warning")
     args = parser.parse_args(argv)

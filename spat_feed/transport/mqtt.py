@@ -19,6 +19,7 @@ and payloads over ``MAX_SPAT_BYTES`` are dropped unparsed (``too_large``).
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
 from dataclasses import dataclass
@@ -70,6 +71,17 @@ def parse_mqtt_url(url: str) -> MqttTarget:
     return MqttTarget(parts.hostname, parts.port or 1883, prefix, user, password)
 
 
+def redacted(url: str) -> str:
+    """The URL without its password (for logs and ``/health``).
+
+    Examples
+    --------
+    >>> redacted("mqtt://k648:s3cret@broker:1883/ecodrive/spat")
+    'mqtt://k648:***@broker:1883/ecodrive/spat'
+    """
+    return re.sub(r"^(mqtt://[^:@/]+):[^@/]*@", r"\1:***@", url)
+
+
 def _client(target: MqttTarget, name: str) -> paho.Client:
     client = paho.Client(paho.CallbackAPIVersion.VERSION2, client_id=f"{name}-{threading.get_ident() % 100000}-{time.monotonic_ns() % 10**6}", protocol=paho.MQTTv311)
     if target.username:
@@ -93,7 +105,7 @@ class _Connection:
 
     def __init__(self, url: str, name: str) -> None:
         self.target = parse_mqtt_url(url)
-        self.url = url
+        self.url = redacted(url)
         self.client = _client(self.target, name)
         self.connected = threading.Event()
         self.connects = 0

@@ -283,7 +283,7 @@ def create_app(settings: FeedSettings | None = None, clock: Clock = time.time) -
         if shared.player is not None:
             out["log"] = {"file": settings.log, "passes": shared.player.passes, "index": shared.player.index, "done": shared.player.done}
         if shared.publisher is not None:
-            out["mqtt"] = {"url": settings.mqtt, "connected": shared.publisher.connected.is_set(), "published": shared.publisher.published}
+            out["mqtt"] = {"url": shared.publisher.url, "connected": shared.publisher.connected.is_set(), "published": shared.publisher.published}
             if not shared.publisher.connected.is_set():
                 out["status"] = "degraded"
         return out

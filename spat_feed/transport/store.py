@@ -17,7 +17,9 @@ Time rules (:class:`TimeRules`), judged on the controller's own timestamp:
   has newer news of (one older than the latest message too), else rejected as ``duplicate`` (the timestamp of
   some group's state held) or ``out_of_order`` (older than every group's state held); ``malformed`` (not our
   schema), ``too_large`` (over ``MAX_SPAT_BYTES``, dropped before parsing), ``clock_ahead`` (dated more than ``clock_tolerance_s`` after its arrival: it would look fresher than it
-  is), ``unknown_intersection`` (a store told which intersections to keep, ``only=``).
+  is), ``implausible`` (a signal group green while the state held of it, from the same controller, guaranteed a red
+  then: a red that ends more than ``PLAUSIBLE_SLACK_S`` before the ``minEndTime`` it was published with; what a
+  forged "green" on a red shows, since a controller never ends a phase before its published minimum), ``unknown_intersection`` (a store told which intersections to keep, ``only=``).
 * **age** = now - the older of timestamp and arrival, per group; older than ``stale_after_s`` (default 2 s):
   ``stale``, the group alone when the others of its intersection are heard.
 * **clock offset** = arrival - timestamp, its floor (the smallest over ``skew_window_s``, which strips the
@@ -44,7 +46,7 @@ from typing import Protocol
 
 from spat_feed.timing.messages import IntersectionState, SpatMessage, plan_from_movement, to_unix_s
 from spat_feed.prediction.observe import IntersectionHistory, PlanReading
-from spat_feed.timing.plans import UncertainPlan
+from spat_feed.timing.plans import PhaseClass, UncertainPlan, phase_class, possible_states_at, state_at
 from spat_feed.transport.scenarios import FeedScenario, spat_message_at
 
 Clock = Callable[[], float]
@@ -56,7 +58,9 @@ MAX_SPAT_BYTES = 256 * 1024
 log line); larger ones are dropped unparsed, rejected ``too_large``. Our JSON of K648's largest recorded state (10
 signal groups) is 1.75 KB, ~175 B a movement: a J2735 intersection at its maximum of 255 movements is ~45 KB, and a
 whole J2735 SpatMessage (at most 32 intersections) of K648-sized ones ~56 KB. [bytes]"""
-REJECT_REASONS = ("malformed", "too_large", "duplicate", "out_of_order", "clock_ahead", "unknown_intersection")
+REJECT_REASONS = ("malformed", "too_large", "duplicate", "out_of_order", "clock_ahead", "implausible", "unknown_intersection")
+PLAUSIBLE_SLACK_S = 0.5
+"""How far before the minEndTime its controller published a red may turn green (timestamps rounded to 0.1 s). [s]"""
 STATUSES = ("ok", "stale", "clock_skew", "no_spat")
 
 log = logging.getLogger("spat_feed.transport.store")
@@ -126,6 +130,7 @@ class IntersectionStats:
     messages: int = 0
     rejected: Counter = field(default_factory=Counter)
     stale_since_unix_s: float | None = None  # set while stale (for the one WARNING per outage)
+    implausible_unix_s: float | None = None  # arrival of the last message rejected as implausible
 
 
 class _Entry:
@@ -212,7 +217,7 @@ class SpatStore:
                 entry.ahead_unix_s, entry.ahead_offset = received, received - stamp
                 verdict = "clock_ahead"
             else:
-                groups, plans, seen = entry.groups, {}, False
+                groups, plans, seen, implausible = entry.groups, {}, False, False
                 for movement in state.states:
                     g = movement.signal_group
                     if g in plans:
@@ -224,7 +229,12 @@ class SpatStore:
                     # parsed once per message: the plan the history records (its minEndTime too: held, resumed) is the
                     # one readings get
                     plans[g] = plan_from_movement(movement, stamp)
-                if not plans:
+                    if held is not None and _contradicts(held.plan, plans[g], stamp):
+                        implausible = True
+                        break
+                if implausible:
+                    verdict = "implausible"
+                elif not plans:
                     verdict = "duplicate" if seen else "out_of_order"  # news held of some group, or older than all
                 else:
                     verdict = "ok"
@@ -241,6 +251,9 @@ class SpatStore:
                 entry.heard_unix_s = received
                 self._clock_offset(entry, received, received - stamp)
         if verdict != "ok":
+            if verdict == "implausible":
+                self.stats.setdefault(ident, IntersectionStats()).implausible_unix_s = received
+                log.warning("implausible SPaT of intersection %d (a red ended before its minEndTime): rejected", ident)
             return self.reject(verdict, ident)
         self.stats.setdefault(ident, IntersectionStats()).messages += 1
         for observer in self.observers:
@@ -370,6 +383,13 @@ class SpatStore:
     def _age(self, intersection_id: int, now: float) -> float:
         r = self.reading(intersection_id)
         return float("inf") if r is None else r.age_s
+
+
+def _contradicts(held: UncertainPlan, new: UncertainPlan, stamp: float) -> bool:
+    """``new`` shows green at ``stamp`` where ``held`` (the controller's previous word) could only be red then."""
+    if phase_class(state_at(new, stamp)) is not PhaseClass.GREEN:
+        return False
+    return all(phase_class(s) is PhaseClass.RED for s in possible_states_at(held, stamp + PLAUSIBLE_SLACK_S))
 
 
 LatestStore = SpatStore

@@ -435,7 +435,7 @@ def test_compose_runs_workers_on_redis_behind_one_port():
 
     spec = yaml.safe_load((REPO / "docker-compose.yml").read_text())["services"]
     svc, store, lb = spec["advisory"], spec["redis"], spec["lb"]
-    assert svc["environment"]["ECO_STORE_URL"] == "redis://redis:6379/0" and "--workers" in svc["command"]
+    assert svc["environment"]["ECO_STORE_URL"] == "redis://redis:6379/0" and "--workers" in " ".join(svc["command"])
     assert "ports" not in svc and svc["deploy"]["replicas"] and svc["depends_on"]["redis"]["condition"] == "service_healthy"
     assert store["command"][0] == "redis-server" and "--appendonly" in store["command"] and "redis-cli" in store["healthcheck"]["test"]
     assert lb["ports"] == ["127.0.0.1:8000:8000"] and lb["depends_on"]["advisory"]["condition"] == "service_healthy"

@@ -16,6 +16,8 @@ MODULES = [
     "road.corridors",
     "transport.store",
     "transport.client",
+    "transport.mqtt",
+    "transport.broker",
 ]
 
 

@@ -439,3 +439,37 @@ def test_a_feed_websocket_message_over_the_limit_is_dropped_unread_and_counted()
 
     store = asyncio.run(main())
     assert store.rejected["too_large"] == 1 and store.rejected["malformed"] == 0
+
+
+def forged_green(state, stamp_unix_s: float, green_s: float = 60.0):
+    """``state`` rewritten as a forger would: stamped ``stamp_unix_s``, every signal group green for ``green_s``."""
+    from spat_feed.timing.messages import IntersectionState, from_unix_s
+
+    data = json.loads(state.model_dump_json(by_alias=True, exclude_none=True))
+    data["timestamp"] = from_unix_s(stamp_unix_s).isoformat().replace("+00:00", "Z")
+    end = from_unix_s(stamp_unix_s + green_s).isoformat().replace("+00:00", "Z")
+    for m in data["states"]:
+        m["stateTimeSpeed"] = [{"eventState": "protected-Movement-Allowed", "timing": {"minEndTime": end, "maxEndTime": end}}]
+    return IntersectionState.model_validate(data)
+
+
+def test_a_red_that_turns_green_before_its_published_minimum_is_implausible_never_served():
+    """Issue 30: the forged message (stamped 0.95 s ahead, green for 60 s, while the controller's red holds): rejected
+    ``implausible`` whatever credentials it came with; the red stays served. A green after the red's minimum is news."""
+    from spat_feed.timing.plans import PhaseClass, phase_class, state_at
+
+    corridor = load_corridor("paper_s200")
+    sg = corridor.intersections[0].signal_groups[0].id
+    sim, clock = IntersectionSimulator([corridor]), Clock(T0)
+    t = next(T0 + k for k in range(200) if (lambda p, t: phase_class(state_at(p, t)) is PhaseClass.RED and p.changes[0].min_end_s > t + 5.0)(
+        plan_from_movement(sim.states_at(T0 + k)[0].movement(sg), T0 + k), T0 + k))  # fmt: skip
+    store = SpatStore(TimeRules(clock_tolerance_s=1.0), clock)
+    clock.t = t + 0.05
+    assert store.offer(sim.states_at(t)[0]) == "ok"
+    red_ends = store.plan_reading(1, sg).plan.changes[0].min_end_s
+    assert store.offer(forged_green(sim.states_at(t)[0], clock.t + 0.95)) == "implausible"
+    reading = store.plan_reading(1, sg)
+    assert reading.fresh and phase_class(state_at(reading.plan, clock.t + 1.0)) is PhaseClass.RED
+    assert store.stats[1].rejected["implausible"] == 1 and store.stats[1].implausible_unix_s == clock.t
+    clock.t = red_ends + 0.2  # the red's minimum passed: a green is what the controller may do
+    assert store.offer(forged_green(sim.states_at(t)[0], red_ends + 0.1)) == "ok"
