@@ -189,5 +189,9 @@ class MqttSubscriber(_Connection):
             self.store.reject("malformed", None, f"{msg.topic}: {exc}")
             log.info("malformed SPaT on %s: %s", msg.topic, exc)
             return
+        ident = msg.topic.rpartition("/")[2]
         for state in states:
+            if str(state.id) != ident:  # a controller may write its own topic only (the broker's ACL): its own states only
+                self.store.reject("wrong_topic", int(ident) if ident.isdigit() else None, f"{msg.topic}: intersection {state.id}")
+                continue
             self.store.offer(state, received)

@@ -16,10 +16,13 @@ Time rules (:class:`TimeRules`), judged on the controller's own timestamp:
 * **rejected** (counted per reason, never stored), judged per signal group: a message is stored for the groups it
   has newer news of (one older than the latest message too), else rejected as ``duplicate`` (the timestamp of
   some group's state held) or ``out_of_order`` (older than every group's state held); ``malformed`` (not our
-  schema), ``too_large`` (over ``MAX_SPAT_BYTES``, dropped before parsing), ``clock_ahead`` (dated more than ``clock_tolerance_s`` after its arrival: it would look fresher than it
-  is), ``implausible`` (a signal group green while the state held of it, from the same controller, guaranteed a red
-  then: a red that ends more than ``PLAUSIBLE_SLACK_S`` before the ``minEndTime`` it was published with; what a
-  forged "green" on a red shows, since a controller never ends a phase before its published minimum), ``unknown_intersection`` (a store told which intersections to keep, ``only=``).
+  schema), ``too_large`` (over ``MAX_SPAT_BYTES``, dropped before parsing), ``clock_ahead`` (dated more than
+  ``clock_tolerance_s`` after its arrival: it would look fresher than it is), ``implausible`` (a signal group green
+  while the state held of it, from the same controller, guaranteed a red then: a red that ends more than
+  ``PLAUSIBLE_SLACK_S`` before the ``minEndTime`` it was published with; what a forged "green" on a red shows, since
+  a controller never ends a phase before its published minimum), ``unknown_intersection`` (a store told which
+  intersections to keep, ``only=``), ``wrong_topic`` (an MQTT payload about another intersection than its topic's:
+  the broker's ACL lets a controller write its own topic only).
 * **age** = now - the older of timestamp and arrival, per group; older than ``stale_after_s`` (default 2 s):
   ``stale``, the group alone when the others of its intersection are heard.
 * **clock offset** = arrival - timestamp, its floor (the smallest over ``skew_window_s``, which strips the
@@ -58,7 +61,7 @@ MAX_SPAT_BYTES = 256 * 1024
 log line); larger ones are dropped unparsed, rejected ``too_large``. Our JSON of K648's largest recorded state (10
 signal groups) is 1.75 KB, ~175 B a movement: a J2735 intersection at its maximum of 255 movements is ~45 KB, and a
 whole J2735 SpatMessage (at most 32 intersections) of K648-sized ones ~56 KB. [bytes]"""
-REJECT_REASONS = ("malformed", "too_large", "duplicate", "out_of_order", "clock_ahead", "implausible", "unknown_intersection")
+REJECT_REASONS = ("malformed", "too_large", "duplicate", "out_of_order", "clock_ahead", "implausible", "wrong_topic", "unknown_intersection")
 PLAUSIBLE_SLACK_S = 0.5
 """How far before the minEndTime its controller published a red may turn green (timestamps rounded to 0.1 s). [s]"""
 STATUSES = ("ok", "stale", "clock_skew", "no_spat")

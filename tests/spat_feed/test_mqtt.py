@@ -302,7 +302,7 @@ def test_forged_spat_is_refused_by_the_shipped_broker_and_by_the_plausibility_ru
     its controller only, the service read-only) and the forged message of the issue (stamped 0.95 s ahead, green for
     60 s, while K648's recorded red holds): an anonymous publisher is refused; another intersection's credentials
     publish into nothing; K648's own (a compromised controller) is rejected ``implausible``, said in /health and
-    /metrics, the red still served."""
+    /metrics, the red still served; K648's credentials can speak for K648 only (``wrong_topic``)."""
     from spat_feed.transport.broker import write_broker_config
     from spat_feed.transport.player import map_times
     from spat_feed.timing.plans import PhaseClass, phase_class
@@ -357,6 +357,9 @@ def test_forged_spat_is_refused_by_the_shipped_broker_and_by_the_plausibility_ru
             health = client.get("/health").json()
             item = next(i for i in health["spat_health"]["intersections"] if i["id"] == 648)
             assert item["rejected"] == {"implausible": 1} and item["implausible_s_ago"] >= 0.0 and health["status"] == "degraded"
+            # K648's credentials, K649's state on K648's topic: not K648's to say
+            k648.client.publish(k648.target.topic(648), now_red().model_copy(update={"id": 649}).model_dump_json(by_alias=True), qos=1).wait_for_publish(5)
+            until("another intersection's state on K648's topic rejected", lambda: count("ecodrive_spat_rejected_total", reason="wrong_topic") == 1.0)
         for pub in (k648, k649):
             pub.stop()
     finally:
