@@ -131,7 +131,7 @@ class SpatHub:
             out.append({"kind": "feed", "url": self.settings.spat_feed_url, "connected": self.client.connected, "reconnects": max(0, self.client.stats.connects - 1)})
         if self.mqtt is not None:
             t = self.mqtt.target
-            out.append({"kind": "mqtt", "url": f"mqtt://{t.host}:{t.port}/{t.prefix}", "connected": self.mqtt.connected.is_set(), "reconnects": max(0, self.mqtt.connects - 1)})
+            out.append({"kind": "mqtt", "url": f"{'mqtts' if t.tls else 'mqtt'}://{t.host}:{t.port}/{t.prefix}", "connected": self.mqtt.connected.is_set(), "reconnects": max(0, self.mqtt.connects - 1)})
         if self.player is not None:
             out.append({"kind": "log", "file": str(self.settings.spat_log), "connected": not self.player.done, "passes": self.player.passes})
         return out

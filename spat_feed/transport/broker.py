@@ -9,7 +9,10 @@
 * ``acl``: each controller may *write* its own intersections' topics (``<prefix>/<id>``) and nothing else, no other
   user may write them; each reader may *read* ``<prefix>/#`` and write nothing;
 * ``<user>.url``: ``mqtt://user:password@host:port/prefix`` for that user (mode 600), what the feed
-  (``--mqtt``) and the service (``ECO_SPAT_MQTT_URL``) are given.
+  (``--mqtt``) and the service (``ECO_SPAT_MQTT_URL``) are given;
+* with ``--tls`` (a broker reached across networks): the listener speaks TLS only (``ca.crt``, ``server.crt``,
+  ``server.key``: a CA of its own made with the ``openssl`` command, the server's certificate for ``--host``), and the
+  URLs are ``mqtts://...?ca=DIR/ca.crt``. A city's own CA replaces it by editing ``mosquitto.conf``.
 
 Users and passwords that already exist in ``DIR`` are kept (a restarted broker, a container recreated on the same
 volume); ``--fresh`` makes new ones. A message on a topic its publisher may not write never reaches a subscriber
@@ -26,6 +29,7 @@ import os
 import pwd
 import re
 import secrets
+import subprocess
 from pathlib import Path
 from urllib.parse import quote
 
@@ -70,6 +74,7 @@ def write_broker_config(
     host: str = "127.0.0.1",
     prefix: str = DEFAULT_PREFIX,
     fresh: bool = False,
+    tls: bool = False,
 ) -> Path:
     """Write the broker's configuration into ``folder`` (see the module docstring); returns ``mosquitto.conf``."""
     folder = Path(folder)
@@ -97,14 +102,20 @@ def write_broker_config(
     passwd = folder / "passwd"
     passwd.write_text("".join(f"{u}:{password_hash(p)}\n" for u, p in passwords.items()))
     passwd.chmod(0o600)
+    scheme, query, tls_conf = "mqtt", "", ""
+    if tls:
+        ca, cert, key = _certificates(folder, host, fresh)
+        scheme, query = "mqtts", f"?ca={quote(str(ca.resolve()))}"
+        tls_conf = f"cafile {ca.resolve()}\ncertfile {cert.resolve()}\nkeyfile {key.resolve()}\ntls_version tlsv1.2\n"
     for user, password in passwords.items():
         path = folder / f"{user}.url"
-        path.write_text(f"mqtt://{user}:{quote(password, safe='')}@{host}:{port}/{prefix}\n")
+        path.write_text(f"{scheme}://{user}:{quote(password, safe='')}@{host}:{port}/{prefix}{query}\n")
         path.chmod(0o600)
     conf = folder / "mosquitto.conf"
     conf.write_text(
         f"listener {port} {listen}\n"
-        "allow_anonymous false\n"
+        + tls_conf
+        + "allow_anonymous false\n"
         f"password_file {passwd.resolve()}\n"
         f"acl_file {(folder / 'acl').resolve()}\n"
         f"max_packet_size {MAX_PACKET_BYTES}\n"
@@ -112,6 +123,31 @@ def write_broker_config(
         f"user {pwd.getpwuid(os.getuid()).pw_name}\n"  # started as root, mosquitto would turn into a user that cannot read them
     )
     return conf
+
+
+def _certificates(folder: Path, host: str, fresh: bool) -> tuple[Path, Path, Path]:
+    """A CA and the broker's certificate for ``host`` (and localhost), made with ``openssl``; kept if present."""
+    ca, ca_key, cert, key = (folder / n for n in ("ca.crt", "ca.key", "server.crt", "server.key"))
+    if not fresh and all(p.exists() for p in (ca, cert, key)):
+        return ca, cert, key
+    alt = f"subjectAltName=DNS:{host},DNS:localhost,IP:127.0.0.1" if not re.match(r"^[0-9.]+$", host) else f"subjectAltName=IP:{host},DNS:localhost"
+
+    def run(*args: str) -> None:
+        subprocess.run(["openssl", *args], check=True, capture_output=True)
+
+    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "825", "-subj", "/CN=ecodrive SPaT broker CA",
+        "-keyout", str(ca_key), "-out", str(ca))  # fmt: skip
+    csr = folder / "server.csr"
+    run("req", "-newkey", "rsa:2048", "-nodes", "-subj", f"/CN={host}", "-keyout", str(key), "-out", str(csr))
+    ext = folder / "server.ext"
+    ext.write_text(alt + "\n")
+    run("x509", "-req", "-in", str(csr), "-CA", str(ca), "-CAkey", str(ca_key), "-CAcreateserial", "-days", "825",
+        "-extfile", str(ext), "-out", str(cert))  # fmt: skip
+    for p in (ca_key, key):
+        p.chmod(0o600)
+    csr.unlink()
+    ext.unlink()
+    return ca, cert, key
 
 
 def _controller(text: str) -> tuple[str, tuple[int, ...]]:
@@ -132,10 +168,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--listen", default="127.0.0.1", help="the broker's listening address")
     p.add_argument("--host", default="127.0.0.1", help="the broker's address in the users' URLs")
     p.add_argument("--prefix", default=DEFAULT_PREFIX)
-    p.add_argument("--fresh", action="store_true", help="new passwords for every user")
+    p.add_argument("--fresh", action="store_true", help="new passwords for every user (and certificates)")
+    p.add_argument("--tls", action="store_true", help="TLS only on the listener (a CA and a certificate for --host, openssl)")
     args = p.parse_args(argv)
     conf = write_broker_config(args.folder, dict(args.controller), tuple(args.reader) or ("service",), port=args.port,
-                               listen=args.listen, host=args.host, prefix=args.prefix, fresh=args.fresh)  # fmt: skip
+                               listen=args.listen, host=args.host, prefix=args.prefix, fresh=args.fresh, tls=args.tls)  # fmt: skip
     print(conf)
 
 

@@ -9,7 +9,8 @@ Cities publish live traffic-light data over MQTT (Hamburg's SensorThings/MQTT se
 * **QoS 0, retained**: SPaT is a latest-value stream; a lost message is replaced by the next one (0.1-1 s), and
   a new subscriber gets each intersection's last state at once (the store's time rules judge its age).
 
-URL: ``mqtt://[user:password@]host[:port][/prefix]`` (port 1883 by default).
+URL: ``mqtt://[user:password@]host[:port][/prefix]`` (port 1883 by default); ``mqtts://...[?ca=FILE]`` over TLS
+(port 8883), the broker's certificate checked against ``FILE`` (else the system's CAs) and its host name.
 
 :class:`MqttSubscriber` runs paho's network thread (reconnecting with backoff by itself) and offers every
 state to a :class:`~spat_feed.transport.store.SpatStore`, which is thread-safe; malformed payloads are counted there,
@@ -23,7 +24,7 @@ import re
 import threading
 import time
 from dataclasses import dataclass
-from urllib.parse import unquote, urlsplit
+from urllib.parse import parse_qs, unquote, urlsplit
 
 import paho.mqtt.client as paho
 from pydantic import ValidationError
@@ -45,30 +46,36 @@ class MqttTarget:
     prefix: str = DEFAULT_PREFIX
     username: str | None = None
     password: str | None = None
+    ca_file: str | None = None  # mqtts: the CA that signed the broker's certificate (None: the system's)
+    tls: bool = False
 
     def topic(self, intersection_id: int | str) -> str:
         return f"{self.prefix}/{intersection_id}"
 
 
 def parse_mqtt_url(url: str) -> MqttTarget:
-    """``mqtt://user:pw@host:1884/city/spat`` -> :class:`MqttTarget`.
+    """``mqtt://user:pw@host:1884/city/spat`` -> :class:`MqttTarget`; ``mqtts://...[?ca=FILE]``: over TLS (port 8883).
 
     Examples
     --------
     >>> parse_mqtt_url("mqtt://127.0.0.1:1884/city/spat")
-    MqttTarget(host='127.0.0.1', port=1884, prefix='city/spat', username=None, password=None)
+    MqttTarget(host='127.0.0.1', port=1884, prefix='city/spat', username=None, password=None, ca_file=None, tls=False)
     >>> parse_mqtt_url("mqtt://broker").prefix
     'ecodrive/spat'
+    >>> t = parse_mqtt_url("mqtts://svc:pw@broker/ecodrive/spat?ca=/run/ca.crt"); (t.port, t.tls, t.ca_file)
+    (8883, True, '/run/ca.crt')
     """
     parts = urlsplit(url)
-    if parts.scheme != "mqtt" or not parts.hostname:
-        raise ValueError(f"not an MQTT URL {url!r}: expected mqtt://host[:port][/prefix]")
+    if parts.scheme not in ("mqtt", "mqtts") or not parts.hostname:
+        raise ValueError(f"not an MQTT URL {url!r}: expected mqtt[s]://host[:port][/prefix]")
+    tls = parts.scheme == "mqtts"
+    ca = parse_qs(parts.query).get("ca", [None])[0]
     prefix = parts.path.strip("/") or DEFAULT_PREFIX
     if any(c in prefix for c in "+#"):
         raise ValueError(f"the topic prefix {prefix!r} may not hold MQTT wildcards")
     user = unquote(parts.username) if parts.username else None
     password = unquote(parts.password) if parts.password else None
-    return MqttTarget(parts.hostname, parts.port or 1883, prefix, user, password)
+    return MqttTarget(parts.hostname, parts.port or (8883 if tls else 1883), prefix, user, password, ca, tls)
 
 
 def redacted(url: str) -> str:
@@ -79,13 +86,15 @@ def redacted(url: str) -> str:
     >>> redacted("mqtt://k648:s3cret@broker:1883/ecodrive/spat")
     'mqtt://k648:***@broker:1883/ecodrive/spat'
     """
-    return re.sub(r"^(mqtt://[^:@/]+):[^@/]*@", r"\1:***@", url)
+    return re.sub(r"^(mqtts?://[^:@/]+):[^@/]*@", r"\1:***@", url)
 
 
 def _client(target: MqttTarget, name: str) -> paho.Client:
     client = paho.Client(paho.CallbackAPIVersion.VERSION2, client_id=f"{name}-{threading.get_ident() % 100000}-{time.monotonic_ns() % 10**6}", protocol=paho.MQTTv311)
     if target.username:
         client.username_pw_set(target.username, target.password)
+    if target.tls:
+        client.tls_set(ca_certs=target.ca_file)  # the broker's certificate and host name verified
     client.reconnect_delay_set(min_delay=1, max_delay=5)
     return client
 

@@ -364,3 +364,33 @@ def test_forged_spat_is_refused_by_the_shipped_broker_and_by_the_plausibility_ru
             pub.stop()
     finally:
         broker.kill()
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl not installed")
+def test_the_shipped_broker_over_tls_takes_its_users_and_refuses_plain_mqtt(tmp_path):
+    """``--tls`` (a broker reached across networks): a controller's message reaches the reader over mqtts:// with the
+    broker's certificate checked; a client speaking plain MQTT to it never connects."""
+    from spat_feed.transport.broker import write_broker_config
+
+    auth, port = tmp_path / "mqtt-auth", free_port()
+    conf = write_broker_config(auth, {"k648": (648,)}, ("service",), port=port, host="127.0.0.1", tls=True)
+    broker = Broker(tmp_path)
+    broker.port, broker.conf = port, conf
+    broker.start()
+    try:
+        url = {u: (auth / f"{u}.url").read_text().strip() for u in ("k648", "service")}
+        assert url["service"].startswith("mqtts://") and "?ca=" in url["service"]
+        store = SpatStore()
+        sub, pub = MqttSubscriber(url["service"], store, (648,)), MqttPublisher(url["k648"])
+        for c in (sub, pub):
+            c.start()
+            assert c.wait_connected(WAIT_S)
+        pub.client.publish(pub.target.topic(648), b"{}", qos=1).wait_for_publish(5)
+        until("the message over TLS", lambda: sub.messages == 1)
+        plain = MqttPublisher(url["k648"].replace("mqtts://", "mqtt://").split("?")[0])
+        plain.start()
+        assert not plain.wait_connected(2.0)
+        for c in (sub, pub, plain):
+            c.stop()
+    finally:
+        broker.kill()
