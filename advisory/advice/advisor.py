@@ -778,13 +778,13 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         both = _Lines.of(usable)
         n_lines, mode, feasible = _search(both, obs, params)
         # (the speed the last plan asked for counts as the car's: a driver still reacting to it is not racing). Not a
-        # cap where no racing can be: towards a light red now (the plan meets the green after it; the safety rule holds
-        # the red while it is published), nor for a car launching with no plan (from a stop or a crawl it speeds up to
-        # the limit as the regular driver does). Capped there, a car launching from the light before crawled at
-        # 16 km/h to the next light and missed its green: +150 s (US 1136, groups 2-5), +78 s (2019-05-01, 9-10)
+        # cap for a car pulling away with no plan (below twice the slowest advised speed: from a stop or a crawl it
+        # speeds up to the limit as the regular driver does): capped there, a car launching from the light before
+        # crawled at 16 km/h to the next light and missed its green (+150 s, US 1136 groups 2-5; +78 s, 2019-05-01
+        # groups 9-10). A car near the limit told nothing is still not sent racing an uncertain red.
         told = last.target_speed_mps if last is not None and last.reason == "green_wave" and last.target_speed_mps is not None else 0.0
-        launching = told == 0.0 and obs.speed_mps < obs.speed_limit_mps - params.hysteresis_mps
-        if not red and not launching:
+        launching = told == 0.0 and obs.speed_mps < 2.0 * params.min_cruise_speed_mps
+        if not launching:
             feasible = feasible[feasible <= max(obs.speed_mps, told, params.min_cruise_speed_mps) + 1e-9]
         on_likely = True
     exact = nxt.likely_red_windows_s is None
