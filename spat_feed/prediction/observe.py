@@ -25,17 +25,18 @@ Conversion of one light (:func:`light_view`):
 * **After the published phases** (an actuated controller publishes the current phase only): what the signal
   group has been seen to do (:class:`PhaseHistory`, passed as ``PlanReading.cycle``) bounds the phases that
   follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the current phase ends
-  no earlier than ``minEndTime`` (hard), likely at the median of the durations seen (given how long it has run;
-  one that would have ended before ``minEndTime`` ends there: the controller holds it; once its ``minEndTime``
-  runs again after a hold, as long after it as such phases ended, :class:`PhaseHistory`; once a change of another
-  group that such phases end a steady time after has come, that long after it, :class:`ChangeLinks`) but no later
-  than the published ``maxEndTime``,
-  late at their :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
-  9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the
-  next phases last their shortest / median / late durations seen. ``red_windows_s`` spans earliest start to late
+  no earlier than ``minEndTime`` (hard), likely at the median of the forecast of
+  :mod:`spat_feed.prediction.predictor` (a linked change of another group, a held ``minEndTime`` running again, the
+  controller's cycle or the durations seen, whichever applies) but no later than the published ``maxEndTime``,
+  late at its :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
+  9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the next phases end at the
+  shortest durations seen after the earliest, and at the forecast chained over their durations (median, late).
+  ``red_windows_s`` spans earliest start to late
   end; ``likely_red_windows_s`` the likely ones (the countdown; "stop" only when a stop is likely);
   ``late_red_windows_s`` latest start to late end (never slowed for a red that may not have begun on arrival;
   what a driver's display may rely on). The first two contain every red that ``minEndTime`` guarantees.
+* **The safety rule** (:func:`red_hold_s`): a light whose latest reading is red (or amber) stays red in all three
+  for as long as a plan could otherwise cross it before the car, told at the next reading, could still stop.
 * **Clock**: a reading may carry the feed clock's estimated offset (subtracted) and its uncertainty (every
   ``red_windows_s`` widened by it on both sides, a red that ended less than that long ago included), so a few
   seconds of skew never put the advice into a red.
@@ -51,7 +52,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from advisory.advice.advisor import AdvisorParams, LightView, Observation
-from spat_feed.prediction.predictor import EXACT_S, ChangeForecast, current_end, cycle_period_s, next_end, scored_errors_s
+from spat_feed.prediction.predictor import EXACT_S, current_end, cycle_period_s, next_end, sample_quantile, scored_errors_s
 from spat_feed.road.corridors import Corridor, IntersectionSpec
 from spat_feed.timing.plans import (
     STOP_STATES,
@@ -133,11 +134,6 @@ class CycleStats:
             total += _quantile(d, 0.5)
             cls = self.following.get(cls)
         return total if cls is not None and cls == self.current and seen else None
-
-
-def _sample_quantile(sorted_s: np.ndarray, q: float) -> float:
-    """The ``q`` quantile of sorted forecast samples (as :meth:`~spat_feed.prediction.predictor.ChangeForecast.quantile`)."""
-    return ChangeForecast(PhaseClass.UNKNOWN, None, -math.inf, sorted_s, "").quantile(q)
 
 
 def _quantile(sorted_s: Sequence[float], q: float) -> float:
@@ -563,7 +559,7 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
     samples = np.sort(got[0])
     # the likely end is the forecast's median, but no later than the controller's own maxEndTime; the late end its
     # LATE_QUANTILE (maxEndTime is soft: 6-12 % of phases outlast it, some by minutes)
-    likely, late = max(min(_sample_quantile(samples, 0.5), max_end), after_s), max(_sample_quantile(samples, LATE_QUANTILE), after_s)
+    likely, late = max(min(sample_quantile(samples, 0.5), max_end), after_s), max(sample_quantile(samples, LATE_QUANTILE), after_s)
     start: Bound = (after_s, likely, max(late, likely))
     unknown_as = _unknown_as(cycle)  # the group's amber or go phase published as "unavailable"
     out: list[tuple[PhaseClass, Bound, Bound]] = [(unknown_as if cls is PhaseClass.UNKNOWN else cls, begun, start)]
@@ -574,8 +570,8 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
             break
         cls = nxt
         samples = next_end(cycle, cls, samples)
-        late = _sample_quantile(samples, LATE_QUANTILE)
-        end = (start[0] + d[0], min(max(_sample_quantile(samples, 0.5), start[1] + d[0]), late), late)
+        late = sample_quantile(samples, LATE_QUANTILE)
+        end = (start[0] + d[0], min(max(sample_quantile(samples, 0.5), start[1] + d[0]), late), late)
         out.append((unknown_as if cls is PhaseClass.UNKNOWN else cls, start, end))
         start = end
     out.append((PhaseClass.UNKNOWN, start, (inf, inf, inf)))

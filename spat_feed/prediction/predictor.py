@@ -80,6 +80,19 @@ MIN_PERIOD_CONCENTRATION = 0.5
 ~1/sqrt(n); a controller with a fixed cycle 0.8-1). [-]"""
 
 
+def sample_quantile(sorted_s, q: float) -> float:
+    """The ``q`` quantile of sorted, equally likely samples: the inverse of their distribution function (the smallest
+    sample with at least ``q`` of them at or before it; ``inf`` in an unbounded tail), as ``observe``'s quantiles of
+    durations.
+
+    Examples
+    --------
+    >>> sample_quantile([1.0, 2.0, 3.0, 4.0], 0.5), sample_quantile([1.0, 2.0, 3.0, 4.0], 0.9)
+    (2.0, 4.0)
+    """
+    return float(sorted_s[min(len(sorted_s) - 1, max(0, math.ceil(q * len(sorted_s) - 1e-9) - 1))])
+
+
 @dataclass(frozen=True, slots=True)
 class ChangeForecast:
     """When the phase of class ``ends`` (followed by ``then``) ends: equally likely instants, and a hard bound.
@@ -95,10 +108,8 @@ class ChangeForecast:
     method: str
 
     def quantile(self, q: float) -> float:
-        """The ``q`` quantile of the end instant: the inverse of the samples' distribution function (the smallest
-        sample with at least ``q`` of them at or before it; ``inf`` in an unbounded tail). [s]"""
-        s = self.samples_unix_s
-        return float(s[min(len(s) - 1, max(0, math.ceil(q * len(s) - 1e-9) - 1))])
+        """The ``q`` quantile of the end instant (:func:`sample_quantile`). [s]"""
+        return sample_quantile(self.samples_unix_s, q)
 
     @property
     def likely_unix_s(self) -> float:
@@ -202,9 +213,9 @@ def scored_errors_s(since_unix_s: float, end_unix_s: float, durations_s: tuple[f
     ahead = since_unix_s + d[since_unix_s + d > at]
     if not len(ahead):
         return None
-    by_duration = ChangeForecast(PhaseClass.UNKNOWN, None, at, ahead, "duration").likely_unix_s
+    by_duration = sample_quantile(ahead, 0.5)
     on_cycle = _after(_on_cycle(since_unix_s + d, ends, period_s), at, period_s)
-    by_cycle = ChangeForecast(PhaseClass.UNKNOWN, None, at, _reduced(on_cycle), "cycle").likely_unix_s
+    by_cycle = sample_quantile(_reduced(on_cycle), 0.5)
     return abs(by_cycle - end_unix_s), abs(by_duration - end_unix_s)
 
 

@@ -149,20 +149,19 @@ def test_predict_eval_on_every_recording(path):
     from spat_feed.timing.plans import phase_class
     from spat_feed.transport.recorded import read_spat_csv
 
-    for path in [path]:
-        summary, rows = evaluate_log(str(path), limit_s=2400.0)
-        assert {"changes", "mae_s", "mae_s_by_horizon", "within_2s_frac", "within_5s_frac", "baseline_mae_s", "interval_coverage", "early_red_frac"} <= set(summary)
-        assert set(summary["mae_s_by_horizon"]) == {"0-10", "10-30", "30-60"} and set(summary["interval_coverage"]) == {"50", "80", "90"}
-        assert summary["changes"] > 50 and summary["early_red_frac"] == 0.0
-        assert summary["mae_s"] < summary["baseline_mae_s"]
-        snapshots = read_spat_csv(path)
-        series: dict = {}
-        for ix in snapshots:
-            for m in ix.states:
-                series.setdefault(m.signal_group, []).append((ix.timestamp.timestamp(), phase_class(m.state_time_speed[0].event_state)))
-        for row in rows[:: max(1, len(rows) // 200)]:
-            seen = series[row["key"][1]]
-            k = next(i for i, (ts, _) in enumerate(seen) if ts >= row["t"] - 1e-6)
-            cls = seen[k][1]
-            change = next(ts for ts, c in seen[k:] if c is not cls)
-            assert change == pytest.approx(row["change_unix_s"], abs=1e-3)
+    summary, rows = evaluate_log(str(path), limit_s=2400.0)
+    assert {"changes", "mae_s", "mae_s_by_horizon", "within_2s_frac", "within_5s_frac", "baseline_mae_s", "interval_coverage", "early_red_frac"} <= set(summary)
+    assert set(summary["mae_s_by_horizon"]) == {"0-10", "10-30", "30-60"} and set(summary["interval_coverage"]) == {"50", "80", "90"}
+    assert summary["changes"] > 50 and summary["early_red_frac"] == 0.0
+    assert summary["mae_s"] < summary["baseline_mae_s"]
+    snapshots = read_spat_csv(path)
+    series: dict = {}
+    for ix in snapshots:
+        for m in ix.states:
+            series.setdefault(m.signal_group, []).append((ix.timestamp.timestamp(), phase_class(m.state_time_speed[0].event_state)))
+    for row in rows[:: max(1, len(rows) // 200)]:
+        seen = series[row["key"][1]]
+        k = next(i for i, (ts, _) in enumerate(seen) if ts >= row["t"] - 1e-6)
+        cls = seen[k][1]
+        change = next(ts for ts, c in seen[k:] if c is not cls)
+        assert change == pytest.approx(row["change_unix_s"], abs=1e-3)
