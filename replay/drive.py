@@ -38,7 +38,7 @@ from advisory.evaluation.endstate import score_in_end_state
 from advisory.physics.params import SPEED_LIMIT_MPS, ModelParams
 from advisory.evaluation.scoring import DriveScore
 from advisory.signals import Scenario
-from advisory.evaluation.track import STANDSTILL_MPS, RedCrossing, smooth_speed_mps  # noqa: F401  (re-exported, used by tests)
+from advisory.evaluation.track import STANDSTILL_MPS, RedCrossing, UnjudgedCrossing, smooth_speed_mps  # noqa: F401  (re-exported, used by tests)
 from replay.matching import CorridorChoice, MatchedTrace, find_corridor, match
 from replay.trace_io import GpsTrace, TraceError
 from spat_feed.road.corridors import load_corridor, preset_names
@@ -106,6 +106,7 @@ class DriveResult:
     dp: DriverResult | None = None
     notes: list[str] = field(default_factory=list)
     red_crossings: list[RedCrossing] = field(default_factory=list)
+    red_unknown: list[UnjudgedCrossing] = field(default_factory=list)
 
     @property
     def complete(self) -> bool:
@@ -167,6 +168,8 @@ class DriveResult:
             },
             "red_light_crossings": [{"light": c.light, "position_m": c.position_m, "t_unix_s": self.zone_entry_unix_s + c.t_s,
                                      "into_red_s": c.into_red_s, "speed_mps": c.speed_mps} for c in self.red_crossings],
+            "red_light_unknown": [{"light": u.light, "position_m": u.position_m, "gap_from_unix_s": self.zone_entry_unix_s + u.gap_from_s,
+                                   "gap_to_unix_s": self.zone_entry_unix_s + u.gap_to_s} for u in self.red_unknown],
             "notes": self.trace.notes + self.notes,
         }
 
@@ -260,7 +263,11 @@ def score_drive(
     # the regular driver and the DP optimum enter when and as fast as the recorded drive did
     scenario = replace(scenario, initial_speed_mps=float(min(max(zone.v_mps[0], 0.0), scenario.speed_limit_mps)))
     result.scenario = scenario
-    result.red_crossings = drive.red_crossings(scenario.signals)
+    check = drive.red_check(scenario.signals)
+    result.red_crossings, result.red_unknown = check.crossings, check.unknown
+    for u in result.red_unknown:
+        notes.append(f"light {u.light} ({u.position_m:.0f} m) was passed during a {u.gap_to_s - u.gap_from_s:.0f} s gap in the fixes "
+                     f"({t_in + u.gap_from_s:.1f}-{t_in + u.gap_to_s:.1f} Unix s) while it changed: whether it was red is unknown")  # fmt: skip
     for c in result.red_crossings:
         notes.append(f"crossed light {c.light} ({c.position_m:.0f} m) at {t_in + c.t_s:.1f} (Unix s), {c.into_red_s:.1f} s into red, at {c.speed_mps * 3.6:.0f} km/h: "
                      "this drive is not reported as a saving")

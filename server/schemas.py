@@ -91,8 +91,9 @@ class TripCreated(TripOut):
 class GpsFixIn(_In):
     """One GPS fix. Only time and position are required; speed over ground is used when present.
 
-    W3C Geolocation names are accepted too: `latitude`, `longitude`, `speed`, `heading`, `accuracy`, and
-    `timestamp` in milliseconds instead of `t_unix_s` (give one of the two).
+    W3C Geolocation names are accepted too: `latitude`, `longitude`, `speed`, `heading`, `accuracy`,
+    `altitude`, `altitudeAccuracy` (so a flattened `GeolocationCoordinates` is a fix as it is), and `timestamp`
+    in milliseconds instead of `t_unix_s` (give one of the two).
     """
 
     model_config = ConfigDict(
@@ -109,6 +110,10 @@ class GpsFixIn(_In):
                                       description="course over ground, clockwise from true north [deg] (alias `heading`)")  # fmt: skip
     accuracy_m: float | None = Field(default=None, ge=0, le=100_000, validation_alias=AliasChoices("accuracy_m", "accuracy"),
                                      description="horizontal accuracy [m] (alias `accuracy`)")  # fmt: skip
+    altitude_m: float | None = Field(default=None, ge=-1000, le=10_000, validation_alias=AliasChoices("altitude_m", "altitude"),
+                                     description="height above the WGS 84 ellipsoid [m] (alias `altitude`); accepted, not used (grades come from the corridor)")  # fmt: skip
+    altitude_accuracy_m: float | None = Field(default=None, ge=0, le=100_000, validation_alias=AliasChoices("altitude_accuracy_m", "altitudeAccuracy"),
+                                              description="vertical accuracy [m] (alias `altitudeAccuracy`); accepted, not used")  # fmt: skip
 
     @model_validator(mode="after")
     def _one_time(self) -> GpsFixIn:
@@ -184,6 +189,15 @@ class RedLightCrossingOut(_Out):
     speed_mps: float = Field(description="[m/s, 0.01]")
 
 
+class RedLightUnknownOut(_Out):
+    """A stop line passed inside a gap between fixes (an outage, a tunnel) while its light changed: red or not is unknown."""
+
+    light: int = Field(description="1 = the first light along the corridor")
+    intersection_id: int
+    gap_from_unix_s: float = Field(description="the last fix before the gap [Unix s, 0.001]")
+    gap_to_unix_s: float = Field(description="the first fix after it [Unix s, 0.001]")
+
+
 class TripScoreOut(_Out):
     """The trip's drive against the paper's regular driver entering when and as fast as the car did, through
     the same signal timing; both sampled and smoothed alike (docs/SERVICE.md, Score)."""
@@ -202,6 +216,9 @@ class TripScoreOut(_Out):
         default=None, description="1 - driven / regular for energy, wear and cost over `compared_m`, positive = less than the regular driver (the sign `replay` uses too) [0.0001]; null when there is no drive to compare or it crossed a red light"
     )
     red_light_crossings: list[RedLightCrossingOut] = Field(default_factory=list)
+    red_light_unknown: list[RedLightUnknownOut] = Field(
+        default_factory=list, description="lights passed inside a gap of more than 3 s between fixes while they changed: not judged (the drive is still compared)"
+    )
     note: str = ""
 
 

@@ -14,7 +14,8 @@ What is compared (docs/SERVICE.md, "Score"):
   (``compared_m``), never the drive's part against the regular driver's whole zone.
 * **Red lights.** A stop line crossed while red (``advisory.evaluation.track.red_light_crossings``, with
   GPS tolerance) is listed with its time, light and how far into red, and the drive is never reported as
-  a saving (``savings_frac`` is null).
+  a saving (``savings_frac`` is null). A line passed inside a gap between fixes longer than a few seconds
+  (an outage) while its light changed is not judged: it is listed under ``red_light_unknown``.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from advisory.signals import Scenario
 from advisory.trajectory import Trajectory
 from spat_feed.transport.scenarios import FeedScenario, advisory_scenario_at
 
-from server.schemas import DriverScoreOut, RedLightCrossingOut, TripScoreOut
+from server.schemas import DriverScoreOut, RedLightCrossingOut, RedLightUnknownOut, TripScoreOut
 
 
 class ObservedSignal:
@@ -120,6 +121,7 @@ def trip_score(
         regular_traj = regular_driver(replace(lights_at(entry_s), initial_speed_mps=speed_limit_mps))
         regular_score = score_in_end_state(regular_traj, params, speed_limit_mps)
         driven_out, savings, crossings, complete, coverage, compared_m, n, v_seen = None, None, [], False, 0.0, None, 0, speed_limit_mps
+        unknown = []
     else:
         comp = compare_drive(drive, lights_at, params, speed_limit_mps)
         entry_s = drive.entry_s
@@ -130,6 +132,10 @@ def trip_score(
         driven_out = _out(comp.driven.score, comp.driven.trajectory)
         crossings, complete, coverage, compared_m = comp.red_crossings, drive.complete, drive.coverage_frac, drive.distance_m
         savings = comp.savings()
+        unknown = comp.red_unknown
+        for u in unknown:
+            notes.append(f"light {u.light} ({u.position_m:.0f} m) was passed during a {u.gap_to_s - u.gap_from_s:.0f} s gap in the fixes while it changed: "
+                         "whether it was red is unknown")  # fmt: skip
         if crossings:
             notes.append("crossed a red light: this drive is not reported as a saving")
         else:
@@ -152,6 +158,11 @@ def trip_score(
             RedLightCrossingOut(light=c.light, intersection_id=scenario.corridor.intersections[c.light - 1].id, t_unix_s=round(entry_s + c.t_s, 3),
                                 into_red_s=round(c.into_red_s, 1), speed_mps=round(c.speed_mps, 2))
             for c in crossings
+        ],  # fmt: skip
+        red_light_unknown=[
+            RedLightUnknownOut(light=u.light, intersection_id=scenario.corridor.intersections[u.light - 1].id,
+                               gap_from_unix_s=round(entry_s + u.gap_from_s, 3), gap_to_unix_s=round(entry_s + u.gap_to_s, 3))
+            for u in unknown
         ],  # fmt: skip
         note="; ".join(notes),
     )

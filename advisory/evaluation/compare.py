@@ -16,7 +16,8 @@ Given a drive's on-route fixes ``(t, station, speed)`` (stations along the route
    entry speed makes it enter exactly as fast as the drive was measured to.
 4. **Scores** in the paper's common end state (``advisory.evaluation.endstate.score_in_end_state``: the
    distance + re-acceleration to the limit) and :func:`savings_frac`, ``1 - drive / regular`` (positive =
-   less than the regular driver), none when a stop line was crossed while red.
+   less than the regular driver), none when a stop line was crossed while red. A line crossed inside a gap
+   in the fixes while its light changed is neither (``red_unknown``): the drive is compared, with a note.
 """
 
 from __future__ import annotations
@@ -28,7 +29,17 @@ import numpy as np
 
 from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import EndStateScore, score_in_end_state
-from advisory.evaluation.track import STANDSTILL_MPS, RedCrossing, ZoneCut, cut_to_zone, red_light_crossings, smooth_speed_mps, trajectory_from_samples
+from advisory.evaluation.track import (
+    STANDSTILL_MPS,
+    RedCrossing,
+    RedLightCheck,
+    UnjudgedCrossing,
+    ZoneCut,
+    cut_to_zone,
+    red_light_check,
+    smooth_speed_mps,
+    trajectory_from_samples,
+)
 from advisory.physics.params import ModelParams
 from advisory.signals import Scenario
 from advisory.trajectory import Trajectory
@@ -135,7 +146,12 @@ class ZoneDrive:
 
     def red_crossings(self, signals) -> list[RedCrossing]:
         """Stop lines this drive crossed while red (``signals`` on a time axis whose 0 is the entry)."""
-        return red_light_crossings(self.driven.trajectory, signals, self.t_s - self.entry_s, self.station_m)
+        return self.red_check(signals).crossings
+
+    def red_check(self, signals) -> RedLightCheck:
+        """The red-light verdicts (``advisory.evaluation.track.red_light_check``): the crossings judged red, and
+        those inside a gap in the fixes that cannot be judged."""
+        return red_light_check(self.driven.trajectory, signals, self.t_s - self.entry_s, self.station_m)
 
     def measured(self, reference: Trajectory, params: ModelParams, speed_limit_mps: float, keep_series: bool = False) -> DriverResult:
         """Another driver (time 0 = the entry, from station 0: the regular driver, the DP optimum) measured as
@@ -191,6 +207,8 @@ class Comparison:
     """The lights as the regular driver saw them (time 0 = the entry; its entry speed set)."""
     regular: DriverResult
     red_crossings: list[RedCrossing]
+    red_unknown: list[UnjudgedCrossing] = field(default_factory=list)
+    """Stop lines crossed inside a gap in the fixes while the light changed: red or not is unknown."""
 
     @property
     def driven(self) -> DriverResult:
@@ -216,4 +234,5 @@ def compare_drive(
     if abs(v_fix - v_in) > 1e-6:
         lights = replace(lights, initial_speed_mps=v_fix)
         regular = drive.measured(regular_driver(lights), params, speed_limit_mps, keep_series)
-    return Comparison(drive, lights, regular, drive.red_crossings(lights.signals))
+    check = drive.red_check(lights.signals)
+    return Comparison(drive, lights, regular, check.crossings, check.unknown)

@@ -170,6 +170,12 @@ ANCHOR_WINDOW_M = 60.0
 """Fixes within this of a stop line anchor the integrated positions to the matched stations there. [m]"""
 
 
+FIX_GAP_S = 3.0
+"""A stop line crossed between two fixes farther apart than this is not judged from the interpolated drive: the
+car may have crossed anywhere in the gap (an outage, a tunnel). It is judged only when the light was red, or not
+red, throughout the gap; else the verdict is "unknown". [s]"""
+
+
 @dataclass(frozen=True, slots=True)
 class RedCrossing:
     """A stop line crossed while its light was red: which light (1-based along the route), when (on the
@@ -182,9 +188,49 @@ class RedCrossing:
     speed_mps: float
 
 
+@dataclass(frozen=True, slots=True)
+class UnjudgedCrossing:
+    """A stop line crossed inside a gap between fixes (``gap_from_s`` to ``gap_to_s``, on the drive's time axis)
+    longer than :data:`FIX_GAP_S` while its light changed: whether it was red is unknown. [-], [m], [s], [s]"""
+
+    light: int
+    position_m: float
+    gap_from_s: float
+    gap_to_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class RedLightCheck:
+    """The red-light verdicts of one drive: crossings judged red, and crossings that cannot be judged."""
+
+    crossings: list[RedCrossing]
+    unknown: list[UnjudgedCrossing]
+
+
+def _gap_around(p_m: float, t_c: float, t_fix: np.ndarray, st_fix: np.ndarray) -> tuple[float, float] | None:
+    """The gap between fixes longer than :data:`FIX_GAP_S` in which the car crossed the line at ``p_m``: the
+    one holding the interpolated crossing instant ``t_c``, or the one between the last fix before the line and
+    the first fix past it. None when the crossing lies between close fixes."""
+    if t_fix.size < 2:
+        return None
+    k = int(np.searchsorted(t_fix, t_c, side="right"))
+    if 0 < k < t_fix.size and t_fix[k] - t_fix[k - 1] > FIX_GAP_S:
+        return float(t_fix[k - 1]), float(t_fix[k])
+    past = np.flatnonzero(st_fix >= p_m)
+    j = int(past[0]) if past.size else 0
+    if j > 0 and t_fix[j] - t_fix[j - 1] > FIX_GAP_S:
+        return float(t_fix[j - 1]), float(t_fix[j])
+    return None
+
+
 def red_light_crossings(traj: Trajectory, signals, t_station_s=None, station_m=None) -> list[RedCrossing]:
+    """The crossings :func:`red_light_check` judges red (those it cannot judge left out)."""
+    return red_light_check(traj, signals, t_station_s, station_m).crossings
+
+
+def red_light_check(traj: Trajectory, signals, t_station_s=None, station_m=None) -> RedLightCheck:
     """
-    Stop lines the drive crossed while red, with measurement tolerance.
+    Stop lines the drive crossed while red, with measurement tolerance, and those it cannot tell.
 
     Parameters
     ----------
@@ -194,27 +240,32 @@ def red_light_crossings(traj: Trajectory, signals, t_station_s=None, station_m=N
         Lights with ``position_m``, ``is_red(t)`` and ``red_intervals(t0, t1)`` (``advisory.signals.FixedTimeSignal``
         or an observed light with the same methods).
     t_station_s, station_m : arrays (n,), optional
-        The fixes' times (same axis) and map-matched stations: near each line, the integrated positions are
-        shifted by the median of (station - integrated position) over the fixes within ``ANCHOR_WINDOW_M``,
-        so slow drift of the integration does not move the crossing, and GPS noise at a standstill (speed 0)
-        cannot fake one.
+        The fixes' times (same axis, increasing) and map-matched stations: near each line, the integrated
+        positions are shifted by the median of (station - integrated position) over the fixes within
+        ``ANCHOR_WINDOW_M``, so slow drift of the integration does not move the crossing, and GPS noise at a
+        standstill (speed 0) cannot fake one. They also show gaps: a line crossed inside a gap between fixes
+        longer than :data:`FIX_GAP_S` is judged by the light over the whole gap (red throughout: a red crossing;
+        never red: none; else unknown), never by the crossing instant the interpolation across the gap makes up.
 
     Returns
     -------
-    list of RedCrossing
-        Crossings at an instant ``t`` such that the light is red from ``t - tol`` (``tol`` =
+    RedLightCheck
+        ``crossings``: at an instant ``t`` such that the light is red from ``t - tol`` (``tol`` =
         max(``RED_TOLERANCE_S``, ``RED_TOLERANCE_M`` / speed)) until the car is ``RED_TOLERANCE_M`` past the
         line: a crossing right at a red's start or end, or a car stopped at the line, is within what a
-        recording can tell apart.
+        recording can tell apart. ``unknown``: the lines crossed in a gap while the light changed.
     """
-    out = []
+    out: list[RedCrossing] = []
+    unknown: list[UnjudgedCrossing] = []
+    t_fix = np.asarray(t_station_s if t_station_s is not None else (), dtype=float)
+    st_fix = np.asarray(station_m if station_m is not None else (), dtype=float)
     for n, light in enumerate(signals, start=1):
         p = float(light.position_m)
         shift = 0.0
-        if station_m is not None and len(station_m):
-            near = np.abs(np.asarray(station_m) - p) <= ANCHOR_WINDOW_M
+        if st_fix.size:
+            near = np.abs(st_fix - p) <= ANCHOR_WINDOW_M
             if near.any():
-                shift = float(np.median(np.asarray(station_m)[near] - traj.position_at(np.asarray(t_station_s)[near])))
+                shift = float(np.median(st_fix[near] - traj.position_at(t_fix[near])))
         t_c = traj.crossing_time_s(p - shift)
         if not np.isfinite(t_c):
             continue
@@ -222,8 +273,19 @@ def red_light_crossings(traj: Trajectory, signals, t_station_s=None, station_m=N
         if not np.isfinite(t_past):
             continue
         v_c = float(traj.speed_at(t_c))
-        tol = max(RED_TOLERANCE_S, RED_TOLERANCE_M / max(v_c, 0.1))
-        if bool(light.is_red(t_c - tol)) and bool(light.is_red(t_c)) and bool(light.is_red(t_past)) and bool(light.is_red(t_past - tol)):
-            start = max((s for s, e in light.red_intervals(t_c - 3600.0, t_c) if s <= t_c < e), default=t_c)
-            out.append(RedCrossing(n, p, float(t_c), float(t_c - start), v_c))
-    return out
+        gap = _gap_around(p, t_c, t_fix, st_fix)
+        if gap is not None:
+            reds = [(a, b) for a, b in light.red_intervals(gap[0], gap[1]) if b > gap[0] and a < gap[1]]
+            if not reds:
+                continue
+            if not any(a <= gap[0] and b >= gap[1] for a, b in reds):
+                unknown.append(UnjudgedCrossing(n, p, gap[0], gap[1]))
+                continue
+            t_c = min(max(t_c, gap[0]), gap[1])  # red throughout the gap: crossed on red, whenever in it
+        else:
+            tol = max(RED_TOLERANCE_S, RED_TOLERANCE_M / max(v_c, 0.1))
+            if not (bool(light.is_red(t_c - tol)) and bool(light.is_red(t_c)) and bool(light.is_red(t_past)) and bool(light.is_red(t_past - tol))):
+                continue
+        start = max((s for s, e in light.red_intervals(t_c - 3600.0, t_c) if s <= t_c < e), default=t_c)
+        out.append(RedCrossing(n, p, float(t_c), float(t_c - start), v_c))
+    return RedLightCheck(out, unknown)

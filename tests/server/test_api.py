@@ -209,13 +209,20 @@ def test_fields_are_rounded_as_documented(client):
     [
         ({"timestamp": NOW * 1000, "latitude": "LAT", "longitude": "LON", "speed": 13.9, "heading": 295.0, "accuracy": 5.0}, True),
         ({"timestamp": NOW * 1000, "latitude": "LAT", "longitude": "LON", "speed": None, "heading": None}, True),  # JS NaN -> null
+        # a flattened GeolocationCoordinates as a phone gives it: altitude fields always there, null on most phones
+        ({"timestamp": NOW * 1000, "latitude": "LAT", "longitude": "LON", "accuracy": 4.0, "altitude": None, "altitudeAccuracy": None,
+          "heading": None, "speed": None}, True),  # fmt: skip
+        ({"timestamp": NOW * 1000, "latitude": "LAT", "longitude": "LON", "accuracy": 4.0, "altitude": 87.4, "altitudeAccuracy": 6.0}, True),
+        ({"t_unix_s": NOW, "lat_deg": "LAT", "lon_deg": "LON", "altitude_m": 87.4, "altitude_accuracy_m": 6.0}, True),
+        ({"t_unix_s": NOW, "lat_deg": "LAT", "lon_deg": "LON", "altitude_m": "87"}, False),
+        ({"t_unix_s": NOW, "lat_deg": "LAT", "lon_deg": "LON", "altitude_accuracy_m": -1.0}, False),
         ({"t_unix_s": NOW, "lat_deg": "LAT", "lon_deg": "LON", "speed_mps": True}, False),
         ({"t_unix_s": NOW, "lat_deg": "LAT", "lon_deg": "LON", "speed_mps": "13.9"}, False),
         ({"t_unix_s": str(NOW), "lat_deg": "LAT", "lon_deg": "LON"}, False),
         ({"t_unix_s": NOW, "timestamp": NOW * 1000, "lat_deg": "LAT", "lon_deg": "LON"}, False),
         ({"t_unix_s": NOW, "lat_deg": "LAT", "latitude": "LAT", "lon_deg": "LON"}, False),
     ],
-    ids=["w3c names", "w3c nulls", "speed true", "speed string", "time string", "both times", "both latitudes"],
+    ids=["w3c names", "w3c nulls", "w3c coords null altitude", "w3c altitude", "our altitude names", "altitude string", "altitude accuracy < 0", "speed true", "speed string", "time string", "both times", "both latitudes"],
 )
 def test_w3c_names_and_strict_numbers(client, body, ok):
     """Findings: W3C Geolocation names rejected; "speed_mps": true taken as 1.0; numeric strings passed."""

@@ -172,6 +172,34 @@ def test_a_red_light_crossing_is_flagged_and_never_a_saving(service):
     assert score["red_light_crossings"] == [] and score["savings_frac"] is not None
 
 
+def test_a_light_passed_in_a_gap_between_fixes_is_not_judged_unless_the_whole_gap_decides():
+    """Finding: a resumed Redis demo trip was scored "red crossed" across the outage's gap in fixes (the speed
+    interpolated from the stop to the first fix after the outage put the car over the line while still red)."""
+    corridor = load_corridor("paper_s400")
+    fs = make_scenario(corridor, "field_test", E)  # light 1 (100 m) red until 15 s after entry, then green for 30 s
+    reg = regular_driver(advisory_scenario_at(fs, E))  # waits at light 1 (99 m) until it turns green
+
+    def score(t, v, x, lose):
+        keep = ~((t > lose[0]) & (t < lose[1]))
+        return trip_score("gap", fs, "paper_54kwh", E + t[keep], v[keep], x[keep], SPEED_LIMIT_MPS)
+
+    t, v, x = fixes_of(reg)
+    # stopped at the red before the outage, past the line after it; the light turned green inside: unknown
+    s = score(t, v, x, (10.0, 25.0))
+    assert s.red_light_crossings == [] and s.savings_frac is not None
+    (u,) = s.red_light_unknown
+    assert (u.light, u.gap_from_unix_s, u.gap_to_unix_s) == (1, pytest.approx(E + 9.37), pytest.approx(E + 25.37))
+    assert "gap in the fixes" in s.note and "unknown" in s.note
+    # the same outage, but the light green all through it: nothing to judge, nothing unknown
+    s = score(t, v, x, (15.5, 22.0))
+    assert s.red_light_crossings == [] and s.red_light_unknown == [] and s.savings_frac is not None
+    # red all through the gap: crossed on red whenever in the gap (a gap never excuses a red)
+    cruise = Trajectory(np.array([0.0, 600 / KMH50]), np.array([0.0, 600.0]), np.array([KMH50, KMH50]))
+    s = score(*fixes_of(cruise), (3.0, 12.0))
+    assert [c.light for c in s.red_light_crossings] == [1, 2] and s.red_light_unknown == [] and s.savings_frac is None
+    assert 2.37 <= s.red_light_crossings[0].t_unix_s - E <= 12.37
+
+
 def test_observed_phases_give_the_same_score_as_the_plans():
     """A trip on live SPaT is scored against the phases it observed; observed from the plans, they are the plans."""
     from server.trips import ObservedLights

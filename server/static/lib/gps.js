@@ -9,6 +9,8 @@ export function fixFromPosition(position, offset_s = 0) {
   if (c.speed != null && Number.isFinite(c.speed) && c.speed >= 0) fix.speed_mps = Math.min(c.speed, 70);
   if (c.heading != null && Number.isFinite(c.heading) && c.speed !== 0) fix.heading_deg = ((c.heading % 360) + 360) % 360;
   if (c.accuracy != null && Number.isFinite(c.accuracy) && c.accuracy >= 0) fix.accuracy_m = Math.min(c.accuracy, 100000);
+  if (c.altitude != null && Number.isFinite(c.altitude) && c.altitude >= -1000 && c.altitude <= 10000) fix.altitude_m = c.altitude;
+  if (c.altitudeAccuracy != null && Number.isFinite(c.altitudeAccuracy) && c.altitudeAccuracy >= 0) fix.altitude_accuracy_m = Math.min(c.altitudeAccuracy, 100000);
   return fix;
 }
 
