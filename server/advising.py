@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
-from advisory.advice.advisor import Advice, AdvisorParams, advise
+from advisory.advice.advisor import Advice, AdvisorParams, advise, published_speed_mps
 from advisory.evaluation.track import RED_TOLERANCE_M
 from advisory.physics.params import VEHICLE_PRESETS
 from spat_feed.road.corridors import Corridor
@@ -271,7 +271,7 @@ class Engine:
             speed_source=point.speed_source if point is not None else ("gps" if fix.speed_mps is not None else "none"),
             next_intersection_id=nxt.intersection_id if nxt else None, distance_to_line_m=round(nxt.distance_m, 2) if nxt else None,
             spat_fresh=spat_fresh, action=advice.action, reason=advice.reason,
-            target_speed_mps=None if advice.target_speed_mps is None else math.floor(advice.target_speed_mps * 100.0 + 1e-9) / 100.0,  # down: never above the limit
+            target_speed_mps=None if advice.target_speed_mps is None else published_speed_mps(advice.target_speed_mps),  # down: never above the limit
             light_red=advice.light_red if named is not None else None, seconds_to_change_s=countdown,
             light_intersection_id=named.intersection_id if named is not None else None,
             light_distance_m=round(named.distance_m, 2) if named is not None else None,

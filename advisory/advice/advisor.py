@@ -501,8 +501,36 @@ def _normal_drive_s(distance_m: float, obs: Observation, params: AdvisorParams) 
                            params.firm_decel_mps2, params.normal_accel_mps2, *_coast_arrays(params.vehicle))  # fmt: skip
 
 
+def published_speed_mps(speed_mps: float) -> float:
+    """An advised speed as the API publishes it (``target_speed_mps``): rounded down to 0.01 m/s, so never above
+    the limit. [m/s]
+
+    Examples
+    --------
+    >>> published_speed_mps(24.5872)  # 55 mph
+    24.58
+    """
+    return math.floor(speed_mps * 100.0 + 1e-9) / 100.0
+
+
+def spoken_speed(speed_mps: float, units: str) -> int:
+    """The whole km/h or mph heard, and shown by the app (``speedIn`` in ``server/static/lib/units.js``, the same
+    operations): the published speed (:func:`published_speed_mps`) converted, halves rounded up. One rounding for
+    both, so the number heard is the number seen (before: the voice rounded the exact speed, 55 mph -> "89 km/h",
+    the screen the published one, 88).
+
+    Examples
+    --------
+    >>> spoken_speed(24.5872, "kmh"), spoken_speed(24.5872, "mph"), spoken_speed(12.5, "kmh")
+    (88, 55, 45)
+    """
+    x = published_speed_mps(speed_mps) * (MPH_PER_MPS if units == "mph" else KMH_PER_MPS)
+    n = math.floor(x)
+    return n + 1 if x - n >= 0.5 else n  # JavaScript's Math.round, to the bit
+
+
 def _say_speed(speed_mps: float, units: str) -> str:
-    return f"{round(speed_mps * (MPH_PER_MPS if units == 'mph' else KMH_PER_MPS)):d}"
+    return f"{spoken_speed(speed_mps, units):d}"
 
 
 def _say_seconds(t_s: float | None) -> str:

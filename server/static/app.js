@@ -371,6 +371,11 @@ function renderScore(score, current) {
   setText("score-note", score?.note ? capitalise(score.note) + "." : "");
 }
 
+/** What the chosen road is, in the corridor's own words (a test track says so: its lights and limit are not the street's). */
+function describeCorridor() {
+  setText("corridor-note", corridors.get($("corridor").value)?.description ?? "");
+}
+
 // -- start-up --------------------------------------------------------------------------------------
 async function init() {
   applyTheme(THEMES.includes(store.get("theme")) ? store.get("theme") : "auto");
@@ -388,7 +393,10 @@ async function init() {
   });
   $("units").addEventListener("change", () => store.set("units", $("units").value));
   $("pace").addEventListener("change", () => store.set("pace", $("pace").value));
-  $("corridor").addEventListener("change", () => store.set("corridor", $("corridor").value));
+  $("corridor").addEventListener("change", () => {
+    store.set("corridor", $("corridor").value);
+    describeCorridor();
+  });
   $("start").addEventListener("click", () => start("gps"));
   $("demo").addEventListener("click", () => start("demo"));
   $("end").addEventListener("click", () => finish(drive, "trip ended"));
@@ -405,6 +413,7 @@ async function init() {
     }
     const saved = store.get("corridor", "");
     if (corridors.has(saved)) $("corridor").value = saved;
+    describeCorridor();
   } catch (error) {
     setText("setup-error", `The service did not answer: ${error.message}`);
   }

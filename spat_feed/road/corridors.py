@@ -566,8 +566,9 @@ def paper_corridor(spacing_m: float, road: StraightRoad = CHAMPS_ELYSEES) -> Cor
         [PAPER_APPROACH_M, PAPER_APPROACH_M + spacing_m],
         PAPER_APPROACH_M + spacing_m + PAPER_EXIT_M,
         description=(
-            f"Paper Sec. 2: 100 m approach, light 2 s = {spacing_m:g} m after light 1, 100 m exit "
-            "(Wang, Advani & Prasad)."
+            f"The paper's test track (Wang, Advani & Prasad, Sec. 2): 100 m approach, light 2 s = {spacing_m:g} m after light 1, "
+            "100 m exit, the paper's 55 mph (88.5 km/h) limit. Drawn on the Champs-Élysées only to have coordinates: "
+            "its lights and limit are the paper's, not the avenue's (50 km/h)."
         ),
     )
 

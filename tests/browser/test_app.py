@@ -22,6 +22,7 @@ import httpx
 import numpy as np
 import pytest
 
+from advisory.advice.advisor import spoken_speed
 from replay.trace_io import read_gps_csv
 from server.routes.webapp import DEMO_TRACE, STATIC_DIR
 from spat_feed.road.corridors import load_corridor
@@ -102,6 +103,10 @@ async def advisories(page: Page) -> list[dict]:
     return sorted(received, key=lambda a: a["seq"])
 
 
+SPEED_GRID = sorted({k / 100 for k in range(7000)} | {(k + 0.5) / 3.6 for k in range(250)} | {(k + 0.5) * 0.44704 for k in range(150)})
+"""Speeds [m/s]: every published value (0.01 m/s) and the halves of each km/h and mph, where roundings differ."""
+
+
 def speed_text(speed_mps: float | None, units: str) -> str:
     if speed_mps is None:
         return "–"
@@ -112,6 +117,9 @@ def speed_text(speed_mps: float | None, units: str) -> str:
 def check_rendering(shown: dict, advice: dict, units: str) -> None:
     """What the page shows is what the advisory says, in the trip's units."""
     assert shown["message"] == advice["message"]
+    heard = re.search(r"(\d+) (?:kilometers|miles) per hour", advice["message"])
+    if heard and advice["action"] != "stop":
+        assert shown["target"] == heard.group(1)  # the number shown is the number heard
     if advice["action"] == "stop":
         assert shown["target"] == "STOP"
     else:
@@ -203,7 +211,7 @@ def test_units_trace_and_demo_timeline_in_the_browser(app_service, tmp_path):
         browser = await Browser.launch(CHROMIUM, tmp_path / "profile", tmp_path / "chromium.log")
         try:
             page = await open_app(browser, app_service.base_url + "/app/", script="", language="en-GB", scheme="light")
-            out = json.loads(await page.evaluate("""(async () => {
+            out = json.loads(await page.evaluate("globalThis.SPEED_GRID = " + json.dumps(SPEED_GRID) + ";\n" + """(async () => {
               const u = await import("./lib/units.js");
               const t = await import("./lib/trace.js");
               const text = await (await fetch("demo/field_test_advised.csv")).text();
@@ -225,7 +233,8 @@ def test_units_trace_and_demo_timeline_in_the_browser(app_service, tmp_path):
                 parameter: [u.unitsParameter({anyOf: [{enum: ["metric", "imperial"], type: "string"}, {type: "null"}]}, "kmh"),
                             u.unitsParameter(undefined, "kmh"), u.unitsParameter({type: "string"}, "mph"),
                             u.unitsParameter({enum: ["kmh", "mph"]}, "mph"), u.unitsParameter({enum: ["metric"]}, "mph")],
-                speeds: [u.speedIn(24.587, "mph"), u.speedIn(24.587, "kmh"), u.speedIn(null, "kmh")],
+                speeds: [u.speedIn(24.5872, "mph"), u.speedIn(24.5872, "kmh"), u.speedIn(null, "kmh")],
+                grid: ["kmh", "mph"].map((units) => SPEED_GRID.map((v) => u.speedIn(v, units))),
                 distances: [u.distanceText(123, "kmh", "en"), u.distanceText(1234, "kmh", "en"), u.distanceText(100, "mph", "en"), u.distanceText(1609.344, "mph", "en")],
                 meta: trace.meta, fixes: trace.fixes, errors, timelines,
               });
@@ -238,7 +247,9 @@ def test_units_trace_and_demo_timeline_in_the_browser(app_service, tmp_path):
     assert out["locale"] == ["mph", "mph", "mph", "kmh", "kmh", "mph", "mph", "kmh"]
     assert out["choose"] == ["mph", "mph", "kmh", "mph", "kmh"]  # the trip's units (spoken) > the user's choice > the locale's
     assert out["parameter"] == ["metric", None, "mph", "mph", None]
-    assert out["speeds"] == [55, 89, None]
+    assert out["speeds"] == [55, 88, None]  # 55 mph: 88 km/h heard and shown (before: 89 heard, 88 shown)
+    # the number shown is the number heard: the page's rounding against the voice's (phrase()), every published speed to 70 m/s
+    assert out["grid"] == [[spoken_speed(v, units) for v in SPEED_GRID] for units in ("kmh", "mph")]
     assert out["distances"] == ["125 m", "1.2 km", "330 ft", "1.0 mi"]
     assert out["meta"] == {"corridor": "paper_s400", "timing": "field_test", "entry_unix_s": 1714557600, "vehicle": "paper_54kwh",
                            "driver": out["meta"]["driver"], "made_by": out["meta"]["made_by"]}  # fmt: skip
@@ -284,14 +295,21 @@ def test_gps_drive_shows_and_speaks_the_advice(app_service, tmp_path, shots):
             assert options == ["", "paper_s200", "paper_s400"]
             for select, value in (("corridor", "paper_s400"), ("units", "kmh")):  # km/h chosen, against the locale's mph
                 await page.evaluate(f"(() => {{ const s = document.getElementById('{select}'); s.value = '{value}'; s.dispatchEvent(new Event('change')); }})()")
+            # the paper's corridor says what it is: a test track, its limit not the avenue's (issue 29, item 5)
+            road = await page.evaluate("document.getElementById('corridor-note').textContent")
+            assert road == corridor.description and "test track" in road and "not the avenue's" in road
+            assert "test track" in await page.evaluate("document.getElementById('demo-note').textContent")
             assert await background_rgb(page) == (255, 255, 255)
             await page.screenshot(shots / "1_setup.png")
 
             async def move_to(station_m: float) -> None:
                 lat, lon = corridor.position(station_m)
-                await page.send("Emulation.setGeolocationOverride", latitude=lat, longitude=lon, accuracy=4.0, speed=CAR_SPEED_MPS, heading=295.5)
+                await page.send("Emulation.setGeolocationOverride", latitude=lat, longitude=lon, accuracy=4.0, speed=CAR_SPEED_MPS, heading=295.5,
+                                altitude=35.0, altitudeAccuracy=3.0)  # the page sends them too (W3C names, accepted)
 
             await move_to(0.0)
+            coords = await page.evaluate("new Promise((ok) => navigator.geolocation.getCurrentPosition((p) => ok([p.coords.altitude, p.coords.altitudeAccuracy])))")
+            assert coords == [35.0, 3.0]  # the fixes the page sends carry them (a 422 before)
             await page.click("#start")
             await page.wait_for("document.body.dataset.state === 'drive'", 20, "the drive screen")
             seen = []
@@ -504,7 +522,8 @@ def test_over_https_the_page_gets_gps_and_a_secure_socket(tmp_path, shots):
             await browser.send("Browser.grantPermissions", {"permissions": ["geolocation"], "origin": service.base_url, "browserContextId": page.context_id})
             for k in range(4):
                 lat, lon = corridor.position(20.0 * k)
-                await page.send("Emulation.setGeolocationOverride", latitude=lat, longitude=lon, accuracy=4.0, speed=CAR_SPEED_MPS, heading=295.5)
+                await page.send("Emulation.setGeolocationOverride", latitude=lat, longitude=lon, accuracy=4.0, speed=CAR_SPEED_MPS, heading=295.5,
+                                altitude=35.0, altitudeAccuracy=3.0)  # the page sends them too (W3C names, accepted)
                 if k == 0:
                     await page.click("#start")
                 await page.wait_for(f"Number(document.getElementById('drive').dataset.seq) >= {k + 1}", 20, f"the advisory for fix {k + 1}")

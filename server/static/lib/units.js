@@ -62,10 +62,13 @@ export function unitsParameter(schema, units) {
   return values.find((value) => normalizeUnits(value) === units) ?? null;
 }
 
-/** A speed in whole units (the service rounds the spoken number the same way). */
+/**
+ * A speed in whole units, as the service speaks it (`advisory.advice.advisor.spoken_speed`, the same
+ * operations): down to 0.01 m/s as the API publishes it (a no-op on its numbers), converted, halves up.
+ */
 export function speedIn(speed_mps, units) {
   if (speed_mps == null || !Number.isFinite(speed_mps)) return null;
-  return Math.round(speed_mps * (units === "mph" ? MPH_PER_MPS : KMH_PER_MPS));
+  return Math.round((Math.floor(speed_mps * 100 + 1e-9) / 100) * (units === "mph" ? MPH_PER_MPS : KMH_PER_MPS));
 }
 
 export function speedUnitLabel(units) {
