@@ -2,7 +2,8 @@
 
 A speed trace (time + speed) is scored as it is. A GPS trace (CSV with time, lat, lon[, speed]; or a GPX
 file) is map-matched onto its corridor, scored over the corridor's zone, and compared with the paper's
-regular driver and the DP optimum through the same lights (``replay.drive``). ``--server URL`` also
+regular driver and the DP optimum through the same lights, or without signal timing with the regular driver
+on the drive's own stops, and its energy per km with the EPA cycles' (``replay.drive``). ``--server URL`` also
 feeds its fixes to a running advisory service and prints what the service advised (``replay.live``).
 Exit status: 0 scored, 1 scored but the drive does not cover the zone (GPS), 2 bad input or options.
 """
@@ -71,7 +72,13 @@ def render_drive(result, title: str) -> str:
             ("cost [$]", lambda r: f"{r.score.cost_usd:.5f}"),
         ]
         over = "zone" if not result.drive.partial else f"first {result.drive.distance_m:.1f} m the drive covered"
-        lines = ["", f"Comparison through the same lights (the {over} + re-acceleration to the limit, as in the paper)"]
+        if result.against == "recorded stops":
+            where = ", ".join(f"{st.position_m:.0f} m until {st.until_s:.0f} s" for st in result.stops) or "none: it never stood still"
+            lines = ["", f"Comparison on the drive's own stops, no signal timing (the {over} + re-acceleration to the limit): the regular driver",
+                     f"stops where the drive stood still and leaves when it left (stops: {where}); it shows how the drive was driven",
+                     "between stops, not the stops advice could have saved"]  # fmt: skip
+        else:
+            lines = ["", f"Comparison through the same lights (the {over} + re-acceleration to the limit, as in the paper)"]
         lines.append(f"  {'':<20}" + "".join(f"{name:>14}" for name, _ in drivers))
         for label, fn in rows:
             lines.append(f"  {label:<20}" + "".join(f"{fn(r):>14}" for _, r in drivers))
@@ -83,6 +90,11 @@ def render_drive(result, title: str) -> str:
                     continue
                 lines.append(f"  {name} vs regular: {savings_text(saved[key])}")
         head += lines
+    cycles = result.epa_cycles()
+    if cycles:
+        head += ["", f"Energy per km against the EPA cycles (same vehicle and model, flat road): this drive {result.end_state_wh_per_km:.1f} Wh/km",
+                 "  (zone + re-acceleration to the limit, per km of the zone: the kinetic energy it used up is charged, as the cycles end at rest)"]  # fmt: skip
+        head += [f"  {c['name']:<20} {c['wh_per_km']:6.1f} Wh/km   this drive x{c['ratio']:.2f}" for c in cycles]
     notes = result.trace.notes + result.notes
     if notes:
         head += ["", "Notes:"] + [f"  - {n}" for n in notes]
@@ -119,7 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--plot", type=Path, metavar="OUT.png", help="draw the paper's four panels (time-distance with red bars, speed, energy, decay)")
     gps = parser.add_argument_group("GPS traces")
     gps.add_argument("--corridor", help="corridor preset or JSON file (default: the trace's '# corridor:', else found by map matching)")
-    gps.add_argument("--timing", help="signal timing: a paper preset (field_test, -15_15), a plan of the corridor, or a plan file .json/.toml (default: the trace's '# timing:', else the corridor's own plan)")
+    gps.add_argument("--timing", help="signal timing: a plan of the corridor, a paper preset (field_test, -15_15), 'trip', or a plan file .json/.toml "
+                     "(default: the trace's '# timing:', else the corridor's own plan; none: compared on the drive's own stops)")  # fmt: skip
     gps.add_argument("--entry", type=float, metavar="UNIX_S", help="zone-entry instant the timing is relative to (default: '# entry_unix_s:', else when the fixes cross station 0)")
     gps.add_argument("--smooth-s", type=float, default=None, help="Gaussian speed smoothing sigma [s] of the drive and of the drivers it is compared with (default: 1, as the service's trip score)")
     gps.add_argument("--baseline", type=Path, metavar="TRACE", help="another GPS trace of the same corridor (e.g. a regular drive): print what this drive saved against it")
@@ -171,7 +184,7 @@ def _gps_main(trace: GpsTrace, args) -> int:
     params = model_params(vehicle, args.decay_multiplier)
     result = score_drive(
         trace, params, corridor=args.corridor, timing=args.timing, entry_unix_s=args.entry,
-        smooth_s=args.smooth_s, compare=not args.no_compare,
+        smooth_s=args.smooth_s, compare=not args.no_compare, vehicle=vehicle, decay_multiplier=args.decay_multiplier,
     )  # fmt: skip
     baseline = None
     if args.baseline is not None:

@@ -25,6 +25,10 @@
    every stop line on a stage boundary: where a corridor's are not (a real road), it solves with 10 m
    stages and the stop lines moved to the nearest boundary (at most 5 m; said in the notes,
    :func:`dp_scenario`). The speed limit is the corridor's lowest over the zone where its file states one.
+7. **No timing**: the regular driver on the drive's own stops (``advisory.evaluation.stops``: held where the
+   drive stood still until it moved off), no DP optimum, and a note on how to give the timing.
+8. **EPA cycles**: the drive's end-state energy per km of the zone beside the same vehicle's on the EPA UDDS and
+   HWFET cycles (``replay.cycles``), with or without timing.
 """
 
 from __future__ import annotations
@@ -37,12 +41,12 @@ from advisory.evaluation.compare import SMOOTH_S, Comparison, DriverResult, Zone
 from advisory.evaluation.endstate import score_in_end_state
 from advisory.physics.params import SPEED_LIMIT_MPS, ModelParams
 from advisory.evaluation.scoring import DriveScore
+from advisory.evaluation.stops import Stop, recorded_stops, stops_scenario
 from advisory.signals import Scenario
 from advisory.evaluation.track import STANDSTILL_MPS, RedCrossing, UnjudgedCrossing, smooth_speed_mps  # noqa: F401  (re-exported, used by tests)
-from replay.matching import CorridorChoice, MatchedTrace, find_corridor, match
+from replay.matching import MAKE_CORRIDOR, ON_ROUTE_M, CorridorChoice, MatchedTrace, find_corridor, how_far, match
 from replay.trace_io import GpsTrace, TraceError
-from spat_feed.road.corridors import load_corridor, preset_names
-from spat_feed.timing.paper import TIMING_PRESETS
+from spat_feed.road.corridors import load_corridor
 from spat_feed.transport.scenarios import FeedScenario, advisory_scenario_at, make_scenario, resolve_timing
 
 DP_STAGE_M = 20.0
@@ -76,11 +80,28 @@ def dp_scenario(scenario: Scenario, stage_m: float = DP_STAGE_M) -> tuple[Scenar
     return replace(scenario, signals=tuple(out), zone_length_m=zone), ds, moved
 
 
-def _plans_of(corridor: str) -> tuple:
-    try:
-        return load_corridor(corridor).plans
-    except (KeyError, ValueError, OSError):
-        return ()  # reported when the corridor is loaded
+NO_TIMING_NOTE = (
+    "no signal timing: compared with the regular driver on the drive's own stops (it stops where the drive stood still "
+    "and leaves when it left), not through the lights; for that, give the timing the lights ran: --timing PLAN.json/.toml "
+    "(a plan file, docs/CORRIDORS.md), a plan of the corridor or a paper preset by name, or '# timing:' in the trace"
+)
+
+
+def _compare_on_recorded_stops(result: DriveResult, params: ModelParams, speed_limit_mps: float) -> None:
+    """No timing: the regular driver held at the drive's own standstills (``advisory.evaluation.stops``)."""
+    drive = result.drive
+    stops = recorded_stops(drive.driven.trajectory)
+    scenario, left_out = stops_scenario(stops, drive.length_m, speed_limit_mps, float(drive.zone.v_mps[0]))
+    comparison = compare_drive(drive, lambda _entry_s: scenario, params, speed_limit_mps, keep_series=True)
+    # stand-in lights, not real ones: the drive cannot cross them "on red"
+    result.comparison = replace(comparison, red_crossings=[], red_unknown=[])
+    result.scenario = result.comparison.lights
+    result.against = "recorded stops"
+    result.stops = [st for st in stops if st not in left_out]
+    for st in left_out:
+        result.notes.append(f"the standstill at {st.position_m:.0f} m ({st.from_s:.1f}-{st.until_s:.1f} s after the entry) is too near the entry "
+                            "or the exit for the regular driver to make it: left out")  # fmt: skip
+    result.notes.append("DP optimum: not computed without signal timing")
 
 
 def speed_from_stations_mps(t_s: np.ndarray, station_m: np.ndarray) -> np.ndarray:
@@ -106,6 +127,13 @@ class DriveResult:
     dp: DriverResult | None = None
     notes: list[str] = field(default_factory=list)
     red_crossings: list[RedCrossing] = field(default_factory=list)
+    against: str = "lights"
+    """What the regular driver drove through: "lights" (the timing), or "recorded stops" (no timing: the drive's own
+    standstills, ``advisory.evaluation.stops``)."""
+    stops: list[Stop] = field(default_factory=list)
+    """With ``against == "recorded stops"``: the standstills the regular driver was held at."""
+    vehicle: str | None = None
+    decay_multiplier: float = 1.0
     red_unknown: list[UnjudgedCrossing] = field(default_factory=list)
 
     @property
@@ -134,6 +162,23 @@ class DriveResult:
             out["dp_optimum"] = savings_frac(self.dp.score, self.regular.score)
         return out
 
+    @property
+    def end_state_wh_per_km(self) -> float:
+        """The drive's energy in the common end state (zone + re-acceleration to the limit) per km of the zone: a
+        drive that leaves slower than it came is charged the kinetic energy it used up, as the cycles, which
+        start and end at rest, are. [Wh/km]"""
+        km = self.zone.distance_m / 1000.0
+        return float(self.driven.score.energy_kwh * 1000.0 / km) if km > 0 else float("nan")
+
+    def epa_cycles(self) -> list[dict]:
+        """:attr:`end_state_wh_per_km` against the same vehicle's Wh/km on the EPA cycles (``replay.cycles``); []
+        without a vehicle name."""
+        if self.vehicle is None:
+            return []
+        from replay.cycles import against_cycles
+
+        return against_cycles(self.end_state_wh_per_km, self.vehicle, self.decay_multiplier)
+
     def as_dict(self) -> dict:
         m = self.matched
         on = m.on_route
@@ -159,7 +204,11 @@ class DriveResult:
                 "columns": self.trace.columns,
             },
             **self.zone.as_dict(),
+            "end_state_wh_per_km": self.end_state_wh_per_km,
+            "epa_cycles": self.epa_cycles(),
             "comparison": {
+                "against": self.against,
+                "recorded_stops": [{"position_m": st.position_m, "from_s": st.from_s, "until_s": st.until_s} for st in self.stops],
                 "compared_m": self.drive.distance_m,
                 "driven": self.driven.as_dict(),
                 "regular": self.regular.as_dict() if self.regular else None,
@@ -184,8 +233,11 @@ def score_drive(
     smooth_s: float | None = None,
     compare: bool = True,
     speed_limit_mps: float = SPEED_LIMIT_MPS,
+    vehicle: str | None = None,
+    decay_multiplier: float = 1.0,
 ) -> DriveResult:
-    """Score a GPS trace over its corridor's zone and compare it (see the module docstring)."""
+    """Score a GPS trace over its corridor's zone and compare it (see the module docstring). ``vehicle``: the
+    preset's name ``params`` come from, for the EPA cycles' Wh/km beside the drive's (none without it)."""
     notes: list[str] = []
     corridor = corridor or trace.meta.get("corridor")
     timing = timing or trace.meta.get("timing")
@@ -194,10 +246,6 @@ def score_drive(
             entry_unix_s = float(trace.meta["entry_unix_s"])
         except ValueError:
             raise TraceError(f"{trace.source}: '# entry_unix_s: {trace.meta['entry_unix_s']}' is not a number") from None
-    if timing is not None and timing not in TIMING_PRESETS and not timing.lower().endswith((".json", ".toml")):
-        plans = {p.name for name in ([corridor] if corridor else preset_names()) for p in _plans_of(name)}
-        if timing not in plans:
-            raise TraceError(f"unknown timing {timing!r}; choose from {sorted(plans) + sorted(TIMING_PRESETS)}, or a plan file (.json/.toml)")
     if corridor:
         try:
             cor = load_corridor(corridor)
@@ -209,11 +257,19 @@ def score_drive(
         if choice.ambiguous:
             notes.append(f"corridor {choice.matched.corridor.name} {choice.how}; {', '.join(choice.ambiguous)} fit as well: give --corridor")
     m = choice.matched
+    if timing is not None:  # checked at once, against the corridor the trace follows: the choices an error lists are the ones accepted
+        try:
+            resolve_timing(m.corridor, timing, 0.0)
+        except KeyError as exc:
+            raise TraceError(str(exc.args[0])) from None
+        except ValueError as exc:
+            raise TraceError(str(exc)) from None
     length_m = m.corridor.length_m
     speed_limit_mps = m.corridor.zone_speed_limit_mps(speed_limit_mps)  # the corridor's own limit where its file states one
     on = m.on_route
     if on.sum() < 2:
-        raise TraceError(f"{trace.source}: fewer than two fixes within 30 m of corridor {m.corridor.name}")
+        raise TraceError(f"{trace.source}: fewer than two fixes within {ON_ROUTE_M:g} m of corridor {m.corridor.name} "
+                         f"({how_far(trace.lat_deg, trace.lon_deg, [m.corridor.name])}); to score it, {MAKE_CORRIDOR}")  # fmt: skip
     if (~on).any():
         lines = trace.lines[~on]
         notes.append(f"{int((~on).sum())} fix(es) more than 30 m off the route dropped (first at line {lines[0]})")
@@ -247,9 +303,12 @@ def score_drive(
     if timing is None and own_plan is not None:
         timing = own_plan.name
         notes.append(f"timing: the corridor's plan {timing!r} (pattern in force at the zone entry)")
-    result = DriveResult(trace, choice, m, speed_source, float(smooth_s), t_in, entry_unix_s, timing, drive, notes=notes)
+    result = DriveResult(trace, choice, m, speed_source, float(smooth_s), t_in, entry_unix_s, timing, drive, notes=notes, vehicle=vehicle,
+                         decay_multiplier=decay_multiplier)  # fmt: skip
     if timing is None:
-        notes.append("no signal timing (--timing or '# timing:'): no comparison with the regular driver and the DP optimum")
+        notes.append(NO_TIMING_NOTE)
+        if compare:
+            _compare_on_recorded_stops(result, params, speed_limit_mps)
         return result
     anchor = t_in if entry_unix_s is None else entry_unix_s
     result.entry_unix_s = anchor

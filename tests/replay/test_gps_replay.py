@@ -111,7 +111,72 @@ def test_corridor_found_by_map_matching_without_header(tmp_path, capsys):
     assert d["corridor"]["how"].startswith("found by map matching")
     assert d["corridor"]["name"] in ("paper_s400", "paper_s600")  # all paper corridors share the road
     rc, d = run_json(capsys, f, "--corridor", "paper_s400")
-    assert d["corridor"]["how"] == "given" and d["comparison"]["regular"] is None  # no timing: score only
+    assert d["corridor"]["how"] == "given" and d["timing"] is None
+    assert d["comparison"]["against"] == "recorded stops" and d["comparison"]["dp_optimum"] is None  # no timing: on its own stops
+
+
+def test_a_drive_without_timing_is_compared_on_its_own_stops(tmp_path, capsys):
+    """Finding: a real GPS drive with no signal timing got no comparison at all. Now the regular driver is held at
+    the drive's own standstills; independent answer: the paper's regular driver, recorded (1 Hz, GPS noise), against
+    the regular driver held at its own recorded stops is the same driver: it saves nothing."""
+    f = _rewrite(tmp_path, REGULAR, keep_meta=False)
+    rc, d = run_json(capsys, f, "--corridor", "paper_s400")
+    c = d["comparison"]
+    assert rc == 0 and d["timing"] is None and c["against"] == "recorded stops"
+    # it stood at light 1 (100 m) and light 2 (500 m), 1 m short of each line, until each turned green (15 s, 60 s)
+    assert [round(st["position_m"]) for st in c["recorded_stops"]] == [98, 499]
+    assert [st["until_s"] for st in c["recorded_stops"]] == [pytest.approx(14.0, abs=1.5), pytest.approx(59.0, abs=1.5)]
+    assert abs(c["savings_frac"]["driven"]["energy"]) < 0.03 and abs(c["savings_frac"]["driven"]["cost"]) < 0.03
+    assert c["regular"]["duration_s"] == pytest.approx(c["driven"]["duration_s"], abs=2.0)
+    assert any("--timing PLAN.json" in n for n in d["notes"])  # says how to give timing
+    # the EPA cycles beside its energy per km, same vehicle
+    cycles = {x["cycle"]: x for x in d["epa_cycles"]}
+    assert set(cycles) == {"udds", "hwfet"}
+    for x in cycles.values():
+        assert x["ratio"] == pytest.approx(d["end_state_wh_per_km"] / x["wh_per_km"])
+    out = capsys.readouterr().out if main([str(f), "--corridor", "paper_s400"]) == 0 else ""
+    assert "Comparison on the drive's own stops" in out and "EPA UDDS (city)" in out and "EPA HWFET (highway)" in out
+
+
+def test_shipped_epa_cycles_are_the_epa_schedules():
+    """The cycles `replay` compares with: the EPA's UDDS (1369 s, 7.45 mi = 11.99 km) and HWFET (765 s, 10.26 mi = 16.51 km)."""
+    from replay.cycles import load_cycle
+
+    for name, duration_s, km in (("udds", 1369.0, 11.99), ("hwfet", 765.0, 16.51)):
+        t, v = load_cycle(name)
+        assert t[-1] - t[0] == duration_s and np.all(np.diff(t) == 1.0)
+        assert float(np.sum(0.5 * (v[1:] + v[:-1]))) / 1000 == pytest.approx(km, abs=0.01)
+
+
+def test_every_timing_an_error_lists_is_accepted(tmp_path, capsys):
+    """Finding: `--timing plausible` was listed as a choice (a plan of another corridor) and then refused."""
+    f = _rewrite(tmp_path, ADVISED, keep_meta=False)
+    assert main([str(f), "--timing", "nope", "--no-compare"]) == 2
+    err = capsys.readouterr().err
+    listed = json.loads(err[err.index("choose from ") + len("choose from ") : err.index("]") + 1].replace("'", '"'))
+    assert "plausible" not in listed and "'trip'" in err  # the trace follows a paper corridor: no Oakland plan
+    for name in [*listed, "trip"]:
+        assert main([str(f), f"--timing={name}", "--no-compare"]) in (0, 1), name
+    capsys.readouterr()
+
+
+def test_off_corridor_error_says_how_far_and_how_to_make_one(tmp_path, capsys):
+    """Finding: off every corridor, the error did not say how far the trace was, nor how to make a corridor."""
+    f = _rewrite(tmp_path, ADVISED, keep_meta=False, edit=lambda body: [body[0]] + [_shift_lat(row, 0.01) for row in body[1:]])  # ~1.1 km north
+    assert main([str(f)]) == 2
+    err = capsys.readouterr().err
+    for name in ("paper_s200", "paper_s400", "paper_s600", "paper_s800", "oakland_7th_westbound"):
+        assert f"{name}: nearest fix" in err
+    assert "paper_s400: nearest fix 1.0 km" in err and "ecodrive corridor from-osm" in err and "--corridor" in err
+    assert main([str(f), "--corridor", "paper_s400"]) == 2
+    err = capsys.readouterr().err
+    assert "paper_s400: nearest fix 1.0 km" in err and "ecodrive corridor from-osm" in err
+
+
+def _shift_lat(row: str, dlat_deg: float) -> str:
+    cells = row.split(",")
+    cells[1] = f"{float(cells[1]) + dlat_deg:.7f}"
+    return ",".join(cells)
 
 
 def test_trimmed_trace_is_incomplete_exit_1(tmp_path, capsys):
@@ -131,8 +196,8 @@ def test_trimmed_trace_is_incomplete_exit_1(tmp_path, capsys):
         ("# corridor: paper_s400\ntime,lat,lon,speed_mps\n0,48.86,2.32,1\n1,48.86,2.32,-3\n", ":4: 'speed_mps' = -3 is outside"),
         ("time,lat,lon\n0,95,2.32\n", ":2: 'lat' = 95 is outside"),
         ("time,lat,lon\n0,48.86,2.32\n0,48.86,2.32\n", "at least two fixes"),
-        ("time,lat,lon\n0,0.0,0.0\n1,0.0,0.0001\n", "follows none of the shipped corridors"),
-        ("# timing: nope\ntime,lat,lon\n0,48.8658,2.3176\n10,48.8665,2.3146\n", "unknown timing 'nope'"),
+        ("time,lat,lon\n0,0.0,0.0\n1,0.0,0.0001\n", "follows none of the corridors"),
+        ("# corridor: paper_s400\n# timing: nope\ntime,lat,lon\n0,48.8658,2.3176\n10,48.8665,2.3146\n", "unknown timing 'nope'"),
     ],
 )
 def test_malformed_gps_files_name_the_line(tmp_path, capsys, content, needle):
