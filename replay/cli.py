@@ -131,7 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--plot", type=Path, metavar="OUT.png", help="draw the paper's four panels (time-distance with red bars, speed, energy, decay)")
     gps = parser.add_argument_group("GPS traces")
     gps.add_argument("--corridor", help="corridor preset or JSON file (default: the trace's '# corridor:', else found by map matching)")
-    gps.add_argument("--timing", help="signal timing: a plan of the corridor, a paper preset (field_test, -15_15), 'trip', or a plan file .json/.toml "
+    gps.add_argument("--timing", help="signal timing: a plan of the corridor, a paper preset (field_test, -15_15), 'trip', a plan file .json/.toml, "
+                     "or a recorded SPaT log .csv[.gz]/.jsonl[.gz] matched by time "
                      "(default: the trace's '# timing:', else the corridor's own plan; none: compared on the drive's own stops)")  # fmt: skip
     gps.add_argument("--entry", type=float, metavar="UNIX_S", help="zone-entry instant the timing is relative to (default: '# entry_unix_s:', else when the fixes cross station 0)")
     gps.add_argument("--smooth-s", type=float, default=None, help="Gaussian speed smoothing sigma [s] of the drive and of the drivers it is compared with (default: 1, as the service's trip score)")
@@ -200,7 +201,12 @@ def _gps_main(trace: GpsTrace, args) -> int:
             result.notes.append(f"not compared with the baseline: it covers {base.drive.distance_m:.1f} m of the zone, this drive {result.drive.distance_m:.1f} m")
     timeline = None
     if args.server:
+        from replay.drive import is_spat_log
         from replay.live import replay_live
+
+        if is_spat_log(result.timing):
+            raise TraceError("--server: the service takes a timing by name (a plan of the corridor or a paper preset), not a recorded SPaT log; "
+                             "serve the log with ECO_SPAT_LOG=LOG (docs/SERVICE.md) and replay without --timing")  # fmt: skip
 
         timeline = replay_live(trace, result, args.server, speedup=args.speedup, vehicle=vehicle, api_key=args.api_key,
                                progress=None if args.json else sys.stdout)  # fmt: skip

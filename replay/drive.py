@@ -80,10 +80,59 @@ def dp_scenario(scenario: Scenario, stage_m: float = DP_STAGE_M) -> tuple[Scenar
     return replace(scenario, signals=tuple(out), zone_length_m=zone), ds, moved
 
 
+SPAT_LOG_SUFFIXES = (".csv", ".csv.gz", ".jsonl", ".jsonl.gz", ".ndjson", ".ndjson.gz")
+"""``--timing`` ending so is a recorded SPaT log (``spat_feed.transport.player.read_spat_log``), matched by time."""
+
+
+def is_spat_log(timing: str | None) -> bool:
+    return timing is not None and timing.lower().endswith(SPAT_LOG_SUFFIXES)
+
+
+@dataclass(frozen=True)
+class SpatLogLights:
+    """The corridor's lights as a recorded SPaT log shows them, on the Unix clock: per stop line, the truth of
+    its intersection's first signal group (a phase switches midway between snapshots, ``ecodrive.spat_eval``)."""
+
+    path: str
+    positions_m: tuple[float, ...]
+    truths: tuple  # TimelineSignal per light, times in Unix s
+    first_unix_s: float
+    last_unix_s: float
+
+    @classmethod
+    def read(cls, path: str, corridor) -> SpatLogLights:
+        from ecodrive.spat_eval import group_logs
+        from spat_feed.transport.player import RecordedLogError, read_spat_log
+        from spat_feed.timing.messages import to_unix_s
+
+        try:
+            snapshots = read_spat_log(path)
+        except (RecordedLogError, OSError) as exc:
+            raise TraceError(f"--timing {path}: {exc}") from None
+        if not snapshots:
+            raise TraceError(f"--timing {path}: the log holds no SPaT")
+        groups = {g.key: g for g in group_logs(snapshots)}
+        truths = []
+        for ix in corridor.intersections:
+            key = (ix.id, ix.signal_groups[0].id)
+            if key not in groups:
+                raise TraceError(f"--timing {path}: no SPaT of intersection {ix.id} signal group {key[1]} ({ix.name}) of corridor {corridor.name}; "
+                                 f"the log has (intersection, signal group) {sorted(groups)}")  # fmt: skip
+            truths.append(groups[key].truth)
+        stamps = [to_unix_s(x.timestamp) for x in snapshots]
+        return cls(path, tuple(ix.stop_line_m for ix in corridor.intersections), tuple(truths), min(stamps), max(stamps))
+
+    def scenario_at(self, entry_unix_s: float, zone_length_m: float, speed_limit_mps: float) -> Scenario:
+        """The lights on an axis whose 0 is ``entry_unix_s``."""
+        signals = tuple(replace(t.shifted(entry_unix_s), position_m=p) for t, p in zip(self.truths, self.positions_m, strict=True))
+        return Scenario(f"SPaT log {self.path}", signals, zone_length_m, speed_limit_mps, speed_limit_mps)
+
+
 NO_TIMING_NOTE = (
     "no signal timing: compared with the regular driver on the drive's own stops (it stops where the drive stood still "
     "and leaves when it left), not through the lights; for that, give the timing the lights ran: --timing PLAN.json/.toml "
-    "(a plan file, docs/CORRIDORS.md), a plan of the corridor or a paper preset by name, or '# timing:' in the trace"
+    "(a plan file, docs/CORRIDORS.md), --timing SPAT_LOG.csv.gz/.jsonl (a recorded SPaT log of the corridor's "
+    "intersections, matched to the fixes by time), a plan of the corridor or a paper preset by name, or '# timing:' in the trace"
 )
 
 
@@ -102,6 +151,32 @@ def _compare_on_recorded_stops(result: DriveResult, params: ModelParams, speed_l
         result.notes.append(f"the standstill at {st.position_m:.0f} m ({st.from_s:.1f}-{st.until_s:.1f} s after the entry) is too near the entry "
                             "or the exit for the regular driver to make it: left out")  # fmt: skip
     result.notes.append("DP optimum: not computed without signal timing")
+
+
+def _compare_on_log(result: DriveResult, log: SpatLogLights, params: ModelParams, speed_limit_mps: float, compare: bool) -> None:
+    """A recorded SPaT log: the lights as they ran when the fixes were taken (by time), the red-light check and the
+    regular driver through them; no DP optimum (a log is no plan to optimise over)."""
+    drive, notes = result.drive, result.notes
+    t0, t1 = drive.entry_s, drive.zone.t_out_s
+    if t0 < 1e8:
+        raise TraceError(f"--timing {log.path}: a SPaT log is matched by time, and the trace's times are not Unix times (give ISO 8601 or epoch times)")
+    if t0 < log.first_unix_s or t1 > log.last_unix_s:
+        raise TraceError(f"--timing {log.path}: the log covers {log.first_unix_s:.1f}-{log.last_unix_s:.1f} (Unix s), the drive's zone "
+                         f"{t0:.1f}-{t1:.1f}: by time, the log must cover the drive")  # fmt: skip
+    result.entry_unix_s = None
+    scenario = log.scenario_at(t0, drive.length_m, speed_limit_mps)
+    scenario = replace(scenario, initial_speed_mps=float(min(max(drive.zone.v_mps[0], 0.0), speed_limit_mps)))
+    result.scenario = scenario
+    check = drive.red_check(scenario.signals)
+    result.red_crossings, result.red_unknown = check.crossings, check.unknown
+    for c in result.red_crossings:
+        notes.append(f"crossed light {c.light} ({c.position_m:.0f} m) at {t0 + c.t_s:.1f} (Unix s), {c.into_red_s:.1f} s into red, at {c.speed_mps * 3.6:.0f} km/h: "
+                     "this drive is not reported as a saving")  # fmt: skip
+    if compare:
+        result.comparison = compare_drive(drive, lambda entry_s: log.scenario_at(entry_s, drive.length_m, speed_limit_mps), params, speed_limit_mps,
+                                          keep_series=True)  # fmt: skip
+        result.scenario = result.comparison.lights
+        notes.append("DP optimum: not computed on a recorded SPaT log")
 
 
 def speed_from_stations_mps(t_s: np.ndarray, station_m: np.ndarray) -> np.ndarray:
@@ -257,11 +332,12 @@ def score_drive(
         if choice.ambiguous:
             notes.append(f"corridor {choice.matched.corridor.name} {choice.how}; {', '.join(choice.ambiguous)} fit as well: give --corridor")
     m = choice.matched
-    if timing is not None:  # checked at once, against the corridor the trace follows: the choices an error lists are the ones accepted
+    log = SpatLogLights.read(timing, m.corridor) if is_spat_log(timing) else None
+    if timing is not None and log is None:  # checked at once, against the corridor the trace follows: the choices an error lists are the ones accepted
         try:
             resolve_timing(m.corridor, timing, 0.0)
         except KeyError as exc:
-            raise TraceError(str(exc.args[0])) from None
+            raise TraceError(f"{exc.args[0]}, or a recorded SPaT log ({'/'.join(SPAT_LOG_SUFFIXES[:4])})") from None
         except ValueError as exc:
             raise TraceError(str(exc)) from None
     length_m = m.corridor.length_m
@@ -309,6 +385,9 @@ def score_drive(
         notes.append(NO_TIMING_NOTE)
         if compare:
             _compare_on_recorded_stops(result, params, speed_limit_mps)
+        return result
+    if log is not None:
+        _compare_on_log(result, log, params, speed_limit_mps, compare)
         return result
     anchor = t_in if entry_unix_s is None else entry_unix_s
     result.entry_unix_s = anchor

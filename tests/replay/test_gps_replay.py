@@ -233,3 +233,36 @@ def test_smoothing_keeps_constants_and_score_drive_is_reusable():
     trace = read_trace(ADVISED)
     r = score_drive(trace, model_params("paper_54kwh"), compare=False)
     assert r.regular is None and r.scenario is not None and len(r.scenario.signals) == 2
+
+
+def _spat_log(path: Path, corridor: str, timing: str, entry_unix_s: float, span_s: tuple[float, float]) -> Path:
+    """A recorded SPaT log (JSON lines, as the service's recorder writes them) of a simulated timing, a snapshot a second."""
+    from spat_feed.transport.player import JsonlRecorder
+    from spat_feed.transport.scenarios import make_scenario, spat_message_at
+
+    fs = make_scenario(corridor, timing, entry_unix_s)
+    rec = JsonlRecorder(path)
+    for k in np.arange(span_s[0], span_s[1], 1.0):
+        for ix in spat_message_at(fs, entry_unix_s + k + 0.25).intersections:
+            rec(ix)
+    rec.close()
+    return path
+
+
+def test_a_recorded_spat_log_gives_the_timing_by_time(tmp_path, capsys):
+    """`--timing LOG.jsonl`: the lights as they ran when the fixes were taken. Independent answer: a log of the
+    field-test timing gives the field-test comparison (the plan itself), to the printed digit."""
+    log = _spat_log(tmp_path / "spat.jsonl", "paper_s400", "field_test", 1714557600.0, (-60.0, 150.0))
+    f = _rewrite(tmp_path, ADVISED, edit=None)
+    f.write_text("".join(ln + "\n" for ln in f.read_text().splitlines() if not ln.startswith(("# timing", "# entry"))))
+    rc, by_log = run_json(capsys, f, "--timing", str(log))
+    rc_plan, by_plan = run_json(capsys, ADVISED)
+    assert rc == rc_plan == 0 and by_log["comparison"]["against"] == "lights" and by_log["red_light_crossings"] == []
+    for key in ("energy", "wear", "cost"):
+        assert by_log["comparison"]["savings_frac"]["driven"][key] == pytest.approx(by_plan["comparison"]["savings_frac"]["driven"][key], abs=0.005)
+    assert by_log["comparison"]["regular"]["energy_kwh"] == pytest.approx(by_plan["comparison"]["regular"]["energy_kwh"], rel=0.01)
+    # a log that does not cover the drive, or lacks a light of the corridor: an error that says so
+    short = _spat_log(tmp_path / "short.jsonl", "paper_s400", "field_test", 1714557600.0, (-60.0, 20.0))
+    assert main([str(f), "--timing", str(short)]) == 2 and "the log must cover the drive" in capsys.readouterr().err
+    other = _spat_log(tmp_path / "oakland.jsonl", "oakland_7th_westbound", "plausible", 1714557600.0, (-60.0, 150.0))
+    assert main([str(f), "--timing", str(other)]) == 2 and "no SPaT of intersection 1" in capsys.readouterr().err
