@@ -207,20 +207,35 @@ class RedLightCheck:
     unknown: list[UnjudgedCrossing]
 
 
-def _gap_around(p_m: float, t_c: float, t_fix: np.ndarray, st_fix: np.ndarray) -> tuple[float, float] | None:
-    """The gap between fixes longer than :data:`FIX_GAP_S` in which the car crossed the line at ``p_m``: the
-    one holding the interpolated crossing instant ``t_c``, or the one between the last fix before the line and
-    the first fix past it. None when the crossing lies between close fixes."""
-    if t_fix.size < 2:
+GAP_SLACK_M = 5.0
+"""How far a fix's station may be off the car (GPS noise, correlated over a stop) when the stations alone tell when
+the car was clearly before a stop line and clearly past it. [m]"""
+
+
+def _crossing_window(p_m: float, t_fix: np.ndarray, st_fix: np.ndarray) -> tuple[float, float]:
+    """From the stations alone: the last fix clearly before the line (``GAP_SLACK_M`` short of it) and the first fix
+    clearly past it (``RED_TOLERANCE_M + GAP_SLACK_M`` beyond): the car crossed in between. [s]"""
+    before = np.flatnonzero(st_fix < p_m - GAP_SLACK_M)
+    past = np.flatnonzero(st_fix > p_m + RED_TOLERANCE_M + GAP_SLACK_M)
+    past = past[past > before[0]] if before.size and past.size else past
+    t_hi = float(t_fix[past[0]]) if past.size else float(t_fix[-1])
+    before = before[t_fix[before] < t_hi] if before.size else before
+    t_lo = float(t_fix[before[-1]]) if before.size else float(t_fix[0])
+    return t_lo, t_hi
+
+
+def _long_gap_within(t_fix: np.ndarray, t_lo: float, t_hi: float, overlapping: bool = False) -> tuple[float, float] | None:
+    """The longest gap between fixes longer than :data:`FIX_GAP_S` inside ``[t_lo, t_hi]`` (``overlapping``: that
+    overlaps it), or None."""
+    dt = np.diff(t_fix)
+    if overlapping:
+        k = np.flatnonzero((dt > FIX_GAP_S) & (t_fix[:-1] < t_hi) & (t_fix[1:] > t_lo))
+    else:
+        k = np.flatnonzero((dt > FIX_GAP_S) & (t_fix[:-1] >= t_lo - 1e-9) & (t_fix[1:] <= t_hi + 1e-9))
+    if k.size == 0:
         return None
-    k = int(np.searchsorted(t_fix, t_c, side="right"))
-    if 0 < k < t_fix.size and t_fix[k] - t_fix[k - 1] > FIX_GAP_S:
-        return float(t_fix[k - 1]), float(t_fix[k])
-    past = np.flatnonzero(st_fix >= p_m)
-    j = int(past[0]) if past.size else 0
-    if j > 0 and t_fix[j] - t_fix[j - 1] > FIX_GAP_S:
-        return float(t_fix[j - 1]), float(t_fix[j])
-    return None
+    k = int(k[np.argmax(dt[k])])
+    return float(t_fix[k]), float(t_fix[k + 1])
 
 
 def red_light_crossings(traj: Trajectory, signals, t_station_s=None, station_m=None) -> list[RedCrossing]:
@@ -243,9 +258,10 @@ def red_light_check(traj: Trajectory, signals, t_station_s=None, station_m=None)
         The fixes' times (same axis, increasing) and map-matched stations: near each line, the integrated
         positions are shifted by the median of (station - integrated position) over the fixes within
         ``ANCHOR_WINDOW_M``, so slow drift of the integration does not move the crossing, and GPS noise at a
-        standstill (speed 0) cannot fake one. They also show gaps: a line crossed inside a gap between fixes
-        longer than :data:`FIX_GAP_S` is judged by the light over the whole gap (red throughout: a red crossing;
-        never red: none; else unknown), never by the crossing instant the interpolation across the gap makes up.
+        standstill (speed 0) cannot fake one. They also show gaps: the stretches of fixes between gaps longer
+        than :data:`FIX_GAP_S` are anchored apart (the integration across a gap drifts), and a line crossed inside
+        a gap is judged by the light over the whole gap (red throughout: a red crossing; never red: none; else
+        unknown), never by the crossing instant the interpolation across the gap makes up.
 
     Returns
     -------
@@ -261,31 +277,36 @@ def red_light_check(traj: Trajectory, signals, t_station_s=None, station_m=None)
     st_fix = np.asarray(station_m if station_m is not None else (), dtype=float)
     for n, light in enumerate(signals, start=1):
         p = float(light.position_m)
+        if st_fix.size and not (st_fix > p + RED_TOLERANCE_M + GAP_SLACK_M).any():
+            continue  # no fix shows the car clearly past the line (a trip ended at it): nothing to judge
+        # the instants, from the integrated positions anchored to the stations near the line
         shift = 0.0
         if st_fix.size:
             near = np.abs(st_fix - p) <= ANCHOR_WINDOW_M
             if near.any():
                 shift = float(np.median(st_fix[near] - traj.position_at(t_fix[near])))
         t_c = traj.crossing_time_s(p - shift)
-        if not np.isfinite(t_c):
-            continue
         t_past = traj.crossing_time_s(p + RED_TOLERANCE_M - shift)
-        if not np.isfinite(t_past):
+        if not (np.isfinite(t_c) and np.isfinite(t_past)):
             continue
         v_c = float(traj.speed_at(t_c))
-        gap = _gap_around(p, t_c, t_fix, st_fix)
-        if gap is not None:
-            reds = [(a, b) for a, b in light.red_intervals(gap[0], gap[1]) if b > gap[0] and a < gap[1]]
+        tol = max(RED_TOLERANCE_S, RED_TOLERANCE_M / max(v_c, 0.1))
+        # a gap between fixes where the car may have crossed (by the stations alone), or where those instants fall
+        gap, window = None, (t_c - tol, t_past)
+        if t_fix.size >= 2:
+            t_lo, t_hi = _crossing_window(p, t_fix, st_fix)
+            gap = _long_gap_within(t_fix, t_lo, t_hi) or _long_gap_within(t_fix, t_c - tol, t_past, overlapping=True)
+            if gap is not None:
+                window = (min(t_lo, gap[0], t_c - tol), max(t_hi, gap[1]))
+        if gap is not None:  # judged by the light over the whole window, never by an instant the gap makes up
+            reds = [(a, b) for a, b in light.red_intervals(window[0], window[1]) if b > window[0] and a < window[1]]
             if not reds:
                 continue
-            if not any(a <= gap[0] and b >= gap[1] for a, b in reds):
+            if not any(a <= window[0] and b >= window[1] for a, b in reds):
                 unknown.append(UnjudgedCrossing(n, p, gap[0], gap[1]))
                 continue
-            t_c = min(max(t_c, gap[0]), gap[1])  # red throughout the gap: crossed on red, whenever in it
-        else:
-            tol = max(RED_TOLERANCE_S, RED_TOLERANCE_M / max(v_c, 0.1))
-            if not (bool(light.is_red(t_c - tol)) and bool(light.is_red(t_c)) and bool(light.is_red(t_past)) and bool(light.is_red(t_past - tol))):
-                continue
+        elif not (bool(light.is_red(t_c - tol)) and bool(light.is_red(t_c)) and bool(light.is_red(t_past)) and bool(light.is_red(t_past - tol))):
+            continue
         start = max((s for s, e in light.red_intervals(t_c - 3600.0, t_c) if s <= t_c < e), default=t_c)
         out.append(RedCrossing(n, p, float(t_c), float(t_c - start), v_c))
     return RedLightCheck(out, unknown)

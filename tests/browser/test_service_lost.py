@@ -100,6 +100,9 @@ def test_a_lost_service_shows_at_once_and_the_trip_comes_back_when_kept(store, t
         check_rendering(back, next(a for a in received if a["seq"] == back["seq"]), expected_units(created, "en-US"))
         assert len(score) == 1 and score[0]["trip_id"] == trip and score[0]["driven"] is not None
         assert summary and not summary.startswith(("No score", "The service restarted")), summary  # scored, whatever it says
+        # the outage's gap in the fixes (stopped at light 1's red before it, past the line after it) is no red crossing
+        # (it was: "crossed a red light", as the interpolation across the gap put the car over the line during the red)
+        assert score[0]["red_light_crossings"] == [] and "red light was crossed" not in summary, (score[0], summary)
     else:
         assert score == [] and summary.startswith("The service restarted and did not keep this trip"), summary
     if (out := figure_dir()) is not None and store == "redis":

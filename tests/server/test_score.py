@@ -190,14 +190,37 @@ def test_a_light_passed_in_a_gap_between_fixes_is_not_judged_unless_the_whole_ga
     (u,) = s.red_light_unknown
     assert (u.light, u.gap_from_unix_s, u.gap_to_unix_s) == (1, pytest.approx(E + 9.37), pytest.approx(E + 25.37))
     assert "gap in the fixes" in s.note and "unknown" in s.note
-    # the same outage, but the light green all through it: nothing to judge, nothing unknown
-    s = score(t, v, x, (15.5, 22.0))
-    assert s.red_light_crossings == [] and s.red_light_unknown == [] and s.savings_frac is not None
     # red all through the gap: crossed on red whenever in the gap (a gap never excuses a red)
     cruise = Trajectory(np.array([0.0, 600 / KMH50]), np.array([0.0, 600.0]), np.array([KMH50, KMH50]))
     s = score(*fixes_of(cruise), (3.0, 12.0))
     assert [c.light for c in s.red_light_crossings] == [1, 2] and s.red_light_unknown == [] and s.savings_frac is None
     assert 2.37 <= s.red_light_crossings[0].t_unix_s - E <= 12.37
+    # green all through the gap (-30_15: light 1 green from the entry for 30 s): nothing to judge, nothing unknown
+    fs_green = make_scenario(corridor, "-30_15", E)
+    t, v, x = fixes_of(cruise)
+    keep = ~((t > 3.0) & (t < 12.0))
+    s = trip_score("gap", fs_green, "paper_54kwh", E + t[keep], v[keep], x[keep], SPEED_LIMIT_MPS)
+    assert 1 not in [c.light for c in s.red_light_crossings] and s.red_light_unknown == []
+
+
+def test_gaps_anywhere_never_make_a_red_crossing_nor_hide_one():
+    """Gaps of 6 and 15 s cut every 2 s of a drive: the regular driver (noisy GPS, stops at both reds) is never
+    scored "red crossed"; a car cruising through both reds has each light it reached judged red or unknown."""
+    fs = make_scenario("paper_s400", "field_test", E)
+    reg = regular_driver(advisory_scenario_at(fs, E))
+    cruise = Trajectory(np.array([0.0, 600 / KMH50]), np.array([0.0, 600.0]), np.array([KMH50, KMH50]))
+    for drive, runs_reds in ((reg, False), (cruise, True)):
+        t, v, x = fixes_of(drive, noise_mps=0.3, seed=3)
+        for start in np.arange(-4.0, drive.duration_s, 2.0):
+            for length in (6.0, 15.0):
+                keep = ~((t > start) & (t < start + length))
+                s = trip_score("gap", fs, "paper_54kwh", E + t[keep], v[keep], x[keep], SPEED_LIMIT_MPS)
+                red, unknown = {c.light for c in s.red_light_crossings}, {u.light for u in s.red_light_unknown}
+                if not runs_reds:
+                    assert not red, (start, length, s.red_light_crossings)
+                else:
+                    reached = {k + 1 for k, line in enumerate((100.0, 500.0)) if x[keep].max() > line + 10}
+                    assert reached <= red | unknown, (start, length, reached, red, unknown)
 
 
 def test_observed_phases_give_the_same_score_as_the_plans():
