@@ -44,7 +44,8 @@ def _settings() -> Settings:
     lots = 1e9  # no rate limit or quota stops the fuzzer short of the handlers
     return Settings(corridors=(CORRIDOR,), default_corridor=CORRIDOR, tables=False, speech=False, api_keys=(API_KEY,), rate_per_s=lots,
                     rate_burst=lots, create_rate_per_s=lots, create_burst=lots, create_rate_per_client_per_s=lots,
-                    create_burst_per_client=lots, max_trips_per_client=0, max_body_bytes=LIMIT, ws_max_message_bytes=LIMIT)  # fmt: skip
+                    create_burst_per_client=lots, max_trips_per_client=0, key_max_trips=0, key_create_rate_per_s=lots, key_create_burst=lots,
+                    max_trips_per_device=0, max_body_bytes=LIMIT, ws_max_message_bytes=LIMIT)  # fmt: skip
 
 
 class _Records(logging.Handler):
@@ -80,7 +81,7 @@ RAW_JSON = [Raw(t) for t in ("NaN", "-Infinity", "Infinity", "1e999999", "-1e999
                              "[" * 199 + "]" * 199, "[" * 201 + "]" * 201, "[" * 5000, '{"a":' * 300 + "1" + "}" * 300, "\x00", "")]  # fmt: skip
 SURROGATES = ["\ud800", "\udfff", "a\udc00b", "\ud83d", "\ud83d\ude00"[::-1]]
 FIX_FIELDS = ["t_unix_s", "timestamp", "lat_deg", "lon_deg", "latitude", "longitude", "speed_mps", "speed", "heading_deg", "accuracy_m"]
-TRIP_FIELDS = ["corridor", "timing", "vehicle", "entry_unix_s", "units"]
+TRIP_FIELDS = ["corridor", "timing", "vehicle", "entry_unix_s", "units", "device_id"]
 
 texts = st.one_of(st.text(max_size=12), st.sampled_from(SURROGATES), st.text(st.characters(exclude_categories=()) | st.characters(min_codepoint=0xD800, max_codepoint=0xDFFF), max_size=6),
                   st.sampled_from([CORRIDOR, "15_15", "trip", "paper_54kwh", "imperial", "metric", "x" * 300]))  # fmt: skip
