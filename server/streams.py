@@ -103,11 +103,12 @@ local out = {0}
 while redis.call('ZCARD', KEYS[1]) >= tonumber(ARGV[3]) do
   local oldest, first = nil, nil
   for _, m in ipairs(redis.call('ZRANGE', KEYS[1], 0, -1)) do
-    local t = tonumber(string.match(m, '^(%d+)|'))
+    local t = tonumber(string.match(m, '^(%d+)|')) or 0  -- 0: a lease in an older format (no address), replaced first
     if oldest == nil or t < first then oldest, first = m, t end
   end
   redis.call('ZREM', KEYS[1], oldest)
-  redis.call('ZREM', ARGV[6] .. ':ws:c:' .. string.match(oldest, '^%d+|%x+|(.*)$'), oldest)
+  local address = string.match(oldest, '^%d+|%x+|(.*)$')
+  if address then redis.call('ZREM', ARGV[6] .. ':ws:c:' .. address, oldest) end
   out[#out + 1] = oldest
 end
 for i = 1, 2 do
