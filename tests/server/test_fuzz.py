@@ -322,7 +322,14 @@ def test_no_client_input_gets_a_5xx(svc, method, template):
 
 def _fuzz_request(svc, method: str, template: str, data) -> None:
     client, records = svc
-    trip, other = _trip(client), _trip(client)
+    odd_method, path, query, hdrs, body = draw_request(data, method, template, _trip(client), _trip(client), _valid_fix())
+    cut = data.draw(st.integers(0, len(body)), label="cut")
+    _check(client, records, odd_method, template, path, query, hdrs, body, cut)
+
+
+def draw_request(data, method: str, template: str, trip: dict, other: dict, fix: dict) -> tuple[str, str, bytes, list[tuple[bytes, bytes]], bytes]:
+    """A request to the route ``method template``: (method, path, query string, headers, body), mostly with
+    ``trip``'s id and token (sometimes ``other``'s, or none), a body from ``fix`` on ``/fixes``."""
     values = {
         "trip_id": _mostly(trip["trip_id"], st.sampled_from([other["trip_id"], "0" * 32, "x" * 65]) | segments),
         "name": _mostly(CORRIDOR, st.just(CORRIDOR + "x") | segments),
@@ -334,10 +341,9 @@ def _fuzz_request(svc, method: str, template: str, data) -> None:
     odd_method = data.draw(_mostly(method, st.sampled_from(["PUT", "DELETE", "PATCH", "OPTIONS", "HEAD"])), label="method")
     query = "&".join(data.draw(st.lists(query_parts, max_size=3), label="query")).encode()
     hdrs = data.draw(headers(trip["token"] if "{trip_id}" in template else API_KEY, other["token"]), label="headers")
-    base = _valid_fix() if template.endswith("/fixes") else {"corridor": CORRIDOR, "units": "metric"}
+    base = fix if template.endswith("/fixes") else {"corridor": CORRIDOR, "units": "metric"}
     body = data.draw(bodies(base), label="body") if odd_method in ("POST", "PUT", "PATCH") or data.draw(st.booleans(), label="get body") else b""
-    cut = data.draw(st.integers(0, len(body)), label="cut")
-    _check(client, records, odd_method, template, path, query, hdrs, body, cut)
+    return odd_method, path, query, hdrs, body
 
 
 def _ws_messages():

@@ -31,7 +31,7 @@ from hypothesis import given, settings as hsettings, strategies as st
 
 from spat_feed import load_corridor
 from tests.procs import Proc, RedisServer, redis_server_path
-from tests.server.test_fuzz import API_KEY, BODY_ROUTES, CORRIDOR, FUZZ, HTTP_ROUTES, LIMIT, _mostly, bodies, headers, query_parts, segments
+from tests.server.test_fuzz import API_KEY, BODY_ROUTES, CORRIDOR, FUZZ, HTTP_ROUTES, LIMIT, bodies, draw_request
 
 LOTS = "1000000000"
 ENV = {
@@ -104,20 +104,7 @@ def test_no_client_input_gets_a_5xx_from_either_worker(workers, method, template
     @given(data=st.data())
     def fuzz(data):
         maker, target = _pair(workers)
-        trip, other = _trip(maker), _trip(maker)
-        values = {
-            "trip_id": _mostly(trip["trip_id"], st.sampled_from([other["trip_id"], "0" * 32, "x" * 65]) | segments),
-            "name": _mostly(CORRIDOR, st.just(CORRIDOR + "x") | segments),
-            "path": st.sampled_from(["index.html", "app.js", "swagger-ui.css", "..%2F..%2Fetc%2Fpasswd", ".", ""]) | segments,
-        }
-        path = template
-        for name, strategy in values.items():
-            path = path.replace("{" + name + "}", data.draw(strategy, label=name))
-        odd_method = data.draw(_mostly(method, st.sampled_from(["PUT", "DELETE", "PATCH", "OPTIONS", "HEAD"])), label="method")
-        query = "&".join(data.draw(st.lists(query_parts, max_size=3), label="query")).encode()
-        hdrs = data.draw(headers(trip["token"] if "{trip_id}" in template else API_KEY, other["token"]), label="headers")
-        base = _valid_fix() if template.endswith("/fixes") else {"corridor": CORRIDOR, "units": "metric"}
-        body = data.draw(bodies(base), label="body") if odd_method in ("POST", "PUT", "PATCH") or data.draw(st.booleans(), label="get body") else b""
+        odd_method, path, query, hdrs, body = draw_request(data, method, template, _trip(maker), _trip(maker), _valid_fix())
         url = quote(path, safe="/%").encode() + (b"?" + query if query else b"")
         status, out_headers, out = raw_request(target.port, odd_method, url, hdrs, body)
         what = f"{odd_method} {url[:200]!r} {hdrs!r} body {body[:200]!r}: {status} {out[:300]!r}"
