@@ -23,6 +23,7 @@ from fastapi.testclient import TestClient
 
 from server.app import create_app
 from server.config import Settings
+from server.errors import ApiError
 from tests.procs import Proc, RedisServer, redis_server_path
 
 ENV = {
@@ -230,3 +231,69 @@ def test_the_in_process_store_holds_the_same_quotas():
         r = c.post("/v1/trips", json={}, headers=key)  # only keyed trips left: none is shed
         assert r.status_code == 503 and r.json()["error"] == "too_many_trips"
         assert 'ecodrive_trips_closed_total{how="shed"} 3.0' in c.get("/metrics", headers=key).text
+
+
+def test_stream_leases_are_renewed_by_their_worker_and_lapse_with_it(store, empty):
+    """The lease logic on a fake clock, two workers' stream counters on the real Redis: a silent stream keeps
+    counting while its worker renews it; a dead worker's stream stops counting within ECO_WS_LEASE_S (the address
+    cap, 1 here, admits again); a stream replaced through the other worker is told so at its worker's renewal."""
+    from server.store import Limits, RedisTrips
+    from server.streams import RedisStreams
+
+    now = [time.time()]
+    settings = Settings(corridors=("paper_s200",), default_corridor="paper_s200", tables=False, speech=False, store_url=store.url, store_prefix="lease")
+
+    async def build(meta):
+        raise AssertionError("no trip is loaded here")
+
+    async def run() -> None:
+        trips_a, trips_b = (RedisTrips(settings, Limits(settings), build, clock=lambda: now[0]) for _ in range(2))
+        a, b, c = RedisStreams(trips_a, lease_s=15.0), RedisStreams(trips_b, lease_s=15.0), RedisStreams(trips_b, lease_s=15.0)
+        r = redis.Redis(port=store.port)
+        try:
+            told = []
+            silent = await a.open("t1", "10.0.0.1", 2, 0, lambda: told.append("silent"))
+            now[0] += 40.0  # no message for 40 s: its worker renews it all the same
+            await a.renew()
+            assert r.zscore("lease:ws:t:t1", silent.member) == pytest.approx(now[0] + 15.0)
+            await b.open("t2", "10.0.0.2", 2, 1)  # worker b dies holding it: nobody renews it
+            with pytest.raises(ApiError) as full:
+                await a.open("t3", "10.0.0.2", 2, 1)
+            assert full.value.status == 429 and full.value.error == "too_many_streams"
+            now[0] += 15.0 + 1e-3  # one lease later: the address's slot is free again
+            assert (await a.open("t3", "10.0.0.2", 2, 1)).member
+            await a.renew()  # (every 5 s in a worker) the silent stream still counts
+            await c.open("t1", "10.0.0.1", 2, 0)  # another worker: the phone's newer streams of t1 replace the silent one
+            assert r.zscore("lease:ws:t:t1", silent.member) is not None
+            await c.open("t1", "10.0.0.1", 2, 0)
+            assert told == [] and r.zscore("lease:ws:t:t1", silent.member) is None
+            await a.renew()
+            assert told == ["silent"] and r.zscore("lease:ws:t:t1", silent.member) is None and r.zcard("lease:ws:t:t1") == 2
+        finally:
+            r.delete(*(r.keys("lease:*") or ["none"]))
+            r.close()
+            for streams in (a, b, c):
+                await streams.aclose()
+            await trips_a.close()
+            await trips_b.close()
+
+    asyncio.run(run())
+
+
+def test_an_operator_sets_a_key_quota_by_the_key_or_its_id_and_mistakes_stop_the_start():
+    from pydantic import ValidationError
+
+    from server.quotas import Quota, key_quotas
+
+    base = dict(corridors=("paper_s200",), default_corridor="paper_s200", api_keys=("k-app", "k-small"), key_max_trips=100)
+    small_id = "key-" + hashlib.sha256(b"k-small").hexdigest()[:8]
+    for name in ("k-small", small_id):
+        quotas = key_quotas(Settings(**base, api_key_quotas={name: {"max_trips": 3, "max_trips_per_device": 0}}))
+        assert quotas[small_id] == Quota(max_trips=3, create_rate_per_s=10.0, create_burst=200.0, max_trips_per_device=0)
+    assert key_quotas(Settings(**base))["key-" + hashlib.sha256(b"k-app").hexdigest()[:8]].max_trips == 100  # the ECO_KEY_* defaults
+    for wrong in ({"api_key_quotas": {"k-other": {"max_trips": 3}}}, {"api_key_quotas": {"k-app": {"max_trip": 3}}}, {"api_key_quotas": {"k-app": {"max_trips": -1}}}):
+        with pytest.raises(ValidationError) as refused:
+            Settings(**base, **wrong)
+        assert "k-other" not in str(refused.value)  # a key named by mistake is not echoed (it may be a secret)
+    with pytest.raises(ValidationError, match="nobody could create a trip"):
+        Settings(corridors=("paper_s200",), default_corridor="paper_s200", anonymous_trips=False)
