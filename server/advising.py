@@ -33,6 +33,7 @@ from server.config import Settings
 from server.errors import ApiError
 from server.gps import Fix, RouteMatcher
 from server.queue import QUEUE_MESSAGE, QueueBoard
+from server.quotas import Creator, address_quota, key_quotas
 from spat_feed.prediction.observe import observation
 from server.ratelimit import TokenBucket
 from server.schemas import MS_TIMESTAMP_MIN, TripCreate
@@ -78,6 +79,9 @@ class Engine:
         self.spat = spat if spat is not None else SpatHub(settings, corridors, clock)
         self.clock = clock
         self.limits = Limits(settings)
+        self.key_quotas = key_quotas(settings)
+        """Each API key's quota, by key id (server.quotas)."""
+        self.address_quota = address_quota(settings)
         self.trips = make_store(settings, self.limits, self.trip_from_meta, self._release, clock)
         self._params = {units: replace(self.params, units=ADVISOR_UNITS[units]) for units in ADVISOR_UNITS}
         self.queue = QueueBoard(arrivals_vph=settings.queue_arrivals_vph, connected_share=settings.queue_connected_share) if settings.queue_aware else None
@@ -105,8 +109,12 @@ class Engine:
             raise ApiError(422, "time_out_of_range", f"{what} = {t_unix_s:.3f} is {now - t_unix_s:.1f} s behind server time (limit {s.max_fix_past_s:g} s)")
 
     async def create_trip(self, body: TripCreate, client: str = "") -> Trip:
+        """A new trip for ``client`` (an API key's id, else ``addr-<address>``: ``server.deps.require_api_key``),
+        held to the key's quota (any other client: an address's) and, with ``body.device_id``, the device's."""
         s = self.settings
-        await self.trips.admit(client)
+        quota = self.key_quotas.get(client)
+        who = Creator(client, body.device_id or "", quota or self.address_quota, anonymous=quota is None)
+        await self.trips.admit(who)
         corridor_name = body.corridor or s.default_corridor
         corridor = self.corridors.get(corridor_name)
         if corridor is None:
@@ -127,10 +135,10 @@ class Engine:
             except ValueError as exc:
                 raise ApiError(422, "timing_mismatch", str(exc)) from None
         meta = {"corridor": corridor_name, "timing": timing, "entry_unix_s": float(entry), "uncertainty": [s.spat_early_s, s.spat_late_s, s.spat_confidence_frac],
-                "vehicle": vehicle, "created_unix_s": now, "client": client, "units": body.units or corridor_units(corridor), "observe_spat": None}  # fmt: skip
+                "vehicle": vehicle, "created_unix_s": now, "client": client, "device": who.device, "units": body.units or corridor_units(corridor), "observe_spat": None}  # fmt: skip
         trip = await self.trip_from_meta(meta)
         try:
-            await self.trips.add(trip)
+            await self.trips.add(trip, who)
         except ApiError:
             await trip.spat.close()
             raise
@@ -157,7 +165,7 @@ class Engine:
             corridor, self.matchers[corridor.name], scenario, spat, vehicle, meta["created_unix_s"],
             TokenBucket(s.rate_per_s, s.rate_burst), s.dropout_s,
             tables=self.tables.get(corridor.name) if vehicle == s.default_vehicle else None,
-            client=meta["client"], units=units, params=self._params[units],
+            client=meta["client"], device=meta.get("device", ""), units=units, params=self._params[units],
             observe_spat=spat.live if observe is None else observe,
             max_speed_mps=s.max_speed_mps, trip_id=meta.get("id"),
         )  # fmt: skip

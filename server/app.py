@@ -36,7 +36,7 @@ from server.score import trip_score
 from server.spat import SpatHub
 from spat_feed.prediction.observe import PlanReading, observation
 from spat_feed.transport.simulator import shared_scenario
-from server.store import RedisStreams
+from server.streams import RedisStreams, StreamCounts
 
 log = logging.getLogger("server")
 
@@ -130,9 +130,10 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         engine.on_advice = metrics.observe_advice
         engine.on_ignored_fix = lambda status: metrics.fixes.labels(status).inc()
         engine.on_rate_limited = metrics.rate_limited.inc
+        engine.trips.on_shed = metrics.trips_closed.labels("shed").inc
         app.state.engine = engine
         if engine.trips.shared:  # WebSocket caps across workers
-            app.state.streams = RedisStreams(engine.trips)
+            app.state.streams = RedisStreams(engine.trips, settings.ws_lease_s)
         await asyncio.to_thread(warm_up, engine)
         await speech.start()
         await hub.start()
@@ -146,6 +147,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
             with contextlib.suppress(asyncio.CancelledError):
                 await sweeper
             await speech.stop()
+            await app.state.streams.aclose()
             await engine.trips.close()
             await hub.stop()
 
@@ -155,7 +157,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     app.state.speech = speech
     metrics = Metrics(lambda: len(app.state.engine.trips) if hasattr(app.state, "engine") else 0, lambda: app.state.engine.spat if hasattr(app.state, "engine") else None)
     app.state.metrics = metrics
-    app.state.streams = stream.StreamCounts()
+    app.state.streams = StreamCounts()
     # Routes are tried in order, a regex and some bookkeeping each, so the per-second ones (fixes, stream)
     # come early and the documentation pages last. The routers' routes go straight into the app's list
     # (each router carries its own prefix and tags; no include-level options are used): FastAPI's

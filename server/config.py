@@ -9,11 +9,22 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from advisory.physics.params import SPEED_LIMIT_MPS
 from spat_feed.road.corridors import preset_names
+
+
+class KeyQuota(BaseModel):
+    """One API key's own limits (``ECO_API_KEY_QUOTAS``); a field left out takes the ``ECO_KEY_*`` default."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    max_trips: int | None = Field(default=None, ge=0, description="open trips; 0 = no limit but the service's")
+    create_rate_per_s: float | None = Field(default=None, gt=0, description="trip creation: token bucket rate [1/s]")
+    create_burst: float | None = Field(default=None, ge=1, description="trip creation: token bucket capacity")
+    max_trips_per_device: int | None = Field(default=None, ge=0, description="open trips per device; 0 = no limit")
 
 
 class Settings(BaseSettings):
@@ -61,6 +72,15 @@ class Settings(BaseSettings):
 
     # auth: keys allowed to create trips ("X-API-Key: <key>" or "Authorization: Bearer <key>"); empty = open creation (development)
     api_keys: Annotated[tuple[str, ...], NoDecode] = ()
+    anonymous_trips: bool | None = Field(default=None, description="trips created without an API key: allowed (counted per address, shed first when the service is full), "
+                                         "refused (401), or None: allowed only when no ECO_API_KEYS are set")  # fmt: skip
+    api_key_quotas: dict[str, KeyQuota] = Field(default_factory=dict, description="a key's own quota, by the key or its id (key-<8 hex of its SHA-256>), "
+                                                "JSON: {\"<key>\": {\"max_trips\": 5000, \"create_rate_per_s\": 10, \"create_burst\": 200, \"max_trips_per_device\": 2}}; "
+                                                "a field left out takes the ECO_KEY_* default")  # fmt: skip
+    key_max_trips: int = Field(default=5_000, ge=0, description="open trips per API key unless ECO_API_KEY_QUOTAS says otherwise; 0 = no limit but ECO_MAX_TRIPS")
+    key_create_rate_per_s: float = Field(default=10.0, gt=0, description="trip creation per API key: token bucket rate [1/s]")
+    key_create_burst: float = Field(default=200.0, ge=1, description="trip creation per API key: token bucket capacity (phones of one app starting together)")
+    max_trips_per_device: int = Field(default=2, ge=0, description="open trips per device (the device_id a trip is created with) within its key or address; 0 = no limit")
     metrics_access: Literal["public", "api_key", "off"] = Field(default="api_key", description="/metrics: open, an API key needed (when keys are set), or not served")
     docs_access: Literal["public", "api_key", "off"] = Field(default="public", description="/docs, /redoc, /openapi.json: same choices")
     cors_origins: Annotated[tuple[str, ...], NoDecode] = Field(default=(), description="browser origins allowed to call the API (CORS); '*' = any; empty = CORS off")
@@ -86,8 +106,8 @@ class Settings(BaseSettings):
         default=2.0, gt=0, description="reject fixes this far ahead of server time: an accepted fix from the future would make the honest ones look late [s]"
     )
     max_entry_future_s: float = Field(default=300.0, gt=0, description="a trip's entry_unix_s may lie this far ahead [s]")
-    max_trips_per_client: int = Field(default=200, ge=0, description="open trips per client (API key, else address); 0 = no limit")
-    create_rate_per_client_per_s: float = Field(default=1.0, gt=0, description="trip creation per client: token bucket rate [1/s]")
+    max_trips_per_client: int = Field(default=200, ge=0, description="open trips per client address, of trips created without an API key; 0 = no limit")
+    create_rate_per_client_per_s: float = Field(default=1.0, gt=0, description="trip creation per client address without an API key: token bucket rate [1/s]")
     create_burst_per_client: float = Field(default=20.0, ge=1)
 
     # connections (enforced by server.protocol in the uvicorn process)
@@ -95,7 +115,8 @@ class Settings(BaseSettings):
     keep_alive_s: float = Field(default=5.0, gt=0, description="idle keep-alive connections are closed after this [s]")
     max_connections: int = Field(default=0, ge=0, description="open connections in all; 0 = the process's file limit less a reserve")
     max_connections_per_client: int = Field(default=256, ge=0, description="open connections per client address; 0 = no limit (behind a proxy)")
-    ws_max_per_trip: int = Field(default=2, ge=1, description="open WebSocket streams per trip")
+    ws_max_per_trip: int = Field(default=2, ge=1, description="open WebSocket streams per trip; a newer one replaces the oldest (closed 4409)")
+    ws_lease_s: float = Field(default=15.0, ge=1, description="with Redis, a stream's lease, renewed by its worker every third of it: a dead worker's streams stop counting within this [s]")
     ws_max_per_client: int = Field(default=256, ge=0, description="open WebSocket streams per client address; 0 = no limit")
 
     # GPS
@@ -125,6 +146,17 @@ class Settings(BaseSettings):
         if isinstance(value, str):
             return tuple(part.strip() for part in value.split(",") if part.strip())
         return value
+
+    @model_validator(mode="after")
+    def _quotas_name_keys(self) -> Settings:
+        from server.quotas import key_id
+
+        known = {*self.api_keys, *(key_id(k) for k in self.api_keys)}
+        if unknown := sorted(set(self.api_key_quotas) - known):
+            raise ValueError(f"ECO_API_KEY_QUOTAS names {len(unknown)} key(s) not in ECO_API_KEYS (give the key or its id, key-<8 hex of its SHA-256>)")
+        if self.anonymous_trips is False and not self.api_keys:
+            raise ValueError("ECO_ANONYMOUS_TRIPS=false without ECO_API_KEYS: nobody could create a trip")
+        return self
 
     @field_validator("corridors")
     @classmethod

@@ -7,7 +7,6 @@ handshake alone may carry the trip token as ``?token=`` (browsers cannot set hea
 
 from __future__ import annotations
 
-import hashlib
 import hmac
 from typing import Annotated
 
@@ -19,6 +18,7 @@ from server.audio import Speech
 from server.config import Settings
 from server.errors import ApiError
 from server.metrics import Metrics
+from server.quotas import ANONYMOUS_PREFIX, anonymous_allowed, key_id
 from server.trips import Trip
 
 API_KEY_HEADER = "x-api-key"
@@ -96,7 +96,7 @@ def check_api_key(conn: HTTPConnection, what: str) -> str | None:
         raise ApiError(401, "unauthorized", f"{what} needs an API key: 'X-API-Key: <key>' or 'Authorization: Bearer <key>'", headers={"WWW-Authenticate": "Bearer"})
     for key in keys:
         if hmac.compare_digest(token.encode(), key.encode()):
-            return "key-" + hashlib.sha256(key.encode()).hexdigest()[:8]
+            return key_id(key)
     raise ApiError(403, "forbidden", "this API key is not accepted")
 
 
@@ -105,9 +105,14 @@ def client_address(conn: HTTPConnection) -> str:
 
 
 async def require_api_key(conn: HTTPConnection) -> str:
-    """Creating trips needs one of ``ECO_API_KEYS`` when keys are configured. Returns the client the trip is
-    counted against for quotas: the key's id, else (open creation) the client's address."""
-    return check_api_key(conn, "creating a trip") or f"addr-{client_address(conn)}"
+    """Creating trips needs one of ``ECO_API_KEYS`` when keys are configured, unless ``ECO_ANONYMOUS_TRIPS``
+    allows trips without one (a key sent must still be valid). Returns the client the trip is counted against
+    for quotas (``server.quotas``): the key's id, else the client's address (``addr-<address>``)."""
+    settings = conn.app.state.settings
+    if not (anonymous_allowed(settings) and api_key_of(conn) is None):
+        if kid := check_api_key(conn, "creating a trip"):
+            return kid
+    return ANONYMOUS_PREFIX + client_address(conn)
 
 
 ApiKeyDep = Annotated[str, Depends(require_api_key)]

@@ -14,6 +14,7 @@ import uvicorn
 from server.app import create_app
 from server.config import Settings
 from server.protocol import protocol_class
+from server.quotas import anonymous_allowed, key_quotas
 
 log = logging.getLogger("server")
 
@@ -73,13 +74,19 @@ def install_log_redaction() -> None:
 
 
 def warn_if_open(settings: Settings) -> None:
-    if not settings.api_keys:
+    """A loud WARNING when trips can be created without an API key; each key's quota, by its id, in the log."""
+    if anonymous_allowed(settings):
+        besides = (f"ECO_ANONYMOUS_TRIPS is on besides {len(settings.api_keys)} API key(s): trips without a key are shed first when the service is full"
+                   if settings.api_keys else "no ECO_API_KEYS set")  # fmt: skip
         log.warning(
-            "\n" + "!" * 100 + "\nTRIP CREATION IS OPEN: no ECO_API_KEYS set, so anyone who reaches this service can create trips "
+            "\n" + "!" * 100 + "\nTRIP CREATION IS OPEN: %s, so anyone who reaches this service can create trips "
             "(up to %d per client address, %d in all).\nSet ECO_API_KEYS=<key1,key2> to require 'X-API-Key' (or 'Authorization: Bearer <key>') on POST /v1/trips.\n"
             + "!" * 100,
-            settings.max_trips_per_client, settings.max_trips,
+            besides, settings.max_trips_per_client, settings.max_trips,
         )  # fmt: skip
+    for kid, q in key_quotas(settings).items():
+        log.info("API key %s: %s open trips, %g created/s (burst %g), %s per device", kid, q.max_trips or "unlimited", q.create_rate_per_s,
+                 q.create_burst, q.max_trips_per_device or "unlimited")  # fmt: skip
 
 
 def app_from_env():

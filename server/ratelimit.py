@@ -40,18 +40,21 @@ class KeyedBuckets:
         self.rate_per_s, self.burst, self.max_keys = rate_per_s, burst, max_keys
         self._buckets: dict[str, TokenBucket] = {}
 
-    def take(self, key: str, now_s: float | None = None) -> float:
-        """:meth:`TokenBucket.take` on ``key``'s bucket.
+    def take(self, key: str, now_s: float | None = None, rate_per_s: float | None = None, burst: float | None = None) -> float:
+        """:meth:`TokenBucket.take` on ``key``'s bucket; ``rate_per_s`` and ``burst``: this key's own (else the
+        instance's).
 
         >>> b = KeyedBuckets(1.0, 1.0)
-        >>> b.take("a", 0.0), b.take("a", 0.0), b.take("b", 0.0)
-        (0.0, 1.0, 0.0)
+        >>> b.take("a", 0.0), b.take("a", 0.0), b.take("b", 0.0), b.take("c", 0.0, 1.0, 2.0), b.take("c", 0.0, 1.0, 2.0)
+        (0.0, 1.0, 0.0, 0.0, 0.0)
         """
         bucket = self._buckets.get(key)
         if bucket is None:
             if len(self._buckets) >= self.max_keys:
                 self._evict(time.monotonic() if now_s is None else now_s)
-            bucket = self._buckets[key] = TokenBucket(self.rate_per_s, self.burst, now_s)
+            bucket = self._buckets[key] = TokenBucket(rate_per_s or self.rate_per_s, burst or self.burst, now_s)
+        else:
+            bucket.rate_per_s, bucket.burst = rate_per_s or bucket.rate_per_s, burst or bucket.burst
         return bucket.take(now_s)
 
     def _evict(self, now_s: float) -> None:

@@ -56,6 +56,11 @@ class TripCreate(_In):
     units: Literal["metric", "imperial"] | None = Field(
         default=None, description="speeds in the spoken messages: km/h (metric) or mph (imperial); default: the corridor's (metric if it has none)"
     )
+    device_id: str | None = Field(
+        default=None, min_length=8, max_length=64, pattern=r"^[A-Za-z0-9._:-]+$",
+        description="the phone's own id, the same for every trip it starts (the app keeps a random one): its open trips are limited "
+        "within the API key's quota (ECO_MAX_TRIPS_PER_DEVICE), so one phone cannot take its fleet's share; default: none, the key's quota alone",
+    )
 
 
 class TripLinks(_Out):

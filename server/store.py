@@ -20,15 +20,18 @@ the trip's last request (up to ``touch_every_s`` later: the idle clock is reset 
 * ``eco:t:<id>``, a hash: ``meta`` (JSON, written once: corridor, timing, entry time, vehicle, units, client;
   any worker rebuilds the trip and its SPaT view from it), ``state`` (JSON, rewritten per fix, ~1-2 kB:
   track, advisor memory, last advice, counters), ``v`` (version, +1 per write), ``tok`` (SHA-256 of the
-  token), ``client``, ``bt``/``bs`` (the trip's request bucket: tokens, stamp), ``ts`` (the idle clock's last
-  reset);
+  token), ``client``, ``dev`` (the device id it was created with, or ''), ``bt``/``bs`` (the trip's request
+  bucket: tokens, stamp), ``ts`` (the idle clock's last reset);
 * ``eco:t:<id>:tr``: the score samples, 24 bytes per accepted fix (``t, v, x`` as little-endian doubles)
   appended per fix, at most ``max_trace_fixes`` of them;
 * ``eco:k:<token hash>`` -> id (tells "another trip's token", 403, from an invalid one, 401);
-* ``eco:open`` and ``eco:c:<client>``: sorted sets of open trips by last request (the caps; members idle
-  longer than the TTL are dropped when counted);
+* ``eco:open``, ``eco:c:<client>`` and ``eco:d:<client>:<device>``: sorted sets of open trips by last request
+  (the caps: in all, per API key or address, per device; members idle longer than the TTL are dropped when
+  counted);
+* ``eco:anon``: the open trips created without an API key, by creation time: when the service is full, a keyed
+  trip takes the place of the newest (``server.quotas``); members of expired trips are dropped by ``sweep``;
 * ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets;
-* ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`RedisStreams`, leases).
+* ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`server.streams.RedisStreams`, leases).
 
 Each call is one round trip (a Lua script, atomic in Redis; a fix's write is 3 commands in it) over the worker's
 one pipelined connection (:class:`server.redispipe.RedisPipe`: the calls of one event-loop turn in one write). A worker keeps the trips it served in a small
@@ -49,7 +52,6 @@ import hmac
 import logging
 import math
 import time
-import uuid
 from collections.abc import AsyncIterator, Awaitable, Callable
 
 import numpy as np
@@ -60,6 +62,7 @@ from redis.exceptions import TimeoutError as RedisTimeoutError
 
 from server.config import Settings
 from server.errors import ApiError
+from server.quotas import Creator, Quota
 from server.ratelimit import KeyedBuckets, TokenBucket
 from server.redispipe import RedisPipe, Script
 from server.trips import Trip, token_hash
@@ -89,24 +92,33 @@ class Limits:
         seconds, headers = retry_after(wait_s)
         return ApiError(429, "rate_limited", f"too many requests for this trip (limit {self.s.rate_per_s:g}/s, burst {self.s.rate_burst:g}); retry in {seconds} s", headers=headers)
 
-    def client_rate(self, wait_s: float) -> ApiError:
+    def client_rate(self, wait_s: float, quota: Quota) -> ApiError:
         seconds, headers = retry_after(wait_s)
-        return ApiError(429, "rate_limited", f"this client creates trips too fast (limit {self.s.create_rate_per_client_per_s:g}/s, burst {self.s.create_burst_per_client:g}); retry in {seconds} s", headers=headers)
+        return ApiError(429, "rate_limited", f"this client creates trips too fast (limit {quota.create_rate_per_s:g}/s, burst {quota.create_burst:g}); retry in {seconds} s", headers=headers)
 
     def create_rate(self, wait_s: float) -> ApiError:
         seconds, headers = retry_after(wait_s)
         return ApiError(429, "rate_limited", f"too many trips created service-wide; retry in {seconds} s", headers=headers)
 
-    def client_full(self) -> ApiError:
-        return ApiError(429, "too_many_trips_for_client", f"this client already holds its maximum of {self.s.max_trips_per_client} open trips; end one (POST /v1/trips/{{id}}/end) or wait for idle ones to expire",
+    def client_full(self, quota: Quota) -> ApiError:
+        return ApiError(429, "too_many_trips_for_client", f"this client already holds its maximum of {quota.max_trips} open trips; end one (POST /v1/trips/{{id}}/end) or wait for idle ones to expire",
+                        headers={"Retry-After": "60"})  # fmt: skip
+
+    def device_full(self, quota: Quota) -> ApiError:
+        return ApiError(429, "too_many_trips_for_device", f"this device already holds its maximum of {quota.max_trips_per_device} open trips; end one (POST /v1/trips/{{id}}/end) or wait for idle ones to expire",
                         headers={"Retry-After": "60"})  # fmt: skip
 
     def service_full(self) -> ApiError:
         return ApiError(503, "too_many_trips", f"the service holds its maximum of {self.s.max_trips} open trips; end one or retry later", headers={"Retry-After": "30"})
 
+    def refusal(self, code: int, who: Creator) -> ApiError:
+        """The error of a store's refusal code: 2 the client's trips, 3 the service's, 5 the device's."""
+        return {2: self.client_full, 5: self.device_full}[code](who.quota) if code != 3 else self.service_full()
+
 
 def unknown_trip(trip_id: str) -> ApiError:
-    return ApiError(404, "unknown_trip", f"no open trip {trip_id!r} (never created, ended or expired)")
+    return ApiError(404, "unknown_trip", f"no open trip {trip_id!r} (never created, ended, expired, or shed: a trip created without an API key "
+                                         "gives its place to a keyed one when the service is full)")  # fmt: skip
 
 
 def no_token() -> ApiError:
@@ -120,17 +132,21 @@ def bad_token(other_trip: bool) -> ApiError:
 
 
 class MemoryTrips:
-    """Trips in this process, by id and by token hash: the embedded default (one worker; a restart loses them)."""
+    """Trips in this process, by id and by token hash: the embedded default (one worker; a restart loses them).
+    ``release(trip)`` closes what a shed trip holds (its SPaT view); ``on_shed()`` counts it."""
 
     shared = False
 
-    def __init__(self, settings: Settings, limits: Limits) -> None:
+    def __init__(self, settings: Settings, limits: Limits, release: Callable[[Trip], Awaitable[None]] | None = None) -> None:
         self.limits = limits
+        self.release = release
+        self.on_shed: Callable[[], None] | None = None
         self.max_trips = settings.max_trips
-        self.max_per_client = settings.max_trips_per_client
         self._trips: dict[str, Trip] = {}
         self._by_token: dict[bytes, str] = {}
         self._per_client: dict[str, int] = {}
+        self._per_device: dict[tuple[str, str], int] = {}
+        self._anonymous: dict[str, None] = {}  # trips created without a key, oldest first: the newest is shed first
         self.create_bucket = TokenBucket(settings.create_rate_per_s, settings.create_burst)
         self.client_buckets = KeyedBuckets(settings.create_rate_per_client_per_s, settings.create_burst_per_client)
 
@@ -140,24 +156,38 @@ class MemoryTrips:
     async def count(self) -> int:
         return len(self._trips)
 
-    def _check_capacity(self, client: str) -> None:
-        if self.max_per_client and self._per_client.get(client, 0) >= self.max_per_client:
-            raise self.limits.client_full()
-        if len(self._trips) >= self.max_trips:
+    def _check_capacity(self, who: Creator) -> None:
+        q = who.quota
+        if who.device and q.max_trips_per_device and self._per_device.get((who.client, who.device), 0) >= q.max_trips_per_device:
+            raise self.limits.device_full(q)
+        if q.max_trips and self._per_client.get(who.client, 0) >= q.max_trips:
+            raise self.limits.client_full(q)
+        if len(self._trips) >= self.max_trips and (who.anonymous or not self._anonymous):
             raise self.limits.service_full()
 
-    async def admit(self, client: str) -> None:
-        if wait_s := self.client_buckets.take(client):
-            raise self.limits.client_rate(wait_s)
-        self._check_capacity(client)
+    async def admit(self, who: Creator) -> None:
+        q = who.quota
+        if wait_s := self.client_buckets.take(who.client, None, q.create_rate_per_s, q.create_burst):
+            raise self.limits.client_rate(wait_s, q)
+        self._check_capacity(who)
         if wait_s := self.create_bucket.take():
             raise self.limits.create_rate(wait_s)
 
-    async def add(self, trip: Trip) -> None:
-        self._check_capacity(trip.client)
+    async def add(self, trip: Trip, who: Creator) -> None:
+        self._check_capacity(who)
+        while len(self._trips) >= self.max_trips and self._anonymous:  # a keyed trip: the newest without a key gives its place
+            shed = await self.remove(next(reversed(self._anonymous)))
+            if self.release is not None:
+                await self.release(shed)
+            if self.on_shed is not None:
+                self.on_shed()
         self._trips[trip.id] = trip
         self._by_token[trip.token_hash] = trip.id
         self._per_client[trip.client] = self._per_client.get(trip.client, 0) + 1
+        if trip.device:
+            self._per_device[trip.client, trip.device] = self._per_device.get((trip.client, trip.device), 0) + 1
+        if who.anonymous:
+            self._anonymous[trip.id] = None
 
     def get(self, trip_id: str) -> Trip:
         trip = self._trips.get(trip_id)
@@ -187,11 +217,13 @@ class MemoryTrips:
         trip = self.get(trip_id)
         del self._trips[trip_id]
         self._by_token.pop(trip.token_hash, None)
-        left = self._per_client.get(trip.client, 1) - 1
-        if left > 0:
-            self._per_client[trip.client] = left
-        else:
-            self._per_client.pop(trip.client, None)
+        self._anonymous.pop(trip_id, None)
+        for table, key in ((self._per_client, trip.client), (self._per_device, (trip.client, trip.device))):
+            left = table.get(key, 1) - 1
+            if left > 0:
+                table[key] = left
+            else:
+                table.pop(key, None)
         return trip
 
     def idle(self, ttl_s: float, now_s: float | None = None) -> list[str]:
@@ -228,36 +260,81 @@ local function count(key, oldest)
 end
 """
 
-# KEYS: open, client zset, client bucket, create bucket. ARGV: now, keep_s, max_trips, max_per_client,
-# client rate, client burst, create rate, create burst.
-# -> {0} admitted, {1, wait} client rate, {2} client full, {3} service full, {4, wait} service rate
+# KEYS: open, client zset, client bucket, create bucket, device zset ('' none), anonymous zset. ARGV: now, keep_s,
+# max_trips, max_per_client, client rate, client burst, create rate, create burst, max_per_device, anonymous (0/1).
+# -> {0} admitted, {1, wait} client rate, {2} client full, {3} service full, {4, wait} service rate, {5} device full
+# (a keyed client finding the service full is admitted while a trip without a key is open: _ADD sheds it)
 _ADMIT = Script(_TAKE + """
 local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
 local wait = take(KEYS[3], 'n', 's', tonumber(ARGV[5]), tonumber(ARGV[6]), now)
 redis.call('PEXPIRE', KEYS[3], math.ceil(1000 * (tonumber(ARGV[6]) / tonumber(ARGV[5]) + 1)))
 if wait > 0 then return {1, tostring(wait)} end
+if KEYS[5] ~= '' and tonumber(ARGV[9]) > 0 and count(KEYS[5], now - ttl) >= tonumber(ARGV[9]) then return {5} end
 if tonumber(ARGV[4]) > 0 and count(KEYS[2], now - ttl) >= tonumber(ARGV[4]) then return {2} end
-if count(KEYS[1], now - ttl) >= tonumber(ARGV[3]) then return {3} end
+if count(KEYS[1], now - ttl) >= tonumber(ARGV[3]) and (ARGV[10] == '1' or redis.call('ZCARD', KEYS[6]) == 0) then return {3} end
 wait = take(KEYS[4], 'n', 's', tonumber(ARGV[7]), tonumber(ARGV[8]), now)
 redis.call('PEXPIRE', KEYS[4], math.ceil(1000 * (tonumber(ARGV[8]) / tonumber(ARGV[7]) + 1)))
 if wait > 0 then return {4, tostring(wait)} end
 return {0}
 """)
 
-# KEYS: trip, open, client zset, token key. ARGV: now, keep_s, max_trips, max_per_client, id, token hash,
-# client, burst, meta, state. -> 0 added, 2 client full, 3 service full
-_ADD = Script(_TAKE + """
-local now, ttl = tonumber(ARGV[1]), tonumber(ARGV[2])
-if tonumber(ARGV[4]) > 0 and count(KEYS[3], now - ttl) >= tonumber(ARGV[4]) then return 2 end
-if count(KEYS[2], now - ttl) >= tonumber(ARGV[3]) then return 3 end
+# Removes the trip ``id`` (its hash, samples, token key, open-set entries); h = its tok, client, dev fields.
+_DROP = """
+local function drop(p, id, h)
+  redis.call('DEL', p .. ':t:' .. id, p .. ':t:' .. id .. ':tr', p .. ':k:' .. h[1])
+  redis.call('ZREM', p .. ':open', id)
+  redis.call('ZREM', p .. ':c:' .. h[2], id)
+  if h[3] and h[3] ~= '' then redis.call('ZREM', p .. ':d:' .. h[2] .. ':' .. h[3], id) end
+  redis.call('ZREM', p .. ':anon', id)
+end
+"""
+
+# KEYS: trip, open, client zset, token key, device zset ('' none), anonymous zset. ARGV: now, keep_s, max_trips,
+# max_per_client, id, token hash, client, burst, meta, state, max_per_device, device, anonymous (0/1), prefix.
+# -> {0, id of the trip shed or ''} added, {2} client full, {3} service full, {5} device full.
+# The service full, a keyed trip takes the place of the newest open trip created without a key (``anon``, by
+# creation time; members whose trip expired are dropped on the way).
+_ADD = Script(_TAKE + _DROP + """
+local now, ttl, p = tonumber(ARGV[1]), tonumber(ARGV[2]), ARGV[14]
+if KEYS[5] ~= '' and tonumber(ARGV[11]) > 0 and count(KEYS[5], now - ttl) >= tonumber(ARGV[11]) then return {5} end
+if tonumber(ARGV[4]) > 0 and count(KEYS[3], now - ttl) >= tonumber(ARGV[4]) then return {2} end
+local shed = ''
+if count(KEYS[2], now - ttl) >= tonumber(ARGV[3]) then
+  if ARGV[13] == '1' then return {3} end
+  while shed == '' do
+    local newest = redis.call('ZRANGE', KEYS[6], -1, -1)[1]
+    if not newest then return {3} end
+    local h = redis.call('HMGET', p .. ':t:' .. newest, 'tok', 'client', 'dev')
+    if h[1] then shed = newest else redis.call('ZREM', KEYS[6], newest) end
+    if h[1] then drop(p, newest, h) end
+  end
+end
 local ms = math.ceil(ttl * 1000)
-redis.call('HSET', KEYS[1], 'v', '1', 'tok', ARGV[6], 'client', ARGV[7], 'bt', ARGV[8], 'bs', ARGV[1], 'ts', ARGV[1], 'meta', ARGV[9], 'state', ARGV[10])
+redis.call('HSET', KEYS[1], 'v', '1', 'tok', ARGV[6], 'client', ARGV[7], 'bt', ARGV[8], 'bs', ARGV[1], 'ts', ARGV[1], 'meta', ARGV[9], 'state', ARGV[10], 'dev', ARGV[12])
 redis.call('PEXPIRE', KEYS[1], ms)
 redis.call('SET', KEYS[4], ARGV[5], 'PX', ms)
 redis.call('ZADD', KEYS[2], now, ARGV[5])
 redis.call('ZADD', KEYS[3], now, ARGV[5])
 redis.call('PEXPIRE', KEYS[3], ms)
-return 0
+if KEYS[5] ~= '' then
+  redis.call('ZADD', KEYS[5], now, ARGV[5])
+  redis.call('PEXPIRE', KEYS[5], ms)
+end
+if ARGV[13] == '1' then redis.call('ZADD', KEYS[6], now, ARGV[5]) end
+return {0, shed}
+""")
+
+# KEYS: anonymous zset. ARGV: prefix. Drops the members whose trip has expired (by the TTL, not ended): the
+# zset is scored by creation, not by last request. -> members dropped
+_PRUNE_ANON = Script("""
+local gone = 0
+for _, id in ipairs(redis.call('ZRANGE', KEYS[1], 0, -1)) do
+  if redis.call('EXISTS', ARGV[1] .. ':t:' .. id) == 0 then
+    redis.call('ZREM', KEYS[1], id)
+    gone = gone + 1
+  end
+end
+return gone
 """)
 
 # The trip's hash is read once per call (HMGET of TRIP_FIELDS) and written once (HSET of what changed).
@@ -276,6 +353,10 @@ local function touch(key, h, keep, every, now, p, id, out)
   redis.call('ZADD', p .. ':open', now, id)
   redis.call('ZADD', p .. ':c:' .. h[3], now, id)
   redis.call('PEXPIRE', p .. ':c:' .. h[3], ms)
+  if h[7] and h[7] ~= '' then
+    redis.call('ZADD', p .. ':d:' .. h[3] .. ':' .. h[7], now, id)
+    redis.call('PEXPIRE', p .. ':d:' .. h[3] .. ':' .. h[7], ms)
+  end
   out[#out + 1] = 'ts'
   out[#out + 1] = string.format('%.17g', now)
 end
@@ -294,14 +375,14 @@ local function write(key, out)
   if #out > 0 then redis.call('HSET', key, unpack(out)) end
 end
 """
-TRIP_FIELDS = ("v", "tok", "client", "bt", "bs", "ts")
+TRIP_FIELDS = ("v", "tok", "client", "bt", "bs", "ts", "dev")
 
 # KEYS: trip. ARGV: token hash, version held ('' none), meta wanted (0/1), take (0/1), now, rate, burst,
 # keep_s, every_s, prefix, id.
 # -> {0} unknown, {1} bad token, {2} another trip's token, {3, wait} rate limited,
 #    {4, version, state or nil, meta or nil}
 _LOAD = Script(_TRIP + """
-local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts')
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts', 'dev')
 if not h[1] then return {0} end
 local p = ARGV[10]
 if h[2] ~= ARGV[1] then
@@ -336,7 +417,7 @@ return {4, h[1], state, meta}
 # 3 commands (HMGET, HSET, APPEND) on most fixes.
 # -> {new version}, {0, version, state} the trip moved meanwhile, {-1} gone, {-2} not its token, {-3, wait} rate limited
 _SAVE = Script(_TRIP + """
-local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts')
+local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts', 'dev')
 if not h[1] then return {-1} end
 if h[2] ~= ARGV[5] then return {-2} end
 local now, keep, out = tonumber(ARGV[7]), tonumber(ARGV[4]), {}
@@ -365,13 +446,10 @@ return {nv}
 """)
 
 # KEYS: trip, samples. ARGV: prefix, id. -> 1 removed, 0 already gone
-_REMOVE = Script("""
-local h = redis.call('HMGET', KEYS[1], 'tok', 'client')
+_REMOVE = Script(_DROP + """
+local h = redis.call('HMGET', KEYS[1], 'tok', 'client', 'dev')
 if not h[1] then return 0 end
-local p = ARGV[1]
-redis.call('DEL', KEYS[1], KEYS[2], p .. ':k:' .. h[1])
-redis.call('ZREM', p .. ':open', ARGV[2])
-redis.call('ZREM', p .. ':c:' .. h[2], ARGV[2])
+drop(ARGV[1], ARGV[2], h)
 return 1
 """)
 
@@ -426,6 +504,7 @@ class RedisTrips:
         self._cache: dict[str, tuple[Trip, float]] = {}  # id -> (trip, last used, monotonic)
         self._locks: dict[str, list] = {}  # id -> [lock, holders and waiters]
         self._count = 0
+        self.on_shed: Callable[[], None] | None = None
 
     def __len__(self) -> int:
         return self._count  # as of the last count() (health, sweep)
@@ -439,36 +518,43 @@ class RedisTrips:
             self._count = int(await self.redis.call("ZCARD", f"{self.p}:open"))
         return self._count
 
-    async def admit(self, client: str) -> None:
-        s = self.s
+    def _quota_keys(self, who: Creator) -> tuple[str, str]:
+        """The device's open-trip set ('' without a device) and the set of trips created without a key."""
+        device = f"{self.p}:d:{who.client}:{who.device}" if who.device else ""
+        return device, f"{self.p}:anon"
+
+    async def admit(self, who: Creator) -> None:
+        s, q = self.s, who.quota
         with REACH:
             r = await self.redis.run(
-                _ADMIT, keys=[f"{self.p}:open", f"{self.p}:c:{client}", f"{self.p}:rl:c:{client}", f"{self.p}:rl:create"],
-                args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, s.create_rate_per_client_per_s,
-                      s.create_burst_per_client, s.create_rate_per_s, s.create_burst],
+                _ADMIT, keys=[f"{self.p}:open", f"{self.p}:c:{who.client}", f"{self.p}:rl:c:{who.client}", f"{self.p}:rl:create", *self._quota_keys(who)],
+                args=[repr(self.clock()), self.keep_s, s.max_trips, q.max_trips, q.create_rate_per_s, q.create_burst, s.create_rate_per_s, s.create_burst,
+                      q.max_trips_per_device, 1 if who.anonymous else 0],
             )  # fmt: skip
         code = int(r[0])
         if code == 1:
-            raise self.limits.client_rate(float(r[1]))
-        if code == 2:
-            raise self.limits.client_full()
-        if code == 3:
-            raise self.limits.service_full()
+            raise self.limits.client_rate(float(r[1]), q)
         if code == 4:
             raise self.limits.create_rate(float(r[1]))
+        if code:
+            raise self.limits.refusal(code, who)
 
-    async def add(self, trip: Trip) -> None:
-        s = self.s
+    async def add(self, trip: Trip, who: Creator) -> None:
+        s, q = self.s, who.quota
         with REACH:
-            code = await self.redis.run(
-                _ADD, keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash],
-                args=[repr(self.clock()), self.keep_s, s.max_trips, s.max_trips_per_client, trip.id, trip.token_hash, trip.client,
-                      s.rate_burst, _json(trip.meta()), _json(trip.state())],
+            r = await self.redis.run(
+                _ADD, keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash, *self._quota_keys(who)],
+                args=[repr(self.clock()), self.keep_s, s.max_trips, q.max_trips, trip.id, trip.token_hash, trip.client,
+                      s.rate_burst, _json(trip.meta()), _json(trip.state()), q.max_trips_per_device, who.device, 1 if who.anonymous else 0, self.p],
             )  # fmt: skip
-        if code == 2:
-            raise self.limits.client_full()
-        if code == 3:
-            raise self.limits.service_full()
+        code = int(r[0])
+        if code:
+            raise self.limits.refusal(code, who)
+        if r[1]:  # a trip without a key gave its place
+            shed = r[1].decode() if isinstance(r[1], bytes) else r[1]
+            self._forget(shed)
+            if self.on_shed is not None:
+                self.on_shed()
         trip.version = 1
         self._cache[trip.id] = (trip, time.monotonic())
 
@@ -614,6 +700,8 @@ class RedisTrips:
                 self._forget(trip_id)
         with contextlib.suppress(ApiError):
             await self.count()
+            with REACH:
+                await self.redis.run(_PRUNE_ANON, keys=[f"{self.p}:anon"], args=[self.p])
         return []
 
     async def close(self) -> None:
@@ -622,77 +710,9 @@ class RedisTrips:
         await self.redis.close()
 
 
-# KEYS: the trip's and the client's stream sets. ARGV: now, stream id, per trip, per client (0: none), lease_s.
-# -> 0 opened, 1 the trip's streams are full, 2 the client's
-_STREAM_OPEN = Script("""
-local now, lease = tonumber(ARGV[1]), tonumber(ARGV[5])
-redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now)
-redis.call('ZREMRANGEBYSCORE', KEYS[2], '-inf', now)
-if redis.call('ZCARD', KEYS[1]) >= tonumber(ARGV[3]) then return 1 end
-if tonumber(ARGV[4]) > 0 and redis.call('ZCARD', KEYS[2]) >= tonumber(ARGV[4]) then return 2 end
-for i = 1, 2 do
-  redis.call('ZADD', KEYS[i], now + lease, ARGV[2])
-  redis.call('PEXPIRE', KEYS[i], math.ceil(lease * 1000))
-end
-return 0
-""")
-
-# KEYS: as above. ARGV: now, stream id, lease_s (0: the stream closed)
-_STREAM_RENEW = Script("""
-for i = 1, 2 do
-  if tonumber(ARGV[3]) > 0 then
-    redis.call('ZADD', KEYS[i], 'XX', tonumber(ARGV[1]) + tonumber(ARGV[3]), ARGV[2])
-    redis.call('PEXPIRE', KEYS[i], math.ceil(tonumber(ARGV[3]) * 1000))
-  else
-    redis.call('ZREM', KEYS[i], ARGV[2])
-  end
-end
-return 0
-""")
-
-
-class RedisStreams:
-    """Open WebSocket streams per trip and per client address, counted in Redis across every worker (the
-    in-process count is ``server.routes.stream.StreamCounts``). Each stream holds a lease of ``LEASE_S``,
-    renewed by its messages: the streams of a killed worker lapse within a lease."""
-
-    LEASE_S = 60.0
-
-    def __init__(self, store: RedisTrips) -> None:
-        self.store = store
-
-    def _keys(self, trip_id: str, client: str) -> list[str]:
-        return [f"{self.store.p}:ws:t:{trip_id}", f"{self.store.p}:ws:c:{client}"]
-
-    async def open(self, trip_id: str, client: str, per_trip: int, per_client: int) -> list:
-        """A handle for :meth:`renew` and :meth:`close`; 429 ``too_many_streams`` beyond the caps."""
-        sid = uuid.uuid4().hex
-        now = self.store.clock()
-        with REACH:
-            code = await self.store.redis.run(_STREAM_OPEN, keys=self._keys(trip_id, client), args=[repr(now), sid, per_trip, per_client, self.LEASE_S])
-        if code == 1:
-            raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
-        if code == 2:
-            raise ApiError(429, "too_many_streams", f"this client address already has {per_client} open streams")
-        return [trip_id, client, sid, now + self.LEASE_S / 3]
-
-    async def renew(self, handle: list) -> None:
-        """Called per message; renews the lease once a third of it has passed."""
-        now = self.store.clock()
-        if now >= handle[3]:
-            handle[3] = now + self.LEASE_S / 3
-            with REACH:
-                await self.store.redis.run(_STREAM_RENEW, keys=self._keys(handle[0], handle[1]), args=[repr(now), handle[2], self.LEASE_S])
-
-    async def close(self, handle: list) -> None:
-        with contextlib.suppress(ApiError):
-            with REACH:
-                await self.store.redis.run(_STREAM_RENEW, keys=self._keys(handle[0], handle[1]), args=[repr(self.store.clock()), handle[2], 0])
-
-
 def make_store(settings: Settings, limits: Limits, build, release, clock) -> MemoryTrips | RedisTrips:
     """The store ``ECO_STORE_URL`` names: Redis (``redis://``, ``rediss://``, ``unix://``), else in process."""
     if settings.store_url:
         return RedisTrips(settings, limits, build, release, clock)
-    return MemoryTrips(settings, limits)
+    return MemoryTrips(settings, limits, release)
 

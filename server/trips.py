@@ -75,12 +75,12 @@ class Trip:
     __slots__ = (
         "id", "token", "token_hash", "corridor", "matcher", "timing", "vehicle", "entry_unix_s", "created_unix_s", "scenario", "spat",
         "track", "memory", "last", "bucket", "trace_t", "trace_v", "trace_x", "trace_base", "n_fixes", "last_seen_s", "tables",
-        "client", "units", "params", "observed", "n_rejected", "version",
+        "client", "device", "units", "params", "observed", "n_rejected", "version",
     )  # fmt: skip
 
     def __init__(
         self, corridor: Corridor, matcher: RouteMatcher, scenario: FeedScenario, spat: TripSpat, vehicle: str,
-        created_unix_s: float, bucket: TokenBucket, dropout_s: float, tables=None, *, client: str = "", units: str = "metric",
+        created_unix_s: float, bucket: TokenBucket, dropout_s: float, tables=None, *, client: str = "", device: str = "", units: str = "metric",
         params=None, observe_spat: bool = False, max_speed_mps: float = 50.0, trip_id: str | None = None,
     ) -> None:  # fmt: skip
         self.id = trip_id or uuid.uuid4().hex
@@ -109,6 +109,7 @@ class Trip:
         self.last_seen_s = time.monotonic()
         self.tables = tables
         self.client = client  # who created it (API key id or client address): per-client quotas
+        self.device = device  # the device id it was created with ("": none): per-device limits (server.quotas)
         self.units = units  # "metric" or "imperial": the spoken speeds
         self.params = params  # the advisor's settings for this trip (units)
         self.observed = ObservedLights() if observe_spat else None  # live SPaT: what the trip saw, for its score
@@ -125,7 +126,7 @@ class Trip:
         u = self.scenario.uncertainty
         return {"id": self.id, "corridor": self.corridor.name, "timing": None if self.spat.shared else self.timing, "entry_unix_s": self.entry_unix_s,
                 "uncertainty": [u.early_s, u.late_s, u.confidence_frac], "vehicle": self.vehicle, "created_unix_s": self.created_unix_s,
-                "client": self.client, "units": self.units, "observe_spat": self.observed is not None}  # fmt: skip
+                "client": self.client, "device": self.device, "units": self.units, "observe_spat": self.observed is not None}  # fmt: skip
 
     def state(self) -> dict:
         """What a fix changes, as plain data of bounded size (the score samples apart)."""

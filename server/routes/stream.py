@@ -4,15 +4,20 @@ Authenticate with ``Authorization: Bearer <trip token>`` or ``?token=<trip token
 one place a token may ride in the URL: browsers cannot set headers there). A refused connection is
 accepted, told why (``{"error": ..., "status": 401|403|404|429}``) and closed with code 4000 + HTTP
 status. A bad message gets an error object and the stream goes on; nothing about the trip changes. Every
-message keeps the trip alive (``last_seen``). At most ``ws_max_per_trip`` streams per trip and
-``ws_max_per_client`` per client address are open at once (4429 beyond).
+message keeps the trip alive (``last_seen``). At most ``ws_max_per_trip`` streams per trip are open at once (a
+newer one replaces the oldest, which is told why and closed with 4409: ``server.streams``) and
+``ws_max_per_client`` per client address (4429 beyond).
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
+from collections.abc import Callable
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocketState
 from pydantic import ValidationError
 from pydantic_core import to_json
 
@@ -21,38 +26,9 @@ from server.gps import Fix
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
 from server.errors import ApiError, clean_errors, validation_summary
 from server.schemas import GpsFixIn
+from server.streams import StreamCounts
 
 router = APIRouter(prefix="/v1/trips", tags=["stream"])
-
-
-class StreamCounts:
-    """Open streams per trip and per client address in this process (bounded: entries leave at zero); with
-    a shared trip store, ``server.store.RedisStreams`` counts them across workers (same calls)."""
-
-    def __init__(self) -> None:
-        self.by_trip: dict[str, int] = {}
-        self.by_client: dict[str, int] = {}
-
-    async def open(self, trip_id: str, client: str, per_trip: int, per_client: int) -> tuple[str, str]:
-        if self.by_trip.get(trip_id, 0) >= per_trip:
-            raise ApiError(429, "too_many_streams", f"this trip already has {per_trip} open stream(s); close one first")
-        if per_client and self.by_client.get(client, 0) >= per_client:
-            raise ApiError(429, "too_many_streams", f"this client address already has {per_client} open streams")
-        self.by_trip[trip_id] = self.by_trip.get(trip_id, 0) + 1
-        self.by_client[client] = self.by_client.get(client, 0) + 1
-        return trip_id, client
-
-    async def renew(self, handle: tuple[str, str]) -> None:
-        return None
-
-    async def close(self, handle: tuple[str, str]) -> None:
-        trip_id, client = handle
-        for table, key in ((self.by_trip, trip_id), (self.by_client, client)):
-            left = table.get(key, 1) - 1
-            if left > 0:
-                table[key] = left
-            else:
-                table.pop(key, None)
 
 
 def _parse(text: str) -> Fix:
@@ -68,14 +44,33 @@ def _error(exc: ApiError) -> str:
     return json.dumps({**exc.body(), "status": exc.status})
 
 
+def _replaced(ws: WebSocket, per_trip: int) -> Callable[[], None]:
+    """What a stream does when a newer one of its trip replaces it (``server.streams``): say why, close 4409."""
+    tasks: set[asyncio.Task] = set()
+
+    async def close() -> None:
+        exc = ApiError(409, "stream_replaced", f"a newer stream of this trip replaced this one (at most {per_trip} per trip)")
+        with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):  # the stream may be closing already
+            if ws.application_state == WebSocketState.CONNECTED:
+                await ws.send_text(_error(exc))
+                await ws.close(code=4409, reason=exc.error)
+
+    def on_replaced() -> None:
+        task = asyncio.get_running_loop().create_task(close())
+        tasks.add(task)
+        task.add_done_callback(tasks.discard)
+
+    return on_replaced
+
+
 @router.websocket("/{trip_id}/stream")
 async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: MetricsDep, settings: SettingsDep) -> None:
-    counts: StreamCounts = ws.app.state.streams  # or server.store.RedisStreams
+    counts: StreamCounts = ws.app.state.streams  # or server.streams.RedisStreams
     client = client_address(ws)
     token = bearer_token(ws, allow_query=True)
     try:  # the slot is taken before the handshake completes: a client whose handshake is done holds it
         trip = await engine.trips.authorize(trip_id, token)
-        handle = await counts.open(trip.id, client, settings.ws_max_per_trip, settings.ws_max_per_client)
+        handle = await counts.open(trip.id, client, settings.ws_max_per_trip, settings.ws_max_per_client, _replaced(ws, settings.ws_max_per_trip))
     except ApiError as exc:
         await ws.accept()
         await ws.send_text(_error(exc))
@@ -85,9 +80,11 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
     limit = settings.ws_max_message_bytes
     try:
         await ws.accept()
+        if handle.replaced:  # replaced before its handshake was done
+            handle.on_replaced()
         while True:
             message = await ws.receive()
-            if message["type"] == "websocket.disconnect":
+            if message["type"] == "websocket.disconnect" or handle.replaced:
                 break
             text = message.get("text")
             if text is None:
@@ -97,7 +94,6 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
             else:  # the limit is in bytes, as uvicorn's ws_max_size (a character is 1 to 4 of them)
                 size = len(text) if len(text) * 4 <= limit else len(text.encode("utf-8", "surrogatepass"))
             try:
-                await counts.renew(handle)
                 if size > limit:
                     await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
                     raise ApiError(413, "payload_too_large", f"message of {size} bytes, larger than {limit}")
@@ -110,6 +106,9 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
                     break
     except WebSocketDisconnect:
         pass
+    except RuntimeError:  # sending on a stream closed meanwhile as replaced (starlette: "once a close message has been sent")
+        if not handle.replaced:
+            raise
     finally:
         await counts.close(handle)
         metrics.ws_open.dec()

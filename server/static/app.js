@@ -31,6 +31,18 @@ const store = {
   set: (key, value) => { try { localStorage.setItem(`ecodrive.${key}`, value); } catch { /* private mode */ } },
 };
 
+/** This phone's id, random and kept (`device_id` of every trip it starts): the service limits one device's open
+ * trips within its API key's quota (docs/SERVICE.md, "Who may create trips"). */
+function deviceId() {
+  let id = store.get("device", "");
+  if (!/^[A-Za-z0-9._:-]{8,64}$/.test(id)) {
+    const bytes = crypto.getRandomValues(new Uint8Array(16)); // also on a plain-http page, unlike randomUUID
+    id = "web-" + Array.from(bytes, (b) => b.toString(16).padStart(2, "0")).join("");
+    store.set("device", id);
+  }
+  return id;
+}
+
 const speaker = new Speaker({ lang: document.documentElement.lang || locale, onState: (text) => note(text) });
 const corridors = new Map(); // name -> CorridorSummary
 let drive = null; // the trip under way: {link, trip, units, names, stop, endFixes, wasBeforeEnd, ...}
@@ -116,6 +128,7 @@ async function start(mode) {
       const units = unitsParameter(spec?.components?.schemas?.TripCreate?.properties?.units, chosen);
       if (units !== null) body.units = units;
     }
+    body.device_id = deviceId();
     const key = $("api-key").value.trim();
     let created;
     try {

@@ -324,6 +324,7 @@ def test_gps_drive_shows_and_speaks_the_advice(app_service, tmp_path, shots):
             await page.wait_for("document.body.dataset.state === 'score'", 30, "the score")
             await page.screenshot(shots / "3_score.png")
             created = (await response_json(page, "/v1/trips"))[0]
+            created["device"] = await page.evaluate("localStorage.getItem('ecodrive.device')")
             trip_id = await page.evaluate("document.body.dataset.trip")
             score = (await response_json(page, "/end"))[0]
             table = await page.evaluate("[...document.querySelectorAll('#score-table tbody tr')].map((r) => [...r.cells].map((c) => c.textContent))")
@@ -334,6 +335,7 @@ def test_gps_drive_shows_and_speaks_the_advice(app_service, tmp_path, shots):
 
     created, trip_id, seen, received, spoken, score, table, summary = run(scenario())
     assert trip_id == created["trip_id"] and created["corridor"] == "paper_s400"
+    assert re.fullmatch(r"web-[0-9a-f]{32}", created["device"] or ""), created["device"]  # the phone's id, sent as device_id (the trip was created with it)
     units = expected_units(created, language, "kmh")
     assert units == "kmh"
     if "units" in created:  # a service that takes `units` was asked for the user's, and speaks them

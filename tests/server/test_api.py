@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
 from hypothesis import given, settings as hsettings, strategies as st
 
 from advisory.advice import advisor
@@ -287,7 +288,7 @@ def test_per_client_trip_quota_and_creation_rate():
     with make(create_rate_per_client_per_s=0.01, create_burst_per_client=2.0) as c:
         r = [c.post("/v1/trips", json={}) for _ in range(3)]
         assert [x.status_code for x in r] == [201, 201, 429] and int(r[2].headers["retry-after"]) >= 1
-    with make(api_keys=("a", "b"), max_trips_per_client=1) as c:  # quotas per key
+    with make(api_keys=("a", "b"), key_max_trips=1) as c:  # quotas per key
         assert c.post("/v1/trips", json={}, headers={"X-API-Key": "a"}).status_code == 201
         assert c.post("/v1/trips", json={}, headers={"X-API-Key": "a"}).status_code == 429
         assert c.post("/v1/trips", json={}, headers={"Authorization": "Bearer b"}).status_code == 201
@@ -306,11 +307,17 @@ def test_websocket_messages_keep_the_trip_alive_and_streams_are_capped():
             ws1.send_json(fix())
             ws1.receive_json()
             assert engine.trips.idle(500.0) == []  # the message refreshed it
-            with c.websocket_connect(url) as ws3:
-                msg = ws3.receive_json()
-                assert msg["status"] == 429 and msg["error"] == "too_many_streams"
-            ws2.send_json(fix(40.0, NOW + 1))
-            assert ws2.receive_json()["seq"] == 2
+            with c.websocket_connect(url) as ws3:  # a third replaces the oldest: never more than 2 open
+                told = ws1.receive_json()
+                assert told["status"] == 409 and told["error"] == "stream_replaced"
+                with pytest.raises(WebSocketDisconnect) as closed:
+                    ws1.receive_json()
+                assert closed.value.code == 4409
+                ws3.send_json(fix(30.0, NOW + 1))
+                assert ws3.receive_json()["seq"] == 2
+            ws2.send_json(fix(40.0, NOW + 2))
+            assert ws2.receive_json()["seq"] == 3
+            assert c.app.state.streams.by_trip[d["trip_id"]] == [c.app.state.streams.by_trip[d["trip_id"]][0]]  # ws2's, still counted
 
 
 def test_score_values_are_rounded(client):

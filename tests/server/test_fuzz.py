@@ -44,7 +44,8 @@ def _settings() -> Settings:
     lots = 1e9  # no rate limit or quota stops the fuzzer short of the handlers
     return Settings(corridors=(CORRIDOR,), default_corridor=CORRIDOR, tables=False, speech=False, api_keys=(API_KEY,), rate_per_s=lots,
                     rate_burst=lots, create_rate_per_s=lots, create_burst=lots, create_rate_per_client_per_s=lots,
-                    create_burst_per_client=lots, max_trips_per_client=0, max_body_bytes=LIMIT, ws_max_message_bytes=LIMIT)  # fmt: skip
+                    create_burst_per_client=lots, max_trips_per_client=0, key_max_trips=0, key_create_rate_per_s=lots, key_create_burst=lots,
+                    max_trips_per_device=0, max_body_bytes=LIMIT, ws_max_message_bytes=LIMIT)  # fmt: skip
 
 
 class _Records(logging.Handler):
@@ -80,7 +81,7 @@ RAW_JSON = [Raw(t) for t in ("NaN", "-Infinity", "Infinity", "1e999999", "-1e999
                              "[" * 199 + "]" * 199, "[" * 201 + "]" * 201, "[" * 5000, '{"a":' * 300 + "1" + "}" * 300, "\x00", "")]  # fmt: skip
 SURROGATES = ["\ud800", "\udfff", "a\udc00b", "\ud83d", "\ud83d\ude00"[::-1]]
 FIX_FIELDS = ["t_unix_s", "timestamp", "lat_deg", "lon_deg", "latitude", "longitude", "speed_mps", "speed", "heading_deg", "accuracy_m"]
-TRIP_FIELDS = ["corridor", "timing", "vehicle", "entry_unix_s", "units"]
+TRIP_FIELDS = ["corridor", "timing", "vehicle", "entry_unix_s", "units", "device_id"]
 
 texts = st.one_of(st.text(max_size=12), st.sampled_from(SURROGATES), st.text(st.characters(exclude_categories=()) | st.characters(min_codepoint=0xD800, max_codepoint=0xDFFF), max_size=6),
                   st.sampled_from([CORRIDOR, "15_15", "trip", "paper_54kwh", "imperial", "metric", "x" * 300]))  # fmt: skip
@@ -321,7 +322,14 @@ def test_no_client_input_gets_a_5xx(svc, method, template):
 
 def _fuzz_request(svc, method: str, template: str, data) -> None:
     client, records = svc
-    trip, other = _trip(client), _trip(client)
+    odd_method, path, query, hdrs, body = draw_request(data, method, template, _trip(client), _trip(client), _valid_fix())
+    cut = data.draw(st.integers(0, len(body)), label="cut")
+    _check(client, records, odd_method, template, path, query, hdrs, body, cut)
+
+
+def draw_request(data, method: str, template: str, trip: dict, other: dict, fix: dict) -> tuple[str, str, bytes, list[tuple[bytes, bytes]], bytes]:
+    """A request to the route ``method template``: (method, path, query string, headers, body), mostly with
+    ``trip``'s id and token (sometimes ``other``'s, or none), a body from ``fix`` on ``/fixes``."""
     values = {
         "trip_id": _mostly(trip["trip_id"], st.sampled_from([other["trip_id"], "0" * 32, "x" * 65]) | segments),
         "name": _mostly(CORRIDOR, st.just(CORRIDOR + "x") | segments),
@@ -333,10 +341,9 @@ def _fuzz_request(svc, method: str, template: str, data) -> None:
     odd_method = data.draw(_mostly(method, st.sampled_from(["PUT", "DELETE", "PATCH", "OPTIONS", "HEAD"])), label="method")
     query = "&".join(data.draw(st.lists(query_parts, max_size=3), label="query")).encode()
     hdrs = data.draw(headers(trip["token"] if "{trip_id}" in template else API_KEY, other["token"]), label="headers")
-    base = _valid_fix() if template.endswith("/fixes") else {"corridor": CORRIDOR, "units": "metric"}
+    base = fix if template.endswith("/fixes") else {"corridor": CORRIDOR, "units": "metric"}
     body = data.draw(bodies(base), label="body") if odd_method in ("POST", "PUT", "PATCH") or data.draw(st.booleans(), label="get body") else b""
-    cut = data.draw(st.integers(0, len(body)), label="cut")
-    _check(client, records, odd_method, template, path, query, hdrs, body, cut)
+    return odd_method, path, query, hdrs, body
 
 
 def _ws_messages():

@@ -138,7 +138,7 @@ def test_tokens_never_reach_the_log_and_open_creation_is_announced(start_proc, t
 
 @pytest.mark.parametrize("keys", ["k-one"])
 def test_creation_needs_a_key_when_keys_are_set_and_quotas_hold_per_client(start_proc, tmp_path, keys):
-    svc = start_proc(_proc(tmp_path, ECO_API_KEYS=keys, ECO_MAX_TRIPS_PER_CLIENT="2", ECO_MAX_CONNECTIONS_PER_CLIENT="0"))
+    svc = start_proc(_proc(tmp_path, ECO_API_KEYS=keys, ECO_API_KEY_QUOTAS=json.dumps({keys: {"max_trips": 2}}), ECO_MAX_CONNECTIONS_PER_CLIENT="0"))
     assert httpx.post(svc.base_url + "/v1/trips", json={}, timeout=10).status_code == 401
     codes = [httpx.post(svc.base_url + "/v1/trips", json={}, headers={"X-API-Key": keys}, timeout=10).status_code for _ in range(3)]
     assert codes == [201, 201, 429]

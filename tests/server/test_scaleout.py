@@ -28,8 +28,8 @@ from tests.server.conftest import service_proc
 KEYS = ("k-drive", "k-quota", "k-global", "k-ws")
 WORKER_ENV = {
     "ECO_CORRIDORS": "paper_s200", "ECO_DEFAULT_CORRIDOR": "paper_s200", "ECO_TABLES": "false", "ECO_SPEECH": "false",
-    "ECO_API_KEYS": ",".join(KEYS), "ECO_RATE_PER_S": "0.001", "ECO_RATE_BURST": "100", "ECO_MAX_TRIPS_PER_CLIENT": "5",
-    "ECO_CREATE_RATE_PER_CLIENT_PER_S": "0.001", "ECO_CREATE_BURST_PER_CLIENT": "6", "ECO_MAX_TRIPS": "8",
+    "ECO_API_KEYS": ",".join(KEYS), "ECO_RATE_PER_S": "0.001", "ECO_RATE_BURST": "100", "ECO_KEY_MAX_TRIPS": "5",
+    "ECO_KEY_CREATE_RATE_PER_S": "0.001", "ECO_KEY_CREATE_BURST": "6", "ECO_MAX_TRIPS": "8", "ECO_WS_MAX_PER_CLIENT": "3",
 }  # fmt: skip
 
 
@@ -154,37 +154,45 @@ def store_trips(store: RedisServer) -> list[bytes]:
 
 
 def test_websocket_streams_are_capped_across_workers(workers):
-    """At most ECO_WS_MAX_PER_TRIP (2) streams per trip, wherever they are opened; a closed one frees its slot."""
+    """At most ECO_WS_MAX_PER_CLIENT (3) streams per client address, wherever they are opened (4429 beyond); a
+    closed one frees its slot. (Per trip, a newer stream replaces the oldest: tests/server/test_quotas.py.)"""
     a, b = workers
-    trip_id, auth = _create(a.base_url, "k-ws", entry_unix_s=time.time() - 10)
+    trips = [_create(a.base_url, "k-ws", entry_unix_s=time.time() - 10) for _ in range(2)]
+
+    def url(w: Proc, k: int) -> str:
+        return f"ws://127.0.0.1:{w.port}/v1/trips/{trips[k][0]}/stream"
+
+    async def connect(w: Proc, k: int):
+        return await websockets.connect(url(w, k), additional_headers=trips[k][1], open_timeout=10, local_addr=("127.0.0.3", 0))
 
     async def run() -> None:
-        urls = [f"ws://127.0.0.1:{w.port}/v1/trips/{trip_id}/stream" for w in (a, b, a)]
-        async with websockets.connect(urls[0], additional_headers=auth) as ws1, websockets.connect(urls[1], additional_headers=auth):
-            async with websockets.connect(urls[2], additional_headers=auth) as ws3:
-                msg = json.loads(await asyncio.wait_for(ws3.recv(), 10))
-                assert msg["status"] == 429 and msg["error"] == "too_many_streams"
-                with pytest.raises(websockets.ConnectionClosed) as closed:
-                    await asyncio.wait_for(ws3.recv(), 10)
-                assert closed.value.rcvd.code == 4429
-            await ws1.close()
-            # the slot ws1 held: the server frees it when it sees the close, and its closing frame may reach the
-            # client first (uvicorn answers a close before the route's ``finally`` runs): a new stream opens
-            # once the slot is free, within a bound; until then it is refused with 4429, never anything else
-            deadline = time.monotonic() + 20
-            while True:
-                try:
-                    async with websockets.connect(urls[2], additional_headers=auth) as ws4:
-                        await ws4.send(json.dumps({"t_unix_s": time.time() - 1, "lat_deg": 0.0, "lon_deg": 0.0}))
-                        reply = json.loads(await asyncio.wait_for(ws4.recv(), 10))
-                except websockets.ConnectionClosed as exc:
-                    assert exc.rcvd is not None and exc.rcvd.code == 4429, exc
-                    reply = {"error": "too_many_streams"}
-                if "seq" in reply or time.monotonic() > deadline:
-                    break
-                assert reply["error"] == "too_many_streams", reply
-                await asyncio.sleep(0.1)
-            assert "seq" in reply, reply
+        held = [await connect(a, 0), await connect(b, 0), await connect(b, 1)]
+        extra = await connect(a, 1)
+        msg = json.loads(await asyncio.wait_for(extra.recv(), 10))
+        assert msg["status"] == 429 and msg["error"] == "too_many_streams"
+        with pytest.raises(websockets.ConnectionClosed) as closed:
+            await asyncio.wait_for(extra.recv(), 10)
+        assert closed.value.rcvd.code == 4429
+        await held[0].close()
+        # the slot held[0] held: the server frees it when it sees the close, and its closing frame may reach the
+        # client first (uvicorn answers a close before the route's ``finally`` runs): a new stream opens
+        # once the slot is free, within a bound; until then it is refused with 4429, never anything else
+        deadline = time.monotonic() + 20
+        while True:
+            try:
+                async with await connect(a, 1) as ws4:
+                    await ws4.send(json.dumps({"t_unix_s": time.time() - 1, "lat_deg": 0.0, "lon_deg": 0.0}))
+                    reply = json.loads(await asyncio.wait_for(ws4.recv(), 10))
+            except websockets.ConnectionClosed as exc:
+                assert exc.rcvd is not None and exc.rcvd.code == 4429, exc
+                reply = {"error": "too_many_streams"}
+            if "seq" in reply or time.monotonic() > deadline:
+                break
+            assert reply["error"] == "too_many_streams", reply
+            await asyncio.sleep(0.1)
+        assert "seq" in reply, reply
+        for ws in held[1:]:
+            await ws.close()
 
     asyncio.run(run())
 
@@ -197,7 +205,7 @@ def test_trip_state_is_bounded_and_expires(workers, store, s200):
         assert httpx.post(f"{a.base_url}/v1/trips/{trip_id}/fixes", json=fix, headers=auth).status_code == 200
     with redis.Redis(port=store.port) as r:
         h = r.hgetall(f"eco:t:{trip_id}")
-        assert set(h) == {b"v", b"tok", b"client", b"bt", b"bs", b"ts", b"meta", b"state"}
+        assert set(h) == {b"v", b"tok", b"client", b"dev", b"bt", b"bs", b"ts", b"meta", b"state"}
         assert auth["Authorization"].split()[1].encode() not in b"".join(h.values())  # the token's hash only
         state = json.loads(h[b"state"])
         assert state["n_fixes"] == 30 and len(state["track"][1]) <= 8 and len(h[b"state"]) < 4096

@@ -109,7 +109,8 @@ export class TripLink {
         return;
       }
       this.retrySocket(`socket closed (${event.code})`);
-      if (!this.closed && ws.opened) this.lost(`socket closed (${event.code})`); // the service went, or the network
+      // the service went, or the network (not 4409: a newer socket of this trip replaced this one, the service is there)
+      if (!this.closed && ws.opened && event.code !== 4409) this.lost(`socket closed (${event.code})`);
     };
   }
 
