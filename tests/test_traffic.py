@@ -203,3 +203,26 @@ def test_evaluate_actuated_oakland():
     out = evaluate("oakland_7th_westbound", control="actuated", demand_vph_per_lane=400.0, penetration_frac=0.5, seed=3, duration_s=180.0)
     assert out["setup"]["control"] == "actuated" and out["advised_cars"] > 0
     assert out["red_entries"] == 0
+
+
+def test_a_driver_crawling_in_a_queue_rolls_up_to_a_red_line_instead_of_creeping():
+    """A connected car pulled away from a queue at 0.9 m/s, 70 m before a red line, with no advice to follow: its
+    eyes stop it at the line, and it gets there as a driver does (up to the advisor's slowest advised speed, 10 mph,
+    then a comfortable stop), not at 0.9 m/s for 78 s with the lane behind it (SUMO, 7th Street at 900 veh/h: a whole
+    cycle lost per such car, +278 % for the traffic behind). Kinematics here: Euler steps, as SUMO's."""
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    driver, line = AdvisedDriver((100.0,), vid="main.0"), 100.0
+    t, x, v, dt = 0.0, 30.0, 0.9, 0.5
+    speeds, stations = [v], [x]
+    while t < 60.0:
+        cmd = driver.command(t, x, v, dt, 13.4, LightNow(0, line, True))
+        v = v if cmd is None else cmd
+        x, t = x + v * dt, t + dt
+        speeds.append(v)
+        stations.append(x)
+    speeds = np.array(speeds)
+    assert max(stations) <= line  # it stops before the line
+    assert line - stations[-1] < 2.0 and speeds[-1] == 0.0  # at the line
+    assert np.argmax(speeds < 0.01) * dt < 30.0  # there in under 30 s (78 s at its crawl)
+    assert speeds.max() <= 10 * 0.44704 + 1e-9 and np.diff(speeds).min() / dt >= -2.0  # at 10 mph at most, braking gently
