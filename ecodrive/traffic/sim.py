@@ -61,7 +61,7 @@ class RunSetup:
     ballistic: bool = False  # SUMO's ballistic update; off: its default (Euler). Ballistic jammed a queue at 900 veh/h on 7th Street: gaps
     # under half a metre, every car creeping at 0.2-0.5 m/s for minutes, the front one with no leader on a green (SUMO 1.28, Krauss)
     cross_demand_vph: float = 0.0  # each cross street, each way (the actuated controllers' rival demand)
-    fix_from_m: float = -100.0  # a connected car's phone posts fixes from this station on (off the route before 0)
+    fix_from_m: float = -250.0  # a connected car's phone posts fixes from this station on (the service advises from its approach_m before 0)
     queue_aware: bool = True  # the advised run's service with queue-aware advice (server.queue), told the demand and penetration
     departures_s: tuple[float, ...] = ()  # instead of the Poisson flow, cars departing at these instants (tests)
     connected: tuple[str, ...] | None = None  # instead of the penetration's draw, these cars are connected (tests)
@@ -280,7 +280,7 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
                 car.advice[out["action"]] = car.advice.get(out["action"], 0) + 1
                 views = {}
                 if out["on_route"]:
-                    obs = observation(corridor, out["station_m"], v, now[0], trip.spat.readings(now[0]), corridor.advisory_limit_mps(out["station_m"]))
+                    obs = observation(corridor, out["station_m"], v, now[0], trip.spat.readings(now[0]), corridor.advisory_limit_mps(max(out["station_m"], 0.0)))
                     views = {index[lv.intersection_id]: lv for lv in obs.lights}
                 driver.heard(now[0], x, advice, views)
             limit = corridor.speed_limit_mps_over(max(x, 0.0), max(x, 0.0))
