@@ -226,3 +226,20 @@ def test_a_driver_crawling_in_a_queue_rolls_up_to_a_red_line_instead_of_creeping
     assert line - stations[-1] < 2.0 and speeds[-1] == 0.0  # at the line
     assert np.argmax(speeds < 0.01) * dt < 30.0  # there in under 30 s (78 s at its crawl)
     assert speeds.max() <= 10 * 0.44704 + 1e-9 and np.diff(speeds).min() / dt >= -2.0  # at 10 mph at most, braking gently
+
+
+def test_an_actuated_green_ends_in_an_amber_even_where_the_plan_has_none():
+    """The paper's timings have no amber: fixed-time, the SPaT says when the green ends to the second; actuated, it
+    may end at any second after its minimum, so SUMO's program gets the ITE yellow change interval for the limit
+    (1 s + v / (2 x 3.05 m/s²): 5.0 s at 55 mph) out of its green, the cycle unchanged. A plan's own amber is kept."""
+    from ecodrive.traffic.network import light_phases, yellow_change_s
+    from spat_feed.timing.plans import FixedTimePlan
+
+    yellow = yellow_change_s(24.5872)
+    assert yellow == pytest.approx(1.0 + 24.5872 / 6.1, abs=0.05)
+    for control, plan, amber in (("actuated", FixedTimePlan(30, 30), yellow), ("fixed", FixedTimePlan(30, 30), None),
+                                 ("actuated", FixedTimePlan(42, 44, 4), 4.0)):  # fmt: skip
+        phases, _ = light_phases(plan, 0.0, control, 1, yellow_s=yellow)
+        assert sum(p["duration"] for p in phases) == pytest.approx(plan.cycle_s)
+        main_amber = [p["duration"] for p in phases if p["state"].startswith("y")]
+        assert main_amber == ([] if amber is None else [pytest.approx(amber)])

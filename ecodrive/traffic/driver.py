@@ -148,7 +148,7 @@ class AdvisedDriver:
                 self.surprised.pop(n, None)
             if amber and n in self.amber_stop and n not in self.committed:
                 self.braking_for = n
-            if n in self.committed and red_now and v < drv.min_coast_mps and n not in self.amber_go:
+            elif n in self.committed and red_now and v < drv.min_coast_mps and n not in self.amber_go:
                 self.committed.discard(n)  # held to a crawl by the cars ahead on a red it meant to meet green: decide again
             elif n not in self.committed and dist - v * dt_s <= decision_m:
                 arrival = t + _arrival_s(dist, v, v_lim_mps, drv)
