@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -243,3 +244,15 @@ def test_an_actuated_green_ends_in_an_amber_even_where_the_plan_has_none():
         assert sum(p["duration"] for p in phases) == pytest.approx(plan.cycle_s)
         main_amber = [p["duration"] for p in phases if p["state"].startswith("y")]
         assert main_amber == ([] if amber is None else [pytest.approx(amber)])
+
+
+def test_a_glosa_run_does_not_inherit_the_previous_glosa_runs_cars(tmp_path):
+    """libsumo keeps the GLOSA device's state between simulations in one process: a 10 % GLOSA run after a 100 %
+    one equipped cars that are not connected. Each GLOSA run goes to a fresh process, so the cars ahead of the
+    first connected one drive exactly as unadvised (nothing in front of them is advised)."""
+    net = build_network(load_corridor("paper_s400"), tmp_path)
+    setup = RunSetup(900.0, 0.1, 1, 100.0, drain_s=20.0)
+    run(net, replace(setup, penetration_frac=1.0), "glosa")
+    glosa, unadvised = run(net, setup, "glosa"), run(net, setup, "unadvised")
+    first = min(int(vid.split(".")[1]) for vid in connected_ids(1, 0.1, 100))
+    assert first >= 5 and all(glosa.cars[f"main.{k}"].v == unadvised.cars[f"main.{k}"].v for k in range(first))

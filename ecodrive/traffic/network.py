@@ -43,6 +43,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
+from advisory.advice.advisor import AdvisorParams
+from server.advising import approach_m
 from spat_feed.road.corridors import Corridor
 from spat_feed.timing.plans import FixedTimePlan
 from spat_feed.transport.scenarios import make_scenario
@@ -248,6 +250,7 @@ def _main_edge_ids(corridor: Corridor, lanes: int, lead_in_m: float, tail_m: flo
 def _write_and_convert(corridor, folder: Path, plans, control, lanes, lead_in_m, tail_m, t0_unix_s, shift) -> Path:
     nodes = _main_nodes(corridor, lead_in_m, tail_m)
     starts, limits, _ = corridor.limit_profile()
+    approach = approach_m(corridor, AdvisorParams(), corridor.zone_speed_limit_mps())  # the service advises from there (server.advising)
     nod = ["<nodes>"]
     for nid, s, ix in nodes:
         x = s + lead_in_m + (shift[ix] if ix is not None else 0.0)
@@ -281,8 +284,8 @@ def _write_and_convert(corridor, folder: Path, plans, control, lanes, lead_in_m,
         phases, offset = light_phases(plans[(ix, ixspec.signal_groups[0].id)], t0_unix_s, control, lanes, yellow_s=yellow)
         kind = "static" if control == "fixed" else "actuated"
         tll.append(f'  <tlLogic id="{nid}" type="{kind}" programID="0" offset="{_fmt(offset)}">')
-        before = max((i.stop_line_m for i in corridor.intersections if i.stop_line_m < s), default=0.0)
-        tll.append(f'    <param key="device.glosa.range" value="{_fmt(s - before)}"/>')  # GLOSA hears it from the zone entry or the light before
+        before = max((i.stop_line_m for i in corridor.intersections if i.stop_line_m < s), default=-approach)
+        tll.append(f'    <param key="device.glosa.range" value="{_fmt(s - before)}"/>')  # GLOSA hears it where the service advises for it
         for p in phases:
             extra = "".join(f' {key}="{_fmt(p[key])}"' for key in ("minDur", "maxDur") if key in p)
             tll.append(f'    <phase duration="{_fmt(p["duration"])}" state="{p["state"]}"{extra} name={quoteattr(p["kind"])}/>')
