@@ -67,6 +67,7 @@ class AdvisedDriver:
     overrides: int = 0
     surprises: int = 0
     controlling: bool = False
+    last_v_mps: float = np.inf  # the speed at the previous step (a car going slower than it was is being held back)
 
     def heard(self, t_s: float, x_m: float, advice: Advice, views: dict[int, LightView]) -> None:
         """The advice for the fix at ``t_s`` (station ``x_m``) and the views it came from: light index -> view."""
@@ -87,6 +88,7 @@ class AdvisedDriver:
             if not _silent(new):
                 self.active, self.stop_line_m = new, line
         active, x, v, t = self.active, x_m, v_mps, t_s
+        slowing, self.last_v_mps = v < self.last_v_mps - 1e-6, v
         free = False  # nothing asked for: SUMO's driver drives unless the eyes below say otherwise
         if active is not None and active.action == "none" and active.reason == "red_ahead":
             v_cmd = min(max(v, adv.min_cruise_speed_mps), v_lim_mps)
@@ -150,6 +152,13 @@ class AdvisedDriver:
                 self.braking_for = n
             elif n in self.committed and red_now and v < drv.min_coast_mps and n not in self.amber_go:
                 self.committed.discard(n)  # held to a crawl by the cars ahead on a red it meant to meet green: decide again
+            elif (n in self.committed and n not in self.amber_go and not red_now and not light.amber and slowing
+                  and next_red <= t + dist / max(v, 0.1) and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2):  # fmt: skip
+                # held back by the car ahead after deciding to go, it no longer reaches the line before the red it was
+                # shown: it stops while it still can (it drove on, and SUMO stopped it at the line at 22 m/s², paper_s400)
+                self.committed.discard(n)
+                self.braking_for = n
+                self.overrides += 1
             elif n not in self.committed and dist - v * dt_s <= decision_m:
                 arrival = t + _arrival_s(dist, v, v_lim_mps, drv)
                 if (red_now and (v <= 0.1 or green_at > arrival - drv.red_end_margin_s)) or next_red <= arrival:
