@@ -153,9 +153,10 @@ class AdvisedDriver:
             elif n in self.committed and red_now and v < drv.min_coast_mps and n not in self.amber_go:
                 self.committed.discard(n)  # held to a crawl by the cars ahead on a red it meant to meet green: decide again
             elif (n in self.committed and n not in self.amber_go and not red_now and not light.amber and slowing
-                  and next_red <= t + dist / max(v, 0.1) and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2):  # fmt: skip
-                # held back by the car ahead after deciding to go, it no longer reaches the line before the red it was
-                # shown: it stops while it still can (it drove on, and SUMO stopped it at the line at 22 m/s², paper_s400)
+                  and next_red <= t + dist / max(v, 0.1) + drv.red_end_margin_s and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2):  # fmt: skip
+                # held back by the car ahead after deciding to go, it no longer reaches the line a second before the red
+                # it was shown: it stops while it still can (it drove on, and SUMO stopped it at the line at 22 m/s²,
+                # paper_s400; or it crossed as the red began, 900 veh/h, seed 2)
                 self.committed.discard(n)
                 self.braking_for = n
                 self.overrides += 1
