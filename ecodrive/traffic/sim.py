@@ -20,7 +20,7 @@ and therefore the arrivals (checked by :mod:`ecodrive.traffic_eval`: every car's
   ``RunSetup.queue_aware`` is False; the service is told the demand per lane and the penetration, as an operator's
   detector counts and fleet share would tell it).
 * ``"glosa"``: the connected cars carry SUMO's GLOSA device (``--device.glosa.explicit``), ``use-queue`` on, each
-  light heard from the zone entry or the light before it, as the advisor hears it (the light's ``device.glosa.range``
+  light heard from the service's approach (``server.advising.approach_m``) or the light before it, as the advisor hears it (the light's ``device.glosa.range``
   parameter, :mod:`ecodrive.traffic.network`); SUMO's other GLOSA settings at their defaults (``max-speedfactor``
   1.1: it may speed up to 110 % of the limit for a green; ``min-speed`` 5 m/s).
 * ``"unadvised"``: SUMO drives every car.
@@ -140,7 +140,7 @@ def run(network: TrafficNetwork, setup: RunSetup, mode: str, folder: str | Path 
                "--end", f"{setup.duration_s + setup.drain_s:g}", "--device.rerouting.probability", "0"]  # fmt: skip
         if mode == "glosa" and connected:
             cmd += ["--device.glosa.explicit", ",".join(sorted(connected)), "--device.glosa.use-queue", "true",
-                    "--device.glosa.range", "1e6"]  # each light's own range: the network's (from the zone entry or the light before)
+                    "--device.glosa.range", "1e6"]  # each light's own range: the network's (from the approach or the light before)
         conn.start(cmd)
         try:
             if mode in ("advised", "blind"):
