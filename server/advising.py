@@ -84,6 +84,7 @@ class Engine:
         self.address_quota = address_quota(settings)
         self.trips = make_store(settings, self.limits, self.trip_from_meta, self._release, clock)
         self._params = {units: replace(self.params, units=ADVISOR_UNITS[units]) for units in ADVISOR_UNITS}
+        self._approach: dict[str, float] = {}  # corridor -> how far before its entry a fix is on the route
         self.queue = QueueBoard(arrivals_vph=settings.queue_arrivals_vph, connected_share=settings.queue_connected_share) if settings.queue_aware else None
         """Queue-aware advice (server.queue): every trip's fix a probe of its corridor's traffic; None: off."""
         self.on_advice: Callable[[Trip, Advice, str, float], None] | None = None  # metrics hooks
@@ -217,6 +218,16 @@ class Engine:
             )  # fmt: skip
         return trip.last if trip.last["fix_status"] == fix_status else {**trip.last, "fix_status": fix_status}
 
+    def approach_of(self, corridor: Corridor) -> float:
+        """How far before ``corridor``'s zone entry a fix is on the route: ``approach_m``, or with None
+        :func:`approach_m` of the corridor. [m]"""
+        if self.settings.approach_m is not None:
+            return self.settings.approach_m
+        found = self._approach.get(corridor.name)
+        if found is None:
+            found = self._approach[corridor.name] = approach_m(corridor, self.params, self.settings.speed_limit_mps)
+        return found
+
     def on_fix(self, trip: Trip, fix: Fix) -> dict:
         """Apply one validated fix to ``trip`` and return the advisory (see the module docstring)."""
         self.check_time(fix.t_unix_s, "t_unix_s")
@@ -229,7 +240,9 @@ class Engine:
         s = self.settings
         m = trip.matcher.match(fix.lat_deg, fix.lon_deg)
         poor = fix.accuracy_m is not None and fix.accuracy_m > s.max_accuracy_m
-        on_route = m.offset_m <= s.off_route_m and not poor
+        before = m.route_m < 0.0 and abs(m.cross_track_m) <= s.off_route_m and -m.route_m <= self.approach_of(trip.corridor)
+        on_route = (m.offset_m <= s.off_route_m or before) and not poor
+        station = m.route_m if before else m.station_m  # on the approach: negative, the first light that much farther
         if on_route and (why := trip.track.implausible(fix.t_unix_s, m.route_m)) is not None:
             trip.n_rejected += 1
             if self.on_ignored_fix is not None:
@@ -248,8 +261,8 @@ class Engine:
             if trip.observed is not None and readings:
                 trip.observed.add(fix.t_unix_s, readings)
             # (a fix just past a stop line, within what GPS can tell, is still at it: lights_station)
-            obs = observation(trip.corridor, lights_station(trip.corridor, m.station_m, fix.accuracy_m), speed or 0.0, fix.t_unix_s, readings,
-                              trip.corridor.advisory_limit_mps(m.station_m, s.speed_limit_mps), on_route=on_route)
+            obs = observation(trip.corridor, lights_station(trip.corridor, station, fix.accuracy_m), speed or 0.0, fix.t_unix_s, readings,
+                              trip.corridor.advisory_limit_mps(max(station, 0.0), s.speed_limit_mps), on_route=on_route)
             held = None
             if self.queue is not None:  # the lights as the car meets them in traffic, or "follow the car in front"
                 obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, trip.last["reason"] if trip.last else None)
@@ -274,7 +287,7 @@ class Engine:
         countdown = _finite(advice.seconds_to_change_s) if named is not None else None
         out = dict(
             trip_id=trip.id, seq=trip.n_fixes, t_unix_s=round(fix.t_unix_s, 3), fix_status="ok", on_route=on_route,
-            station_m=round(m.station_m, 2), cross_track_m=round(m.cross_track_m, 2), offset_m=round(m.offset_m, 2),
+            station_m=round(station, 2), cross_track_m=round(m.cross_track_m, 2), offset_m=round(m.offset_m, 2),
             speed_mps=None if speed is None else round(speed, 2),
             speed_source=point.speed_source if point is not None else ("gps" if fix.speed_mps is not None else "none"),
             next_intersection_id=nxt.intersection_id if nxt else None, distance_to_line_m=round(nxt.distance_m, 2) if nxt else None,
@@ -301,6 +314,29 @@ def corridor_units(corridor: Corridor) -> str:
 LINE_HOLD_MAX_M = 10.0
 """A fix at most this far past a stop line (and no farther than its accuracy, at least ``RED_TOLERANCE_M``) is
 taken as at the line: the light stays the next one. [m]"""
+
+
+def approach_m(corridor: Corridor, params: AdvisorParams, default_limit_mps: float) -> float:
+    """How far before the zone entry the service must advise a car so that the first light can be met without
+    hard braking: a car at the entry's limit ``v`` hears the advice, reacts (``reaction_s``), is told to prepare
+    (``stop_lead_s``) and stops at ``comfort_decel_mps2``: ``v (reaction_s + stop_lead_s) + v² / (2 comfort_decel)``
+    before the first stop line, less the part of it inside the zone. 0 where the zone holds it all.
+
+    Without it the paper's corridor (first light 100 m after the entry, 55 mph) was advised from 27 m before the entry
+    (map matching's ``off_route_m``): 5 s before the line, where a red needs 3.7 m/s² from any driver at the limit
+    (SUMO, docs/TRAFFIC.md). [m]
+
+    Examples
+    --------
+    >>> from spat_feed.road.corridors import load_corridor
+    >>> round(approach_m(load_corridor("paper_s400"), AdvisorParams(), 13.4), 1), approach_m(load_corridor("oakland_7th_westbound"), AdvisorParams(), 13.4)
+    (175.3, 0.0)
+    """
+    if not corridor.intersections:
+        return 0.0
+    v = corridor.advisory_limit_mps(0.0, default_limit_mps)
+    need = v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)
+    return float(max(need - corridor.intersections[0].stop_line_m, 0.0))
 
 
 def lights_station(corridor: Corridor, station_m: float | None, accuracy_m: float | None) -> float | None:

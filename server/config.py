@@ -121,6 +121,7 @@ class Settings(BaseSettings):
 
     # GPS
     off_route_m: float = Field(default=30.0, gt=0, description="farther than this from the route: advice paused [m]")
+    approach_m: float | None = Field(default=None, ge=0, description="fixes this far before the zone entry, on the line of the route's first stretch, are on the route (advice for the first light starts there); None: as far as a car at the entry's limit needs to hear and stop comfortably for the first light (advising.approach_m) [m]")
     max_accuracy_m: float = Field(default=50.0, gt=0, description="fixes less accurate than this are not used [m]")
     dropout_s: float = Field(default=5.0, gt=0, description="longer gaps reset the position-derived speed [s]")
     max_speed_mps: float = Field(default=50.0, gt=0, description="a fix implying a faster jump along the route is ignored as a GPS glitch [m/s]")

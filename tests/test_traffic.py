@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -203,3 +204,74 @@ def test_evaluate_actuated_oakland():
     out = evaluate("oakland_7th_westbound", control="actuated", demand_vph_per_lane=400.0, penetration_frac=0.5, seed=3, duration_s=180.0)
     assert out["setup"]["control"] == "actuated" and out["advised_cars"] > 0
     assert out["red_entries"] == 0
+
+
+def test_a_driver_crawling_in_a_queue_rolls_up_to_a_red_line_instead_of_creeping():
+    """A connected car pulled away from a queue at 0.9 m/s, 70 m before a red line, with no advice to follow: its
+    eyes stop it at the line, and it gets there as a driver does (up to the advisor's slowest advised speed, 10 mph,
+    then a comfortable stop), not at 0.9 m/s for 78 s with the lane behind it (SUMO, 7th Street at 900 veh/h: a whole
+    cycle lost per such car, +278 % for the traffic behind). Kinematics here: Euler steps, as SUMO's."""
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    driver, line = AdvisedDriver((100.0,), vid="main.0"), 100.0
+    t, x, v, dt = 0.0, 30.0, 0.9, 0.5
+    speeds, stations = [v], [x]
+    while t < 60.0:
+        cmd = driver.command(t, x, v, dt, 13.4, LightNow(0, line, True))
+        v = v if cmd is None else cmd
+        x, t = x + v * dt, t + dt
+        speeds.append(v)
+        stations.append(x)
+    speeds = np.array(speeds)
+    assert max(stations) <= line  # it stops before the line
+    assert line - stations[-1] < 2.0 and speeds[-1] == 0.0  # at the line
+    assert np.argmax(speeds < 0.01) * dt < 30.0  # there in under 30 s (78 s at its crawl)
+    assert speeds.max() <= 10 * 0.44704 + 1e-9 and np.diff(speeds).min() / dt >= -2.0  # at 10 mph at most, braking gently
+
+
+def test_an_actuated_green_ends_in_an_amber_even_where_the_plan_has_none():
+    """The paper's timings have no amber: fixed-time, the SPaT says when the green ends to the second; actuated, it
+    may end at any second after its minimum, so SUMO's program gets the ITE yellow change interval for the limit
+    (1 s + v / (2 x 3.05 m/s²): 5.0 s at 55 mph) out of its green, the cycle unchanged. A plan's own amber is kept."""
+    from ecodrive.traffic.network import light_phases, yellow_change_s
+    from spat_feed.timing.plans import FixedTimePlan
+
+    yellow = yellow_change_s(24.5872)
+    assert yellow == pytest.approx(1.0 + 24.5872 / 6.1, abs=0.05)
+    for control, plan, amber in (("actuated", FixedTimePlan(30, 30), yellow), ("fixed", FixedTimePlan(30, 30), None),
+                                 ("actuated", FixedTimePlan(42, 44, 4), 4.0)):  # fmt: skip
+        phases, _ = light_phases(plan, 0.0, control, 1, yellow_s=yellow)
+        assert sum(p["duration"] for p in phases) == pytest.approx(plan.cycle_s)
+        main_amber = [p["duration"] for p in phases if p["state"].startswith("y")]
+        assert main_amber == ([] if amber is None else [pytest.approx(amber)])
+
+
+def test_a_glosa_run_does_not_inherit_the_previous_glosa_runs_cars(tmp_path):
+    """libsumo keeps the GLOSA device's state between simulations in one process: a 10 % GLOSA run after a 100 %
+    one equipped cars that are not connected. Each GLOSA run goes to a fresh process, so the cars ahead of the
+    first connected one drive exactly as unadvised (nothing in front of them is advised)."""
+    net = build_network(load_corridor("paper_s400"), tmp_path)
+    setup = RunSetup(900.0, 0.1, 1, 100.0, drain_s=20.0)
+    run(net, replace(setup, penetration_frac=1.0), "glosa")
+    glosa, unadvised = run(net, setup, "glosa"), run(net, setup, "unadvised")
+    first = min(int(vid.split(".")[1]) for vid in connected_ids(1, 0.1, 100))
+    assert first >= 5 and all(glosa.cars[f"main.{k}"].v == unadvised.cars[f"main.{k}"].v for k in range(first))
+
+
+def test_a_driver_held_back_after_deciding_to_go_stops_while_it_still_can():
+    """Committed to a green with 5 s left at 17.5 m/s, 80 m out, the car is then slowed by a car ahead (0.7 m/s per
+    half second): once its arrival at its speed falls less than a second before the red it was shown, it brakes for
+    the line, gently, instead of driving on (SUMO then stopped such a car at the line at 22 m/s², paper_s400 at
+    600 veh/h; another crossed as the red began)."""
+    from advisory.advice.advisor import Advice, LightView
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    driver = AdvisedDriver((100.0,), vid="main.0")
+    t, x, v = 0.0, 20.0, 17.5
+    driver.heard(t, x, Advice("none", "queue"), {0: LightView(1, 100.0 - x, red_windows_s=((5.0, 35.0),))})
+    assert driver.command(t, x, v, STEP_S, 24.6, LightNow(0, 100.0, False)) is None and 0 in driver.committed  # it goes
+    while x + v * STEP_S < 100.0 and driver.braking_for is None:
+        x, t, v = x + v * STEP_S, t + STEP_S, v - 0.7
+        cmd = driver.command(t, x, v, STEP_S, 24.6, LightNow(0, 100.0, False))
+    assert driver.braking_for == 0 and t + (100.0 - x) / v > 5.0 - 1.0  # it stops for the red it would meet (or cross within 1 s of)
+    assert (v - cmd) / STEP_S <= 3.5  # and can do so gently: no hard brake

@@ -26,6 +26,7 @@ import numpy as np
 
 from advisory.advice.advisor import Advice, AdvisorParams, LightView, coast_decel_mps2
 from advisory.drivers.closed_loop import DriverModel, _silent, _time_to_cover_s, belief
+from advisory.drivers.regular import time_to_cover_s
 from advisory.signals import TimelineSignal
 
 TRAFFIC_DRIVER = replace(DriverModel(), amber="stop")
@@ -66,6 +67,7 @@ class AdvisedDriver:
     overrides: int = 0
     surprises: int = 0
     controlling: bool = False
+    last_v_mps: float = np.inf  # the speed at the previous step (a car going slower than it was is being held back)
 
     def heard(self, t_s: float, x_m: float, advice: Advice, views: dict[int, LightView]) -> None:
         """The advice for the fix at ``t_s`` (station ``x_m``) and the views it came from: light index -> view."""
@@ -86,6 +88,7 @@ class AdvisedDriver:
             if not _silent(new):
                 self.active, self.stop_line_m = new, line
         active, x, v, t = self.active, x_m, v_mps, t_s
+        slowing, self.last_v_mps = v < self.last_v_mps - 1e-6, v
         free = False  # nothing asked for: SUMO's driver drives unless the eyes below say otherwise
         if active is not None and active.action == "none" and active.reason == "red_ahead":
             v_cmd = min(max(v, adv.min_cruise_speed_mps), v_lim_mps)
@@ -147,8 +150,18 @@ class AdvisedDriver:
                 self.surprised.pop(n, None)
             if amber and n in self.amber_stop and n not in self.committed:
                 self.braking_for = n
+            elif n in self.committed and red_now and v < drv.min_coast_mps and n not in self.amber_go:
+                self.committed.discard(n)  # held to a crawl by the cars ahead on a red it meant to meet green: decide again
+            elif (n in self.committed and n not in self.amber_go and not red_now and not light.amber and slowing
+                  and next_red <= t + dist / max(v, 0.1) + drv.red_end_margin_s and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2):  # fmt: skip
+                # held back by the car ahead after deciding to go, it no longer reaches the line a second before the red
+                # it was shown: it stops while it still can (it drove on, and SUMO stopped it at the line at 22 m/s²,
+                # paper_s400; or it crossed as the red began, 900 veh/h, seed 2)
+                self.committed.discard(n)
+                self.braking_for = n
+                self.overrides += 1
             elif n not in self.committed and dist - v * dt_s <= decision_m:
-                arrival = t + (dist / v if v > 0.1 else np.sqrt(2.0 * dist / drv.accel_mps2) + drv.reaction_s)
+                arrival = t + _arrival_s(dist, v, v_lim_mps, drv)
                 if (red_now and (v <= 0.1 or green_at > arrival - drv.red_end_margin_s)) or next_red <= arrival:
                     if self.braking_for != n and (active is None or active.action != "stop"):
                         self.overrides += 1
@@ -157,10 +170,9 @@ class AdvisedDriver:
                     self.committed.add(n)
                     self.braking_for = None
             if self.braking_for == n:
-                free = False
-                v_cmd = 0.0
                 hardest = drv.emergency_decel_mps2 if n in self.surprised else rules.brake_max_mps2
-                rate_down = min(v * v / (2.0 * room), hardest) if room > 1e-6 else hardest
+                self.controlling = True
+                return _to_line_mps(v, room, dt_s, hardest, min(adv.min_cruise_speed_mps, v_lim_mps), drv.decel_mps2, rules.accel_mps2)
             elif n in self.committed:
                 if red_now:
                     free = False
@@ -186,8 +198,9 @@ class AdvisedDriver:
             if v > drv.min_coast_mps:
                 v_cmd, rate_down = 0.0, coast_decel_mps2(v, adv.vehicle)
             elif light is not None and light.red:
+                self.controlling = True
                 room = light.station_m - x - rules.stop_gap_m
-                v_cmd, rate_down = 0.0, (min(v * v / (2.0 * room), rules.brake_max_mps2) if room > 1e-6 else rules.brake_max_mps2)
+                return _to_line_mps(v, room, dt_s, rules.brake_max_mps2, min(adv.min_cruise_speed_mps, v_lim_mps), drv.decel_mps2, rules.accel_mps2)
             else:
                 free = True
         self.controlling = not free
@@ -195,3 +208,41 @@ class AdvisedDriver:
             return None
         a = min(max((v_cmd - v) / dt_s, -rate_down), rate_up)
         return max(v + a * dt_s, 0.0)
+
+
+def _arrival_s(dist_m: float, v_mps: float, v_lim_mps: float, drv: DriverModel) -> float:
+    """When a driver deciding at the decision point reaches a line ``dist_m`` ahead: at its speed; a car slower than
+    ``drv.min_coast_mps`` (pulling away in a queue, or standing) drives on to it at ``drv.accel_mps2`` up to the limit
+    (standing: after its reaction), as nobody crawls 70 m to a light. [s]
+
+    Examples
+    --------
+    >>> round(_arrival_s(100.0, 10.0, 13.4, DriverModel()), 1), round(_arrival_s(75.0, 0.9, 13.4, DriverModel()), 1)
+    (10.0, 9.5)
+    """
+    if v_mps >= drv.min_coast_mps:
+        return dist_m / v_mps
+    return float(time_to_cover_s(dist_m, v_mps, drv.accel_mps2, v_lim_mps)) + (drv.reaction_s if v_mps <= 0.1 else 0.0)
+
+
+def _to_line_mps(v_mps: float, room_m: float, dt_s: float, hardest_mps2: float, roll_mps: float, decel_mps2: float, accel_mps2: float) -> float:
+    """The next step's speed of a driver stopping ``room_m`` before it: slowing at ``v²/(2 room)`` (at most
+    ``hardest_mps2``), as the regular driver brakes for a red; a car slower than that rolls up to the line at up to
+    ``roll_mps`` (the advisor's slowest advised speed), speeding up at ``accel_mps2``, from where ``decel_mps2`` still
+    stops it at the line (Euler steps: it moves at the new speed). Without the roll a car crawling in a queue at
+    0.7 m/s "stopped" for a light 70 m ahead at 0.003 m/s² for a whole cycle, and the lane behind it with it (SUMO,
+    7th Street at 900 veh/h, docs/TRAFFIC.md). [m/s]
+
+    Examples
+    --------
+    >>> round(_to_line_mps(0.9, 70.0, 0.5, 4.0, 4.47, 1.5, 2.0), 2), round(_to_line_mps(10.0, 50.0, 0.5, 4.0, 4.47, 1.5, 2.0), 2)
+    (1.9, 9.5)
+    >>> _to_line_mps(0.5, 0.0, 0.5, 4.0, 4.47, 1.5, 2.0)
+    0.0
+    """
+    need = min(v_mps * v_mps / (2.0 * room_m), hardest_mps2) if room_m > 1e-6 else hardest_mps2
+    down = max(v_mps - need * dt_s, 0.0)
+    b = decel_mps2
+    stoppable = -b * dt_s + np.sqrt(b * b * dt_s * dt_s + 2.0 * b * max(room_m, 0.0))
+    roll = min(roll_mps, stoppable, v_mps + accel_mps2 * dt_s)
+    return float(max(down, roll))

@@ -19,7 +19,8 @@ Programs (one per light, its corridor plan's cycle; :func:`light_phases`):
   amber, the plan's offset on the Unix axis): the corridor's red is the cross street's green then its amber
   (``cross_amber_s``), then the corridor's green and amber. The program is positioned so that SUMO's state at
   simulation time ``t`` is the plan's at ``t0_unix_s + t`` (tested second by second).
-* ``actuated``: SUMO's own ``actuated`` logic on the same phases, each green between ``min_green_frac`` and
+* ``actuated``: SUMO's own ``actuated`` logic on the same phases (a plan without amber gets the ITE yellow change
+  interval for the approach's limit out of its green: :func:`yellow_change_s`), each green between ``min_green_frac`` and
   ``max_green_frac`` of the plan's duration (at least ``MIN_GREEN_S``), extended by SUMO's induction loops while
   cars keep arriving (SUMO's defaults: ``max-gap`` 3 s, loops placed ``detector-gap`` 2 s of travel upstream).
 
@@ -42,6 +43,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
+from advisory.advice.advisor import AdvisorParams
+from server.advising import approach_m
 from spat_feed.road.corridors import Corridor
 from spat_feed.timing.plans import FixedTimePlan
 from spat_feed.transport.scenarios import make_scenario
@@ -132,14 +135,34 @@ def light_plans(corridor: Corridor, timing: str | None, t0_unix_s: float) -> dic
     return plans
 
 
+def yellow_change_s(speed_mps: float, perception_s: float = 1.0, decel_mps2: float = 3.05) -> float:
+    """The ITE yellow change interval for an approach speed on the level: ``perception_s + v / (2 decel)`` (ITE,
+    *Traffic Control Devices Handbook*, 2nd ed., 2013, ch. 13: 1 s perception-reaction, 10 ft/s² = 3.05 m/s²). [s]
+
+    Examples
+    --------
+    >>> round(yellow_change_s(24.5872), 1), round(yellow_change_s(13.4112), 1)
+    (5.0, 3.2)
+    """
+    return round(perception_s + speed_mps / (2.0 * decel_mps2), 1)
+
+
 def light_phases(plan: FixedTimePlan, t0_unix_s: float, control: str, lanes: int, cross_amber_s: float = 3.0,
-                 min_green_frac: float = 0.5, max_green_frac: float = 1.5) -> tuple[list[dict], float]:  # fmt: skip
+                 min_green_frac: float = 0.5, max_green_frac: float = 1.5, yellow_s: float = 0.0) -> tuple[list[dict], float]:  # fmt: skip
     """SUMO phases of one light (dicts of ``tlLogic/phase`` attributes) and the program's ``offset``.
 
     Order: cross green (the corridor's red), cross amber, corridor green, corridor amber (if any). SUMO starts a
     static program at phase 0 at simulation time ``offset``... counted backwards: at time 0 it is ``-offset`` into
-    its cycle, so the offset is minus the plan's time in cycle at ``t0_unix_s``."""
+    its cycle, so the offset is minus the plan's time in cycle at ``t0_unix_s``.
+
+    ``actuated`` with a plan that has no amber (the paper's timings): the corridor's green ends in a ``yellow_s``
+    amber taken from the green's end (the cycle stays the plan's). A fixed-time plan's green ends when its SPaT says,
+    to the second; an actuated green may end at any second after its minimum, and without an amber a car a few
+    metres from the line then meets a red no one can stop for (SUMO: 31 hard brakes of 196 advised cars, 9-32 m/s²,
+    paper_s400 at 900 veh/h). No real controller goes from green to red."""
     red, green, amber = plan.red_s, plan.green_s, plan.amber_s
+    if control == "actuated" and amber <= 0.0 and yellow_s > 0.0:
+        green, amber = green - yellow_s, yellow_s
     ca = min(cross_amber_s, red / 4.0)
     main = {"r": "r" * lanes, "G": "G" * lanes, "y": "y" * lanes}
     phases = [
@@ -227,6 +250,7 @@ def _main_edge_ids(corridor: Corridor, lanes: int, lead_in_m: float, tail_m: flo
 def _write_and_convert(corridor, folder: Path, plans, control, lanes, lead_in_m, tail_m, t0_unix_s, shift) -> Path:
     nodes = _main_nodes(corridor, lead_in_m, tail_m)
     starts, limits, _ = corridor.limit_profile()
+    approach = approach_m(corridor, AdvisorParams(), corridor.zone_speed_limit_mps())  # the service advises from there (server.advising)
     nod = ["<nodes>"]
     for nid, s, ix in nodes:
         x = s + lead_in_m + (shift[ix] if ix is not None else 0.0)
@@ -256,11 +280,12 @@ def _write_and_convert(corridor, folder: Path, plans, control, lanes, lead_in_m,
             edg.append(f'  <edge id="c{ix}{d}_out" from="{nid}" to="{to}" numLanes="1" speed="{_fmt(CROSS_SPEED_MPS)}" priority="1"/>')
             con.append(f'  <connection from="c{ix}{d}_in" to="c{ix}{d}_out" fromLane="0" toLane="0"/>')
         ixspec = corridor.intersection(ix)
-        phases, offset = light_phases(plans[(ix, ixspec.signal_groups[0].id)], t0_unix_s, control, lanes)
+        yellow = yellow_change_s(corridor.speed_limit_mps_over(max(s - 1.0, 0.0), s))
+        phases, offset = light_phases(plans[(ix, ixspec.signal_groups[0].id)], t0_unix_s, control, lanes, yellow_s=yellow)
         kind = "static" if control == "fixed" else "actuated"
         tll.append(f'  <tlLogic id="{nid}" type="{kind}" programID="0" offset="{_fmt(offset)}">')
-        before = max((i.stop_line_m for i in corridor.intersections if i.stop_line_m < s), default=0.0)
-        tll.append(f'    <param key="device.glosa.range" value="{_fmt(s - before)}"/>')  # GLOSA hears it from the zone entry or the light before
+        before = max((i.stop_line_m for i in corridor.intersections if i.stop_line_m < s), default=-approach)
+        tll.append(f'    <param key="device.glosa.range" value="{_fmt(s - before)}"/>')  # GLOSA hears it where the service advises for it
         for p in phases:
             extra = "".join(f' {key}="{_fmt(p[key])}"' for key in ("minDur", "maxDur") if key in p)
             tll.append(f'    <phase duration="{_fmt(p["duration"])}" state="{p["state"]}"{extra} name={quoteattr(p["kind"])}/>')

@@ -20,7 +20,7 @@ and therefore the arrivals (checked by :mod:`ecodrive.traffic_eval`: every car's
   ``RunSetup.queue_aware`` is False; the service is told the demand per lane and the penetration, as an operator's
   detector counts and fleet share would tell it).
 * ``"glosa"``: the connected cars carry SUMO's GLOSA device (``--device.glosa.explicit``), ``use-queue`` on, each
-  light heard from the zone entry or the light before it, as the advisor hears it (the light's ``device.glosa.range``
+  light heard from the service's approach (``server.advising.approach_m``) or the light before it, as the advisor hears it (the light's ``device.glosa.range``
   parameter, :mod:`ecodrive.traffic.network`); SUMO's other GLOSA settings at their defaults (``max-speedfactor``
   1.1: it may speed up to 110 % of the limit for a green; ``min-speed`` 5 m/s).
 * ``"unadvised"``: SUMO drives every car.
@@ -61,7 +61,7 @@ class RunSetup:
     ballistic: bool = False  # SUMO's ballistic update; off: its default (Euler). Ballistic jammed a queue at 900 veh/h on 7th Street: gaps
     # under half a metre, every car creeping at 0.2-0.5 m/s for minutes, the front one with no leader on a green (SUMO 1.28, Krauss)
     cross_demand_vph: float = 0.0  # each cross street, each way (the actuated controllers' rival demand)
-    fix_from_m: float = -100.0  # a connected car's phone posts fixes from this station on (off the route before 0)
+    fix_from_m: float = -250.0  # a connected car's phone posts fixes from this station on (the service advises from its approach_m before 0)
     queue_aware: bool = True  # the advised run's service with queue-aware advice (server.queue), told the demand and penetration
     departures_s: tuple[float, ...] = ()  # instead of the Poisson flow, cars departing at these instants (tests)
     connected: tuple[str, ...] | None = None  # instead of the penetration's draw, these cars are connected (tests)
@@ -113,10 +113,20 @@ def _sumo_lights(network: TrafficNetwork) -> list[SumoLight]:
     return [SumoLight(lt.intersection_id, lt.signal_group, lt.tls_id, lt.link_index, lt.name, "corridor through") for lt in network.lights]
 
 
-def run(network: TrafficNetwork, setup: RunSetup, mode: str, folder: str | Path | None = None, advisor: AdvisorParams | None = None) -> RunResult:
-    """One run (see the module docstring)."""
+def run(network: TrafficNetwork, setup: RunSetup, mode: str, folder: str | Path | None = None, advisor: AdvisorParams | None = None,
+        fresh_process: bool = True) -> RunResult:  # fmt: skip
+    """One run (see the module docstring). A ``"glosa"`` run goes to a fresh Python process (``fresh_process``):
+    libsumo keeps the GLOSA device's state from one simulation to the next in a process, so a second GLOSA run
+    repeated the first one's cars (SUMO 1.28: paper_s400, 300 veh/h, GLOSA at 10 % after a run at 50 % gave the 50 %
+    run's trajectories, to the metre; at 10 % alone it changes nothing)."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, not {mode!r}")
+    if mode == "glosa" and fresh_process:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+            return pool.submit(run, network, setup, mode, folder, advisor, False).result()
     import libsumo as conn
 
     with tempfile.TemporaryDirectory(prefix="ecodrive-sumo-") as tmp:
@@ -130,7 +140,7 @@ def run(network: TrafficNetwork, setup: RunSetup, mode: str, folder: str | Path 
                "--end", f"{setup.duration_s + setup.drain_s:g}", "--device.rerouting.probability", "0"]  # fmt: skip
         if mode == "glosa" and connected:
             cmd += ["--device.glosa.explicit", ",".join(sorted(connected)), "--device.glosa.use-queue", "true",
-                    "--device.glosa.range", "1e6"]  # each light's own range: the network's (from the zone entry or the light before)
+                    "--device.glosa.range", "1e6"]  # each light's own range: the network's (from the approach or the light before)
         conn.start(cmd)
         try:
             if mode in ("advised", "blind"):
@@ -280,7 +290,7 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
                 car.advice[out["action"]] = car.advice.get(out["action"], 0) + 1
                 views = {}
                 if out["on_route"]:
-                    obs = observation(corridor, out["station_m"], v, now[0], trip.spat.readings(now[0]), corridor.advisory_limit_mps(out["station_m"]))
+                    obs = observation(corridor, out["station_m"], v, now[0], trip.spat.readings(now[0]), corridor.advisory_limit_mps(max(out["station_m"], 0.0)))
                     views = {index[lv.intersection_id]: lv for lv in obs.lights}
                 driver.heard(now[0], x, advice, views)
             limit = corridor.speed_limit_mps_over(max(x, 0.0), max(x, 0.0))
