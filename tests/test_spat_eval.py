@@ -109,6 +109,23 @@ def test_recorded_approaches_that_crossed_a_red_no_longer_do():
         assert row is not None and not row["red_entry"] and not row["hard_brake"], (groups, entry)
 
 
+US_1136 = SHARED_DATA / "spat" / "atspm-1136-2024-04-15.csv.gz"
+
+
+@pytest.mark.skipif(not US_1136.exists(), reason=f"{US_1136} not present")
+def test_a_red_held_past_every_forecast_does_not_take_the_careful_driver_over_the_line():
+    """US 1136 group 8 (found by spat-eval when the advisor came to choose by expected cost): the state-only controller
+    held a red 60-70 s past every forecast; the published red was held in every view a second at a time (the safety
+    rule), so the display said "green in 1 second" throughout. The careful driver, surprised a second time by the same
+    red, rolled on (only the first surprise was heeded); and creeping up to the line with "hold" still active, its
+    lift-off eased the braking that was to stop it there. It now stops and waits at the line."""
+    spat_eval.load(spat_eval._read_head(str(US_1136), 3600.0))
+    keys = [log.key[1] for log in spat_eval._LOGS]
+    for entry in (1713184880.0, 1713185240.0):
+        row = spat_eval.approach(((keys.index(8),), entry, spat_eval.Setup()))
+        assert row is not None and not row["red_entry"] and not row["hard_brake"], entry
+
+
 def _amber_at_35m() -> tuple[Scenario, float]:
     """A light 200 m ahead whose 3 s amber begins as a car at 50 km/h is 35 m from it: it clears the line 0.5 s
     before the red at the limit, and stops for it at 2.8 m/s²."""

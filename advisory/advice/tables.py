@@ -56,7 +56,7 @@ from advisory.evaluation.endstate import reacceleration_penalty
 from advisory.optimizer._kernels import is_red
 from advisory.optimizer.dp import coast_chain_mps
 from advisory.physics.model import I_AUX, pack, step_battery_power_w, step_cost_usd
-from advisory.physics.params import ModelParams
+from advisory.physics.params import TIME_VALUE_USD_PER_S, ModelParams
 from advisory.signals import FixedTimeSignal, Scenario
 
 TABLES_VERSION = "2"
@@ -79,7 +79,7 @@ class TableGrid:
 
     stage_m: float = 20.0
     tau_step_s: float = 0.5
-    time_value_usd_per_s: float = 4.5e-4
+    time_value_usd_per_s: float = TIME_VALUE_USD_PER_S
     accel_max_mps2: float = 2.0
     brake_max_mps2: float = 4.0
     exit_m: float = 100.0

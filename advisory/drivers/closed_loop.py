@@ -191,6 +191,7 @@ def simulate(
             else:  # then brake as it takes to stop there (told late, or a second's reaction behind: more than the comfortable rate)
                 rate_down = max(rate_down, min(v * v / (2.0 * max(to_line_m, 1e-6)), rules.brake_max_mps2))
         # the driver's own eyes: decide once per light at the decision point, like the regular driver
+        at_line = False  # waiting at a line still red (no lift-off rule eases that braking)
         ahead = [(n, s) for n, s in enumerate(scenario.signals) if s.position_m > x + 1e-9]
         if ahead:
             n, light = ahead[0]
@@ -226,10 +227,16 @@ def simulate(
             # red held longer since the driver committed: an actuated controller's late change): nobody rolls on into a
             # red they can still stop for (checked a step ahead: at a crawl the need grows from 3 to 4+ m/s² within a step)
             overdue = overdue or (red_now and v_cmd > 0.0 and v * v >= 2.0 * driver.last_call_decel_mps2 * max(room - v * dt_s, 1e-6))
-            if n in committed and red_now and surprised.get(n) != light.next_green_start_s(t) and overdue:
-                surprises += 1  # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at all possible
-                surprised[n] = light.next_green_start_s(t)  # (once per red)
-                if v * v / (2.0 * max(room, 1e-6)) <= driver.emergency_decel_mps2:
+            if n in committed and red_now and overdue:
+                # committed, and the light shows red it was not expected to (a green a reaction time overdue): stop if at
+                # all possible; counted once per red. A driver who went on again since, on the display's "green in 1
+                # second", is not blind to the same red at the line (US 1136 group 8): it stops again where its last
+                # call allows, no harder than the regular driver brakes (``brake_max_mps2``)
+                first = surprised.get(n) != light.next_green_start_s(t)
+                if first:
+                    surprises += 1
+                    surprised[n] = light.next_green_start_s(t)
+                if v * v / (2.0 * max(room, 1e-6)) <= (driver.emergency_decel_mps2 if first else rules.brake_max_mps2):
                     committed.discard(n)
             if amber and n in amber_stop and n not in committed:
                 braking_for = n
@@ -246,12 +253,15 @@ def simulate(
                     braking_for = None
             if braking_for == n:  # stop short of the line at the constant rate that gets there
                 v_cmd = 0.0
-                rate_down = min(v * v / (2.0 * room), driver.emergency_decel_mps2 if n in surprised else rules.brake_max_mps2) if room > 1e-6 else rules.brake_max_mps2
+                # (inside the stop gap already, at a crawl: stop short of the line itself, as gently as that allows)
+                rate_down = min(v * v / (2.0 * room) if room > 1e-6 else v * v / (2.0 * max(dist - 0.05, 1e-3)),
+                                driver.emergency_decel_mps2 if n in surprised else rules.brake_max_mps2)
             elif n in committed:
                 if red_now:  # committed while red: it turns green before arrival at this speed, not faster
                     v_cmd = min(v_cmd, v)
                     if room <= v * dt_s:  # creeping up to a line still red: wait at it (it crept over the line)
                         v_cmd, rate_down = 0.0, min(v * v / (2.0 * max(dist - 0.05, 1e-3)), rules.brake_max_mps2)
+                        at_line = True
                 elif active is not None and active.action == "stop":
                     v_cmd = v_lim
                 # going: slow down only if the line is still cleared, with a second to spare, before the next
@@ -265,8 +275,8 @@ def simulate(
         clearing = bool(ahead) and ahead[0][0] in amber_go and braking_for != ahead[0][0] and not light.is_red(t)
         if clearing:
             v_cmd = max(v_cmd, v)  # clearing an amber: no slowing down before the line (coasting included)
-        if braking_for is None and active is not None and active.action in ("ease_off", "cruise") and v_cmd < v:
-            rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast
+        if braking_for is None and not at_line and active is not None and active.action in ("ease_off", "cruise") and v_cmd < v:
+            rate_down = min(rate_down, coast_decel_mps2(v, advisor.vehicle))  # lift off: coast (not into a red at the line)
         if braking_for is None and not clearing and active is not None and active.action == "coast" and v <= v_cmd + 0.05:
             if v > driver.min_coast_mps:
                 v_cmd, rate_down = 0.0, coast_decel_mps2(v, advisor.vehicle)  # target reached: keep coasting

@@ -167,6 +167,12 @@ class CostParams:
     battery_usd_per_kwh: float = 125.0
 
 
+TIME_VALUE_USD_PER_S = 4.5e-4
+"""The price on time where advice trades time for energy (the lookup tables, the choice under uncertainty): with no
+lights, cruising at the paper car's limit is then the cheapest steady speed (d(cost/m)/dv = lambda / v² at 24.6
+m/s). Without one the optimum crawls (air drag falls with speed). [$/s]"""
+
+
 @dataclass(frozen=True, slots=True)
 class ModelParams:
     """Everything the scoring and the optimizer need: vehicle, battery wear and prices."""

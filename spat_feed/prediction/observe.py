@@ -468,8 +468,36 @@ def red_windows_s(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S, cyc
     return _windows(predicted_phases(plan, t_unix_s, horizon_s, cycle), t_unix_s, horizon_s, 0, 2)
 
 
-Bound = tuple[float, float, float]
-"""A change's (earliest, likely, late) instant on the plan's axis. [s]"""
+Bound = tuple
+"""A change's (earliest, likely, late) instant on the plan's axis, and where the predictor says, a fourth item: its
+:data:`N_SCENARIOS` quantiles (:func:`_levels`). [s]"""
+
+N_SCENARIOS = 20
+"""Equally likely timings of a light the advisor weighs its plans on (``LightView.scenario_red_windows_s``): every
+change at the same quantile ``(k + 1/2) / N`` of its forecast (comonotone: a late red ends late). [-]"""
+
+SCENARIO_LEVELS = tuple((k + 0.5) / N_SCENARIOS for k in range(N_SCENARIOS))
+
+
+def _levels(samples: np.ndarray, floor_s: float) -> tuple[float, ...]:
+    """The forecast's quantiles at :data:`SCENARIO_LEVELS` (sorted ``samples``), none before ``floor_s``."""
+    return tuple(max(sample_quantile(samples, q), floor_s) for q in SCENARIO_LEVELS)
+
+
+def _pick(bound: Bound, which) -> float:
+    """One instant of a change: ``which`` an index (0 earliest, 1 likely, 2 late) or a quantile level in (0, 1): the
+    forecast's where it has one, else read off the (earliest, likely, latest) window, a published one, as piecewise
+    uniform (half the chance on each side of its likely time)."""
+    if isinstance(which, int):
+        return bound[which]
+    if len(bound) > 3:
+        return bound[3][SCENARIO_LEVELS.index(which)]
+    lo, mid, hi = bound[:3]
+    if not math.isfinite(lo) or hi - lo < EXACT_S:
+        return mid  # exact, or before anything is known
+    if which <= 0.5:
+        return lo + (mid - lo) * which / 0.5
+    return mid + (hi - mid) * (which - 0.5) / 0.5 if math.isfinite(hi) else hi
 
 
 def published_state(plan: UncertainPlan, t_unix_s: float) -> MovementPhaseState:
@@ -560,7 +588,7 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
     # the likely end is the forecast's median, but no later than the controller's own maxEndTime; the late end its
     # LATE_QUANTILE (maxEndTime is soft: 6-12 % of phases outlast it, some by minutes)
     likely, late = max(min(sample_quantile(samples, 0.5), max_end), after_s), max(sample_quantile(samples, LATE_QUANTILE), after_s)
-    start: Bound = (after_s, likely, max(late, likely))
+    start: Bound = (after_s, likely, max(late, likely), _levels(samples, after_s))
     unknown_as = _unknown_as(cycle)  # the group's amber or go phase published as "unavailable"
     out: list[tuple[PhaseClass, Bound, Bound]] = [(unknown_as if cls is PhaseClass.UNKNOWN else cls, begun, start)]
     while start[0] < after_s + horizon_s:
@@ -571,20 +599,22 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
         cls = nxt
         samples = next_end(cycle, cls, samples)
         late = sample_quantile(samples, LATE_QUANTILE)
-        end = (start[0] + d[0], min(max(sample_quantile(samples, 0.5), start[1] + d[0]), late), late)
+        end = (start[0] + d[0], min(max(sample_quantile(samples, 0.5), start[1] + d[0]), late), late,
+               tuple(max(q, a + d[0]) for q, a in zip(_levels(samples, -math.inf), start[3])))
         out.append((unknown_as if cls is PhaseClass.UNKNOWN else cls, start, end))
         start = end
     out.append((PhaseClass.UNKNOWN, start, (inf, inf, inf)))
     return out
 
 
-def _windows(phases, t_unix_s: float, horizon_s: float, lo: int, hi: int, classes=BLOCKING_CLASSES) -> tuple[tuple[float, float], ...]:
-    """Phases of ``classes`` as windows from their start's ``lo`` bound to their end's ``hi`` bound, relative, merged."""
+def _windows(phases, t_unix_s: float, horizon_s: float, lo, hi, classes=BLOCKING_CLASSES) -> tuple[tuple[float, float], ...]:
+    """Phases of ``classes`` as windows from their start's ``lo`` bound to their end's ``hi`` bound (:func:`_pick`),
+    relative, merged."""
     out: list[list[float]] = []
     for cls, start, end in phases:
         if cls not in classes:
             continue
-        start_rel, end_rel = start[lo] - t_unix_s, end[hi] - t_unix_s
+        start_rel, end_rel = _pick(start, lo) - t_unix_s, _pick(end, hi) - t_unix_s
         if end_rel <= 0.0 or start_rel >= horizon_s:
             continue
         start_rel = max(start_rel, 0.0)
@@ -696,6 +726,7 @@ def light_view(
     # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no
     # chance), a red that ended less than u ago by the feed's clock included: the windows are taken from u before now
     u = reading.clock_uncertainty_s
+    scenarios: tuple = ()
     if isinstance(plan, FixedTimePlan):
         windows = likely = late = red_windows_s(plan, t_feed - u, horizon_s + u)
         unknown = ()
@@ -704,13 +735,16 @@ def light_view(
         if unknown_now(plan, t_unix_s - reading.age_s) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
         windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
+        if likely != windows:  # uncertain: the equally likely timings too
+            # (an amber counts: a plan reaching the line in it meets a driver who stops for it)
+            scenarios = tuple(_windows(phases, t_feed - u, horizon_s + u, q, q, BLOCKING_CLASSES | {PhaseClass.AMBER}) for q in SCENARIO_LEVELS)
         # the unknown phases that end (between known ones; the open tail past the plan and the history stays a red)
         unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
     if u > 0.0:
-        windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
+        windows, likely, late, *scenarios = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late, *scenarios))
     if not isinstance(plan, FixedTimePlan) and (hold := red_hold_s(plan, t_feed - reading.age_s, speed_mps)) > 0.0:  # fresh or not: the latest reading
         red_now = phase_class(published_state(plan, t_feed - reading.age_s)) is PhaseClass.RED
-        windows, likely, late = (_held(w, hold, red_now) for w in (windows, likely, late))
+        windows, likely, late, *scenarios = (_held(w, hold, red_now) for w in (windows, likely, late, *scenarios))
     return LightView(
         intersection.id,
         distance_m,
@@ -721,6 +755,7 @@ def light_view(
         late_red_windows_s=None if late == windows else late,
         age_s=float(reading.age_s),
         unknown_windows_s=unknown,
+        scenario_red_windows_s=tuple(scenarios) if scenarios and likely != windows else None,
     )
 
 

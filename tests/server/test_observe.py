@@ -297,7 +297,7 @@ def test_the_recorded_controller_through_the_history():
             if true_end is None:
                 continue
             reds += 1
-            lo, likely, late_end = predicted_phases(plan, t, 150.0, stats)[0][2]
+            lo, likely, late_end = predicted_phases(plan, t, 150.0, stats)[0][2][:3]
             published_bound += math.isfinite(plan.changes[0].max_end_s)
             early += true_end < lo - 1e-6
             if math.isfinite(late_end):
@@ -606,3 +606,23 @@ def test_what_is_learnt_of_the_phase_in_progress_does_not_end_a_later_one():
     plan = UncertainPlan((RED, GREEN, RED, UNAVAILABLE), (ChangeWindow(t + 5, t + 5, t + 5), ChangeWindow(t + 25, t + 25, t + 25), ChangeWindow(t + 60, t + 70, t + 90)))
     later_red = [p for p in predicted_phases(plan, t, 150.0, cycle) if p[0] is PhaseClass.RED][1]
     assert later_red[2][1] == pytest.approx(t + 65.0, abs=1e-6)
+
+
+def test_the_timings_of_a_published_window_spread_over_it_and_hold_a_published_red():
+    """A red published as "not before 10 s, likely at 25 s, not after 40 s", then green (no history): the advisor's equally likely timings end that
+    red at increasing instants spread over the window (its likely time, the middle, at the median), none before
+    minEnd; the next reading comes within a second, so every timing holds the published red at least that long (the
+    safety rule); the view's conservative window is the published one, the likely one its likely time."""
+    from spat_feed.prediction.observe import N_SCENARIOS, red_hold_s
+
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    plan = UncertainPlan((RED, GREEN), (ChangeWindow(T0 + 10, T0 + 25, T0 + 40, 0.9),))
+    view = light_view(ix, PlanReading(plan), 0.0, T0, speed_mps=10.0)
+    timings = view.scenario_red_windows_s
+    assert timings is not None and len(timings) == N_SCENARIOS
+    ends = [w[0][1] for w in timings]
+    assert ends == sorted(ends) and ends[0] >= 10.0 - 1e-9 and ends[-1] <= 40.0 + 1e-9 and len(set(ends)) == N_SCENARIOS
+    assert abs(ends[N_SCENARIOS // 2] - view.likely_red_windows_s[0][1]) <= 30.0 / N_SCENARIOS + 1e-9
+    hold = red_hold_s(plan, T0, 10.0)
+    assert hold > 0.0 and all(w[0][0] == 0.0 and w[0][1] >= hold for w in timings)
+    assert view.red_windows_s[0] == (0.0, 40.0) and view.likely_red_windows_s[0] == (0.0, 25.0)  # the hull, the middle
