@@ -245,6 +245,17 @@ def _durations_ahead(since_unix_s: float | None, durations_s: Sequence[float], n
     return ends[ends > now_unix_s]
 
 
+def _durations_given_state(spans, elapsed_s: float) -> np.ndarray | None:
+    """The durations of the past phases of the class that, this long after they began, were in the intersection's
+    state now (every group's class as now), if :data:`MIN_SEEN` were, else None. ``spans``: :class:`CycleStats`'s
+    ``state_spans_s``, (durations, from, to) arrays. [s]"""
+    if spans is None:
+        return None
+    d, lo, hi = spans
+    m = (lo <= elapsed_s) & (elapsed_s < hi)
+    return d[m] if np.count_nonzero(m) >= MIN_SEEN else None
+
+
 def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: float, published_min_unix_s: float = -math.inf,
                 published_max_unix_s: float = math.inf, current: bool = True) -> tuple[np.ndarray, str] | None:  # fmt: skip
     """Samples of the end of the phase of class ``cls`` that began at ``since_unix_s`` (None: unknown), in progress
@@ -255,12 +266,19 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
     floor_unix_s = max(now_unix_s, published_min_unix_s)
     if published_max_unix_s - published_min_unix_s < EXACT_S:  # an exact window: the controller says when
         return np.array([max(floor_unix_s, published_max_unix_s)]), "published"
+    given = None  # the durations of the phases of the class seen in the intersection's state now, this far in
+    if cycle is not None and current and since_unix_s is not None:
+        given = _durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s)
     if cycle is not None and current:
         linked = cycle.linked_ends_unix_s or cycle.linked_end_unix_s or ()  # every lag seen, or (likely, late)
         if linked and linked[-1] >= now_unix_s:
             return _after(np.asarray(linked, dtype=float), floor_unix_s, None), "linked"
         if cycle.resumed and (excess := cycle.after_resumed(cls)) and math.isfinite(published_min_unix_s):
-            return _after(published_min_unix_s + np.asarray(excess, dtype=float), floor_unix_s, None), "resumed"
+            resumed = _after(published_min_unix_s + np.asarray(excess, dtype=float), floor_unix_s, None)
+            if given is None:
+                return resumed, "resumed"
+            by_state = _after(since_unix_s + given, floor_unix_s, None)  # pooled with the state's, half each
+            return np.concatenate([_reduced(resumed, N_SAMPLES // 2), _reduced(by_state, N_SAMPLES // 2)]), "resumed"
     durations = cycle.durations(cls) if cycle is not None else ()
     since = since_unix_s
     if durations and since is not None:
@@ -268,6 +286,8 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         d, cycle_ends = _class_model(durations, cycle.ends(cls), period is not None and cls in cycle.cycle_classes)
         if cycle_ends is not None:
             return _after(_on_cycle(since + d, cycle_ends, period), floor_unix_s, period), "cycle"
+        if given is not None:
+            return _after(since + given, floor_unix_s, None), "state"
         ahead = _durations_ahead(since, durations, now_unix_s)
         if len(ahead):
             return _after(ahead, floor_unix_s, None), "duration"
