@@ -15,15 +15,22 @@ Where the samples come from, in the order they are trusted (each *method* names 
 ``linked``
     A change of another group of the intersection that this group's phases end a steady time after has come
     (the controller's stage sequence, :class:`~spat_feed.prediction.observe.ChangeLinks`): the instant of that
-    change plus each lag seen.
+    change plus each lag seen that is not yet past (a phase that went on past its lags is the case the link does not
+    know, a phase skipped: with fewer than :data:`MIN_SEEN` lags left, the methods below say).
 ``resumed``
     The published ``minEndTime`` was held (moved later with the clock) and runs again: it plus each excess
-    (end - minEndTime) seen of resumed phases of the class.
+    (end - minEndTime) seen of resumed phases of the class; pooled half and half with ``state`` where that speaks
+    (the excess is two-humped, the end at ``minEndTime`` or a stage later, and the other groups tell which).
 ``cycle``
     A coordinated controller (its changes come back at the same point of a fixed cycle, the period found by
     :func:`cycle_period_s`): each past duration from the phase's start, moved to the nearest point of the cycle
     where phases of the class ended (every pair of the two), and a cycle later for each one that has passed
     while the phase goes on (a phase not ended at its force-off ends at a later one).
+``state``
+    The durations of the past phases of the class that, as long after they began as this one now, saw the
+    intersection in the state it is in now (every signal group's class), where at least :data:`MIN_SEEN` did: on an
+    actuated controller what its phases do depends on which stage runs, and this tells it from the stream alone
+    (no signal plan, no detectors; :meth:`~spat_feed.prediction.observe.PhaseHistory.spans_in`).
 ``duration``
     Each past duration of the class from the phase's start, given that it has run this long (the empirical
     conditional distribution: durations it has already outlasted are out).
@@ -32,7 +39,7 @@ Where the samples come from, in the order they are trusted (each *method* names 
 ``window``
     No history yet and a finite published window: evenly spread in ``[minEndTime, maxEndTime]``.
 
-Between ``cycle`` and ``duration`` the one that has erred less for that (group, class) wins: at each phase end the
+Between ``cycle`` and ``duration`` (``state`` is the latter, conditioned) the one that has erred less for that (group, class) wins: at each phase end the
 likely end each would have said :data:`SCORE_AHEAD_S` before it is scored (:func:`scored_errors_s`, a running mean kept by
 :class:`~spat_feed.prediction.observe.IntersectionHistory`). A state-only coordinated controller earns the cycle
 (2024-04-15, device 1136: ends within a few seconds of a fixed point of its 75 s cycle); the actuated Antwerp
@@ -270,9 +277,10 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
     if cycle is not None and current and since_unix_s is not None:
         given = _durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s)
     if cycle is not None and current:
-        linked = cycle.linked_ends_unix_s or cycle.linked_end_unix_s or ()  # every lag seen, or (likely, late)
-        if linked and linked[-1] >= now_unix_s:
-            return _after(np.asarray(linked, dtype=float), floor_unix_s, None), "linked"
+        linked = np.asarray(cycle.linked_ends_unix_s or cycle.linked_end_unix_s or (), dtype=float)  # every lag seen, or (likely, late)
+        ahead = linked[linked >= now_unix_s]  # the link has not failed (the phase went on past its lags) while some are ahead
+        if len(ahead) >= min(MIN_SEEN, len(linked)) > 0:
+            return _after(ahead, floor_unix_s, None), "linked"
         if cycle.resumed and (excess := cycle.after_resumed(cls)) and math.isfinite(published_min_unix_s):
             resumed = _after(published_min_unix_s + np.asarray(excess, dtype=float), floor_unix_s, None)
             if given is None:

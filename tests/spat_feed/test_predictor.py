@@ -150,6 +150,34 @@ def test_interval_coverage_of_a_forecast_that_is_the_true_law_is_its_level(level
     assert np.mean([lo <= y <= hi for y in s]) == pytest.approx({0.5: 0.525, 0.8: 0.825, 0.9: 0.925}[level])
 
 
+def test_a_link_that_failed_no_longer_says_the_phase_ends_now():
+    """Group 2's green comes 2 s after group 1's green ends (the stage sequence: a link; 12 s in one cycle of 20, as a
+    link allows), unless group 2 has no demand that cycle (one in four, at random): then its red goes on through
+    group 1's next green. Right after group 1's green ends the link tells group 2's end to the second; 10 s after a
+    change whose usual lag has passed with group 2 still red, the forecast is not "now" (the lags passed are out;
+    the ones left, or the other methods, say when), as it was while any lag was ahead."""
+    rng = np.random.default_rng(5)
+    history = IntersectionHistory()
+    t, linked, failed = T0, [], []
+    for k in range(120):
+        served = rng.random() >= 0.25
+        g1_green_s, g1_red_s = float(rng.integers(20, 40)), float(rng.integers(30, 50))
+        for phase_s, s1 in ((g1_green_s, GREEN), (g1_red_s, RED)):
+            start = t
+            while t < start + phase_s - 1e-9:
+                s2 = GREEN if s1 is RED and served and (12.0 if k % 20 == 0 else 2.0) <= t - start < phase_s - 2.0 else RED
+                history.record(t, {1: state_only(s1, t), 2: state_only(s2, t)})
+                if k >= 60 and s1 is RED and t - start in (1.0, 10.0) and s2 is RED:
+                    fc = forecast(state_only(RED, t), t, history.stats(2))[0]
+                    if served and k % 20 and t - start == 1.0:
+                        linked.append((fc.method, fc.likely_unix_s - t))
+                    elif not served and t - start == 10.0:
+                        failed.append((fc.method, fc.likely_unix_s - t))
+                t += 1.0
+    assert len(linked) > 30 and all(m == "linked" and abs(e - 1.0) <= 1.0 for m, e in linked), [x for x in linked if x != ("linked", 1.0)]
+    assert len(failed) > 10 and all(e >= 2.0 for m, e in failed), failed
+
+
 def test_cycle_period_needs_enough_changes_and_a_real_cycle():
     rng = np.random.default_rng(1)
     assert cycle_period_s([[T0 + 60.0 * k for k in range(5)]]) is None  # too few to tell
