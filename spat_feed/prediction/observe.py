@@ -52,7 +52,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from advisory.advice.advisor import AdvisorParams, LightView, Observation
-from spat_feed.prediction.predictor import EXACT_S, current_end, cycle_period_s, next_end, sample_quantile, scored_errors_s
+from spat_feed.prediction.predictor import (
+    EXACT_S,
+    SCORE_AHEAD_S,
+    current_end,
+    cycle_period_s,
+    durations_given_state,
+    next_end,
+    sample_quantile,
+    scored_errors_s,
+)
 from spat_feed.road.corridors import Corridor, IntersectionSpec
 from spat_feed.timing.plans import (
     STOP_STATES,
@@ -204,7 +213,7 @@ class PhaseHistory:
             if changed and not gap and self._current is not None:
                 if self._exact:
                     before = self.stats()
-                    self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current))
+                    self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current), self._given_before(t_unix_s))
                     self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
                     self._paths.setdefault(self._current, deque(maxlen=self.keep)).append((t_unix_s - self._since, tuple(self._path)))
                 self._following[self._current] = cls
@@ -251,6 +260,13 @@ class PhaseHistory:
     def current(self) -> PhaseClass | None:
         """The class of the phase in progress (None before the first reading)."""
         return self._current
+
+    def _given_before(self, end_unix_s: float) -> np.ndarray | None:
+        """The durations ``state`` gave :data:`SCORE_AHEAD_S` before the phase in progress ended at ``end_unix_s``
+        (:func:`~spat_feed.prediction.predictor.durations_given_state`), what the cycle is scored against."""
+        el = max(0.0, end_unix_s - SCORE_AHEAD_S - self._since)
+        then = [s for at, s in self._path if at <= el]
+        return durations_given_state(self.spans_in(self._current, then[-1]), el) if then else None
 
     def note_state(self, t_unix_s: float, state: int) -> None:
         """The intersection's state (an id of every group's class, :class:`IntersectionHistory`) from ``t_unix_s`` on."""
@@ -418,8 +434,8 @@ class IntersectionHistory:
     def _score(self, group: int, ended: tuple) -> None:
         """Score the cycle and the durations on a phase seen whole (:func:`~spat_feed.prediction.predictor.scored_errors_s`):
         a running mean of each one's error over about the last :data:`METHOD_MEMORY` phases of the class."""
-        cls, since, end, durations, ends = ended
-        errors = scored_errors_s(since, end, durations, ends, self.period_s)
+        cls, since, end, durations, ends, given = ended
+        errors = scored_errors_s(since, end, durations, ends, self.period_s, given)
         if errors is None:
             return
         score = self._errors.setdefault((group, cls), [0, 0.0, 0.0])

@@ -208,16 +208,17 @@ SCORE_AHEAD_S = 20.0
 
 
 def scored_errors_s(since_unix_s: float, end_unix_s: float, durations_s: tuple[float, ...], ends_unix_s: tuple[float, ...],
-                    period_s: float | None) -> tuple[float, float] | None:  # fmt: skip
+                    period_s: float | None, given_s: np.ndarray | None = None) -> tuple[float, float] | None:  # fmt: skip
     """How far off the ``cycle`` and the ``duration`` method's likely end were :data:`SCORE_AHEAD_S` before a phase
     that began at ``since_unix_s`` ended at ``end_unix_s`` (or at its start, if shorter), on the history before it;
-    None where either cannot say. [s] What :class:`~spat_feed.prediction.observe.IntersectionHistory` scores each
-    class's methods by."""
+    None where either cannot say. ``given_s``: the durations ``state`` gave then (:func:`durations_given_state`),
+    scored in place of the durations where given (what the cycle would replace). [s] What
+    :class:`~spat_feed.prediction.observe.IntersectionHistory` scores each class's methods by."""
     if period_s is None or len(durations_s) < MIN_SEEN or len(ends_unix_s) < MIN_SEEN:
         return None
     at = max(since_unix_s, end_unix_s - SCORE_AHEAD_S)
     d, ends = _class_model(durations_s, ends_unix_s, True)
-    ahead = since_unix_s + d[since_unix_s + d > at]
+    ahead = since_unix_s + (np.sort(given_s) if given_s is not None else d[since_unix_s + d > at])
     if not len(ahead):
         return None
     by_duration = sample_quantile(ahead, 0.5)
@@ -252,7 +253,7 @@ def _durations_ahead(since_unix_s: float | None, durations_s: Sequence[float], n
     return ends[ends > now_unix_s]
 
 
-def _durations_given_state(spans, elapsed_s: float) -> np.ndarray | None:
+def durations_given_state(spans, elapsed_s: float) -> np.ndarray | None:
     """The durations of the past phases of the class that, this long after they began, were in the intersection's
     state now (every group's class as now), if :data:`MIN_SEEN` were, else None. ``spans``: :class:`CycleStats`'s
     ``state_spans_s``, (durations, from, to) arrays. [s]"""
@@ -275,7 +276,7 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         return np.array([max(floor_unix_s, published_max_unix_s)]), "published"
     given = None  # the durations of the phases of the class seen in the intersection's state now, this far in
     if cycle is not None and current and since_unix_s is not None:
-        given = _durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s)
+        given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s)
     if cycle is not None and current:
         linked = np.asarray(cycle.linked_ends_unix_s or cycle.linked_end_unix_s or (), dtype=float)  # every lag seen, or (likely, late)
         ahead = linked[linked >= now_unix_s]  # the link has not failed (the phase went on past its lags) while some are ahead
