@@ -30,7 +30,8 @@ Where the samples come from, in the order they are trusted (each *method* names 
     The durations of the past phases of the class that, as long after they began as this one now, saw the
     intersection in the state it is in now (every signal group's class), where at least :data:`MIN_SEEN` did: on an
     actuated controller what its phases do depends on which stage runs, and this tells it from the stream alone
-    (no signal plan, no detectors; :meth:`~spat_feed.prediction.observe.PhaseHistory.spans_in`).
+    (no signal plan, no detectors; :meth:`~spat_feed.prediction.observe.PhaseHistory.spans_in`); the plain
+    durations below weigh :data:`PRIOR_PHASES` phases in it.
 ``duration``
     Each past duration of the class from the phase's start, given that it has run this long (the empirical
     conditional distribution: durations it has already outlasted are out).
@@ -74,6 +75,15 @@ N_SAMPLES = 64
 
 MIN_SEEN = 3
 """Phases of a class needed before their durations say anything (as ``observe.MIN_PHASES_SEEN``). [-]"""
+
+PRIOR_PHASES = MIN_SEEN
+"""What the plain durations of a class weigh, in phases, in the law that the phases seen in the intersection's state
+now give (method ``state``): from ``n`` such phases, ``(n F_state + a F_plain) / (n + a)`` (the predictive law of a
+Dirichlet process with the plain durations as its base measure [1]). With a few phases alone the law is too narrow
+(its 80 % interval held 74.5 % of the changes on Antwerp; 76.4 % with the prior).
+
+.. [1] T. S. Ferguson, "A Bayesian analysis of some nonparametric problems," Ann. Statist., vol. 1, pp. 209-230,
+   1973, doi:10.1214/aos/1176342360. [-]"""
 
 PERIOD_RANGE_S = (30.0, 240.0)
 """Cycle lengths searched by :func:`cycle_period_s` (traffic signal cycles: 30 s to 4 min). [s]"""
@@ -295,9 +305,11 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         d, cycle_ends = _class_model(durations, cycle.ends(cls), period is not None and cls in cycle.cycle_classes)
         if cycle_ends is not None:
             return _after(_on_cycle(since + d, cycle_ends, period), floor_unix_s, period), "cycle"
-        if given is not None:
-            return _after(since + given, floor_unix_s, None), "state"
         ahead = _durations_ahead(since, durations, now_unix_s)
+        if given is not None:  # the state's law, with the plain durations as its prior (PRIOR_PHASES)
+            n_plain = round(N_SAMPLES * PRIOR_PHASES / (len(given) + PRIOR_PHASES)) if len(ahead) else 0
+            pooled = np.concatenate([_reduced(since + given, N_SAMPLES - n_plain), _reduced(ahead, n_plain)]) if n_plain else since + given
+            return _after(pooled, floor_unix_s, None), "state"
         if len(ahead):
             return _after(ahead, floor_unix_s, None), "duration"
     if math.isfinite(published_max_unix_s) and published_max_unix_s > floor_unix_s:
