@@ -273,11 +273,11 @@ class PhaseHistory:
         if self._since is not None and (not self._path or self._path[-1][1] != state):
             self._path.append((t_unix_s - self._since, state))
 
-    def spans_in(self, cls: PhaseClass | None, state: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    def spans_in(self, cls: PhaseClass | None, state: int) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] | None:
         """The phases of ``cls`` seen whole while the intersection was in ``state``: each one's duration and the span
-        of its own time (from, to) it spent so, as arrays; None when none was. [s]"""
+        of its own time (from, to) it spent so, as three tuples; None when none was. [s]"""
         out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d) for d, path in self._paths.get(cls, ()) for k, (el, s) in enumerate(path) if s == state]
-        return None if not out else tuple(np.array(x, dtype=float) for x in zip(*out))
+        return None if not out else tuple(zip(*out))
 
 
 LINK_TOLERANCE_S = 1.5

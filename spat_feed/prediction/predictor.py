@@ -263,13 +263,19 @@ def _durations_ahead(since_unix_s: float | None, durations_s: Sequence[float], n
     return ends[ends > now_unix_s]
 
 
+@lru_cache(maxsize=256)
+def _as_arrays(spans: tuple[tuple[float, ...], ...]) -> tuple[np.ndarray, ...]:
+    """The tuples as float arrays (cached: a group's spans change only when the intersection's state does)."""
+    return tuple(np.asarray(x, dtype=float) for x in spans)
+
+
 def durations_given_state(spans, elapsed_s: float) -> np.ndarray | None:
     """The durations of the past phases of the class that, this long after they began, were in the intersection's
     state now (every group's class as now), if :data:`MIN_SEEN` were, else None. ``spans``: :class:`CycleStats`'s
-    ``state_spans_s``, (durations, from, to) arrays. [s]"""
+    ``state_spans_s``, (durations, from, to) tuples. [s]"""
     if spans is None:
         return None
-    d, lo, hi = spans
+    d, lo, hi = _as_arrays(spans)
     m = (lo <= elapsed_s) & (elapsed_s < hi)
     return d[m] if np.count_nonzero(m) >= MIN_SEEN else None
 
