@@ -118,7 +118,8 @@ class CycleStats:
     ends_unix_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # when phases of each class ended
     cycle_classes: frozenset = frozenset()  # classes told better by the point of the cycle they end at than by their durations
     period_s: float | None = None  # the controller's fixed cycle, if its changes keep to one (:func:`~spat_feed.prediction.predictor.cycle_period_s`)
-    state_spans_s: tuple | None = None  # (durations, from, to): past phases of the current class while the intersection was in its state now (:meth:`PhaseHistory.spans_in`)
+    # (durations, from, to): past phases of the current class while the intersection was in its state now (:meth:`PhaseHistory.spans_in`)
+    state_spans_s: tuple | None = None
 
     def ends(self, cls: PhaseClass) -> tuple[float, ...]:
         """The instants phases of ``cls`` ended at, if enough are seen, else ()."""
@@ -213,7 +214,8 @@ class PhaseHistory:
             if changed and not gap and self._current is not None:
                 if self._exact:
                     before = self.stats()
-                    self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current), self._given_before(t_unix_s))
+                    self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current),
+                                  self._given_before(t_unix_s))  # fmt: skip
                     self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
                     self._paths.setdefault(self._current, deque(maxlen=self.keep)).append((t_unix_s - self._since, tuple(self._path)))
                 self._following[self._current] = cls
@@ -276,7 +278,8 @@ class PhaseHistory:
     def spans_in(self, cls: PhaseClass | None, state: int) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] | None:
         """The phases of ``cls`` seen whole while the intersection was in ``state``: each one's duration and the span
         of its own time (from, to) it spent so, as three tuples; None when none was. [s]"""
-        out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d) for d, path in self._paths.get(cls, ()) for k, (el, s) in enumerate(path) if s == state]
+        out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d)
+               for d, path in self._paths.get(cls, ()) for k, (el, s) in enumerate(path) if s == state]  # fmt: skip
         return None if not out else tuple(zip(*out))
 
 
