@@ -52,7 +52,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from advisory.advice.advisor import AdvisorParams, LightView, Observation
-from spat_feed.prediction.predictor import EXACT_S, current_end, cycle_period_s, next_end, sample_quantile, scored_errors_s
+from spat_feed.prediction.predictor import (
+    EXACT_S,
+    SCORE_AHEAD_S,
+    current_end,
+    cycle_period_s,
+    durations_given_state,
+    next_end,
+    sample_quantile,
+    scored_errors_s,
+)
 from spat_feed.road.corridors import Corridor, IntersectionSpec
 from spat_feed.timing.plans import (
     STOP_STATES,
@@ -109,6 +118,8 @@ class CycleStats:
     ends_unix_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # when phases of each class ended
     cycle_classes: frozenset = frozenset()  # classes told better by the point of the cycle they end at than by their durations
     period_s: float | None = None  # the controller's fixed cycle, if its changes keep to one (:func:`~spat_feed.prediction.predictor.cycle_period_s`)
+    # (durations, from, to): past phases of the current class while the intersection was in its state now (:meth:`PhaseHistory.spans_in`)
+    state_spans_s: tuple | None = None
 
     def ends(self, cls: PhaseClass) -> tuple[float, ...]:
         """The instants phases of ``cls`` ended at, if enough are seen, else ()."""
@@ -158,7 +169,7 @@ class PhaseHistory:
     """
 
     __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
-                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended")  # fmt: skip
+                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
         self.keep, self.max_gap_s = keep, max_gap_s
@@ -175,6 +186,8 @@ class PhaseHistory:
         self._sorted: tuple | None = None  # the two above, sorted (until a phase ends)
         self._ends: dict[PhaseClass, deque[float]] = {}  # when phases of each class were seen to end
         self.ended: tuple | None = None  # the phase seen whole that the last reading ended: (class, start, end, durations and ends before it)
+        self._path: list[tuple[float, int]] = []  # the phase in progress: (time since it began, the intersection's state) at each change of state
+        self._paths: dict[PhaseClass, deque[tuple[float, tuple]]] = {}  # phases seen whole: (duration, their path)
 
     def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
         """Take one reading at ``t_unix_s`` (:meth:`record`) and return the :meth:`stats` after it."""
@@ -201,8 +214,10 @@ class PhaseHistory:
             if changed and not gap and self._current is not None:
                 if self._exact:
                     before = self.stats()
-                    self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current))
+                    self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current),
+                                  self._given_before(t_unix_s))  # fmt: skip
                     self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
+                    self._paths.setdefault(self._current, deque(maxlen=self.keep)).append((t_unix_s - self._since, tuple(self._path)))
                 self._following[self._current] = cls
                 self._ends.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s)
                 excess = self._excess.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
@@ -211,6 +226,7 @@ class PhaseHistory:
             # first seen now: it began now or before (a start dated late makes its end late: the safe side for a red)
             self._since, self._exact = t_unix_s, changed and not gap and self._current is not None
             self._current = cls
+            self._path = []
             self._held = self._resumed = False
             self._resumed_min_ends = []
         elif min_end is not None and self._min_end is not None:
@@ -246,6 +262,25 @@ class PhaseHistory:
     def current(self) -> PhaseClass | None:
         """The class of the phase in progress (None before the first reading)."""
         return self._current
+
+    def _given_before(self, end_unix_s: float) -> np.ndarray | None:
+        """The durations ``state`` gave :data:`SCORE_AHEAD_S` before the phase in progress ended at ``end_unix_s``
+        (:func:`~spat_feed.prediction.predictor.durations_given_state`), what the cycle is scored against."""
+        el = max(0.0, end_unix_s - SCORE_AHEAD_S - self._since)
+        then = [s for at, s in self._path if at <= el]
+        return durations_given_state(self.spans_in(self._current, then[-1]), el) if then else None
+
+    def note_state(self, t_unix_s: float, state: int) -> None:
+        """The intersection's state (an id of every group's class, :class:`IntersectionHistory`) from ``t_unix_s`` on."""
+        if self._since is not None and (not self._path or self._path[-1][1] != state):
+            self._path.append((t_unix_s - self._since, state))
+
+    def spans_in(self, cls: PhaseClass | None, state: int) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] | None:
+        """The phases of ``cls`` seen whole while the intersection was in ``state``: each one's duration and the span
+        of its own time (from, to) it spent so, as three tuples; None when none was. [s]"""
+        out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d)
+               for d, path in self._paths.get(cls, ()) for k, (el, s) in enumerate(path) if s == state]  # fmt: skip
+        return None if not out else tuple(zip(*out))
 
 
 LINK_TOLERANCE_S = 1.5
@@ -360,7 +395,7 @@ class IntersectionHistory:
     :class:`ChangeLinks` between them. ``record`` each message's plans; ``stats(group)`` is the group's
     :class:`CycleStats` (cached until the group's history or a link changes)."""
 
-    __slots__ = ("groups", "links", "_stats", "period_s", "_ends_since_period", "_period_every", "_errors")
+    __slots__ = ("groups", "links", "_stats", "period_s", "_ends_since_period", "_period_every", "_errors", "_states", "_state")
 
     def __init__(self) -> None:
         self.groups: dict[int, PhaseHistory] = {}
@@ -370,6 +405,8 @@ class IntersectionHistory:
         self._ends_since_period = 0
         self._period_every = PERIOD_EVERY[0]
         self._errors: dict[tuple[int, PhaseClass], list[float]] = {}  # (group, class) -> [n, cycle's mean error, durations']
+        self._states: dict[tuple, int] = {}  # the intersection's states seen (every group's class) -> id
+        self._state = -1  # the state now
 
     def record(self, t_unix_s: float, plans: Mapping[int, Plan | MovementPhaseState | None]) -> None:
         """Take one message: each signal group's plan (or state) at ``t_unix_s``."""
@@ -383,6 +420,11 @@ class IntersectionHistory:
                 changed[g] = history.current
                 if history.ended is not None:
                     self._score(g, history.ended)
+        if changed:
+            state = tuple((g, h.current) for g, h in self.groups.items())
+            self._state = self._states.setdefault(state, len(self._states))
+            for h in self.groups.values():
+                h.note_state(t_unix_s, self._state)
         if self.links.record(t_unix_s, changed):
             self._stats.clear()  # a change may start a link for any group
             self._ends_since_period += len(changed)
@@ -395,8 +437,8 @@ class IntersectionHistory:
     def _score(self, group: int, ended: tuple) -> None:
         """Score the cycle and the durations on a phase seen whole (:func:`~spat_feed.prediction.predictor.scored_errors_s`):
         a running mean of each one's error over about the last :data:`METHOD_MEMORY` phases of the class."""
-        cls, since, end, durations, ends = ended
-        errors = scored_errors_s(since, end, durations, ends, self.period_s)
+        cls, since, end, durations, ends, given = ended
+        errors = scored_errors_s(since, end, durations, ends, self.period_s, given)
         if errors is None:
             return
         score = self._errors.setdefault((group, cls), [0, 0.0, 0.0])
@@ -417,7 +459,8 @@ class IntersectionHistory:
             ends = self.links.ends_of(group)
             linked = (_quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE)) if ends else None
             cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=linked, linked_ends_unix_s=ends, period_s=self.period_s,
-                                                 cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset())  # fmt: skip
+                                                 cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset(),
+                                                 state_spans_s=history.spans_in(history.current, self._state))  # fmt: skip
         return cycle
 
 

@@ -18,6 +18,8 @@ MODULES = [
     "transport.client",
     "transport.mqtt",
     "transport.broker",
+    "prediction.predictor",
+    "prediction.observe",
 ]
 
 

@@ -108,6 +108,76 @@ def test_the_cycle_of_a_coordinated_controller_is_found_and_tells_the_end_of_a_g
     assert np.mean(np.abs(off) <= 1.0) >= 0.5 and np.mean([c for _, _, c in errors]) >= 0.8  # (a discrete law: at least)
 
 
+def test_durations_are_conditioned_on_the_other_groups_state():
+    """An actuated controller with no fixed cycle: group 1's red lasts 16-24 s when group 2 is not served during it
+    and 44-56 s when it is (group 2 green from 2 s after 1's red begins to 2 s before it ends), half each at random;
+    1's green lasts 25-35 s. The durations alone mix the two (their median errs ~13 s); seen 5 s into a red, with
+    group 2's state known, the forecast (method ``state``) errs what the uniform law of that kind of red does (its
+    mean absolute deviation from the median: 2 s or 3 s), and its 80 % interval holds the end about that often."""
+    rng = np.random.default_rng(11)
+    history = IntersectionHistory()
+    t, rows = T0, []
+    for k in range(160):
+        served = bool(rng.integers(0, 2))
+        red_s = float(rng.integers(44, 57) if served else rng.integers(16, 25))
+        start = t
+        while t < start + red_s - 1e-9:
+            s2 = GREEN if served and 2.0 <= t - start < red_s - 2.0 else RED
+            history.record(t, {1: state_only(RED, t), 2: state_only(s2, t)})
+            if k >= 60 and t - start == 5.0:
+                fc = forecast(state_only(RED, t), t, history.stats(1))[0]
+                lo, hi = fc.interval(0.8)
+                rows.append((fc.method, abs(fc.likely_unix_s - (start + red_s)), lo <= start + red_s <= hi))
+            t += 1.0
+        t = _drive(history, [(GREEN, float(rng.integers(25, 36)))], t)
+    assert len(rows) == 100 and all(m == "state" for m, _, _ in rows)
+    assert np.mean([e for _, e, _ in rows]) <= 3.5 and np.mean([c for _, _, c in rows]) >= 0.75
+
+
+@pytest.mark.parametrize("level", [0.5, 0.8, 0.9])
+def test_interval_coverage_of_a_forecast_that_is_the_true_law_is_its_level(level):
+    """A change that comes at a whole second drawn evenly from 10..49, seen at the first reading after it (the one
+    before it a second earlier), forecast by exactly that law: over the 40 equally likely outcomes the share inside the
+    central interval is the level, exactly (the randomized PIT of a discrete law); the closed interval between the two
+    quantiles holds more (0.525 / 0.825 / 0.925: its ends carry mass)."""
+    from ecodrive.predict_eval import pit_coverage
+
+    fc = ChangeForecast(PhaseClass.RED, PhaseClass.GREEN, 0.0, np.arange(10.0, 50.0), "duration")
+    s = fc.samples_unix_s
+    pits = [(np.searchsorted(s, y - 1.0, side="right") / len(s), np.searchsorted(s, y, side="right") / len(s)) for y in s]
+    assert np.mean([pit_coverage(p, level) for p in pits]) == pytest.approx(level)
+    lo, hi = fc.interval(level)
+    assert np.mean([lo <= y <= hi for y in s]) == pytest.approx({0.5: 0.525, 0.8: 0.825, 0.9: 0.925}[level])
+
+
+def test_a_link_that_failed_no_longer_says_the_phase_ends_now():
+    """Group 2's green comes 2 s after group 1's green ends (the stage sequence: a link; 12 s in one cycle of 20, as a
+    link allows), unless group 2 has no demand that cycle (one in four, at random): then its red goes on through
+    group 1's next green. Right after group 1's green ends the link tells group 2's end to the second; 10 s after a
+    change whose usual lag has passed with group 2 still red, the forecast is not "now" (the lags passed are out;
+    the ones left, or the other methods, say when), as it was while any lag was ahead."""
+    rng = np.random.default_rng(5)
+    history = IntersectionHistory()
+    t, linked, failed = T0, [], []
+    for k in range(120):
+        served = rng.random() >= 0.25
+        g1_green_s, g1_red_s = float(rng.integers(20, 40)), float(rng.integers(30, 50))
+        for phase_s, s1 in ((g1_green_s, GREEN), (g1_red_s, RED)):
+            start = t
+            while t < start + phase_s - 1e-9:
+                s2 = GREEN if s1 is RED and served and (12.0 if k % 20 == 0 else 2.0) <= t - start < phase_s - 2.0 else RED
+                history.record(t, {1: state_only(s1, t), 2: state_only(s2, t)})
+                if k >= 60 and s1 is RED and t - start in (1.0, 10.0) and s2 is RED:
+                    fc = forecast(state_only(RED, t), t, history.stats(2))[0]
+                    if served and k % 20 and t - start == 1.0:
+                        linked.append((fc.method, fc.likely_unix_s - t))
+                    elif not served and t - start == 10.0:
+                        failed.append((fc.method, fc.likely_unix_s - t))
+                t += 1.0
+    assert len(linked) > 30 and all(m == "linked" and abs(e - 1.0) <= 1.0 for m, e in linked), [x for x in linked if x != ("linked", 1.0)]
+    assert len(failed) > 10 and all(e >= 2.0 for m, e in failed), failed
+
+
 def test_cycle_period_needs_enough_changes_and_a_real_cycle():
     rng = np.random.default_rng(1)
     assert cycle_period_s([[T0 + 60.0 * k for k in range(5)]]) is None  # too few to tell
