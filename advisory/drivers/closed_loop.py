@@ -11,6 +11,11 @@ rate, or harder if that no longer stops it at the line, only until its line is b
 ahead." alone: no speeding up towards it; advice that asks nothing new, such as "Signal data delayed.": it goes on
 with what it was told);
 ``overrides`` counts the times the driver's own braking was needed although the advice did not say "stop".
+What it knows of the lights it sees (issue 31): at a light that shows no amber (:func:`shows_amber`) its eye
+cannot see a red coming, so a green its display says may turn red now (a window open since the driver last saw
+red), or that it is told to stop for, is one it stops for where it still can at 4 m/s²; stopping on advice for a line that shows red now, where even 4 m/s² would roll it over the line,
+it brakes harder (up to ``emergency_decel_mps2``); and a red that outlasts by a reaction time the green the display
+promised when the driver went on is waited out by the eye (no new countdown is trusted for that red).
 
 Two named drivers (:data:`DRIVERS`), the same but on amber and at launch: :data:`LENIENT` clears an amber it
 reaches before the red (the regular driver's rule) and speeds up at the regular driver's 2 m/s² when no speed
@@ -147,6 +152,8 @@ def simulate(
     amber_stop: set[int] = set()  # lights whose amber the driver stops for
     amber_go: set[int] = set()  # lights whose amber the driver has decided to clear
     green_since: dict[int, float] = {}
+    seen_red: dict[int, float] = {}  # light -> when the driver last saw it red
+    promised: dict[int, tuple[float, float]] = {}  # light -> (the red by its end, the green its display promised when the driver went on)
     max_advised = 0.0
     steps_per_advice = int(round(1.0 / dt_s))
     step = 0
@@ -190,6 +197,10 @@ def simulate(
                 rate_down = coast_decel_mps2(v, advisor.vehicle)  # prepare to stop: lift off until a comfortable stop at the line needs braking
             else:  # then brake as it takes to stop there (told late, or a second's reaction behind: more than the comfortable rate)
                 rate_down = max(rate_down, min(v * v / (2.0 * max(to_line_m, 1e-6)), rules.brake_max_mps2))
+                if v * v > 2.0 * rules.brake_max_mps2 * (stop_line_m - x) and any(s.position_m == stop_line_m and s.is_red(t) for s in scenario.signals):
+                    # even the regular driver's hardest braking rolls it over a line that shows red now (a light with no
+                    # amber turned red while it stopped for it): nobody rolls into a red it can still stop for
+                    rate_down = min(v * v / (2.0 * max(to_line_m, 1e-6)), driver.emergency_decel_mps2)
         # the driver's own eyes: decide once per light at the decision point, like the regular driver
         at_line = False  # waiting at a line still red (no lift-off rule eases that braking)
         ahead = [(n, s) for n, s in enumerate(scenario.signals) if s.position_m > x + 1e-9]
@@ -198,6 +209,8 @@ def simulate(
             dist = light.position_m - x
             room = dist - rules.stop_gap_m
             red_now = bool(light.is_red(t))  # what the driver sees; the future only from the display
+            if red_now:
+                seen_red[n] = t
             display = shown[n]
             if display is None:  # nothing shown: a red lasts, a green holds (as far as the driver knows)
                 green_at, next_red = (np.inf, np.inf) if red_now else (t, np.inf)
@@ -206,8 +219,14 @@ def simulate(
             else:
                 green_at = display.next_green_start_s(t) if red_now else t  # t itself when green
                 # the next red to begin after any current one; green while the display says it may be red (a
-                # window already open): the eye and the amber rule decide
-                next_red = display.next_red_start_s(display.next_green_start_s(green_at)) if red_now or not display.is_red(t) else np.inf
+                # window already open): the eye and the amber rule decide, where the light shows an amber; where it
+                # shows none the eye cannot, and a red may begin now (unless that window is the end of the red the
+                # driver saw end, shown longer for the feed clock's uncertainty)
+                if red_now or not display.is_red(t):
+                    next_red = display.next_red_start_s(display.next_green_start_s(green_at))
+                else:
+                    opened = max((a for a, b in display.reds_s if a <= t < b), default=-np.inf)
+                    next_red = t if not shows_amber(light) and opened > seen_red.get(n, -np.inf) else np.inf
             heeded_m = max(decision_m, v * v / (2.0 * driver.decel_mps2) + rules.stop_gap_m)  # where a comfortable stop begins
             amber = dist <= heeded_m and bool(getattr(light, "is_amber", lambda _: False)(t))
             red_at = light.next_red_start_s(t) if amber else None
@@ -238,19 +257,29 @@ def simulate(
                     surprised[n] = light.next_green_start_s(t)
                 if v * v / (2.0 * max(room, 1e-6)) <= (driver.emergency_decel_mps2 if first else rules.brake_max_mps2):
                     committed.discard(n)
+            promise = promised.get(n)
+            if red_now and promise is not None and promise[0] == light.next_green_start_s(t) and t >= promise[1] + driver.reaction_s:
+                green_at = np.inf  # the green the display promised when the driver went on has not come: it waits for the green it sees
             if amber and n in amber_stop and n not in committed:
                 braking_for = n
             elif n not in committed and dist - v * dt_s <= decision_m:  # decide before the step that crosses it
                 # go only if the light will be green on arrival at the current speed (a red now must end
                 # ``red_end_margin_s`` before) and no red can begin before the car is over the line
                 arrival = t + (dist / v if v > 0.1 else np.sqrt(2.0 * dist / driver.accel_mps2) + driver.reaction_s)
-                if (red_now and (v <= 0.1 or green_at > arrival - driver.red_end_margin_s)) or next_red <= arrival:
+                # at a light that shows no amber the eye cannot see a red coming: told to stop for it, the driver stops
+                # where it still can (elsewhere a green it sees, with the display's countdown, outweighs the advice)
+                told_stop = active is not None and active.action == "stop" and stop_line_m == light.position_m and not shows_amber(light)
+                if (red_now and (v <= 0.1 or green_at > arrival - driver.red_end_margin_s)) or next_red <= arrival or (
+                    told_stop and v * v <= 2.0 * rules.brake_max_mps2 * max(room, 1e-6)
+                ):
                     if braking_for != n and (active is None or active.action != "stop"):
                         overrides += 1
                     braking_for = n
                 else:
                     committed.add(n)
                     braking_for = None
+                    if red_now and (n not in promised or promised[n][0] != light.next_green_start_s(t)):
+                        promised[n] = (light.next_green_start_s(t), green_at)  # (this red, the green the display promised)
             if braking_for == n:  # stop short of the line at the constant rate that gets there
                 v_cmd = 0.0
                 # (inside the stop gap already, at a crawl: stop short of the line itself, as gently as that allows)
@@ -304,6 +333,13 @@ def simulate(
         step += 1
     arr = np.array(knots)
     return ClosedLoopResult(Trajectory(arr[:, 0], arr[:, 1], arr[:, 2]), log, overrides, stops, max_advised, surprises)
+
+
+def shows_amber(light: Signal) -> bool:
+    """Whether the driver sees ``light``'s reds coming: a :class:`TimelineSignal` (an actuated or recorded light) does
+    where it shows an amber before them; a fixed-time light is taken to (the paper's model has no amber; its display,
+    exact, counts down to every red)."""
+    return not isinstance(light, TimelineSignal) or any(b > a for a, b in light.ambers_s)
 
 
 def _silent(advice: Advice) -> bool:

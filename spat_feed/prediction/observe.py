@@ -477,6 +477,9 @@ class PlanReading:
     ``cycle``: what the signal group has been seen to do (:meth:`PhaseHistory.stats`), to bound the phases after
     the published ones. ``clock_offset_s``: the feed clock minus ours, as estimated (subtracted from the plan's
     instants); ``clock_uncertainty_s``: how far that estimate may be off (red windows widened by it). [s]
+    ``amber_s``: the amber the light really shows before each red, where the source knows it: None (unknown) is
+    taken as some amber, as traffic law requires, whether the feed publishes it or not; 0: none, a green may turn
+    red at once (:func:`no_amber`). [s]
     """
 
     plan: Plan | None
@@ -485,6 +488,7 @@ class PlanReading:
     cycle: CycleStats | None = None
     clock_offset_s: float = 0.0
     clock_uncertainty_s: float = 0.0
+    amber_s: float | None = None
 
 
 def as_uncertain(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> UncertainPlan:
@@ -741,6 +745,27 @@ def red_hold_s(plan: UncertainPlan, t_reading_unix_s: float, speed_mps: float, p
     return READING_PERIOD_S + max(0.0, no_return_s - params.green_margin_s)
 
 
+def no_amber(phases: list[tuple[PhaseClass, Bound, Bound]]) -> list[tuple[PhaseClass, Bound, Bound]]:
+    """The phases of a light that shows no amber before its reds (``PlanReading.amber_s`` = 0), each red that a go
+    phase ends into beginning at its earliest in every view: the safety rule for a green whose end is uncertain.
+
+    A driver is warned of a red by its amber: a car past the point where it can stop clears the line in it, and
+    one before that point stops (the driver's eye, with or without advice). A green that turns red at once warns
+    nobody, so a plan that reaches the line inside the window where its red may begin, on the likely time, meets
+    the red at speed when it comes early: a car is too close to stop as soon as it is within its stopping distance
+    (seed 3 of the randomized runs: "Drive normally" into a window open 0.5 s after entry, the change published
+    exactly 4 s before the line at 24.6 m/s, 2.1 s into the red). So where no amber comes, no view puts such a red
+    later than its earliest start (``minEndTime``, widened for the clock like any red): no plan reaches the line
+    after a green may have ended, and the driver's display, which shows the late views, shows the possible red
+    (the eye cannot). A red after an amber, or whose start is exact, is left as it is."""
+    out = []
+    for n, (cls, start, end) in enumerate(phases):
+        if cls is PhaseClass.RED and n > 0 and phases[n - 1][0] is PhaseClass.GREEN and start[2] - start[0] >= EXACT_S:
+            start = (start[0], start[0], start[0])
+        out.append((cls, start, end))
+    return out
+
+
 def _held(windows: tuple[tuple[float, float], ...], hold_s: float, red_now: bool) -> tuple[tuple[float, float], ...]:
     """Windows with the first red (the published one, or the one after a published amber) lasting at least ``hold_s``
     from now; a red now that the windows lost is put back."""
@@ -775,7 +800,16 @@ def light_view(
         unknown = ()
     else:
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
-        if unknown_now(plan, t_unix_s - reading.age_s) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
+        if reading.amber_s == 0.0:
+            phases = no_amber(phases)
+        read_at = t_unix_s - reading.age_s
+        if unknown_now(plan, read_at) and u > 0.0 and phase_class(published_state(plan, read_at - u)) in (PhaseClass.GREEN, PhaseClass.AMBER):
+            # a go phase that ended into the unknown past the last published event, by a clock that may be u off: it may
+            # not have ended yet, and the red after it may come (with no amber, unseen): not "no data" (a skewed clock
+            # 2.8 s behind said so 7 m before the line, "Drive normally.", and the car rolled into the red); the
+            # windows, widened by u, carry that red. (A red that ended so is left to the eye: the light is green.)
+            read_at -= u
+        if unknown_now(plan, read_at) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
         windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
         if likely != windows:  # uncertain: the equally likely timings too

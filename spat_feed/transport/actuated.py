@@ -36,10 +36,11 @@ import numpy as np
 
 from advisory.advice.advisor import LightView, Observation
 from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
+from advisory.trajectory import Trajectory
 from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.timing.messages import MovementState, confidence_index, movement_events, plan_from_movement, to_unix_s
 from spat_feed.prediction.observe import IntersectionHistory, PlanReading, light_view
-from spat_feed.timing.plans import GREEN, RED, STOP_STATES, ChangeWindow, MovementPhaseState, UncertainPlan
+from spat_feed.timing.plans import AMBER, GREEN, RED, STOP_STATES, ChangeWindow, MovementPhaseState, UncertainPlan
 
 SAMPLE_S = 1.0
 """The recordings' snapshot interval: a switch is known to within this. [s]"""
@@ -142,7 +143,7 @@ class ActuatedLight:
     switches_s: tuple[float, ...]
     decide_s: float = 3.0  # the controller publishes the exact instant this long before the switch [s]
     late_push_s: float = 5.0  # a phase past its maxEnd is published with maxEnd this far ahead [s]
-    amber_s: float = 4.0  # the last seconds of each green show amber (at 88.5 km/h a car that cannot stop clears in it) [s]
+    amber_s: float = 4.0  # the last seconds of each green show amber, published as J2735 protected-clearance (at 88.5 km/h a car that cannot stop clears in it); 0: none [s]
 
     def truth(self) -> TimelineSignal:
         """The light as it really switches (amber: the last ``amber_s`` of a green, green for the rules)."""
@@ -152,18 +153,51 @@ class ActuatedLight:
         ambers = [(max(a - self.amber_s, e), a) for (a, _), e in zip(reds, ends) if math.isfinite(a)]
         return TimelineSignal(self.position_m, tuple(reds), tuple(ambers))
 
+    def amber_start_s(self, i: int) -> float | None:
+        """When the amber before change ``i`` begins (a change from a go state into a stop state, with ``amber_s`` > 0:
+        ``amber_s`` before it, or when the red before it ended if the green was shorter), else None. [s]"""
+        if self.amber_s <= 0.0 or self.states[i] in STOP_STATES or self.states[i + 1] not in STOP_STATES:
+            return None
+        return max(self.switches_s[i] - self.amber_s, self.switches_s[i - 1] if i > 0 else -math.inf)
+
     def state_at(self, t_s: float) -> MovementPhaseState:
-        """The state really showing at ``t_s`` (what its controller publishes as the current phase)."""
-        return self.states[int(np.searchsorted(self.switches_s, t_s, side="right"))]
+        """The state really showing at ``t_s`` (what its controller publishes as the current phase): amber
+        (J2735 protected-clearance) in the last ``amber_s`` of a green."""
+        k = int(np.searchsorted(self.switches_s, t_s, side="right"))
+        if k < len(self.switches_s) and (a := self.amber_start_s(k)) is not None and t_s >= a:
+            return AMBER
+        return self.states[k]
 
     def plan_at(self, t_s: float) -> UncertainPlan:
-        """What the controller publishes at ``t_s``: the state now and every change to come, windows narrowed."""
+        """What the controller publishes at ``t_s``: the state now and every change to come, windows narrowed.
+
+        A green that ends in an amber (``amber_s`` > 0) is published as J2735 does: the green, the change into amber
+        (protected-clearance), then the amber and its change into red, which comes ``amber_s`` after the amber begins
+        (exact once the controller has decided when the green ends, ``decide_s`` before the amber). Windows of one
+        plan may not overlap (:class:`~spat_feed.timing.plans.UncertainPlan`): where the green's window is wider than
+        the amber, the amber's start is published no later than the red's earliest start (the green's ``maxEndTime`` is
+        cut, never the red's ``minEndTime``, which stays hard)."""
         k = int(np.searchsorted(self.switches_s, t_s, side="right"))  # changes already made
-        states, changes = [self.states[k]], []
+        in_amber = k < len(self.switches_s) and (a_k := self.amber_start_s(k)) is not None and t_s >= a_k
+        states, changes = [AMBER if in_amber else self.states[k]], []
         floor_s = t_s
         for i in range(k, len(self.windows)):
             w, real = self.windows[i], self.switches_s[i]
-            if real - t_s <= self.decide_s:
+            amber = None if i == k and in_amber else self.amber_start_s(i)
+            if amber is not None:  # the green ends in its amber: its window is the change's, ``length_s`` earlier
+                length_s = real - amber
+                if amber - t_s <= self.decide_s:
+                    a_lo = a_hi = a_likely = max(amber, floor_s)
+                    conf = 1.0
+                else:
+                    a_lo = max(w.min_end_s - length_s, floor_s)
+                    a_hi = max(w.max_end_s - length_s if w.max_end_s - length_s > t_s else t_s + self.late_push_s, a_lo)
+                    a_likely, conf = min(max(w.likely_s - length_s, a_lo, t_s + LIKELY_AHEAD_S), a_hi), w.confidence_frac
+                lo, likely, hi = a_lo + length_s, a_likely + length_s, a_hi + length_s  # the red: the amber's length later
+                a_hi = min(a_hi, lo)  # windows may not overlap: the green's latest end is cut, never the red's earliest
+                changes.append(ChangeWindow(a_lo, min(a_likely, a_hi), a_hi, conf))
+                states.append(AMBER)
+            elif real - t_s <= self.decide_s or i == k and in_amber:
                 lo = hi = likely = max(real, floor_s)
                 conf = 1.0
             else:
@@ -176,6 +210,18 @@ class ActuatedLight:
             states.append(self.states[i + 1])
             floor_s = hi
         return UncertainPlan(tuple(states), tuple(changes))
+
+
+    def published_change(self, t_s: float, i: int) -> ChangeWindow | None:
+        """The window :meth:`plan_at` publishes at ``t_s`` for change ``i`` (None: it has come)."""
+        k = int(np.searchsorted(self.switches_s, t_s, side="right"))
+        if i < k or i >= len(self.windows):
+            return None
+        position = -1
+        for j in range(k, i + 1):  # each change, after its amber's start where it has one to come
+            amber = self.amber_start_s(j)
+            position += 2 if amber is not None and not (j == k and t_s >= amber) else 1
+        return self.plan_at(t_s).changes[position]
 
 
 def actuated_light(
@@ -227,7 +273,8 @@ def conflicting_light(light: ActuatedLight, rng: np.random.Generator, *, after_s
     between them; each drawn once, in ``after_start_s`` and ``before_end_s``: a controller's are fixed). In
     ``misfire_frac`` of its greens another stage comes in between: the green ends ``misfire_s`` earlier, so a
     receiver that learnt "``light``'s red ends the lead after this green" (:class:`~spat_feed.prediction.observe.ChangeLinks`)
-    is told too early an end, or, with too many such, learns no link. Its windows are exact."""
+    is told too early an end, or, with too many such, learns no link. Its windows are exact; its greens end in an amber
+    as ``light``'s do (``amber_s``)."""
     after_start, before_end = float(rng.uniform(*after_start_s)), float(rng.uniform(*before_end_s))
     states, switches = [RED], []
     for a, b in light.truth().reds_s:
@@ -239,7 +286,7 @@ def conflicting_light(light: ActuatedLight, rng: np.random.Generator, *, after_s
             switches += [g0, g1]
             states += [GREEN, RED]
     windows = tuple(ChangeWindow(x, x, x) for x in switches)
-    return ActuatedLight(light.position_m, tuple(states), windows, tuple(switches), amber_s=0.0)
+    return ActuatedLight(light.position_m, tuple(states), windows, tuple(switches), amber_s=light.amber_s)
 
 
 @dataclass
@@ -248,14 +295,16 @@ class ActuatedFeed:
 
     ``epoch_unix_s`` places the zone's time 0 on the Unix axis. ``dropouts_s``: intervals ``[a, b)`` with no
     message; the last one received ages and is stale after ``stale_after_s``. ``skew_s``: the feed's clock is
-    this far ahead of the car's. ``n_events``: events per movement (1 = the current phase only, as Antwerp).
+    this far ahead of the car's. ``n_events``: events per movement (1 = the current phase only, as Antwerp; the
+    default 4 carries the current phase and the cycle after it, green, amber, red and green: before the amber was
+    published, 3 did).
     """
 
     lights: Sequence[ActuatedLight]
     speed_limit_mps: float
     skew_s: float = 0.0
     dropouts_s: Sequence[tuple[float, float]] = ()
-    n_events: int = 3
+    n_events: int = 4
     stale_after_s: float = 3.0
     epoch_unix_s: float = 1.7e9
     clock_uncertainty_s: float = 0.0  # what the receiver is told of the skew: a bound, not the offset [s]
@@ -298,7 +347,7 @@ class ActuatedFeed:
             if received is not None:
                 age = t_s - received[0]
                 reading = PlanReading(received[1], fresh=age <= self.stale_after_s, age_s=age, cycle=received[2],
-                                      clock_uncertainty_s=self.clock_uncertainty_s)  # fmt: skip
+                                      clock_uncertainty_s=self.clock_uncertainty_s, amber_s=light.amber_s)  # fmt: skip
             spec = IntersectionSpec(id=n + 1, name=f"light {n + 1}", stop_line_m=light.position_m, lat_deg=0.0, lon_deg=0.0,
                                     approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
             views.append(light_view(spec, reading, x_m, t_s + self.epoch_unix_s, speed_mps=v_mps))
@@ -351,6 +400,88 @@ def random_case(seed: int, max_half_width_s: float = 15.0, max_skew_s: float = 3
         conflicting = [conflicting_light(light, rng) for light in lights]
         feed = replace(feed, n_events=1, warm_up_s=1500.0, conflicting=conflicting)
     return truth, feed, noise
+
+
+# --------------------------------------------------------------------------------------------------
+# Red entries and hard brakes of a closed-loop run: avoidable or not
+
+
+@dataclass(frozen=True, slots=True)
+class SafetyEvent:
+    """A red entry or a hard brake in a closed-loop run fed by an :class:`ActuatedFeed`, and whether the feed had told
+    of its red in time for a car to stop. Times on the zone's axis [s]; ``inf`` where the feed never told."""
+
+    kind: str  # "red_entry" (a line crossed on red) or "hard_brake" (braking harder than the rate given)
+    light: int  # the light's index in the feed
+    at_s: float  # the crossing, or the hardest braking
+    red_start_s: float  # the red it is about
+    brake_mps2: float  # the hardest braking of the run (a hard brake), nan for a red entry
+    known_s: float  # the first reading received that put a possible red at ``max(at_s, red_start_s)`` (its window, widened by the clock bound)
+    decided_s: float  # the first reading received that published the red's start exactly
+    distance_m: float  # from the car to the line at ``known_s``
+    speed_mps: float  # the car's speed at ``known_s``
+    stop_decel_mps2: float  # braking from ``known_s`` that stops the car at the line: v² / 2d
+    avoidable: bool  # ``stop_decel_mps2`` within the rate given to :func:`safety_events`
+
+
+def _told_s(light: ActuatedLight, feed: ActuatedFeed, red_start_s: float, at_s: float, before_s: float) -> tuple[float, float]:
+    """The first reading received before ``before_s`` (one a second from entry, none in a dropout) whose published
+    window for the start of the red that begins at ``red_start_s`` admits a red at ``at_s``, and the first that
+    publishes that start exactly: ``(known_s, decided_s)``, ``inf`` where none did. A red already begun is known."""
+    known = decided = math.inf
+    for t in np.arange(0.0, math.ceil(before_s)):
+        t = float(t)
+        if t >= before_s or (known < math.inf and decided < math.inf):
+            break
+        if any(a <= t < b for a, b in feed.dropouts_s):
+            continue
+        if t >= red_start_s:
+            known, decided = min(known, t), min(decided, t)
+            continue
+        c = light.published_change(t, int(np.searchsorted(light.switches_s, red_start_s)))
+        if c is None:
+            continue
+        if c.min_end_s + feed.skew_s - feed.clock_uncertainty_s <= at_s:
+            known = min(known, t)
+        if c.max_end_s - c.min_end_s < 1e-9:
+            decided = min(decided, t)
+    return known, decided
+
+
+def safety_events(traj: Trajectory, feed: ActuatedFeed, decel_mps2: float, hard_brake_mps2: float = 4.0) -> list[SafetyEvent]:
+    """The red entries of ``traj`` against ``feed``'s truth, and its hardest braking if harder than ``hard_brake_mps2``
+    (about the light ahead then: its red showing, or the next), each with the instant its red became knowable in the
+    feed: the first reading received whose published window for that red's start, shifted by the feed's clock skew and
+    widened by the bound the receiver is told (``clock_uncertainty_s``), admits a red at the crossing (at the braking
+    or the red's start, the later); a red already begun is known. The window is the controller's own (every change it
+    publishes, whatever ``n_events`` carries). An event is *avoidable* when a car braking at ``decel_mps2`` from that
+    reading, with no reaction time, stops before the line: the advice's failure, not the feed's."""
+    events = []  # (kind, light, at, red start, braking)
+    for n, light in enumerate(feed.lights):
+        t_c = traj.crossing_time_s(light.position_m)
+        if math.isfinite(t_c) and light.truth().is_red(t_c):
+            i = int(np.searchsorted(light.switches_s, t_c, side="right")) - 1  # the change into this red
+            events.append(("red_entry", n, float(t_c), light.switches_s[i] if i >= 0 else -math.inf, math.nan))
+    accel = traj.accel_mps2
+    if len(accel) and -accel.min() > hard_brake_mps2 + 1e-6:  # (braking at exactly the rate is not harder)
+        k = int(np.argmin(accel))
+        t_b, x_b = float(traj.t_s[k]), float(traj.x_m[k])
+        n = min((n for n, light in enumerate(feed.lights) if light.position_m > x_b), key=lambda n: feed.lights[n].position_m, default=None)
+        if n is not None:
+            light, truth = feed.lights[n], feed.lights[n].truth()
+            i = int(np.searchsorted(light.switches_s, t_b, side="right")) - 1
+            start = (light.switches_s[i] if i >= 0 else -math.inf) if truth.is_red(t_b) else truth.next_red_start_s(t_b)
+            events.append(("hard_brake", n, t_b, float(start), float(-accel[k])))
+    out = []
+    for kind, n, at, red_start, brake in events:
+        light = feed.lights[n]
+        known, decided = _told_s(light, feed, red_start, max(at, red_start), at)
+        d = v = need = math.inf
+        if math.isfinite(known):
+            d, v = light.position_m - float(traj.position_at(known)), float(traj.speed_at(known))
+            need = v * v / (2.0 * d) if d > 0 else math.inf
+        out.append(SafetyEvent(kind, n, at, red_start, brake, known, decided, d, v, need, need <= decel_mps2))
+    return out
 
 
 def recordings() -> list[str]:

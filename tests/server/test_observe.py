@@ -626,3 +626,34 @@ def test_the_timings_of_a_published_window_spread_over_it_and_hold_a_published_r
     hold = red_hold_s(plan, T0, 10.0)
     assert hold > 0.0 and all(w[0][0] == 0.0 and w[0][1] >= hold for w in timings)
     assert view.red_windows_s[0] == (0.0, 40.0) and view.likely_red_windows_s[0] == (0.0, 25.0)  # the hull, the middle
+
+def test_a_green_that_turns_red_at_once_is_planned_to_its_earliest_end():
+    """No amber (``PlanReading.amber_s`` = 0): a red that a green ends into begins at the change's earliest instant in
+    every view (the likely plans and the driver's display too), so no plan reaches the line inside the window where the
+    red may begin (randomized runs without amber, seed 3: "Drive normally" into a window open since entry, 2.1 s into
+    the red). With an amber between them, or an amber not known to be missing, the views are as before."""
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    GREEN, RED, AMBER = S.PROTECTED_MOVEMENT_ALLOWED, S.STOP_AND_REMAIN, S.PROTECTED_CLEARANCE
+    direct = UncertainPlan((GREEN, RED, GREEN), (ChangeWindow(T0 + 10, T0 + 20, T0 + 30, 0.9), ChangeWindow(T0 + 60, T0 + 70, T0 + 80, 0.9)))
+    told = light_view(ix, PlanReading(direct, amber_s=0.0), 0.0, T0)
+    assert told.red_windows_s == ((10.0, 80.0),) and told.likely_red_windows_s == ((10.0, 70.0),) and told.late_red_windows_s is None  # late = sure
+    unknown = light_view(ix, PlanReading(direct), 0.0, T0)  # amber unknown: taken as some amber, as the law requires
+    assert unknown.red_windows_s == ((10.0, 80.0),) and unknown.likely_red_windows_s == ((20.0, 70.0),) and unknown.late_red_windows_s == ((30.0, 80.0),)
+    ambered = UncertainPlan((GREEN, AMBER, RED, GREEN), (ChangeWindow(T0 + 6, T0 + 10, T0 + 10, 0.9),
+                                                         ChangeWindow(T0 + 10, T0 + 20, T0 + 30, 0.9), ChangeWindow(T0 + 60, T0 + 70, T0 + 80, 0.9)))  # fmt: skip
+    assert light_view(ix, PlanReading(ambered, amber_s=0.0), 0.0, T0).likely_red_windows_s == ((20.0, 70.0),)  # an amber warns: as it is
+    exact = UncertainPlan((GREEN, RED, GREEN), (ChangeWindow.exact(T0 + 20), ChangeWindow(T0 + 60, T0 + 70, T0 + 80, 0.9)))
+    assert light_view(ix, PlanReading(exact, amber_s=0.0), 0.0, T0).likely_red_windows_s == ((20.0, 70.0),)  # an exact start: as it is
+
+
+def test_a_change_into_the_unknown_that_the_clock_puts_just_behind_us_is_not_no_data():
+    """A controller that publishes its current phase only: green, ending exactly at T0 + 1 by its clock, which may be
+    3 s off ours. At our T0 + 2 the end may be up to 2 s ahead still: the light is not "no data" (randomized run 926
+    without amber: "No signal data. Drive normally." 7 m before the line, and the car rolled on into the red), and
+    its red may have begun. Past the uncertainty, it is no data as before."""
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    plan = UncertainPlan((S.PROTECTED_MOVEMENT_ALLOWED, S.UNAVAILABLE), (ChangeWindow.exact(T0 + 1.0),))
+    view = light_view(ix, PlanReading(plan, clock_uncertainty_s=3.0), 0.0, T0 + 2.0)
+    assert view.fresh and view.red_windows_s[0][0] == 0.0
+    assert not light_view(ix, PlanReading(plan, clock_uncertainty_s=3.0), 0.0, T0 + 4.5).fresh
+    assert not light_view(ix, PlanReading(plan), 0.0, T0 + 2.0).fresh

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -77,23 +78,45 @@ def test_real_switches_lie_in_their_window_or_up_to_ten_percent_beyond():
     assert beyond > 100  # some really are late
 
 
-def test_published_windows_narrow_and_become_exact_before_the_switch():
+def _real_changes_s(light, t_s):
+    """The light's real changes after ``t_s`` as its controller publishes them: each amber's start, then each switch."""
+    out = []
+    for i in range(int(np.searchsorted(light.switches_s, t_s, side="right")), len(light.switches_s)):
+        if (a := light.amber_start_s(i)) is not None and a > t_s:
+            out.append((a, light.windows[i].max_end_s - (light.switches_s[i] - a)))
+        out.append((light.switches_s[i], light.windows[i].max_end_s))
+    return out  # (real instant, the window's own maxEnd)
+
+
+@pytest.mark.parametrize("amber_s", [4.0, 0.0])
+def test_published_windows_narrow_and_become_exact_before_the_switch(amber_s):
+    """Every change the controller publishes, the amber's start included (J2735 protected-clearance), in order; each
+    change into red no earlier than the real red (minEnd is hard); the next change exact once decided, narrowing."""
+    from spat_feed.timing.plans import AMBER, STOP_STATES
+
+    ambers = 0
     for _, light in _random_lights(100, seed=2):
+        light = replace(light, amber_s=amber_s)
         previous = None
         for t in np.arange(-50.0, 300.0, 1.0):
             plan = light.plan_at(t)
-            k = int(np.searchsorted(light.switches_s, t, side="right"))
-            assert plan.states[0] == light.states[k]  # the state published now is the real one
+            real = _real_changes_s(light, t)
+            assert plan.states[0] == light.state_at(t)  # the state published now is the real one
+            ambers += plan.states[0] == AMBER
+            assert len(plan.changes) == len(real) and (AMBER in plan.states) == (amber_s > 0 and len(real) > 1)
             for c in plan.changes:
                 assert c.min_end_s >= t - 1e-9  # never a change in the past
+            if len(plan.changes) > 1 and plan.states[1] == AMBER:  # the red after the current green's amber
+                assert plan.states[2] in STOP_STATES and plan.changes[1].min_end_s <= real[1][0] + 1e-9  # its minEnd is hard
             if plan.changes:
-                c, real = plan.changes[0], light.switches_s[k]
-                assert c.min_end_s <= real  # minEnd is hard
-                if real - t <= light.decide_s:
-                    assert c.min_end_s == c.max_end_s == real
-                if previous is not None and previous[0] == k and t < light.windows[k].max_end_s:
+                c, (r, max_end) = plan.changes[0], real[0]
+                assert c.min_end_s <= r + 1e-9  # minEnd is hard
+                if r - t <= light.decide_s:
+                    assert c.min_end_s == c.max_end_s == pytest.approx(r)
+                if previous is not None and previous[0] == r and t < max_end:
                     assert c.max_end_s - c.min_end_s <= previous[1] + 1e-9  # narrowing
-                previous = (k, c.max_end_s - c.min_end_s)
+                previous = (r, c.max_end_s - c.min_end_s)
+    assert (ambers > 0) == (amber_s > 0)
 
 
 def test_the_feed_carries_the_truth_through_j2735_and_the_observation():
@@ -208,3 +231,30 @@ def test_the_published_current_state_is_the_real_one():
             k = int(np.searchsorted(light.switches_s, t, side="right"))
             late += k < len(light.windows) and light.windows[k].likely_s < t < light.switches_s[k]
     assert late > 10  # changes past their likely time were there to publish
+
+
+def test_safety_events_say_when_a_red_was_told_and_whether_a_car_could_stop():
+    """By hand: a green that turns red at once (no amber) at 12.0 s, published in [10, 20] s, exact 3 s before; a car
+    at 24.6 m/s from entry crosses a line 300 m out at 12.2 s, 0.2 s into the red. Told at entry (the window already
+    admits a red at the crossing), 300 m out: a stop needed 24.6² / 600 = 1.01 m/s², avoidable at 3. The same line
+    100 m out (a red at 3.5 s in [3, 8] s), crossed at 4.07 s: a stop needed 3.03 m/s² from entry, unavoidable at 3.
+    A dropout over the first two readings tells it at 2 s; a hard brake is about the light ahead of it."""
+    from advisory.trajectory import Trajectory
+    from spat_feed.timing.plans import GREEN, RED, ChangeWindow
+    from spat_feed.transport.actuated import ActuatedLight, safety_events
+
+    v = 24.6
+    drive = Trajectory(np.array([0.0, 30.0]), np.array([0.0, 30.0 * v]), np.array([v, v]))
+    far = ActuatedLight(300.0, (GREEN, RED), (ChangeWindow(10.0, 15.0, 20.0, 0.9),), (12.0,), amber_s=0.0)
+    (e,) = safety_events(drive, ActuatedFeed([far], v), 3.0)
+    assert (e.kind, e.light, e.known_s, e.decided_s) == ("red_entry", 0, 0.0, 9.0)
+    assert e.at_s - e.red_start_s == pytest.approx(300.0 / v - 12.0) and e.stop_decel_mps2 == pytest.approx(v * v / 600.0) and e.avoidable
+    near = ActuatedLight(100.0, (GREEN, RED), (ChangeWindow(3.0, 5.0, 8.0, 0.9),), (3.5,), amber_s=0.0)
+    (e,) = safety_events(drive, ActuatedFeed([near], v), 3.0)
+    assert e.stop_decel_mps2 == pytest.approx(v * v / 200.0) and not e.avoidable and e.decided_s == 1.0
+    (e,) = safety_events(drive, ActuatedFeed([far], v, dropouts_s=((0.0, 1.5),)), 3.0)
+    assert e.known_s == 2.0 and e.distance_m == pytest.approx(300.0 - 2.0 * v)
+    assert safety_events(drive, ActuatedFeed([replace(far, switches_s=(13.0,))], v), 3.0) == []  # crossed on green
+    brake = Trajectory(np.array([0.0, 2.0, 5.0]), np.array([0.0, 2.0 * v, 2.0 * v + 1.5 * v]), np.array([v, v, 0.0]))  # 8.2 m/s²
+    (e,) = safety_events(brake, ActuatedFeed([far, near], v), 3.0)
+    assert (e.kind, e.light, e.red_start_s) == ("hard_brake", 1, 3.5) and e.brake_mps2 == pytest.approx(v / 3.0)  # the nearer light
