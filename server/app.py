@@ -31,6 +31,7 @@ from server.errors import install_handlers
 from server.metrics import Metrics
 from server.middleware import GuardMiddleware
 from server.openapi import install_docs
+from server.overload import ShedCollector, ShedMiddleware, Shedder
 from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
 from server.spat import SpatHub
@@ -137,14 +138,16 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         await speech.start()
         await hub.start()
         sweeper = asyncio.create_task(_expire_idle(engine, metrics, min(60.0, settings.trip_idle_ttl_s / 2)))
+        lag_probe = asyncio.create_task(shedder.watch())
         gc.freeze()  # start-up objects (tables, corridors, numba) to the permanent generation: collections stop rescanning them
         log.info("advisory service ready in %.1f s: %d corridors, tables for %s, speech %s", time.perf_counter() - t0, len(corridors_), sorted(tables), speech.reason)
         try:
             yield
         finally:
-            sweeper.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await sweeper
+            for task in (sweeper, lag_probe):
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
             await speech.stop()
             await engine.trips.close()
             await hub.stop()
@@ -166,6 +169,9 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     default = corridors_[settings.default_corridor]
     install_docs(app, default.position(min(50.0, default.length_m / 2)), default.name)
     install_handlers(app)
+    shedder = app.state.shedder = Shedder(settings.max_in_flight, settings.max_loop_lag_s)  # overload: 503 + Retry-After, never a queue
+    metrics.registry.register(ShedCollector(shedder))
+    app.add_middleware(ShedMiddleware, shedder=shedder)  # inside GuardMiddleware: a refusal is counted as a 503
     app.add_middleware(GuardMiddleware, max_body_bytes=settings.max_body_bytes, metrics=metrics)
     if settings.cors_origins:  # outermost: answers browsers' preflight requests (docs/SERVICE.md, CORS)
         app.add_middleware(CORSMiddleware, allow_origins=list(settings.cors_origins), allow_methods=["GET", "POST"],

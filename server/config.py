@@ -105,6 +105,10 @@ class Settings(BaseSettings):
     max_speed_mps: float = Field(default=50.0, gt=0, description="a fix implying a faster jump along the route is ignored as a GPS glitch [m/s]")
     max_trace_fixes: int = Field(default=7_200, ge=10, description="fixes kept per trip for its score")
 
+    # overload (server.overload, per worker): beyond either, 503 overloaded + Retry-After instead of a queue
+    max_in_flight: int = Field(default=256, ge=1, description="requests served at once per worker (awaiting Redis or a trip's turn)")
+    max_loop_lag_s: float = Field(default=0.25, gt=0, description="shed while the worker's event loop runs this late at two probes in a row [s]")
+
     @property
     def spat_simulated(self) -> bool:
         """Whether lights with fixed plans are simulated in process (``spat_simulate``, default: no remote feed)."""

@@ -5,7 +5,8 @@ one place a token may ride in the URL: browsers cannot set headers there). A ref
 accepted, told why (``{"error": ..., "status": 401|403|404|429}``) and closed with code 4000 + HTTP
 status. A bad message gets an error object and the stream goes on; nothing about the trip changes. Every
 message keeps the trip alive (``last_seen``). At most ``ws_max_per_trip`` streams per trip and
-``ws_max_per_client`` per client address are open at once (4429 beyond).
+``ws_max_per_client`` per client address are open at once (4429 beyond). A fix that comes while the worker
+sheds load (``server.overload``) gets ``{"error": "overloaded", "status": 503, ...}`` and is dropped; the stream goes on.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pydantic_core import to_json
 
 from server.advising import fix_from_schema
 from server.gps import Fix
+from server.overload import RETRY_AFTER_S, Shedder
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
 from server.errors import ApiError, clean_errors, validation_summary
 from server.schemas import GpsFixIn
@@ -83,6 +85,7 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
         return
     metrics.ws_open.inc()
     limit = settings.ws_max_message_bytes
+    shedder: Shedder = ws.app.state.shedder
     try:
         await ws.accept()
         while True:
@@ -101,7 +104,13 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
                 if size > limit:
                     await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
                     raise ApiError(413, "payload_too_large", f"message of {size} bytes, larger than {limit}")
-                out = await engine.apply_fix(trip_id, token, lambda: _parse(text))
+                if (reason := shedder.refusal()) is not None:  # overloaded (server.overload): this fix is dropped, the stream goes on
+                    raise ApiError(503, "overloaded", shedder.error_body(reason)["message"], headers={"Retry-After": str(RETRY_AFTER_S)})
+                shedder.in_flight += 1
+                try:
+                    out = await engine.apply_fix(trip_id, token, lambda: _parse(text))
+                finally:
+                    shedder.in_flight -= 1
                 await ws.send_text(to_json(out).decode())
             except ApiError as exc:
                 await ws.send_text(_error(exc))
