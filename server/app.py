@@ -28,6 +28,7 @@ from server.advising import Engine
 from server.audio import Speech
 from server.config import Settings
 from server.errors import install_handlers
+from server.fastlane import FixLane
 from server.metrics import Metrics
 from server.middleware import GuardMiddleware
 from server.openapi import install_docs
@@ -171,6 +172,8 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     install_handlers(app)
     shedder = app.state.shedder = Shedder(settings.max_in_flight, settings.max_loop_lag_s)  # overload: 503 + Retry-After, never a queue
     metrics.registry.register(ShedCollector(shedder))
+    fix_route = next(r for r in app.router.routes if getattr(r, "path", "") == "/v1/trips/{trip_id}/fixes" and "POST" in getattr(r, "methods", ()))
+    app.add_middleware(FixLane, route=fix_route, handlers=app.exception_handlers)  # a car's fix each second, without the router
     app.add_middleware(ShedMiddleware, shedder=shedder)  # inside GuardMiddleware: a refusal is counted as a 503
     app.add_middleware(GuardMiddleware, max_body_bytes=settings.max_body_bytes, metrics=metrics)
     if settings.cors_origins:  # outermost: answers browsers' preflight requests (docs/SERVICE.md, CORS)
