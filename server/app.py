@@ -135,6 +135,8 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         app.state.engine = engine
         if engine.trips.shared:  # WebSocket caps across workers
             app.state.streams = RedisStreams(engine.trips)
+            if warning := await engine.trips.volatile():
+                log.warning(warning)
         await asyncio.to_thread(warm_up, engine)
         await speech.start()
         await hub.start()
