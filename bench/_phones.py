@@ -1,0 +1,185 @@
+"""Open-loop load: phones sending one GPS fix per period, whatever the service answers (run as its own process
+by ``bench/bench_redis_load.py``, so its CPU is measured apart from the workers').
+
+Each phone is one keep-alive connection and one trip (``bench/_loadgen.py``'s :class:`Car` does the HTTP). Phone
+``i`` ticks every ``period_s`` at its own offset (the phones' ticks spread evenly over the period). At a tick an
+active phone sends its fix; if its previous answer is still out, the fix is sent as soon as that answer is in, and
+its latency still counts from the tick (no coordinated omission: a slow service is not hidden by phones waiting
+for it); a tick that finds a fix already waiting is counted as ``late`` (the phone could not send it) and dropped.
+
+Reads a JSON job on stdin: ``{"port", "trips": [[id, token], ...], "positions": [[lat, lon], ...], "period_s",
+"phases": [[seconds, n_active], ...], "out"}``: phase k keeps the first ``n_active`` phones sending for
+``seconds``. Writes ``mark`` to stdout at the start of each phase and at the end of the last (the caller samples
+CPU there), then ``done`` once ``out`` holds ``{"marks": [t...], "cpu_s": [...], "late": n, "lost": n, "t": [...],
+"lat_s": [...], "status": [...], "kind": [...]}``: per answer its tick (seconds since the run began), latency,
+HTTP status and kind (0 ok, 1 shed: ``overloaded``, 2 ``store_unavailable``, 3 any other error).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import sys
+import time
+
+from _loadgen import Car, cpu_s
+
+KINDS = {b'"overloaded"': 1, b'"store_unavailable"': 2}
+
+
+class Phone(Car):
+    """A :class:`Car` that sends on its ticks instead of as soon as it is answered."""
+
+    def __init__(self, run: OpenRun, i: int, trip_id: str, token: str) -> None:
+        super().__init__(run, i, trip_id, token)
+        self.busy = False
+        self.owed: float | None = None  # the tick of a fix waiting for the answer in flight
+
+    def tick(self, due: float) -> None:
+        if self.transport is None or self.transport.is_closing():  # closed by the service: a phone connects again
+            if not self.busy:
+                self.busy = True
+                asyncio.get_running_loop().create_task(self.reconnect(due))
+            return
+        if self.busy:
+            if self.owed is not None:
+                self.run.late += 1
+            self.owed = due
+            return
+        self.send_at(due)
+
+    def send_at(self, due: float) -> None:
+        self.busy = True
+        self.send()
+        self.sent = due  # latency from the tick
+
+    async def reconnect(self, due: float) -> None:
+        self.buf, self.need = b"", -1
+        try:
+            await asyncio.get_running_loop().create_connection(lambda: self, "127.0.0.1", self.run.job["port"])
+        except OSError:
+            self.busy = False
+            return
+        self.send_at(due)
+
+    def connection_made(self, transport) -> None:
+        self.transport = transport
+        if not self.run.all_connected.is_set():
+            super().connection_made(transport)
+
+    def connection_lost(self, exc) -> None:
+        if not self.run.stopping:
+            self.run.lost += 1
+            if self.busy:  # the fix in flight is lost: an error
+                self.status, self.busy = 0, False
+                self.run.answered(self, b"", time.perf_counter())
+        self.transport = None
+
+    def data_received(self, data: bytes) -> None:
+        self.buf += data
+        while True:
+            if self.need < 0:
+                end = self.buf.find(b"\r\n\r\n")
+                if end < 0:
+                    return
+                head = self.buf[:end].lower()
+                self.status = int(head[9:12])
+                at = head.find(b"content-length:")
+                eol = head.find(b"\r\n", at)
+                self.need = int(head[at + 15 : eol if eol >= 0 else len(head)]) if at >= 0 else 0
+                self.buf = self.buf[end + 4 :]
+            if len(self.buf) < self.need:
+                return
+            body = self.buf[: self.need] if self.status != 200 else b""
+            self.buf = self.buf[self.need :]
+            self.need = -1
+            self.busy = False
+            self.run.answered(self, body, time.perf_counter())
+            if self.owed is not None and not self.run.stopping:
+                due, self.owed = self.owed, None
+                self.send_at(due)
+
+
+class OpenRun:
+    def __init__(self, job: dict) -> None:
+        self.job = job
+        self.positions = job["positions"]
+        self.cars = [Phone(self, i, tid, tok) for i, (tid, tok) in enumerate(job["trips"])]
+        self.connected = 0
+        self.lost = 0
+        self.late = 0
+        self.all_connected = asyncio.Event()
+        self.stopping = False
+        self.t0 = 0.0
+        self.t: list[float] = []
+        self.lat: list[float] = []
+        self.status: list[int] = []
+        self.kind: list[int] = []
+
+    def answered(self, car: Phone, body: bytes, now: float) -> None:
+        self.t.append(car.sent - self.t0)
+        self.lat.append(now - car.sent)
+        self.status.append(car.status)
+        kind = 0
+        if car.status != 200:
+            kind = next((k for word, k in KINDS.items() if word in body), 3)
+        self.kind.append(kind)
+
+    async def main(self) -> dict:
+        loop = asyncio.get_running_loop()
+        for car in self.cars:
+            await loop.create_connection(lambda c=car: c, "127.0.0.1", self.job["port"])
+        await asyncio.wait_for(self.all_connected.wait(), 60)
+        period = self.job["period_s"]
+        n = len(self.cars)
+        self.t0 = start = time.perf_counter() + 0.2
+        marks, cpu = [], []
+        active = 0
+
+        def tick(i: int, due: float) -> None:
+            if self.stopping:
+                return
+            if i < active:
+                self.cars[i].tick(due)
+            loop.call_at(loop.time() + (due + period - time.perf_counter()), tick, i, due + period)
+
+        for i in range(n):
+            due = start + period * i / n
+            loop.call_at(loop.time() + (due - time.perf_counter()), tick, i, due)
+        at = start
+        for seconds, n_active in self.job["phases"]:
+            await asyncio.sleep(max(0.0, at - time.perf_counter()))
+            active = n_active
+            print("mark", flush=True)
+            marks.append(time.perf_counter() - self.t0)
+            cpu.append(cpu_s())
+            at += seconds
+        await asyncio.sleep(max(0.0, at - time.perf_counter()))
+        print("mark", flush=True)
+        marks.append(time.perf_counter() - self.t0)
+        cpu.append(cpu_s())
+        self.stopping = True
+        await asyncio.sleep(1.0)  # the answers in flight come back before the connections close
+        for car in self.cars:
+            if car.transport is not None:
+                car.transport.close()
+        return {"marks": marks, "cpu_s": cpu, "late": self.late, "lost": self.lost, "t": self.t, "lat_s": self.lat, "status": self.status, "kind": self.kind}
+
+
+def main() -> int:
+    job = json.load(sys.stdin)
+    try:
+        import uvloop
+
+        runner = uvloop.run
+    except ImportError:
+        runner = asyncio.run
+    out = runner(OpenRun(job).main())
+    with open(job["out"], "w") as f:
+        json.dump(out, f)
+    print("done", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
