@@ -122,3 +122,25 @@ def test_in_flight_bound_on_a_worker_with_redis_paused_503_overloaded_then_serve
             os.kill(redis.proc.pid, signal.SIGCONT)
         proc.kill()
         redis.kill()
+
+
+def test_a_websocket_fix_while_shedding_gets_an_overloaded_error_and_the_stream_goes_on(s200):
+    from fastapi.testclient import TestClient
+
+    from server.app import create_app
+    from server.config import Settings
+
+    with TestClient(create_app(Settings(corridors=("paper_s200",), default_corridor="paper_s200", tables=False, speech=False))) as c:
+        trip = c.post("/v1/trips", json={}).json()
+        shedder = c.app.state.shedder
+        lat, lon = s200.position(10.0)
+        with c.websocket_connect(f"/v1/trips/{trip['trip_id']}/stream?token={trip['token']}") as ws:
+            shedder.observe = lambda late_s: None  # the app's own probe is muted: the lag is set here
+            shedder.lag_s = 1.0  # the loop a second late (at two probes in a row)
+            ws.send_json({"t_unix_s": time.time(), "lat_deg": lat, "lon_deg": lon, "speed_mps": 10.0})
+            refused = ws.receive_json()
+            assert refused["status"] == 503 and refused["error"] == "overloaded" and "retry in 1 s" in refused["message"]
+            shedder.lag_s = 0.0  # on time again
+            ws.send_json({"t_unix_s": time.time(), "lat_deg": lat, "lon_deg": lon, "speed_mps": 10.0})
+            assert ws.receive_json()["seq"] == 1  # the refused fix changed nothing
+        assert shedder.shed["loop_lag"] == 1
