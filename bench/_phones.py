@@ -2,7 +2,7 @@
 by ``bench/bench_redis_load.py``, so its CPU is measured apart from the workers').
 
 Each phone is one keep-alive connection and one trip (``bench/_loadgen.py``'s :class:`Car` does the HTTP). Phone
-``i`` ticks every ``period_s`` at its own offset (the phones' ticks spread evenly over the period). At a tick an
+``i`` ticks every ``period_s`` at its own offset (any first k phones spread evenly over the period). At a tick an
 active phone sends its fix; if its previous answer is still out, the fix is sent as soon as that answer is in, and
 its latency still counts from the tick (no coordinated omission: a slow service is not hidden by phones waiting
 for it); a tick that finds a fix already waiting is counted as ``late`` (the phone could not send it) and dropped.
@@ -24,6 +24,8 @@ import time
 
 from _loadgen import Car, cpu_s
 
+GOLDEN = (5**0.5 - 1) / 2
+"""Phone i ticks at (i x GOLDEN) mod 1 of the period: any first k phones are spread evenly (a low-discrepancy sequence)."""
 KINDS = {b'"overloaded"': 1, b'"store_unavailable"': 2}
 
 
@@ -144,7 +146,7 @@ class OpenRun:
             loop.call_at(loop.time() + (due + period - time.perf_counter()), tick, i, due + period)
 
         for i in range(n):
-            due = start + period * i / n
+            due = start + period * ((i * GOLDEN) % 1.0)  # the first k phones spread evenly over the period, whatever k
             loop.call_at(loop.time() + (due - time.perf_counter()), tick, i, due)
         at = start
         for seconds, n_active in self.job["phases"]:

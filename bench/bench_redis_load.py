@@ -135,7 +135,8 @@ def one_service(name: str, env: dict, workers: int, redis: RedisServer, args, fo
           f" other errors {int(other.sum())}; ticks not sent (answer still out) {out['late']}; worker CPU {1e3 * cpu_hi / max(int(hi.sum()), 1):.3f} ms/answer,"
           f" workers {100 * w_hi:.0f} %, others {100 * o_hi:.0f} %")  # fmt: skip
     after = t >= m[3]
-    before = max(np.percentile(lat[(t >= a) & (t < a + WINDOW_S)], 99) for a in np.arange(m[1], m[2] - WINDOW_S / 2, WINDOW_S))
+    windows = [(t >= a) & (t < a + WINDOW_S) for a in np.arange(m[1], m[2] - WINDOW_S / 2, WINDOW_S)]
+    before = max(np.percentile(lat[w], 99) for w in windows if w.any())
     rec = recovery_s(t[after], lat[after], status[after] == 200, m[3], m[4], before)
     last_error = t[after & (status != 200)].max() - m[3] if (after & (status != 200)).any() else float("nan")
     print(f"     back to {args.low}: recovered in {rec:.1f} s (target <= 5 s: from then on every {WINDOW_S:g} s has no error and a p99 <= {1e3 * TARGET_P99_S:.0f} ms"

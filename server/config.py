@@ -66,7 +66,8 @@ class Settings(BaseSettings):
     cors_origins: Annotated[tuple[str, ...], NoDecode] = Field(default=(), description="browser origins allowed to call the API (CORS); '*' = any; empty = CORS off")
 
     # trip store (server.store): where open trips live
-    store_url: str | None = Field(default=None, description="Redis holding the open trips, shared by every worker (redis://host:6379/0); None = in this process (one worker; a restart loses them)")
+    store_url: str | None = Field(default=None, description="Redis holding the open trips, shared by every worker (redis://host:6379/0), run with --appendonly yes "
+                                     "(without it a restart of Redis loses every open trip); None = in this process (one worker; a restart loses them)")
     store_prefix: str = Field(default="eco", min_length=1, description="prefix of the store's Redis keys (several services on one Redis)")
     store_timeout_s: float = Field(default=2.0, gt=0, description="a Redis call failing for this long answers 503 + Retry-After [s]")
 
