@@ -18,11 +18,9 @@ HTTP status and kind (0 ok, 1 shed: ``overloaded``, 2 ``store_unavailable``, 3 a
 from __future__ import annotations
 
 import asyncio
-import json
-import sys
 import time
 
-from _loadgen import Car, cpu_s
+from _loadgen import Car, Run, cpu_s, main
 
 GOLDEN = (5**0.5 - 1) / 2
 """Phone i ticks at (i x GOLDEN) mod 1 of the period: any first k phones are spread evenly (a low-discrepancy sequence)."""
@@ -77,44 +75,25 @@ class Phone(Car):
                 self.run.answered(self, b"", time.perf_counter())
         self.transport = None
 
-    def data_received(self, data: bytes) -> None:
-        self.buf += data
-        while True:
-            if self.need < 0:
-                end = self.buf.find(b"\r\n\r\n")
-                if end < 0:
-                    return
-                head = self.buf[:end].lower()
-                self.status = int(head[9:12])
-                at = head.find(b"content-length:")
-                eol = head.find(b"\r\n", at)
-                self.need = int(head[at + 15 : eol if eol >= 0 else len(head)]) if at >= 0 else 0
-                self.buf = self.buf[end + 4 :]
-            if len(self.buf) < self.need:
-                return
-            body = self.buf[: self.need] if self.status != 200 else b""
-            self.buf = self.buf[self.need :]
-            self.need = -1
-            self.busy = False
-            self.run.answered(self, body, time.perf_counter())
-            if self.owed is not None and not self.run.stopping:
-                due, self.owed = self.owed, None
-                self.send_at(due)
+    def answered(self) -> bool:
+        self.busy = False
+        self.run.answered(self, self.body, time.perf_counter())
+        if self.owed is not None and not self.run.stopping:
+            due, self.owed = self.owed, None
+            self.send_at(due)
+        return True
 
 
-class OpenRun:
+class OpenRun(Run):
+    """:class:`Run`'s connections and counters, the phones' schedule and per-answer records."""
+
+    car_class = Phone
+
     def __init__(self, job: dict) -> None:
-        self.job = job
-        self.positions = job["positions"]
-        self.cars = [Phone(self, i, tid, tok) for i, (tid, tok) in enumerate(job["trips"])]
-        self.connected = 0
-        self.lost = 0
+        super().__init__(job)
         self.late = 0
-        self.all_connected = asyncio.Event()
-        self.stopping = False
         self.t0 = 0.0
         self.t: list[float] = []
-        self.lat: list[float] = []
         self.status: list[int] = []
         self.kind: list[int] = []
 
@@ -168,20 +147,5 @@ class OpenRun:
         return {"marks": marks, "cpu_s": cpu, "late": self.late, "lost": self.lost, "t": self.t, "lat_s": self.lat, "status": self.status, "kind": self.kind}
 
 
-def main() -> int:
-    job = json.load(sys.stdin)
-    try:
-        import uvloop
-
-        runner = uvloop.run
-    except ImportError:
-        runner = asyncio.run
-    out = runner(OpenRun(job).main())
-    with open(job["out"], "w") as f:
-        json.dump(out, f)
-    print("done", flush=True)
-    return 0
-
-
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(OpenRun))

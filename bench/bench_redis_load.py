@@ -24,13 +24,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import json
 import os
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -40,7 +38,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from bench._procs import cpu_seconds, free_port, machine_cpu_s  # noqa: E402
-from bench.bench_scaleout import start_service, tree_cpu_s  # noqa: E402
+from bench.bench_scaleout import bench_redis, running_service, tree_cpu_s  # noqa: E402
 from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
 from spat_feed.road.corridors import load_corridor  # noqa: E402
 from tests.procs import RedisServer  # noqa: E402
@@ -89,20 +87,13 @@ def recovery_s(t, lat, ok, drop_s: float, end_s: float, before_p99_s: float) -> 
 
 def one_service(name: str, env: dict, workers: int, redis: RedisServer, args, folder: Path, positions) -> None:
     port = free_port()
-    proc = start_service(port, folder / f"service-{workers}-{'ECO_STORE_URL' in env}.log", env, workers)
-    try:
+    with running_service(port, folder / f"service-{workers}-{'ECO_STORE_URL' in env}.log", env, workers) as proc:
         trips = asyncio.run(create_trips(port, args.high))
         marks = []
         load_avg = os.getloadavg()[0]
         phases = [[3.0, args.low], [args.seconds, args.low], [args.seconds, args.high], [args.seconds, args.low]]
         out = run_phones(port, trips, positions, phases, folder / "phones.json",
                          lambda: marks.append((tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s(), time.perf_counter())))  # fmt: skip
-    finally:
-        proc.terminate()
-        with contextlib.suppress(subprocess.TimeoutExpired):
-            proc.wait(timeout=20)
-        if proc.poll() is None:
-            proc.kill()
     if os.environ.get("BENCH_KEEP"):
         Path(os.environ["BENCH_KEEP"]).with_suffix(f".{workers}.json").write_text(json.dumps(out))
     t, lat = np.asarray(out["t"]), np.asarray(out["lat_s"])
@@ -159,19 +150,13 @@ def main() -> int:
     there = [corridor.position(float(s)) for s in range(int(corridor.length_m))]
     positions = there + there[::-1]
     print(f"bench_redis_load: {os.cpu_count()} CPUs, shared with other jobs (their load is printed beside each service); phones send 1 fix/s")
-    with tempfile.TemporaryDirectory(prefix="ecodrive-bench-") as tmp:
-        folder = Path(tmp)
-        (folder / "redis").mkdir()
-        redis = RedisServer(folder / "redis", fsync="everysec").start()
-        try:
-            idle = {"ECO_KEEP_ALIVE_S": "60", "ECO_READ_TIMEOUT_S": "60"}  # the phones beyond --low wait, connected, through two phases
-            services = [("in-process store, 1 worker", idle, 1), (f"Redis, {args.workers} workers", {**idle, "ECO_STORE_URL": redis.url}, args.workers)]
-            for name, env, workers in services:
-                if args.only and (args.only == "redis") != ("ECO_STORE_URL" in env):
-                    continue
-                one_service(name, env, workers, redis, args, folder, positions)
-        finally:
-            redis.kill()
+    with bench_redis() as (folder, redis):
+        idle = {"ECO_KEEP_ALIVE_S": "60", "ECO_READ_TIMEOUT_S": "60"}  # the phones beyond --low wait, connected, through two phases
+        services = [("in-process store, 1 worker", idle, 1), (f"Redis, {args.workers} workers", {**idle, "ECO_STORE_URL": redis.url}, args.workers)]
+        for name, env, workers in services:
+            if args.only and (args.only == "redis") != ("ECO_STORE_URL" in env):
+                continue
+            one_service(name, env, workers, redis, args, folder, positions)
     return 0
 
 
