@@ -18,9 +18,13 @@ HTTP status and kind (0 ok, 1 shed: ``overloaded``, 2 ``store_unavailable``, 3 a
 from __future__ import annotations
 
 import asyncio
+import json
+import sys
 import time
+from collections import deque
 
-from _loadgen import Car, Run, cpu_s, main
+import websockets
+from _loadgen import SPEED_MPS, Car, Run, cpu_s, main
 
 GOLDEN = (5**0.5 - 1) / 2
 """Phone i ticks at (i x GOLDEN) mod 1 of the period: any first k phones are spread evenly (a low-discrepancy sequence)."""
@@ -106,11 +110,20 @@ class OpenRun(Run):
             kind = next((k for word, k in KINDS.items() if word in body), 3)
         self.kind.append(kind)
 
-    async def main(self) -> dict:
+    async def connect(self) -> None:
         loop = asyncio.get_running_loop()
         for car in self.cars:
             await loop.create_connection(lambda c=car: c, "127.0.0.1", self.job["port"])
         await asyncio.wait_for(self.all_connected.wait(), 60)
+
+    async def close(self) -> None:
+        for car in self.cars:
+            if car.transport is not None:
+                car.transport.close()
+
+    async def main(self) -> dict:
+        loop = asyncio.get_running_loop()
+        await self.connect()
         period = self.job["period_s"]
         n = len(self.cars)
         self.t0 = start = time.perf_counter() + 0.2
@@ -141,11 +154,62 @@ class OpenRun(Run):
         cpu.append(cpu_s())
         self.stopping = True
         await asyncio.sleep(1.0)  # the answers in flight come back before the connections close
-        for car in self.cars:
-            if car.transport is not None:
-                car.transport.close()
+        await self.close()
         return {"marks": marks, "cpu_s": cpu, "late": self.late, "lost": self.lost, "t": self.t, "lat_s": self.lat, "status": self.status, "kind": self.kind}
 
 
+class StreamPhone:
+    """A phone on the WebSocket stream (as the app sends its fixes): a fix per tick, answers in order, several
+    in flight when the service is slow (each one's latency from its own tick)."""
+
+    def __init__(self, run: StreamRun, i: int, trip_id: str, token: str) -> None:
+        self.run, self.trip_id, self.token = run, trip_id, token
+        self.t0 = time.time() - 7.0 * i
+        self.ws = None
+        self.pending: deque[float] = deque()  # ticks of the fixes sent, not answered yet
+        self.status = 0
+        self.sent = 0.0
+
+    async def open(self) -> None:
+        url = f"ws://127.0.0.1:{self.run.job['port']}/v1/trips/{self.trip_id}/stream"
+        self.ws = await websockets.connect(url, additional_headers={"Authorization": f"Bearer {self.token}"}, compression=None)
+        asyncio.get_running_loop().create_task(self.receive())
+
+    def tick(self, due: float) -> None:
+        if self.ws is None:
+            return
+        if self.pending:
+            self.run.late += 1
+        now = time.time()
+        lat, lon = self.run.positions[int(SPEED_MPS * (now - self.t0)) % len(self.run.positions)]
+        self.pending.append(due)
+        asyncio.get_running_loop().create_task(self.ws.send('{"t_unix_s":%.3f,"lat_deg":%.7f,"lon_deg":%.7f,"speed_mps":%.1f,"accuracy_m":4.0}' % (now, lat, lon, SPEED_MPS)))
+
+    async def receive(self) -> None:
+        try:
+            async for message in self.ws:
+                now = time.perf_counter()
+                self.sent = self.pending.popleft()
+                error = '"error"' in message[:40]
+                self.status = int(message.rsplit('"status":', 1)[1].strip(" }")) if error else 200
+                self.run.answered(self, message.encode() if error else b"", now)
+        except websockets.ConnectionClosed:
+            if not self.run.stopping:
+                self.run.lost += 1
+
+
+class StreamRun(OpenRun):
+    """The same phones and phases on the WebSocket stream (``"transport": "ws"`` in the job)."""
+
+    car_class = StreamPhone
+
+    async def connect(self) -> None:
+        for k in range(0, len(self.cars), 100):
+            await asyncio.gather(*(car.open() for car in self.cars[k : k + 100]))
+
+    async def close(self) -> None:
+        await asyncio.gather(*(car.ws.close() for car in self.cars if car.ws is not None), return_exceptions=True)
+
+
 if __name__ == "__main__":
-    raise SystemExit(main(OpenRun))
+    raise SystemExit(main(StreamRun if json.loads(sys.argv[1] if len(sys.argv) > 1 else '"http"') == "ws" else OpenRun))

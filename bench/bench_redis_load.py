@@ -54,9 +54,9 @@ def pct_ms(a, q: float) -> float:
     return float(np.percentile(a, q) * 1e3) if a.size else float("nan")
 
 
-def run_phones(port: int, trips, positions, phases, out: Path, mark) -> dict:
+def run_phones(port: int, trips, positions, phases, out: Path, mark, transport: str = "http") -> dict:
     job = {"port": port, "trips": trips, "positions": positions, "period_s": 1.0, "phases": phases, "out": str(out)}
-    gen = subprocess.Popen([sys.executable, str(REPO / "bench" / "_phones.py")], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    gen = subprocess.Popen([sys.executable, str(REPO / "bench" / "_phones.py"), json.dumps(transport)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     gen.stdin.write(json.dumps(job))
     gen.stdin.close()
     for line in gen.stdout:
@@ -93,7 +93,7 @@ def one_service(name: str, env: dict, workers: int, redis: RedisServer, args, fo
         load_avg = os.getloadavg()[0]
         phases = [[3.0, args.low], [args.seconds, args.low], [args.seconds, args.high], [args.seconds, args.low]]
         out = run_phones(port, trips, positions, phases, folder / "phones.json",
-                         lambda: marks.append((tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s(), time.perf_counter())))  # fmt: skip
+                         lambda: marks.append((tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s(), time.perf_counter())), args.transport)  # fmt: skip
     if os.environ.get("BENCH_KEEP"):
         Path(os.environ["BENCH_KEEP"]).with_suffix(f".{workers}.json").write_text(json.dumps(out))
     t, lat = np.asarray(out["t"]), np.asarray(out["lat_s"])
@@ -142,6 +142,7 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0, help="length of each measured phase [s]")
     ap.add_argument("--workers", type=int, default=2, help="Redis: worker processes")
     ap.add_argument("--only", choices=["memory", "redis"], help="run one service only")
+    ap.add_argument("--transport", choices=["http", "ws"], default="http", help="fixes as REST POSTs (default) or on each trip's WebSocket stream, as the app sends them")
     args = ap.parse_args()
     if shutil.which("redis-server") is None:
         print("redis-server is not installed: sh scripts/system-deps.sh (as root) installs it")
@@ -149,7 +150,7 @@ def main() -> int:
     corridor = load_corridor(CORRIDOR)
     there = [corridor.position(float(s)) for s in range(int(corridor.length_m))]
     positions = there + there[::-1]
-    print(f"bench_redis_load: {os.cpu_count()} CPUs, shared with other jobs (their load is printed beside each service); phones send 1 fix/s")
+    print(f"bench_redis_load: {os.cpu_count()} CPUs, shared with other jobs (their load is printed beside each service); phones send 1 fix/s ({args.transport})")
     with bench_redis() as (folder, redis):
         idle = {"ECO_KEEP_ALIVE_S": "60", "ECO_READ_TIMEOUT_S": "60"}  # the phones beyond --low wait, connected, through two phases
         services = [("in-process store, 1 worker", idle, 1), (f"Redis, {args.workers} workers", {**idle, "ECO_STORE_URL": redis.url}, args.workers)]
