@@ -44,6 +44,7 @@ class Car(asyncio.Protocol):
         self.buf = b""
         self.need = -1  # bytes of the answer still to come once its head is read (-1: reading the head)
         self.status = 0
+        self.body = b""
         self.sent = 0.0
         self.transport: asyncio.Transport | None = None
 
@@ -76,12 +77,19 @@ class Car(asyncio.Protocol):
                 self.buf = self.buf[end + 4 :]
             if len(self.buf) < self.need:
                 return
+            self.body = self.buf[: self.need] if self.status != 200 else b""  # an error's body says which
             self.buf = self.buf[self.need :]
             self.need = -1
-            self.run.done(self, time.perf_counter())
-            if self.run.stopping:
+            if not self.answered():
                 return
-            self.send()
+
+    def answered(self) -> bool:
+        """A whole answer is in (``status``, ``body``): counted, and the next fix sent; False: stop reading."""
+        self.run.done(self, time.perf_counter())
+        if self.run.stopping:
+            return False
+        self.send()
+        return True
 
     def connection_lost(self, exc) -> None:
         if not self.run.stopping:
@@ -89,10 +97,12 @@ class Car(asyncio.Protocol):
 
 
 class Run:
+    car_class = Car
+
     def __init__(self, job: dict) -> None:
         self.job = job
         self.positions = job["positions"]
-        self.cars = [Car(self, i, tid, tok) for i, (tid, tok) in enumerate(job["trips"])]
+        self.cars = [self.car_class(self, i, tid, tok) for i, (tid, tok) in enumerate(job["trips"])]
         self.connected = 0
         self.lost = 0
         self.all_connected = asyncio.Event()
@@ -130,7 +140,8 @@ class Run:
         return {"n": len(self.lat), "errors": self.errors, "elapsed_s": t1 - t0, "cpu_s": c1 - c0, "lost": self.lost, "lat_s": self.lat}
 
 
-def main() -> int:
+def main(run_class=None) -> int:
+    """Read the job on stdin, run it (``run_class``, default :class:`Run`) on uvloop when installed, write its results."""
     job = json.load(sys.stdin)
     try:
         import uvloop
@@ -138,7 +149,7 @@ def main() -> int:
         runner = uvloop.run
     except ImportError:
         runner = asyncio.run
-    out = runner(Run(job).main())
+    out = runner((run_class or Run)(job).main())
     with open(job["out"], "w") as f:
         json.dump(out, f)
     print("done", flush=True)

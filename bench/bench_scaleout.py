@@ -36,6 +36,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
@@ -149,6 +150,33 @@ def start_service(port: int, log_path: Path, env: dict[str, str], workers: int) 
     raise RuntimeError("service did not start")
 
 
+@contextlib.contextmanager
+def running_service(port: int, log_path: Path, env: dict[str, str], workers: int) -> Iterator[subprocess.Popen]:
+    """:func:`start_service`, stopped (terminated, killed after 20 s) when the block ends."""
+    proc = start_service(port, log_path, env, workers)
+    try:
+        yield proc
+    finally:
+        proc.terminate()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            proc.wait(timeout=20)
+        if proc.poll() is None:
+            proc.kill()
+
+
+@contextlib.contextmanager
+def bench_redis() -> Iterator[tuple[Path, RedisServer]]:
+    """A temporary folder and a ``redis-server`` in it (``appendfsync everysec``, as deployed), killed at the end."""
+    with tempfile.TemporaryDirectory(prefix="ecodrive-bench-") as tmp:
+        folder = Path(tmp)
+        (folder / "redis").mkdir()
+        redis = RedisServer(folder / "redis", fsync="everysec").start()
+        try:
+            yield folder, redis
+        finally:
+            redis.kill()
+
+
 def tree_cpu_s(pid: int) -> float:
     """CPU seconds of a process and its children (uvicorn's workers)."""
     total = cpu_seconds(pid)
@@ -200,19 +228,12 @@ def http_round(redis: RedisServer, conns: int, seconds: float, folder: Path, pos
     for name, env, workers in (("in-process store, 1 worker", {}, 1), ("Redis, 1 worker", {"ECO_STORE_URL": redis.url}, 1),
                                ("Redis, 2 workers", {"ECO_STORE_URL": redis.url}, 2)):  # fmt: skip
         port = free_port()
-        proc = start_service(port, folder / f"service-{workers}-{bool(env)}.log", env, workers)
-        try:
+        with running_service(port, folder / f"service-{workers}-{bool(env)}.log", env, workers) as proc:
             trips = asyncio.run(create_trips(port, conns))
             marks = []
             load_avg = os.getloadavg()[0]
             out = load(port, trips, positions, 2.0, seconds, lambda: marks.append((time.perf_counter(), tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s())),
                        folder / "load.json")  # fmt: skip
-        finally:
-            proc.terminate()
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                proc.wait(timeout=20)
-            if proc.poll() is None:
-                proc.kill()
         (t0, c0, r0, m0), (t1, c1, r1, m1) = marks
         rps, lat, wall = out["n"] / out["elapsed_s"], out["lat_s"], t1 - t0
         cpu, cpu_redis, cpu_gen = (c1 - c0) / wall, (r1 - r0) / wall, out["cpu_s"] / out["elapsed_s"]
@@ -281,21 +302,15 @@ def main() -> int:
         print("redis-server is not installed: sh scripts/system-deps.sh (as root) installs it")
         return 1
     print(f"bench_scaleout: {os.cpu_count()} CPUs (shared: figures are indicative)")
-    with tempfile.TemporaryDirectory(prefix="ecodrive-bench-") as tmp:
-        folder = Path(tmp)
-        (folder / "redis").mkdir()
-        redis = RedisServer(folder / "redis", fsync="everysec").start()
-        try:
-            if "latency" in parts:
-                asyncio.run(latency_part(redis.url, args.lat_trips, args.lat_fixes))
-            if "http" in parts:
-                print(f"2. HTTP, {args.conns} keep-alive clients (one trip each, one fix in flight each), {args.http_s:g} s each after 2 s warm-up;"
-                      " load generator: bench/_loadgen.py, its own process")
-                http_part(redis, args.conns, args.http_s, folder, args.rounds)
-            if "memory" in parts:
-                asyncio.run(memory_part(redis.url, args.trips, args.fixes))
-        finally:
-            redis.kill()
+    with bench_redis() as (folder, redis):
+        if "latency" in parts:
+            asyncio.run(latency_part(redis.url, args.lat_trips, args.lat_fixes))
+        if "http" in parts:
+            print(f"2. HTTP, {args.conns} keep-alive clients (one trip each, one fix in flight each), {args.http_s:g} s each after 2 s warm-up;"
+                  " load generator: bench/_loadgen.py, its own process")
+            http_part(redis, args.conns, args.http_s, folder, args.rounds)
+        if "memory" in parts:
+            asyncio.run(memory_part(redis.url, args.trips, args.fixes))
     return 0
 
 

@@ -86,7 +86,8 @@ class Settings(BaseSettings):
     cors_origins: Annotated[tuple[str, ...], NoDecode] = Field(default=(), description="browser origins allowed to call the API (CORS); '*' = any; empty = CORS off")
 
     # trip store (server.store): where open trips live
-    store_url: str | None = Field(default=None, description="Redis holding the open trips, shared by every worker (redis://host:6379/0); None = in this process (one worker; a restart loses them)")
+    store_url: str | None = Field(default=None, description="Redis holding the open trips, shared by every worker (redis://host:6379/0), run with --appendonly yes "
+                                     "(without it a restart of Redis loses every open trip); None = in this process (one worker; a restart loses them)")
     store_prefix: str = Field(default="eco", min_length=1, description="prefix of the store's Redis keys (several services on one Redis)")
     store_timeout_s: float = Field(default=2.0, gt=0, description="a Redis call failing for this long answers 503 + Retry-After [s]")
 
@@ -126,6 +127,10 @@ class Settings(BaseSettings):
     dropout_s: float = Field(default=5.0, gt=0, description="longer gaps reset the position-derived speed [s]")
     max_speed_mps: float = Field(default=50.0, gt=0, description="a fix implying a faster jump along the route is ignored as a GPS glitch [m/s]")
     max_trace_fixes: int = Field(default=7_200, ge=10, description="fixes kept per trip for its score")
+
+    # overload (server.overload, per worker): beyond either, 503 overloaded + Retry-After instead of a queue
+    max_in_flight: int = Field(default=256, ge=1, description="requests served at once per worker (awaiting Redis or a trip's turn)")
+    max_loop_lag_s: float = Field(default=0.25, gt=0, description="shed while the worker's event loop runs this late at two probes in a row [s]")
 
     @property
     def spat_simulated(self) -> bool:

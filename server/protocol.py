@@ -12,6 +12,8 @@ protocol (the documented ``http=`` class of ``uvicorn.run``):
   and ``max_connections_per_client`` per client address; beyond, ``503`` with ``Retry-After`` and close,
   at once, so the file descriptor is freed.
 
+Each response leaves in one write (:class:`_OneWrite`: uvicorn writes its head and body apart).
+
 A connection upgraded to a WebSocket leaves the per-address count here; WebSocket streams have their own caps
 (``server.routes.stream``).
 """
@@ -50,6 +52,35 @@ def _raw_response(status: int, reason: str, body: dict, extra: str = "") -> byte
     head = (f"HTTP/1.1 {status} {reason}\r\ncontent-type: application/json\r\ncontent-length: {len(data)}\r\n"
             f"connection: close\r\n{extra}\r\n")  # fmt: skip
     return head.encode() + data
+
+
+class _OneWrite:
+    """A response's view of its connection: the status line and headers are held back and written with the first
+    part of the body, one ``send()`` for a whole small response (uvicorn writes them apart: two system calls per
+    answer, a fix's included). A 100 Continue is never held (such a request is not given this view)."""
+
+    __slots__ = ("transport", "head")
+
+    def __init__(self, transport) -> None:
+        self.transport = transport
+        self.head: bytes | None = None
+
+    def write(self, data: bytes) -> None:
+        if self.head is None:
+            self.head = data
+            return
+        if self.head:
+            data, self.head = self.head + data, b""
+        self.transport.write(data)
+
+    def close(self) -> None:
+        if self.head:
+            self.transport.write(self.head)
+            self.head = b""
+        self.transport.close()
+
+    def __getattr__(self, name: str):
+        return getattr(self.transport, name)
 
 
 def protocol_class(read_timeout_s: float, max_connections: int, max_per_client: int) -> type[HttpToolsProtocol]:
@@ -97,6 +128,12 @@ def protocol_class(read_timeout_s: float, max_connections: int, max_per_client: 
             if self._deadline is None and self._counted and (self.cycle is None or self.cycle.response_complete):
                 self._arm()  # a new request begins on a kept-alive connection
             super().data_received(data)
+
+        def on_headers_complete(self) -> None:
+            super().on_headers_complete()
+            cycle = self.cycle
+            if cycle is not None and cycle.transport is self.transport and not self.expect_100_continue and not cycle.response_started:
+                cycle.transport = _OneWrite(self.transport)
 
         def on_message_complete(self) -> None:
             self._disarm()

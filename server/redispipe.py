@@ -8,7 +8,7 @@ and Redis reads many commands per read too. Redis runs one command at a time, so
 
 Failures: a call made while the connection is down reconnects first (one attempt, bounded by ``timeout_s``);
 when the connection is lost every call in flight fails with ``redis.exceptions.ConnectionError``; a reply
-later than ``timeout_s`` drops the connection and fails every call in flight with ``redis.exceptions.TimeoutError``. The
+later than ``timeout_s`` after the command was written drops the connection and fails every call in flight with ``redis.exceptions.TimeoutError``. The
 caller decides what a failure means (the trip store answers 503 + ``Retry-After``).
 """
 
@@ -38,8 +38,9 @@ class _Connection(asyncio.Protocol):
     def __init__(self) -> None:
         self.transport: asyncio.Transport | None = None
         self.reader = hiredis.Reader()
-        self.pending: deque[tuple[asyncio.Future, float]] = deque()  # (call, monotonic when sent), in order
+        self.pending: deque[list] = deque()  # [call, loop time when written (0.0: not yet)], in order
         self.out: list[bytes] = []
+        self.unsent: list[list] = []  # the entries of pending whose commands are in out
         self.failure: Exception | None = None  # why the connection is unusable
         self._flush = None
 
@@ -76,7 +77,9 @@ class _Connection(asyncio.Protocol):
         if self.failure is not None:
             future.set_exception(self.failure)
             return future
-        self.pending.append((future, loop.time()))
+        entry = [future, 0.0]
+        self.pending.append(entry)
+        self.unsent.append(entry)
         self.out.append(packed)
         if self._flush is None:
             self._flush = loop.call_soon(self.flush)
@@ -86,7 +89,11 @@ class _Connection(asyncio.Protocol):
         self._flush = None
         if self.out and self.failure is None:
             self.transport.write(b"".join(self.out))
+            now = asyncio.get_running_loop().time()
+            for entry in self.unsent:
+                entry[1] = now
         self.out.clear()
+        self.unsent.clear()
 
 
 class RedisPipe:
@@ -158,13 +165,17 @@ class RedisPipe:
         return await self._reply(future)
 
     def _check(self) -> None:
-        """Drop the connection when its oldest call in flight has waited ``timeout_s``; else look again when it will have."""
+        """Drop the connection when its oldest call in flight has waited ``timeout_s`` since it was written to the
+        socket; else look again when it will have."""
         self._watch = None
         conn = self._conn
         if conn is None or conn.failure is not None or not conn.pending:
             return
         loop = asyncio.get_running_loop()
-        waited = loop.time() - conn.pending[0][1]
+        written = conn.pending[0][1]
+        # from when the command was written, not asked for: a busy worker's own queue (the calls of a long loop turn
+        # wait for its end to be written) is not Redis being slow (issue 30: 526 "store unreachable", Redis idle)
+        waited = loop.time() - written if written else 0.0
         if waited >= self.timeout_s:
             conn.fail(ReplyTimeout(f"no reply from Redis within {self.timeout_s:g} s"))
             return

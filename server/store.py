@@ -610,6 +610,20 @@ class RedisTrips:
         with REACH:
             return bool(await self.redis.call("EXISTS", self._key(trip_id)))
 
+    async def volatile(self) -> str | None:
+        """A warning when this Redis keeps no append-only file, so that a restart of Redis loses every open trip;
+        None when it keeps one, or cannot be asked now (the service starts all the same)."""
+        try:
+            with REACH:
+                info = await self.redis.call("INFO", "persistence")
+        except ApiError:
+            return None
+        fields = dict(line.split(":", 1) for line in info.decode().splitlines() if ":" in line)
+        if fields.get("aof_enabled", "1") == "1":
+            return None
+        return ("the trip store's Redis keeps no append-only file (appendonly no): a restart of Redis loses every open trip (their phones get 404), "
+                "or brings back its last RDB snapshot without the fixes since. Run it with --appendonly yes (docs/SERVICE.md, Scaling)")  # fmt: skip
+
     async def for_fix(self, trip_id: str, token: str | None) -> Trip:
         """The trip to apply a fix to: this worker's copy when it has one and ``token`` is its token (no round
         trip: :meth:`save` finds out whether the copy was current), else :meth:`authorize` (no bucket token)."""

@@ -6,7 +6,8 @@ accepted, told why (``{"error": ..., "status": 401|403|404|429}``) and closed wi
 status. A bad message gets an error object and the stream goes on; nothing about the trip changes. Every
 message keeps the trip alive (``last_seen``). At most ``ws_max_per_trip`` streams per trip are open at once (a
 newer one replaces the oldest, which is told why and closed with 4409: ``server.streams``) and
-``ws_max_per_client`` per client address (4429 beyond).
+``ws_max_per_client`` per client address (4429 beyond). A fix that comes while the worker sheds load
+(``server.overload``) gets ``{"error": "overloaded", "status": 503, ...}`` and is dropped; the stream goes on.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from pydantic_core import to_json
 
 from server.advising import fix_from_schema
 from server.gps import Fix
+from server.overload import RETRY_AFTER_S, Shedder
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
 from server.errors import ApiError, clean_errors, validation_summary
 from server.schemas import GpsFixIn
@@ -78,6 +80,7 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
         return
     metrics.ws_open.inc()
     limit = settings.ws_max_message_bytes
+    shedder: Shedder = ws.app.state.shedder
     try:
         await ws.accept()
         if handle.replaced:  # replaced before its handshake was done
@@ -97,7 +100,13 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
                 if size > limit:
                     await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
                     raise ApiError(413, "payload_too_large", f"message of {size} bytes, larger than {limit}")
-                out = await engine.apply_fix(trip_id, token, lambda: _parse(text))
+                if (reason := shedder.refusal()) is not None:  # overloaded (server.overload): this fix is dropped, the stream goes on
+                    raise ApiError(503, "overloaded", shedder.error_body(reason)["message"], headers={"Retry-After": str(RETRY_AFTER_S)})
+                shedder.in_flight += 1
+                try:
+                    out = await engine.apply_fix(trip_id, token, lambda: _parse(text))
+                finally:
+                    shedder.in_flight -= 1
                 await ws.send_text(to_json(out).decode())
             except ApiError as exc:
                 await ws.send_text(_error(exc))

@@ -103,3 +103,25 @@ def test_password_and_database_from_the_url_and_a_wrong_password_is_unreachable(
             await pipe.close()
 
     asyncio.run(run())
+
+
+
+def test_a_busy_worker_is_not_an_unreachable_store(store):
+    """The worker's loop turn lasts longer than the timeout between a call and the end of the turn, when the turn's
+    commands are written (a CPU-bound turn, as under load): Redis has not even been asked yet, so the call must get
+    its reply, not a TimeoutError (issue 30: 526 "store unreachable" at 2,000 phones while Redis sat idle). On uvloop,
+    which runs due timers before the rest of the ready callbacks of the next turn."""
+    import time
+
+    uvloop = pytest.importorskip("uvloop")
+
+    async def run() -> None:
+        pipe = RedisPipe(store.url, 0.3)
+        assert await pipe.call("SET", "k", "v") == b"OK"  # connected
+        call = asyncio.ensure_future(pipe.call("GET", "k"))
+        await asyncio.sleep(0)  # the call's task ran in this turn: its command is queued, to be written at the turn's end
+        time.sleep(1.0)  # the rest of this turn takes 1 s (other requests' work)
+        assert await asyncio.wait_for(call, 30) == b"v"
+        await pipe.close()
+
+    uvloop.run(run())
