@@ -135,7 +135,7 @@ BAD_FIXES = [
     ("speed 500", {"t_unix_s": "NOW", "lat_deg": 48.87, "lon_deg": 2.31, "speed_mps": 500.0}, "validation_error"),
     ("heading 400", {"t_unix_s": "NOW", "lat_deg": 48.87, "lon_deg": 2.31, "heading_deg": 400.0}, "validation_error"),
     ("string lat", {"t_unix_s": "NOW", "lat_deg": "north", "lon_deg": 2.31}, "validation_error"),
-    ("extra field", {"t_unix_s": "NOW", "lat_deg": 48.87, "lon_deg": 2.31, "altitude": 3}, "validation_error"),
+    ("extra field", {"t_unix_s": "NOW", "lat_deg": 48.87, "lon_deg": 2.31, "turbo": 3}, "validation_error"),
     ("future fix", {"t_unix_s": "FUTURE", "lat_deg": 48.87, "lon_deg": 2.31}, "time_out_of_range"),
     ("ancient fix", {"t_unix_s": 1000.0, "lat_deg": 48.87, "lon_deg": 2.31}, "time_out_of_range"),
 ]
