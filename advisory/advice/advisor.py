@@ -266,15 +266,7 @@ def _coast_arrays(vehicle: VehicleParams) -> tuple[np.ndarray, np.ndarray, np.nd
     return x_of_v, t_of_v, np.interp(x_grid, x, t)
 
 
-@njit(cache=True, inline="always")
-def _lerp(table, step, q):
-    u = q / step
-    i = int(u)
-    if i >= table.size - 1:
-        return table[-1]
-    if i < 0:
-        return table[0]
-    return table[i] + (u - i) * (table[i + 1] - table[i])
+_lerp = choice.lerp_uniform
 
 
 @njit(cache=True)

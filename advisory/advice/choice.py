@@ -71,14 +71,21 @@ def rate_tables(vehicle: VehicleParams, comfort_mps2: float, normal_mps2: float,
 
 
 @njit(cache=True, inline="always")
-def _at(table, v):
-    u = v / RATE_DV_MPS
+def lerp_uniform(table, step, q):
+    """``table`` (values on the grid ``i * step``) read at ``q`` by linear interpolation, clamped at both ends (the
+    advisor's coast tables and the rate tables here)."""
+    u = q / step
     i = int(u)
     if i >= table.size - 1:
         return table[-1]
     if i < 0:
         return table[0]
     return table[i] + (u - i) * (table[i + 1] - table[i])
+
+
+@njit(cache=True, inline="always")
+def _at(table, v):
+    return lerp_uniform(table, RATE_DV_MPS, v)
 
 
 @njit(cache=True)
