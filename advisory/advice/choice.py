@@ -157,6 +157,12 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     m, n_lines, n_sc = vts.size, d_m.size, windows.shape[1]
     cost = np.empty(m)
     p_stop = np.empty(m)
+    # after a stop: the launch from rest to the limit at the regular driver's rate (midpoint rule, 16 steps)
+    launch_s = v_lim / normal
+    launch_m = 0.5 * v_lim * launch_s
+    launch_usd = 0.0
+    for q in range(16):
+        launch_usd += _at(rates[ACCEL_NORMAL], v_lim * (q + 0.5) / 16) * launch_s / 16
     for c in range(m):
         usd, t_end, stop_usd, stop_s = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort, firm, normal)
         if not np.isfinite(t_end):
@@ -184,11 +190,6 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
             if not np.isfinite(t_stop):  # too close to stop comfortably: a hard stop, as costly as one can be
                 t_stop = tc
             wait = max(wait_end - t_stop, 0.0)
-            launch_s = v_lim / normal
-            launch_m = 0.5 * v_lim * launch_s
-            launch_usd = 0.0
-            for q in range(16):
-                launch_usd += _at(rates[ACCEL_NORMAL], v_lim * (q + 0.5) / 16) * launch_s / 16
             rest_m = max(x_end_m - d_m[blocked] - launch_m, 0.0)
             rest_s = rest_m / v_lim
             c_usd = (stop_usd[blocked] if np.isfinite(stop_usd[blocked]) else usd) + idle_usd_per_s * wait + launch_usd + _at(rates[CRUISE], v_lim) * rest_s

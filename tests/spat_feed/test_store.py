@@ -262,15 +262,21 @@ def k648_2019_05_01():
     return read_spat_csv(path)
 
 
-def test_a_partial_message_keeps_the_omitted_groups_plan_with_its_own_age(k648_2019_05_01):
-    snaps = k648_2019_05_01[:5]
-    assert snaps[3].movement(3) is not None and snaps[4].movement(3) is None  # group 3 last heard in snapshot 3
+def _offered(snaps, lag_s: float):
+    """A store (stale after 2 s) offered each snapshot ``lag_s`` after its stamp, all accepted: (store, clock, stamps)."""
     stamps = [to_unix_s(s.timestamp) for s in snaps]
     clock = Clock(stamps[0])
     store = SpatStore(TimeRules(stale_after_s=2.0), clock)
     for snap, stamp in zip(snaps, stamps):
-        clock.t = stamp + 0.2
+        clock.t = stamp + lag_s
         assert store.offer(snap) == "ok"
+    return store, clock, stamps
+
+
+def test_a_partial_message_keeps_the_omitted_groups_plan_with_its_own_age(k648_2019_05_01):
+    snaps = k648_2019_05_01[:5]
+    assert snaps[3].movement(3) is not None and snaps[4].movement(3) is None  # group 3 last heard in snapshot 3
+    store, clock, stamps = _offered(snaps, 0.2)
     clock.t = stamps[4] + 0.5
     plan, reading = store.plan(648, 3)
     assert plan == plan_from_movement(snaps[3].movement(3), stamps[3])  # the omitted group's latest plan, held
@@ -283,12 +289,7 @@ def test_a_partial_message_keeps_the_omitted_groups_plan_with_its_own_age(k648_2
 
 def test_an_omitted_group_goes_stale_alone(k648_2019_05_01):
     snaps = k648_2019_05_01[:8]
-    stamps = [to_unix_s(s.timestamp) for s in snaps]
-    clock = Clock(stamps[0])
-    store = SpatStore(TimeRules(stale_after_s=2.0), clock)
-    for snap, stamp in zip(snaps, stamps):
-        clock.t = stamp + 0.1
-        assert store.offer(snap) == "ok"
+    store, clock, stamps = _offered(snaps, 0.1)
     plan, reading = store.plan(648, 3)  # not heard for 4.1 s, while the others are heard every second
     assert plan is not None and not reading.fresh and reading.status == "stale" and reading.age_s == pytest.approx(clock.t - stamps[3])
     assert not store.plan_reading(648, 3).fresh and store.status(648, 3) == "stale"
