@@ -217,7 +217,10 @@ def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None =
     event (or an event without timing) nothing is known (``UNAVAILABLE``). A missing ``likelyTime`` is
     taken as the middle of the window (``minEndTime`` if the window is open-ended); a missing
     ``maxEndTime`` is unbounded on the last event and the next event's ``minEndTime`` otherwise;
-    a missing confidence is not a low one: :data:`UNSTATED_CONFIDENCE_FRAC`. Windows that overlap a later one are cut to fit.
+    a missing confidence is not a low one: :data:`UNSTATED_CONFIDENCE_FRAC`. Windows that overlap a later one are cut to fit:
+    the earlier change's latest end comes down to the later one's earliest, never the later ``minEndTime`` up (a green
+    that may end at 5-25 s into a 3 s amber publishes the red at 8-28 s: raising the red's earliest to 25 s would
+    plan a crossing into a red that may begin at 8 s; cutting the green's latest end only makes the plan warier).
     A ``likelyTime`` or ``confidence`` that a republisher of ours predicted (:func:`predicted_fields`) is read as
     absent: the plan is the controller's own, the window's confidence only ever one the controller stated.
     """
@@ -229,8 +232,12 @@ def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None =
         if ev.timing is None:
             break
         min_s = to_unix_s(ev.timing.min_end_time)
-        if changes:
-            min_s = max(min_s, changes[-1].max_end_s)
+        if changes:  # windows may not overlap: the earlier change's latest end is cut, never this one's earliest
+            prev = changes[-1]
+            min_s = max(min_s, prev.min_end_s)
+            if prev.max_end_s > min_s:
+                cut_s = min_s
+                changes[-1] = ChangeWindow(prev.min_end_s, min(prev.likely_s, cut_s), cut_s, prev.confidence_frac)
         max_end_s = None if ev.timing.max_end_time is None else to_unix_s(ev.timing.max_end_time)
         if max_end_s is not None and timestamp_unix_s is not None and max_end_s - timestamp_unix_s >= UNKNOWN_MAX_END_S:
             max_end_s = None
