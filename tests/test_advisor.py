@@ -657,21 +657,3 @@ def test_a_car_launching_towards_an_uncertain_light_is_not_held_at_a_crawl():
     # a car cruising at the limit is still not told to race an uncertain red
     cruising, _ = advise(Observation(limit, limit, (replace(green_now, distance_m=600.0),)), AdvisorMemory())
     assert cruising.target_speed_mps is None or cruising.target_speed_mps <= limit + 1e-9
-
-
-def test_through_a_dropout_a_car_on_no_plan_is_told_to_prepare_to_stop_for_a_red_the_last_reading_holds_possible():
-    """Stale data, the car driving normally (the last advice gave no speed): a red the last reading's sure windows put
-    on its arrival, which it can still stop for at the firm rate, is "Prepare to stop", held until data comes back;
-    one it would reach only after the red, or could not stop for, is not. A car following a speed plan goes on
-    with it (``test_closed_loop_actuated``'s dropout test)."""
-    no_plan = AdvisorMemory(last=Advice("none", "no_spat"))
-    # 300 m at the limit (24.6 m/s): there in ~12.2 s, inside a red possible from 5 s to 40 s; a stop needs 1.0 m/s²
-    told, memory = advise(Observation(V, V, (light(300, (5, 40), fresh=False),)), no_plan)
-    assert (told.action, told.reason, told.target_speed_mps) == ("stop", "stale_spat", None)
-    assert told.message == "Signal data delayed. Prepare to stop."
-    again, _ = advise(Observation(V, V, (light(280, (4, 39), fresh=False),)), memory)
-    assert again.action == "stop"
-    # the red ends long before the car arrives (and the margin after it): nothing to stop for
-    assert advise(Observation(V, V, (light(300, (-5, 8), fresh=False),)), no_plan)[0].action == "none"
-    # 60 m out at the limit: a stop needs 5 m/s², more than the firm rate: not told (the driver's eye decides)
-    assert advise(Observation(V, V, (light(60, (0, 40), fresh=False),)), no_plan)[0].action == "none"

@@ -753,21 +753,7 @@ def _held(obs: Observation, memory: AdvisorMemory, params: AdvisorParams) -> Adv
     red, to_change = _light_timing(nxt)
     if last.action == "stop" or (last.action in KEEP_MODES and last.target_speed_mps is not None and _kept(_Lines.of(usable), usable, obs, params, last)):
         return Advice(last.action, "stale_spat", last.target_speed_mps, red, to_change, source=last.source)
-    if last.target_speed_mps is None and _stoppable_red_ahead(nxt, obs, params):
-        return Advice("stop", "stale_spat", light_red=red, seconds_to_change_s=to_change)
     return Advice("none", "stale_spat", light_red=red, seconds_to_change_s=to_change)
-
-
-def _stoppable_red_ahead(light: LightView, obs: Observation, params: AdvisorParams) -> bool:
-    """Through a dropout, a car driving normally (it follows no speed plan) reaches the line inside a red that the
-    last reading's sure windows hold possible (or within the after-red margin), and can still stop for it at no more
-    than the firm rate: then "Prepare to stop", not silence (the next reading may come too late to stop: seed 1392 of
-    the randomized no-amber runs, an 8.6 s dropout with the red's window open at the last reading, the red 46 m out
-    at 24.6 m/s, 7 m/s² to stop). A car on a speed plan goes on with it (:func:`_held`)."""
-    v_mps, d_m = obs.speed_mps, light.distance_m
-    if v_mps <= 0.0 or d_m <= 0.0 or v_mps * v_mps / (2.0 * d_m) > params.firm_decel_mps2:
-        return False
-    return not _green_crossing(light, _normal_drive_s(d_m, obs, params), params.green_margin_s)
 
 
 @njit(cache=True)
@@ -1064,9 +1050,8 @@ def advise(
     speak = bool(message) and _meaningful_change(advice, memory.spoken, params)
     advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps, a.light_ahead, light_id)
     spoken, last = (advice if advice.speak else memory.spoken), advice
-    if advice.reason == "stale_spat" and advice.light_red is not None and (advice.action != "stop" or memory.last is not None and memory.last.action == "stop"):
-        # a short dropout: the driver goes on with the plan it follows; that stays the plan when data returns (a
-        # stop it was told in the dropout, :func:`_stoppable_red_ahead`, is held as the plan until then)
+    if advice.reason == "stale_spat" and advice.light_red is not None:
+        # a short dropout: the driver goes on with the plan it follows; that stays the plan when data returns
         spoken, last = (advice if advice.speak else memory.spoken), memory.last
     if advice.action == "none" and advice.reason in ("too_close", "short_wait", "far_ahead"):
         # silence: the driver goes on with what it was told, so that stays the plan to re-check (and the
