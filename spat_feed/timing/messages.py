@@ -136,12 +136,38 @@ def predicted_fields(event: MovementEvent) -> frozenset[str]:
     return frozenset(f for fields in marked if isinstance(fields, list) for f in fields if isinstance(f, str))
 
 
+class ConnectionManeuverAssist(_Model):
+    """J2735 DF_ConnectionManeuverAssist: what the intersection's detectors see on one lane connection of the MAP
+    (``connectionID``): the queue standing back from the stop line (``queueLength``, DE_ZoneLength, whole metres,
+    0-10,000), the room left for more cars (``availableStorageLength``), whether a car must stop at the line before it
+    may go (``waitOnStop``) and a pedestrian or cyclist detected in the crossing (``pedBicycleDetect``)."""
+
+    connection_id: int = Field(ge=0, le=255, alias="connectionID")
+    queue_length: int | None = Field(default=None, ge=0, le=10_000)
+    available_storage_length: int | None = Field(default=None, ge=0, le=10_000)
+    wait_on_stop: bool | None = None
+    ped_bicycle_detect: bool | None = None
+    regional: list[RegionalExtension] | None = Field(default=None, max_length=4)
+
+
+ManeuverAssistList = Annotated[list[ConnectionManeuverAssist], Field(min_length=1, max_length=16)]
+"""J2735 DF_ManeuverAssistList (1-16 connections)."""
+
+
 class MovementState(_Model):
-    """J2735 DF_MovementState: one signal group's current and coming events (``state-time-speed``)."""
+    """J2735 DF_MovementState: one signal group's current and coming events (``state-time-speed``), and what the
+    detectors see on the lane connections it serves (``maneuverAssistList``: :meth:`queue_length_m`)."""
 
     signal_group: int = Field(ge=0, le=255)
     movement_name: str | None = Field(default=None, max_length=63)
     state_time_speed: list[MovementEvent] = Field(min_length=1, max_length=16)
+    maneuver_assist_list: ManeuverAssistList | None = None
+
+    def queue_length_m(self) -> float | None:
+        """The longest ``queueLength`` published for the lane connections this movement serves (a car does not know
+        which lane it will queue in: the longest queue is the one that may hold it up), or None when none says. [m]"""
+        lengths = [c.queue_length for c in self.maneuver_assist_list or () if c.queue_length is not None]
+        return float(max(lengths)) if lengths else None
 
 
 class IntersectionState(_Model):
@@ -152,6 +178,7 @@ class IntersectionState(_Model):
     revision: int = Field(default=0, ge=0, le=127)
     timestamp: UtcTime
     states: list[MovementState] = Field(min_length=1, max_length=255)
+    maneuver_assist_list: ManeuverAssistList | None = None  # per lane connection of the MAP (kept; a queue for a movement is read from its own list)
 
     def movement(self, signal_group: int) -> MovementState | None:
         """The state of ``signal_group``, or ``None`` if this intersection does not report it."""
@@ -361,12 +388,20 @@ def to_j2735(message: SpatMessage) -> dict:
             state: dict[str, Any] = {"signalGroup": mv.signal_group, "state-time-speed": events}
             if mv.movement_name is not None:
                 state["movementName"] = mv.movement_name
+            if mv.maneuver_assist_list:
+                state["maneuverAssistList"] = _assists(mv.maneuver_assist_list)
             states.append(state)
         item: dict[str, Any] = {"id": {"id": ix.id}, "revision": ix.revision, "status": "0000", "moy": ix_moy, "timeStamp": ix_ms, "states": states}
         if ix.name is not None:
             item["name"] = ix.name
+        if ix.maneuver_assist_list:
+            item["maneuverAssistList"] = _assists(ix.maneuver_assist_list)
         out["intersections"].append(item)
     return out
+
+
+def _assists(assists: list[ConnectionManeuverAssist]) -> list[dict]:
+    return [c.model_dump(by_alias=True, exclude_none=True) for c in assists]
 
 
 def from_j2735(data: dict, ref_unix_s: float) -> SpatMessage:
@@ -405,10 +440,12 @@ def from_j2735(data: dict, ref_unix_s: float) -> SpatMessage:
                         fields["confidence"] = raw["confidence"]
                     timing = TimeChangeDetails(**fields)
                 events.append(MovementEvent(event_state=MovementPhaseState(ev["eventState"]), timing=timing, regional=ev.get("regional")))
-            states.append(MovementState(signal_group=st["signalGroup"], movement_name=st.get("movementName"), state_time_speed=events))
+            states.append(MovementState(signal_group=st["signalGroup"], movement_name=st.get("movementName"), state_time_speed=events,
+                                        maneuver_assist_list=st.get("maneuverAssistList")))  # fmt: skip
         intersections.append(
             IntersectionState(
-                id=item["id"]["id"], name=item.get("name"), revision=item.get("revision", 0), timestamp=from_unix_s(ref_s), states=states
+                id=item["id"]["id"], name=item.get("name"), revision=item.get("revision", 0), timestamp=from_unix_s(ref_s), states=states,
+                maneuver_assist_list=item.get("maneuverAssistList"),
             )
         )
     if "timeStamp" in data:

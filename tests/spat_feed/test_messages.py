@@ -209,3 +209,21 @@ def test_overlapping_windows_cut_the_earlier_end_never_raise_the_later_start():
     assert (to_amber.min_end_s - T0, to_amber.max_end_s - T0) == pytest.approx((5.0, 8.0))
     assert to_amber.likely_s - T0 == pytest.approx(7.0)
     assert seconds_to_next_red(plan, T0).min_s == pytest.approx(8.0)
+
+
+def test_maneuver_assist_list_is_read_and_kept():
+    """J2735 MovementState.maneuverAssistList (DF_ConnectionManeuverAssist per lane connection): a message that carries
+    it is accepted (it was refused as an unknown field), the longest queue of a movement's connections is its queue,
+    it survives the J2735 form both ways, and a queueLength outside DE_ZoneLength (0-10,000 m) rejects the
+    intersection with a message naming the field."""
+    movement = {"signalGroup": 2, "stateTimeSpeed": [{"eventState": "stop-And-Remain", "timing": {"minEndTime": T0 + 10.0}}],
+                "maneuverAssistList": [{"connectionID": 1, "queueLength": 18, "waitOnStop": False}, {"connectionID": 2, "queueLength": 42},
+                                       {"connectionID": 3, "pedBicycleDetect": True}]}  # fmt: skip
+    ix = IntersectionState.model_validate({"id": 7, "timestamp": T0, "states": [movement, {**movement, "signalGroup": 3, "maneuverAssistList": None}]})
+    assert ix.movement(2).queue_length_m() == 42.0 and ix.movement(3).queue_length_m() is None
+    back = from_j2735(to_j2735(SpatMessage(timestamp=T0, intersections=[ix])), T0)
+    assert back.intersections[0].movement(2).maneuver_assist_list == ix.movement(2).maneuver_assist_list
+    assert back.intersections[0].movement(2).queue_length_m() == 42.0
+    text = json.dumps({"timestamp": T0, "intersections": [{"id": 7, "timestamp": T0, "states": [{**movement, "maneuverAssistList": [{"connectionID": 1, "queueLength": 10_001}]}]}]})
+    parsed = parse_spat_text(text)
+    assert parsed.intersections == () and "queueLength" in parsed.errors[0]
