@@ -51,6 +51,27 @@ def test_unconnected_cars_from_the_arrival_rate():
     assert estimate(_obs(), [], arrivals_vps=0.2, connected_share=1.0, red_elapsed_s=10.0).cars == (0.0,)
 
 
+def test_a_published_queue_length_counts_first():
+    """The controller's detectors publish a 30 m queue (J2735 ``queueLength``): 30 / 7.5 = 4 cars stand at the red
+    ending in 20 s, so the line is closed to this car for 20 + 2 + 3 x 2 + 2 = 30 s, as four connected cars standing
+    there would close it; a connected car standing inside the published queue is one of those four, not a fifth;
+    with the published queue the arrival-rate estimate is not made (the detectors counted); a stale reading's queue
+    says nothing."""
+    published = _obs(reds=((0.0, 20.0), (60.0, 90.0)))
+    published = Observation(published.speed_mps, published.speed_limit_mps, (LightView(1, 300.0, red_windows_s=((0.0, 20.0), (60.0, 90.0)), queue_m=30.0),), position_m=100.0)
+    est = estimate(published, [])
+    assert est.cars == (4.0,) and est.known == (0,)
+    assert est.free_at_s[0] == pytest.approx(20.0 + M.startup_s + 3 * M.headway_s + M.headway_s)
+    assert estimate(published, [Probe(300.0 - 1.0, 0.0)]).cars == (4.0,)  # the first car, connected: counted once
+    assert estimate(published, [Probe(300.0 - 60.0, 0.0)]).cars == (5.0,)  # 60 m back: behind the published queue
+    assert estimate(published, [], arrivals_vps=0.2, connected_share=0.5, red_elapsed_s=10.0).cars == (4.0,)
+    stale = Observation(13.0, 13.4, (LightView(1, 300.0, fresh=False, red_windows_s=((0.0, 20.0),), queue_m=30.0),), position_m=100.0)
+    assert estimate(stale, []).cars == (0.0,)
+    # no more cars than fit between the line and this car: 20 m out, two spacings at most
+    near = Observation(5.0, 13.4, (LightView(1, 20.0, red_windows_s=((0.0, 20.0),), queue_m=300.0),), position_m=100.0)
+    assert estimate(near, []).cars == (2.0,)
+
+
 def test_in_queue_and_following():
     assert estimate(_obs(speed=0.5), []).in_queue
     assert not estimate(_obs(distance_m=2.0, speed=0.0), []).in_queue  # first at the line

@@ -80,6 +80,10 @@ class LightView:
     """Under uncertainty, the red windows of each of the light's equally likely timings (every change at one quantile
     of its forecast, :mod:`advisory.advice.choice`); None: the timing is exact (``red_windows_s``)."""
 
+    queue_m: float | None = None
+    """The queue standing back from the stop line that the controller published with a fresh reading (J2735
+    ``queueLength``; queue-aware advice counts its cars first, :func:`advisory.advice.queue.estimate`); None: not said. [m]"""
+
     def likely_red_at(self, t_s: float) -> bool:
         """Red at ``t_s`` seconds from now if every change comes at its likely time (exact plans: :meth:`is_red_at`);
         a phase of unknown state is not a red."""

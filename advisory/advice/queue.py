@@ -8,7 +8,10 @@ advisor then aims at the queue having cleared, not at the start of green, with e
 
 Where the count comes from, in order of trust (issue 28):
 
-1. ``queueLength`` of the SPaT message (J2735 ``maneuverAssistList``): not read yet (no source here sends it).
+1. ``queueLength`` of the SPaT message (J2735 ``maneuverAssistList`` of the light's movement, the longest of its
+   lane connections, :attr:`LightView.queue_m`, fresh readings only): the cars standing in it (one per jam spacing,
+   no more than fit between the car and the line) wait at the line; a connected car standing inside it is one of
+   them, not one more, and the arrival-rate estimate below is not made for that light (the detectors counted).
 2. The connected cars ahead on the approach (:class:`Probe`: the service knows where every trip on the corridor is,
    to the second): between this car and the line, each one that will reach the line during the red (or stands
    before it) is in the queue.
@@ -105,10 +108,15 @@ def estimate(
         red = _first_red(light)
         start, end = red if red is not None else (math.inf, math.inf)
         ahead = sorted((light.distance_m - p.ahead_m, p.speed_mps) for p in probes if before < p.ahead_m < light.distance_m)
+        queue_m = light.queue_m if light.fresh else None
+        if queue_m is not None:  # the detectors' count: connected cars standing inside the published queue are in it
+            ahead = [(to_line, v) for to_line, v in ahead if to_line > queue_m or v >= model.queued_mps]
         accel = 2.0  # a car ahead speeds up to the limit as the regular driver does (paper Sec. 2)
         arrivals = [0.0 if v < model.queued_mps else normal_drive_s(to_line, v, obs.speed_limit_mps, accel) for to_line, v in ahead]
+        if queue_m is not None:  # standing: one car per jam spacing, as many as fit between the line and this car
+            arrivals = [0.0] * int(round(max(min(queue_m, light.distance_m - model.jam_spacing_m), 0.0) / model.jam_spacing_m)) + arrivals
         n_unseen = 0.0
-        if i == 0 and arrivals_vps is not None and arrivals_vps > 0.0 and connected_share < 1.0 and red is not None:
+        if i == 0 and queue_m is None and arrivals_vps is not None and arrivals_vps > 0.0 and connected_share < 1.0 and red is not None:
             began = -(red_elapsed_s or 0.0) if start <= 0.0 else start
             mine = light.distance_m / v_free  # this car's unimpeded arrival at the line
             n_unseen = (1.0 - connected_share) * arrivals_vps * max(0.0, min(end, mine) - began)

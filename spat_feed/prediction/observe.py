@@ -480,6 +480,8 @@ class PlanReading:
     ``amber_s``: the amber the light really shows before each red, where the source knows it: None (unknown) is
     taken as some amber, as traffic law requires, whether the feed publishes it or not; 0: none, a green may turn
     red at once (:func:`no_amber`). [s]
+    ``queue_m``: the queue standing back from the stop line that the controller's detectors published with the
+    reading (J2735 ``queueLength``, :meth:`~spat_feed.timing.messages.MovementState.queue_length_m`); None: not said. [m]
     """
 
     plan: Plan | None
@@ -489,6 +491,7 @@ class PlanReading:
     clock_offset_s: float = 0.0
     clock_uncertainty_s: float = 0.0
     amber_s: float | None = None
+    queue_m: float | None = None
 
 
 def as_uncertain(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> UncertainPlan:
@@ -833,6 +836,7 @@ def light_view(
         age_s=float(reading.age_s),
         unknown_windows_s=unknown,
         scenario_red_windows_s=tuple(scenarios) if scenarios and likely != windows else None,
+        queue_m=reading.queue_m if reading.fresh else None,
     )
 
 

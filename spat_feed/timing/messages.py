@@ -136,12 +136,38 @@ def predicted_fields(event: MovementEvent) -> frozenset[str]:
     return frozenset(f for fields in marked if isinstance(fields, list) for f in fields if isinstance(f, str))
 
 
+class ConnectionManeuverAssist(_Model):
+    """J2735 DF_ConnectionManeuverAssist: what the intersection's detectors see on one lane connection of the MAP
+    (``connectionID``): the queue standing back from the stop line (``queueLength``, DE_ZoneLength, whole metres,
+    0-10,000), the room left for more cars (``availableStorageLength``), whether a car must stop at the line before it
+    may go (``waitOnStop``) and a pedestrian or cyclist detected in the crossing (``pedBicycleDetect``)."""
+
+    connection_id: int = Field(ge=0, le=255, alias="connectionID")
+    queue_length: int | None = Field(default=None, ge=0, le=10_000)
+    available_storage_length: int | None = Field(default=None, ge=0, le=10_000)
+    wait_on_stop: bool | None = None
+    ped_bicycle_detect: bool | None = None
+    regional: list[RegionalExtension] | None = Field(default=None, max_length=4)
+
+
+ManeuverAssistList = Annotated[list[ConnectionManeuverAssist], Field(min_length=1, max_length=16)]
+"""J2735 DF_ManeuverAssistList (1-16 connections)."""
+
+
 class MovementState(_Model):
-    """J2735 DF_MovementState: one signal group's current and coming events (``state-time-speed``)."""
+    """J2735 DF_MovementState: one signal group's current and coming events (``state-time-speed``), and what the
+    detectors see on the lane connections it serves (``maneuverAssistList``: :meth:`queue_length_m`)."""
 
     signal_group: int = Field(ge=0, le=255)
     movement_name: str | None = Field(default=None, max_length=63)
     state_time_speed: list[MovementEvent] = Field(min_length=1, max_length=16)
+    maneuver_assist_list: ManeuverAssistList | None = None
+
+    def queue_length_m(self) -> float | None:
+        """The longest ``queueLength`` published for the lane connections this movement serves (a car does not know
+        which lane it will queue in: the longest queue is the one that may hold it up), or None when none says. [m]"""
+        lengths = [c.queue_length for c in self.maneuver_assist_list or () if c.queue_length is not None]
+        return float(max(lengths)) if lengths else None
 
 
 class IntersectionState(_Model):
@@ -152,6 +178,7 @@ class IntersectionState(_Model):
     revision: int = Field(default=0, ge=0, le=127)
     timestamp: UtcTime
     states: list[MovementState] = Field(min_length=1, max_length=255)
+    maneuver_assist_list: ManeuverAssistList | None = None  # per lane connection of the MAP (kept; a queue for a movement is read from its own list)
 
     def movement(self, signal_group: int) -> MovementState | None:
         """The state of ``signal_group``, or ``None`` if this intersection does not report it."""
@@ -217,7 +244,10 @@ def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None =
     event (or an event without timing) nothing is known (``UNAVAILABLE``). A missing ``likelyTime`` is
     taken as the middle of the window (``minEndTime`` if the window is open-ended); a missing
     ``maxEndTime`` is unbounded on the last event and the next event's ``minEndTime`` otherwise;
-    a missing confidence is not a low one: :data:`UNSTATED_CONFIDENCE_FRAC`. Windows that overlap a later one are cut to fit.
+    a missing confidence is not a low one: :data:`UNSTATED_CONFIDENCE_FRAC`. Windows that overlap a later one are cut to fit:
+    the earlier change's latest end comes down to the later one's earliest, never the later ``minEndTime`` up (a green
+    that may end at 5-25 s into a 3 s amber publishes the red at 8-28 s: raising the red's earliest to 25 s would
+    plan a crossing into a red that may begin at 8 s; cutting the green's latest end only makes the plan warier).
     A ``likelyTime`` or ``confidence`` that a republisher of ours predicted (:func:`predicted_fields`) is read as
     absent: the plan is the controller's own, the window's confidence only ever one the controller stated.
     """
@@ -229,8 +259,12 @@ def plan_from_movement(movement: MovementState, timestamp_unix_s: float | None =
         if ev.timing is None:
             break
         min_s = to_unix_s(ev.timing.min_end_time)
-        if changes:
-            min_s = max(min_s, changes[-1].max_end_s)
+        if changes:  # windows may not overlap: the earlier change's latest end is cut, never this one's earliest
+            prev = changes[-1]
+            min_s = max(min_s, prev.min_end_s)
+            if prev.max_end_s > min_s:
+                cut_s = min_s
+                changes[-1] = ChangeWindow(prev.min_end_s, min(prev.likely_s, cut_s), cut_s, prev.confidence_frac)
         max_end_s = None if ev.timing.max_end_time is None else to_unix_s(ev.timing.max_end_time)
         if max_end_s is not None and timestamp_unix_s is not None and max_end_s - timestamp_unix_s >= UNKNOWN_MAX_END_S:
             max_end_s = None
@@ -354,12 +388,20 @@ def to_j2735(message: SpatMessage) -> dict:
             state: dict[str, Any] = {"signalGroup": mv.signal_group, "state-time-speed": events}
             if mv.movement_name is not None:
                 state["movementName"] = mv.movement_name
+            if mv.maneuver_assist_list:
+                state["maneuverAssistList"] = _assists(mv.maneuver_assist_list)
             states.append(state)
         item: dict[str, Any] = {"id": {"id": ix.id}, "revision": ix.revision, "status": "0000", "moy": ix_moy, "timeStamp": ix_ms, "states": states}
         if ix.name is not None:
             item["name"] = ix.name
+        if ix.maneuver_assist_list:
+            item["maneuverAssistList"] = _assists(ix.maneuver_assist_list)
         out["intersections"].append(item)
     return out
+
+
+def _assists(assists: list[ConnectionManeuverAssist]) -> list[dict]:
+    return [c.model_dump(by_alias=True, exclude_none=True) for c in assists]
 
 
 def from_j2735(data: dict, ref_unix_s: float) -> SpatMessage:
@@ -398,10 +440,12 @@ def from_j2735(data: dict, ref_unix_s: float) -> SpatMessage:
                         fields["confidence"] = raw["confidence"]
                     timing = TimeChangeDetails(**fields)
                 events.append(MovementEvent(event_state=MovementPhaseState(ev["eventState"]), timing=timing, regional=ev.get("regional")))
-            states.append(MovementState(signal_group=st["signalGroup"], movement_name=st.get("movementName"), state_time_speed=events))
+            states.append(MovementState(signal_group=st["signalGroup"], movement_name=st.get("movementName"), state_time_speed=events,
+                                        maneuver_assist_list=st.get("maneuverAssistList")))  # fmt: skip
         intersections.append(
             IntersectionState(
-                id=item["id"]["id"], name=item.get("name"), revision=item.get("revision", 0), timestamp=from_unix_s(ref_s), states=states
+                id=item["id"]["id"], name=item.get("name"), revision=item.get("revision", 0), timestamp=from_unix_s(ref_s), states=states,
+                maneuver_assist_list=item.get("maneuverAssistList"),
             )
         )
     if "timeStamp" in data:

@@ -340,8 +340,9 @@ class SpatStore:
             if reading is None:
                 return PlanReading(None, fresh=False, age_s=float("inf"))
             cycle = entry.history.stats(signal_group)
+        movement = reading.intersection.movement(signal_group) if plan is not None else None
         return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s,
-                           clock_uncertainty_s=reading.clock_uncertainty_s)
+                           clock_uncertainty_s=reading.clock_uncertainty_s, queue_m=None if movement is None else movement.queue_length_m())
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:
         r = self.reading(intersection_id)

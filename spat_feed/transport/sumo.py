@@ -22,12 +22,20 @@ What SUMO knows and the message says, per signal group (one SUMO link: the corri
   ``minEndTime`` and ``maxEndTime``): the service's predictor bounds the phases after it from the group's history.
   (Later events with summed windows would overlap the current one's, and J2735 readers, ours included, cut such
   windows to follow each other: an amber "ending between 26 and 70 s" after a green "ending between 22 and 66 s"
-  would read as ending after 66 s.)
+  reads as a green ending between 22 and 26 s, :func:`~spat_feed.timing.messages.plan_from_movement`: safe, but
+  narrower than SUMO's controller is held to.)
 * ``startTime`` of the current event: when the source saw the state begin (:meth:`SumoSpatSource.observe` each
   step), or for a static program the programmed start.
 
 For a static program the next ``n_events - 1`` events follow the current one (default 3 in all), as the simulator
 sends.
+
+With ``queues=True`` each movement also carries what stop-line detectors on its approach would measure (J2735
+``maneuverAssistList``, one ``ConnectionManeuverAssist`` per incoming lane of its SUMO link, ``connectionID`` the
+link index: no MAP here): ``queueLength``, the jam standing back from the stop line (:func:`jam_length_m`, the
+quantity of SUMO's own lane-area detectors' ``jamLengthMeters``: halting vehicles, under 0.1 m/s, no farther
+apart than :data:`JAM_GAP_M`), whole metres. A controller with detectors can publish it; the queue-aware advisor
+counts it before anything else (:mod:`advisory.advice.queue`).
 """
 
 from __future__ import annotations
@@ -36,7 +44,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from spat_feed.timing.messages import IntersectionState, MovementEvent, MovementState, TimeChangeDetails, from_unix_s
+from spat_feed.timing.messages import ConnectionManeuverAssist, IntersectionState, MovementEvent, MovementState, TimeChangeDetails, from_unix_s
 from spat_feed.timing.plans import MovementPhaseState as S
 
 LINK_STATES: dict[str, S] = {
@@ -55,6 +63,13 @@ LINK_STATES: dict[str, S] = {
 
 STATIC, ACTUATED = 0, 3
 """``Logic.type`` of SUMO's static and actuated programs (libsumo/TraCI constants TRAFFICLIGHT_TYPE_*)."""
+
+HALTING_MPS = 0.1
+"""A vehicle slower than this is halting (SUMO's own threshold, ``--tls.actuated.jam-threshold`` aside). [m/s]"""
+
+JAM_GAP_M = 10.0
+"""Halting vehicles this close (bumper to bumper) belong to one jam (SUMO's lane-area detectors: ``jamDistThreshold``
+default 10 m). [m]"""
 
 HORIZON_S = 3000.0
 """Events are listed no further than this after now (a program with a very long phase). [s]"""
@@ -97,13 +112,14 @@ class _Phase:
 class SumoSpatSource:
     """SPaT of SUMO's lights (see the module docstring). ``conn``: ``libsumo`` or a ``traci`` connection."""
 
-    def __init__(self, conn, lights: Sequence[SumoLight], t0_unix_s: float, n_events: int = 3) -> None:
+    def __init__(self, conn, lights: Sequence[SumoLight], t0_unix_s: float, n_events: int = 3, queues: bool = False) -> None:
         if n_events < 1:
             raise ValueError("n_events must be >= 1")
         self.conn = conn
         self.lights = tuple(lights)
         self.t0_unix_s = float(t0_unix_s)
         self.n_events = n_events
+        self.queues = queues
         self._programs: dict[str, tuple[str, int, list[list[str]], list[tuple[float, float, float]]]] = {}
         self._seen: dict[tuple[str, int], tuple[S, float]] = {}  # (tls, link) -> (state, since) [Unix s]
         self.published = 0
@@ -227,10 +243,22 @@ class SumoSpatSource:
         names: dict[int, str | None] = {}
         for light in self.lights if lights is None else lights:
             by_ix.setdefault(light.intersection_id, []).append(
-                MovementState(signal_group=light.signal_group, movement_name=light.movement_name, state_time_speed=self.events(light))
+                MovementState(signal_group=light.signal_group, movement_name=light.movement_name, state_time_speed=self.events(light),
+                              maneuver_assist_list=self.assists(light) if self.queues else None)  # fmt: skip
             )
             names.setdefault(light.intersection_id, light.name)
         return [IntersectionState(id=i, name=names[i], timestamp=stamp, states=ms) for i, ms in by_ix.items()]
+
+    def assists(self, light: SumoLight) -> list[ConnectionManeuverAssist]:
+        """What stop-line detectors see on each incoming lane of the light's link: its jam's length (module docstring)."""
+        lanes = dict.fromkeys(link[0] for link in self.conn.trafficlight.getControlledLinks(light.tls_id)[light.link_index])
+        return [ConnectionManeuverAssist(connection_id=light.link_index, queue_length=min(round(self.jam_m(lane)), 10_000)) for lane in lanes]
+
+    def jam_m(self, lane: str) -> float:
+        """The jam standing back from the end of ``lane`` now (:func:`jam_length_m` of its vehicles). [m]"""
+        veh = self.conn.vehicle
+        cars = [(veh.getLanePosition(v), veh.getLength(v), veh.getSpeed(v)) for v in self.conn.lane.getLastStepVehicleIDs(lane)]
+        return jam_length_m(float(self.conn.lane.getLength(lane)), cars)
 
     def publish(self, store) -> list[str]:
         """Offer every intersection's state now to ``store`` (a :class:`~spat_feed.transport.store.SpatStore`); the
@@ -252,3 +280,24 @@ def _with_next_times(events: list[MovementEvent]) -> list[MovementEvent]:
         nxt = events[i + 1].timing.likely_time if i + 1 < len(events) and events[i + 1].timing is not None else None
         out.append(ev if nxt is None else ev.model_copy(update={"timing": ev.timing.model_copy(update={"next_time": nxt})}))
     return out
+
+
+def jam_length_m(lane_length_m: float, cars: Sequence[tuple[float, float, float]]) -> float:
+    """How far back from the end of a lane (the stop line) its jam reaches: the halting vehicles (slower than
+    :data:`HALTING_MPS`) from the line back, each no farther than :data:`JAM_GAP_M` behind the one before (the first
+    no farther from the line); ``cars``: (front position along the lane, length, speed) in m, m, m/s. [m]
+
+    Examples
+    --------
+    >>> jam_length_m(100.0, [(98.0, 5.0, 0.0), (90.5, 5.0, 0.0), (60.0, 5.0, 0.0), (40.0, 5.0, 8.0)])
+    14.5
+    >>> jam_length_m(100.0, [(98.0, 5.0, 3.0)]), jam_length_m(100.0, [(80.0, 5.0, 0.0)])
+    (0.0, 0.0)
+    """
+    back_m, jam_m = lane_length_m, 0.0
+    for front, length, speed in sorted(cars, reverse=True):
+        if speed >= HALTING_MPS or back_m - front > JAM_GAP_M:
+            break
+        back_m = front - length
+        jam_m = lane_length_m - back_m
+    return jam_m

@@ -11,10 +11,13 @@ from pydantic import ValidationError
 from spat_feed.timing.messages import (
     CONFIDENCE_FRAC,
     IntersectionState,
+    MovementEvent,
+    MovementState,
     SpatMessage,
     TimeChangeDetails,
     confidence_index,
     from_j2735,
+    from_unix_s,
     movement_events,
     parse_spat_text,
     plan_from_movement,
@@ -189,3 +192,38 @@ def test_event_without_timing_holds():
     ix = IntersectionState.model_validate({"id": 1, "timestamp": T0, "states": [{"signalGroup": 1, "stateTimeSpeed": [{"eventState": "dark"}]}]})
     plan = plan_from_movement(ix.states[0])
     assert state_at(plan, T0 + 1e6) == MovementPhaseState.DARK and seconds_to_next_green(plan, T0) is None
+
+
+def test_overlapping_windows_cut_the_earlier_end_never_raise_the_later_start():
+    """A green+amber feed: the green may end 5-25 s from now into a 3 s amber, so the red may begin 8-28 s from now.
+    Windows of a plan may not overlap; the red's earliest start stays 8 s (a plan on 25 s would cross a red that
+    began at 8 s), the green's latest end comes down to it (warier, never unsafe)."""
+    def event(state, lo_s, hi_s):
+        timing = TimeChangeDetails(min_end_time=from_unix_s(T0 + lo_s), max_end_time=from_unix_s(T0 + hi_s), likely_time=from_unix_s(T0 + lo_s + 2.0))
+        return MovementEvent(event_state=state, timing=timing)
+
+    G, A, R = MovementPhaseState.PROTECTED_MOVEMENT_ALLOWED, MovementPhaseState.PROTECTED_CLEARANCE, MovementPhaseState.STOP_AND_REMAIN
+    plan = plan_from_movement(MovementState(signal_group=1, state_time_speed=[event(G, 5.0, 25.0), event(A, 8.0, 28.0), MovementEvent(event_state=R)]), T0)
+    to_amber, to_red = plan.changes
+    assert (to_red.min_end_s - T0, to_red.max_end_s - T0) == pytest.approx((8.0, 28.0))
+    assert (to_amber.min_end_s - T0, to_amber.max_end_s - T0) == pytest.approx((5.0, 8.0))
+    assert to_amber.likely_s - T0 == pytest.approx(7.0)
+    assert seconds_to_next_red(plan, T0).min_s == pytest.approx(8.0)
+
+
+def test_maneuver_assist_list_is_read_and_kept():
+    """J2735 MovementState.maneuverAssistList (DF_ConnectionManeuverAssist per lane connection): a message that carries
+    it is accepted (it was refused as an unknown field), the longest queue of a movement's connections is its queue,
+    it survives the J2735 form both ways, and a queueLength outside DE_ZoneLength (0-10,000 m) rejects the
+    intersection with a message naming the field."""
+    movement = {"signalGroup": 2, "stateTimeSpeed": [{"eventState": "stop-And-Remain", "timing": {"minEndTime": T0 + 10.0}}],
+                "maneuverAssistList": [{"connectionID": 1, "queueLength": 18, "waitOnStop": False}, {"connectionID": 2, "queueLength": 42},
+                                       {"connectionID": 3, "pedBicycleDetect": True}]}  # fmt: skip
+    ix = IntersectionState.model_validate({"id": 7, "timestamp": T0, "states": [movement, {**movement, "signalGroup": 3, "maneuverAssistList": None}]})
+    assert ix.movement(2).queue_length_m() == 42.0 and ix.movement(3).queue_length_m() is None
+    back = from_j2735(to_j2735(SpatMessage(timestamp=T0, intersections=[ix])), T0)
+    assert back.intersections[0].movement(2).maneuver_assist_list == ix.movement(2).maneuver_assist_list
+    assert back.intersections[0].movement(2).queue_length_m() == 42.0
+    text = json.dumps({"timestamp": T0, "intersections": [{"id": 7, "timestamp": T0, "states": [{**movement, "maneuverAssistList": [{"connectionID": 1, "queueLength": 10_001}]}]}]})
+    parsed = parse_spat_text(text)
+    assert parsed.intersections == () and "queueLength" in parsed.errors[0]

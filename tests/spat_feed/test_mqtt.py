@@ -116,16 +116,18 @@ def test_recorded_day_through_mqtt_reaches_trips_and_survives_a_broker_restart(s
 
         advice = until("fresh SPaT from the broker", lambda: fix_when(True))
         assert advice["next_intersection_id"] == 648 and advice["reason"] not in ("no_spat", "stale_spat", "clock_skew")
-        health = client.get("/health").json()
-        assert health["status"] == "ok" and [{k: i[k] for k in ("id", "status", "age_s")} for i in health["spat_health"]["intersections"]] == [{"id": 648, "status": "ok", "age_s": pytest.approx(0.5, abs=1.5)}]
+        # (ok: the latest message younger than the stale age; asked until so, a loaded machine may lag a moment)
+        health = until("health ok with fresh SPaT", lambda: (h := client.get("/health").json())["status"] == "ok" and h)
+        assert [{k: i[k] for k in ("id", "status")} for i in health["spat_health"]["intersections"]] == [{"id": 648, "status": "ok"}]
         assert [s["kind"] for s in health["spat_health"]["sources"]] == ["simulator", "mqtt"]
 
         # the trip sees the controller's states: the phases and windows of one recorded snapshot, moved onto now
+        asked = time.time()
         spat = client.get(f"/v1/trips/{trip_id}/spat", headers=auth).json()
         (seen,) = spat["intersections"]
         assert seen["id"] == 648 and spat["fresh"] == {"648": True}
         stamp = _unix(seen["timestamp"])
-        assert abs(stamp - time.time()) < 2.5
+        assert asked - 3.0 < stamp < time.time() + 1.0  # moved onto now (fresh: younger than the stale age)
 
         def shape(states, stamp_s):
             out = []

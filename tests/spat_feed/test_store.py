@@ -474,3 +474,21 @@ def test_a_red_that_turns_green_before_its_published_minimum_is_implausible_neve
     assert store.stats[1].rejected["implausible"] == 1 and store.stats[1].implausible_unix_s == clock.t
     clock.t = red_ends + 0.2  # the red's minimum passed: a green is what the controller may do
     assert store.offer(forged_green(sim.states_at(t)[0], red_ends + 0.1)) == "ok"
+
+
+def test_a_published_queue_reaches_the_light_view_fresh_only():
+    """A movement's J2735 ``queueLength`` (its ``maneuverAssistList``) reaches the advisor's view of that light (the
+    longest of its connections), per signal group (another group publishes none), and not once the reading is stale."""
+    clock = Clock(T0)
+    store = SpatStore(TimeRules(stale_after_s=2.0), clock)
+    ix = states(T0)[0]
+    g = ix.states[0].signal_group
+    assists = [{"connectionID": 1, "queueLength": 12}, {"connectionID": 2, "queueLength": 35}]
+    queued = type(ix.states[0]).model_validate({**ix.states[0].model_dump(by_alias=True), "maneuverAssistList": assists})
+    assert store.offer(ix.model_copy(update={"states": [queued, *ix.states[1:]]})) == "ok"
+    assert store.plan_reading(ix.id, g).queue_m == 35.0
+    assert all(store.plan_reading(ix.id, m.signal_group).queue_m is None for m in ix.states[1:])
+    spec = paper_corridor(200.0).intersections[0]
+    assert light_view(spec, store.plan_reading(ix.id, g), 0.0, T0).queue_m == 35.0
+    clock.t = T0 + 3.0
+    assert light_view(spec, store.plan_reading(ix.id, g), 0.0, T0 + 3.0).queue_m is None
