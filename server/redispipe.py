@@ -144,25 +144,37 @@ class RedisPipe:
             raise ConnectionError(f"cannot connect to Redis ({exc!r})") from None
 
     @staticmethod
-    async def _reply(future: asyncio.Future):
+    def _raise(reply: hiredis.ReplyError):
+        message = str(reply)
+        if message.startswith("NOSCRIPT"):
+            raise NoScriptError(message)
+        if message.startswith("LOADING"):
+            raise BusyLoadingError(message)
+        raise ResponseError(message)
+
+    @classmethod
+    async def _reply(cls, future: asyncio.Future):
         reply = await future
         if isinstance(reply, hiredis.ReplyError):
-            message = str(reply)
-            if message.startswith("NOSCRIPT"):
-                raise NoScriptError(message)
-            if message.startswith("LOADING"):
-                raise BusyLoadingError(message)
-            raise ResponseError(message)
+            cls._raise(reply)
         return reply
 
     async def call(self, *args):
         """One command's reply (bytes, int, None, lists of those); Redis's error replies raised."""
-        conn = await self._connection()
+        return await self._call(args)
+
+    async def _call(self, args: tuple):
+        conn = self._conn
+        if conn is None or conn.failure is not None:
+            conn = await self._connection()
         loop = asyncio.get_running_loop()
         future = conn.send(loop, hiredis.pack_command(args))
         if self._watch is None:
             self._watch = loop.call_later(self.timeout_s, self._check)
-        return await self._reply(future)
+        reply = await future  # (no further coroutine per call: a fix's save is the hot path)
+        if isinstance(reply, hiredis.ReplyError):
+            self._raise(reply)
+        return reply
 
     def _check(self) -> None:
         """Drop the connection when its oldest call in flight has waited ``timeout_s`` since it was written to the
@@ -184,7 +196,7 @@ class RedisPipe:
     async def run(self, script: Script, keys: list, args: list):
         """``script``'s reply for ``keys`` and ``args`` (``EVALSHA``; ``EVAL`` the first time Redis lacks it)."""
         try:
-            return await self.call("EVALSHA", script.sha, len(keys), *keys, *args)
+            return await self._call(("EVALSHA", script.sha, len(keys), *keys, *args))
         except NoScriptError:  # the calls of a burst all fail at once: one SCRIPT LOAD serves them all
             loading = self._loading.get(script.sha)
             if loading is None or loading.done():

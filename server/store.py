@@ -51,8 +51,10 @@ import contextlib
 import hmac
 import logging
 import math
+import struct
 import time
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import Awaitable, Callable
+from itertools import chain
 
 import numpy as np
 from pydantic_core import from_json, to_json
@@ -478,6 +480,36 @@ class _Reach:
 REACH = _Reach()
 
 
+class _Hold:
+    """:meth:`RedisTrips.hold`: one lock per trip while anyone holds or waits for it (``locks``: id -> [lock, holders
+    and waiters]). A class, not an ``asynccontextmanager``: that one is an async generator per fix, registered with
+    the event loop (a weak set's add and remove) and stepped twice."""
+
+    __slots__ = ("locks", "trip_id", "entry")
+
+    def __init__(self, locks: dict[str, list], trip_id: str) -> None:
+        self.locks = locks
+        self.trip_id = trip_id
+
+    async def __aenter__(self) -> None:
+        entry = self.entry = self.locks.get(self.trip_id) or self.locks.setdefault(self.trip_id, [asyncio.Lock(), 0])
+        entry[1] += 1
+        try:
+            await entry[0].acquire()
+        except BaseException:
+            self._leave()
+            raise
+
+    async def __aexit__(self, *exc) -> None:
+        self.entry[0].release()
+        self._leave()
+
+    def _leave(self) -> None:
+        self.entry[1] -= 1
+        if not self.entry[1]:
+            del self.locks[self.trip_id]
+
+
 class RedisTrips:
     """Trips in Redis, shared by every worker (see the module docstring). ``build(meta)`` makes a trip from its
     meta (``Engine.trip_from_meta``); ``release(trip)`` closes what a cached trip holds (its SPaT view)."""
@@ -558,20 +590,9 @@ class RedisTrips:
         trip.version = 1
         self._cache[trip.id] = (trip, time.monotonic())
 
-    @contextlib.asynccontextmanager
-    async def hold(self, trip_id: str) -> AsyncIterator[None]:
-        """Serialise this worker's calls on one trip (load, apply, save)."""
-        entry = self._locks.get(trip_id)
-        if entry is None:
-            entry = self._locks[trip_id] = [asyncio.Lock(), 0]
-        entry[1] += 1
-        try:
-            async with entry[0]:
-                yield
-        finally:
-            entry[1] -= 1
-            if not entry[1]:
-                del self._locks[trip_id]
+    def hold(self, trip_id: str) -> _Hold:
+        """``async with store.hold(trip_id)``: serialise this worker's calls on one trip (load, apply, save)."""
+        return _Hold(self._locks, trip_id)
 
     async def authorize(self, trip_id: str, token: str | None, take: bool = False) -> Trip:
         if not token:
@@ -642,11 +663,7 @@ class RedisTrips:
         (False: another worker wrote first; the copy now holds the store's state: apply the fix again).
         ``take``: one token of the trip's bucket first (429 when empty, nothing written)."""
         n = len(trip.trace_t)
-        samples = b""
-        if n:
-            rows = np.empty((n, 3), dtype=SAMPLE)
-            rows[:, 0], rows[:, 1], rows[:, 2] = trip.trace_t, trip.trace_v, trip.trace_x
-            samples = rows.tobytes()
+        samples = struct.pack(f"<{3 * n}d", *chain.from_iterable(zip(trip.trace_t, trip.trace_v, trip.trace_x))) if n else b""  # as SAMPLE rows
         s = self.s
         try:
             with REACH:
