@@ -542,6 +542,10 @@ def _pick(bound: Bound, which) -> float:
     lo, mid, hi = bound[:3]
     if not math.isfinite(lo) or hi - lo < EXACT_S:
         return mid  # exact, or before anything is known
+    if mid - lo < EXACT_S and math.isfinite(hi):
+        # a likely time at the earliest (a controller's likely time that has passed is published as "now"): no news
+        # about where in the window, which is read as uniform (not half the chance at its first instant)
+        return lo + (hi - lo) * which
     if which <= 0.5:
         return lo + (mid - lo) * which / 0.5
     return mid + (hi - mid) * (which - 0.5) / 0.5 if math.isfinite(hi) else hi
@@ -662,6 +666,10 @@ def _windows(phases, t_unix_s: float, horizon_s: float, lo, hi, classes=BLOCKING
         if cls not in classes:
             continue
         start_rel, end_rel = _pick(start, lo) - t_unix_s, _pick(end, hi) - t_unix_s
+        if cls is PhaseClass.AMBER and math.isfinite(end[0] - start[0]):
+            # an amber lasts its own length before the red it leads into (its start's window may be cut short where it
+            # would overlap the red's: a feed publishing the green's latest end no later than the red's earliest start)
+            start_rel = max(start_rel, _pick(end, lo) - t_unix_s - (end[0] - start[0]))
         if end_rel <= 0.0 or start_rel >= horizon_s:
             continue
         start_rel = max(start_rel, 0.0)
@@ -833,6 +841,7 @@ def light_view(
         age_s=float(reading.age_s),
         unknown_windows_s=unknown,
         scenario_red_windows_s=tuple(scenarios) if scenarios and likely != windows else None,
+        amber_s=reading.amber_s,
     )
 
 
