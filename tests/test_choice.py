@@ -212,10 +212,22 @@ def test_a_red_that_comes_whatever_the_plan_is_met_by_lifting_off_then_a_stop():
     near, _ = advise(Observation(V_LIM, V_LIM, (_view(70.0, scenarios),)), params=PARAMS)
     assert far.action in ("coast", "ease_off") and far.target_speed_mps < V_LIM - PARAMS.hysteresis_mps or far.reason == "red_ahead"
     assert (near.action, near.reason) == ("stop", "red_ahead")
-    # the same windows beginning with an amber (of unstated length, so at least 3 s): the car 70 m out at the limit
-    # cannot stop for it when it shows (within 24 m of the line at 4 m/s²) and is over the line before its red
+    # the same reds after an amber (of unstated length, so at least 3 s): shown 0-3 s from now, while the car can still
+    # stop for it (at least 28 m out at 4 m/s²): a stop all the same
     amber, _ = advise(Observation(V_LIM, V_LIM, (_view(70.0, scenarios, amber_s=None),)), params=PARAMS)
-    assert amber.action != "stop" and (amber.target_speed_mps is None or amber.target_speed_mps >= V_LIM - 2 * PARAMS.hysteresis_mps)
+    assert (amber.action, amber.reason) == ("stop", "red_ahead")
+
+
+def test_an_amber_the_car_cannot_stop_for_is_cleared():
+    """Recourse at an amber, hand numbers: at the limit, 60 m from the line (over it at 4.3 s), a red at 6.5 s in every
+    timing after at least 3 s of amber: when the amber shows (3.5 s) the car is 11 m out, short of the 24 m it needs at
+    4 m/s²: it clears the line in the amber, no stop, as cheap as no light at all. 150 m out with the red at 11.5 s,
+    the amber shows 32 m out: the car stops for it."""
+    near, p_near, _ = _priced(V_LIM, 0, 0.0, 2.0, (((6.5, 60.0),),) * 4, line_m=60.0, clear_s=3.0)
+    free, _, _ = _priced(V_LIM, 0, 0.0, 2.0, ((),), line_m=60.0)
+    assert p_near == 0.0 and near == pytest.approx(free, rel=1e-9)
+    _, p_far, _ = _priced(V_LIM, 0, 0.0, 2.0, (((11.5, 60.0),),) * 4, line_m=150.0, clear_s=3.0)
+    assert p_far == 1.0
 
 
 def test_a_green_the_car_makes_as_it_goes_in_every_timing_is_not_advised_away():

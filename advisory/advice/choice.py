@@ -223,13 +223,16 @@ def _go_usd(x_m, v0, reaction_s, x_end_m, v_lim, rates, up, normal, lam):
 
 
 @njit(cache=True, inline="always")
-def _met(tc, windows, j, s, n_windows, after_red_s, skip):
+def _met(tc, windows, j, s, n_windows, after_red_s, skip, amber_s):
     """Window index (and the chance [-] of meeting it) of timing ``s`` at line ``j`` that a crossing at ``tc`` meets:
-    inside a red or the margin after it, or within :data:`EDGE_S` before it (likelier the closer); -1 if none."""
+    inside a red, the margin after it or the amber (``amber_s``) before a red still to come, or within :data:`EDGE_S`
+    before that (likelier the closer); -1 if none."""
     for k in range(n_windows):
         if k == skip:
             continue
         a, b = windows[j, s, k, 0], windows[j, s, k, 1]
+        if a > 0.0:
+            a = max(a - amber_s, 0.0)
         if a - EDGE_S < tc < b + after_red_s:
             return k, 1.0 if tc >= a else (tc - (a - EDGE_S)) / EDGE_S
     return -1, 0.0
@@ -241,8 +244,8 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     """Expected cost [$] (motion plus ``lam_usd_per_s`` per second to ``x_end_m``), chance of a stop [-], and whether
     the plan crosses a red of every timing (the hard constraint) of each candidate plan (m,), over the equally likely
     timings ``windows`` (lines, timings, k, 2: red windows, padded with +inf) of the lines ``d_m`` (lines,), reached at
-    ``cross_s`` (m, lines) as the plans go. A window begins with the amber before its red where the line's light shows
-    one (``clear_s`` (lines,): how long at least, 0 where it shows none).
+    ``cross_s`` (m, lines) as the plans go. The amber before a red still to come (``clear_s`` (lines,): how long at
+    least, 0 where the light shows none) comes before its window.
 
     **With recourse**: the advice is made again every second, so in each timing the car follows the plan only until
     the light shows what that timing is, then does the best it can knowing it (module docstring):
@@ -254,7 +257,8 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     * a red still to come that the plan would meet, shown (its amber) before a comfortable stop must begin: from then
       a glide that reaches the line ``after_red_s`` after that red's end, held no lower than ``min_speed_mps``, else a
       stop at the line; shown where the car can no longer stop at :data:`AMBER_STOP_MPS2`, the amber is cleared (if the
-      car is over the line before the red); shown in between, a stop.
+      car is over the line before the red); shown in between, a stop. A red shows with its amber, ``clear_s`` before
+      it.
 
     A stop (or a roll below ``min_speed_mps``) counts in the chance of a stop. The hard constraint is about the light
     as published now: a plan is through a red when it reaches the line inside a red (or amber) on now in every timing,
@@ -277,7 +281,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
         for j in range(n_lines):  # the hard constraint: a crossing inside a red of every timing
             sure = True
             for s in range(n_sc):
-                k, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1)
+                k, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, 0.0)
                 if k < 0 or w < 1.0 or cross_s[c, j] < windows[j, s, k, 0] or (windows[j, s, k, 0] > 0.0 and clear_s[j] > 0.0):
                     sure = False
                     break
@@ -288,7 +292,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
         for s in range(n_sc):
             blocked, kb, w = -1, -1, 0.0
             for j in range(n_lines):
-                kb, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1)
+                kb, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, clear_s[j])
                 if kb >= 0:
                     blocked = j
                     break
@@ -307,7 +311,8 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                         ok = True
                         for i in range(n_lines):
                             if d_m[i] > x:
-                                ki, _ = _met(b + _go_s(d_m[i] - x, v, reaction_s, v_lim, normal), windows, i, s, n_windows, after_red_s, k if i == j else -1)
+                                ki, _ = _met(b + _go_s(d_m[i] - x, v, reaction_s, v_lim, normal), windows, i, s, n_windows, after_red_s, k if i == j else -1,
+                                              clear_s[i])
                                 if ki >= 0:
                                     ok = False
                         if ok:
@@ -321,32 +326,30 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
             tb, xb, vb, ub = brake[blocked, 0], brake[blocked, 1], brake[blocked, 2], brake[blocked, 3]
             d_line = d_m[blocked]
             stopped = True
-            cleared = False
-            if a > 0.0 and clear_s[blocked] > 0.0 and cross_s[c, blocked] < a + clear_s[blocked]:
-                x, v, u = _state_at(path, n_knots, a)
-                cleared = d_line - x < v * v / (2.0 * AMBER_STOP_MPS2)  # too close to stop for the amber: over in it
-            if cleared:
-                c_usd = plan
+            shown, x, v, u = 0.0, 0.0, 0.0, 0.0
+            if a > 0.0:  # a red still to come: it shows with its amber
+                shown = max(a - clear_s[blocked], 0.0)
+                x, v, u = _state_at(path, n_knots, shown)
+            if a > 0.0 and (d_line - x <= 0.0 or v <= 0.0):
+                c_usd = plan  # over the line before it showed (or stopped short: the plan's own)
                 stopped = False
-            elif a > 0.0 and a < tb:
+            elif a > 0.0 and clear_s[blocked] > 0.0 and cross_s[c, blocked] < a and d_line - x < v * v / (2.0 * AMBER_STOP_MPS2):
+                c_usd = plan  # too close to stop for the amber when it shows: over the line in it, before the red
+                stopped = False
+            elif a > 0.0 and shown < tb:
                 # shown before a stop must begin: glide to the line to reach it after the red, no slower than allowed
-                x, v, u = _state_at(path, n_knots, a)
                 d = d_line - x
-                if v > 0.0 and d > 0.0:
-                    vg = min(v, d / max(b + after_red_s - a, 1e-6))
-                    if vg >= min_speed_mps:
-                        g, tg = _go_usd(d_line, vg, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
-                        c_usd = u + _at(rates[CRUISE], vg) * d / vg + g + lam_usd_per_s * (a + d / vg)
-                        stopped = False
-                    else:  # a stop at the line: hold the speed to where it must begin, brake, wait, launch
-                        hold_m = max(d - v * v / (2.0 * comfort), 0.0)
-                        t_stop = a + hold_m / v + v / comfort
-                        wait = max(min(b, t_stop + WAIT_CAP_S) - t_stop, 0.0)
-                        g, tg = _go_usd(d_line, 0.0, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
-                        c_usd = u + _at(rates[CRUISE], v) * hold_m / v + _at(down, v) + idle_usd_per_s * wait + g + lam_usd_per_s * (t_stop + wait)
-                else:
-                    c_usd = plan
+                vg = min(v, d / max(b + after_red_s - shown, 1e-6))
+                if vg >= min_speed_mps:
+                    g, tg = _go_usd(d_line, vg, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
+                    c_usd = u + _at(rates[CRUISE], vg) * d / vg + g + lam_usd_per_s * (shown + d / vg)
                     stopped = False
+                else:  # a stop at the line: hold the speed to where it must begin, brake, wait, launch
+                    hold_m = max(d - v * v / (2.0 * comfort), 0.0)
+                    t_stop = shown + hold_m / v + v / comfort
+                    wait = max(min(b, t_stop + WAIT_CAP_S) - t_stop, 0.0)
+                    g, tg = _go_usd(d_line, 0.0, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
+                    c_usd = u + _at(rates[CRUISE], v) * hold_m / v + _at(down, v) + idle_usd_per_s * wait + g + lam_usd_per_s * (t_stop + wait)
             elif a <= 0.0 and b <= tb:
                 # red now, over before a stop must begin: on with the plan until then, then speed up
                 x, v, u = _state_at(path, n_knots, b)

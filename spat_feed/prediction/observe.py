@@ -666,10 +666,6 @@ def _windows(phases, t_unix_s: float, horizon_s: float, lo, hi, classes=BLOCKING
         if cls not in classes:
             continue
         start_rel, end_rel = _pick(start, lo) - t_unix_s, _pick(end, hi) - t_unix_s
-        if cls is PhaseClass.AMBER and math.isfinite(end[0] - start[0]):
-            # an amber lasts its own length before the red it leads into (its start's window may be cut short where it
-            # would overlap the red's: a feed publishing the green's latest end no later than the red's earliest start)
-            start_rel = max(start_rel, _pick(end, lo) - t_unix_s - (end[0] - start[0]))
         if end_rel <= 0.0 or start_rel >= horizon_s:
             continue
         start_rel = max(start_rel, 0.0)
@@ -821,8 +817,8 @@ def light_view(
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
         windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
         if likely != windows:  # uncertain: the equally likely timings too
-            # (an amber counts: a plan reaching the line in it meets a driver who stops for it)
-            scenarios = tuple(_windows(phases, t_feed - u, horizon_s + u, q, q, BLOCKING_CLASSES | {PhaseClass.AMBER}) for q in SCENARIO_LEVELS)
+            # (the reds: the amber before each, published or not, is the advisor's to weigh, ``LightView.amber_s``)
+            scenarios = tuple(_windows(phases, t_feed - u, horizon_s + u, q, q) for q in SCENARIO_LEVELS)
         # the unknown phases that end (between known ones; the open tail past the plan and the history stays a red)
         unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
     if u > 0.0:
