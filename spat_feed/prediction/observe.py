@@ -534,7 +534,8 @@ def _levels(samples: np.ndarray, floor_s: float) -> tuple[float, ...]:
 def _pick(bound: Bound, which) -> float:
     """One instant of a change: ``which`` an index (0 earliest, 1 likely, 2 late) or a quantile level in (0, 1): the
     forecast's where it has one, else read off the (earliest, likely, latest) window, a published one, as piecewise
-    uniform (half the chance on each side of its likely time)."""
+    uniform (half the chance on each side of its likely time; uniform over the window where the likely time is its
+    earliest, which says nothing of where in it)."""
     if isinstance(which, int):
         return bound[which]
     if len(bound) > 3:
