@@ -23,8 +23,9 @@ How the advice is made (docs/ADVISOR.md):
    target moves by ``speak_change_mps``.
 
 Under uncertain timing ``AdvisorParams(uncertain_choice="expected_cost")`` replaces the rules of 3 and 4 by the plan
-of least expected cost over the lights' equally likely timings (:func:`_choose`, :mod:`advisory.advice.choice`;
-docs/ADVISOR.md, "The choice on the distribution"); not yet the default.
+of least expected cost over the lights' equally likely timings, each plan priced with recourse (:func:`_choose`,
+:mod:`advisory.advice.choice`; docs/ADVISOR.md, "The choice on the distribution"); not yet the default (its targets
+are not met: the same section).
 """
 
 from __future__ import annotations
@@ -78,7 +79,11 @@ class LightView:
 
     scenario_red_windows_s: tuple[tuple[tuple[float, float], ...], ...] | None = None
     """Under uncertainty, the red windows of each of the light's equally likely timings (every change at one quantile
-    of its forecast, :mod:`advisory.advice.choice`); None: the timing is exact (``red_windows_s``)."""
+    of its forecast, :mod:`advisory.advice.choice`); None: the timing is exact (``red_windows_s``). A window begins
+    with the amber before its red, where the light shows one."""
+    amber_s: float | None = None
+    """The amber the light shows before each red, where its source knows it: None (unknown) is some amber, as traffic
+    law requires; 0: none (a green may turn red at once). [s]"""
 
     queue_m: float | None = None
     """The queue standing back from the stop line that the controller published with a fresh reading (J2735
@@ -793,10 +798,49 @@ def _implied_timings(light: LightView) -> tuple:
     return tuple(out)
 
 
+WIDE_LEVELS = (1, 6, 13, 18)
+"""The forecast's timings (of :data:`IMPLIED_TIMINGS`, by index: levels ~0.08, 0.33, 0.68, 0.93) that the wide
+component of the mixture stretches (:func:`_widened_timings`). [-]"""
+WIDE_STRETCH = 2.0
+"""How much farther from the median timing the wide component puts each change: a copy of the forecast with twice its
+spread. [-]"""
+
+
+def _widened_timings(timings: tuple) -> tuple:
+    """The forecast's equally likely timings of one light, and a wider component of the mixture: a copy of the forecast
+    with :data:`WIDE_STRETCH` times its spread about its median timing, at the levels :data:`WIDE_LEVELS`, so that
+    the outer timings are not the forecast's extremes (a forecast from a few dozen past phases is its sample: a change
+    outside every timing came 7-10 s past the outer ones on the recorded controllers). Weight
+    ``len(WIDE_LEVELS) / (N + len(WIDE_LEVELS))`` (1/6 for 20 timings). Windows pair up by their order (the k-th red of
+    each timing; one past the median's horizon stays as it is). A red on now never ends earlier than in every timing
+    (the published red is held: the safety rule); no change comes before now."""
+    n = len(timings)
+    if n < 2:
+        return timings
+    med = timings[n // 2]
+    wide = []
+    for i in (round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS):
+        out = []
+        for w, (a, b) in enumerate(timings[i]):
+            am, bm = med[w] if w < len(med) else (a, b)
+            b2 = bm + WIDE_STRETCH * (b - bm) if math.isfinite(b) and math.isfinite(bm) else b
+            if a <= 0.0:  # red on now: its end no earlier than every timing says
+                out.append((a, max(b2, min(t[w][1] for t in timings if len(t) > w))))
+                continue
+            a2 = max(am + WIDE_STRETCH * (a - am), 0.0) if math.isfinite(a) and math.isfinite(am) else a
+            out.append((a2, max(b2, a2)))
+        if out and any(out[k][0] < out[k - 1][1] for k in range(1, len(out))):
+            continue  # stretched into each other: not a timing
+        wide.append(tuple(out))
+    return timings + tuple(wide)
+
+
 def _timings(lights: tuple[LightView, ...]) -> np.ndarray:
     """The lights' equally likely timings packed for :func:`advisory.advice.choice.expected_costs`: red windows
-    (lines, timings, k, 2), padded with +inf; an exact light has one timing in all of them."""
-    per_light = [light.scenario_red_windows_s or _implied_timings(light) for light in lights]
+    (lines, timings, k, 2), padded with +inf; an exact light has one timing in all of them. Each uncertain light's
+    forecast with its wide component (:func:`_widened_timings`)."""
+    per_light = [_widened_timings(light.scenario_red_windows_s or _implied_timings(light)) if light.likely_red_windows_s is not None
+                 or light.scenario_red_windows_s is not None else _implied_timings(light) for light in lights]  # fmt: skip
     n_sc = max(len(timings) for timings in per_light)
     per_light = [timings if len(timings) == n_sc else tuple(timings[k * len(timings) // n_sc] for k in range(n_sc)) for timings in per_light]
     k = max(max((len(w) for sc in per_light for w in sc), default=0), 1)
@@ -832,28 +876,39 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     rates, coast, idle = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
     x_end = float(d_m[-1]) + v_lim * v_lim / (2.0 * params.normal_accel_mps2)
     windows = _timings(usable)
-    cost, p_stop = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim, params.green_margin_s,
-                                         params.time_value_usd_per_s, cross, rates, coast, idle, brake, firm, params.normal_accel_mps2)  # fmt: skip
+    clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
+    cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,
+                                                  params.green_margin_s, params.time_value_usd_per_s, cross, rates, coast, idle, brake, firm,
+                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear)  # fmt: skip
+    for j, light in enumerate(usable):
+        if clear[j] == 0.0:  # no amber warns of its reds: no plan reaches the line where one may be on (the sure windows)
+            for a, b in light.red_windows_s:
+                through |= (cross[:, j] >= a) & (cross[:, j] < b + params.green_margin_s)
     normal = n_modes * m
-    allowed = p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9
+    allowed = (p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9) & ~through
     if not keep:
         allowed[-1] = False
+    forced = not allowed.any()
+    if forced:  # every plan crosses a red of every timing: a stop comes whatever the plan
+        allowed[normal], p_stop[normal] = True, 1.0
     best = int(np.argmin(np.where(allowed, cost, np.inf)))
     if keep and allowed[-1] and cost[-1] <= cost[best] + params.time_value_usd_per_s * params.reaction_s:
         best = vts.size - 1  # the plan followed now, unless another is better by more than a new reaction costs
-    if p_stop[best] >= 0.5 and nxt.unknown_at(float(cross[normal, 0])):
+    if p_stop[best] >= 0.5 and any(light.unknown_at(float(cross[normal, j])) for j, light in enumerate(usable)):
         # what comes as the car goes is a phase whose state nobody knows: no stop is asked for it (the regular driver
         # went through it), and no plan slows the car for the green after it: no data, said so
         return Advice("none", "no_spat", light_red=red, seconds_to_change_s=to_change)
-    if best == normal:  # nothing does better than driving on as the driver would (the red may come late): no speed advice
+    if best == normal and not forced:  # nothing does better than driving on as the driver would (the red may come late): no speed advice
         arrival = float(cross[normal, 0])
         reason = "no_spat" if nxt.unknown_at(arrival) else "tight_green" if not red and to_change is not None and arrival < to_change else "low_confidence"
         return Advice("none", reason, light_red=red, seconds_to_change_s=to_change)
-    if p_stop[best] >= 0.5:
+    i = _binding(usable, obs, params)
+    if forced or float(p_stop[allowed].min()) >= 0.5:
         # a stop is likely whatever the plan: prepare to stop when one must begin soon; farther out lift off (arriving
-        # later only helps: the red may end first), or nothing while the car pulls away at a crawl
-        # (the light it is about: the first the car as it goes would not cross on green; a stop only at the next one)
-        i = _binding(usable, obs, params)
+        # later only helps: the red may end first), or nothing while the car pulls away at a crawl (the light it is
+        # about: the first the car as it goes would not cross on green; a stop only at the next one). Where some plan
+        # likely avoids a stop, the cheapest plan's words, even if it stops more often: it was priced with the stop,
+        # glide or amber cleared that the car makes once the light shows its timing, not with a stop now
         if i == 0 and red and v > 0.0 and nxt.seconds_to_green() - crossing_time_s(nxt.distance_m, v, v, params) < params.short_wait_s:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)  # a stop to wait a moment: none
         if v < params.min_cruise_speed_mps:  # pulling away at a crawl: what is ahead, said

@@ -5,17 +5,24 @@ speed by rules; it prices every candidate plan (a target speed and how to reach 
 of the light's ``N`` equally likely timings (``LightView.scenario_red_windows_s``, quantiles of the predictor's
 forecast) and chooses the cheapest in expectation (docs/ADVISOR.md, "Under uncertainty"):
 
-* **Outcome of a plan in one timing**: the car follows the plan from now to a point ``x_end`` past the last line
-  planned for, where every plan is back at the speed limit. If it reaches a line inside a red of that timing (or
-  within the after-red margin), it brakes comfortably to a stop at the line instead, waits for the green and
-  launches at the regular driver's rate.
+* **Outcome of a plan in one timing, with recourse**: the advice is made again every second, so the car follows the
+  plan only until the light shows which timing it is in, then does the best it can knowing it, to a point ``x_end``
+  past the last line planned for, where every plan is back at the speed limit (:func:`expected_costs`): a green that
+  comes early is met by speeding up to the limit from that instant (where that is cheaper and meets no red); a red on
+  now that the plan would meet is ridden out (the plan until it ends, braking comfortably from where a stop at the
+  line must begin, rolling on when the green comes, a stop if it does not come first); a red still to come that the
+  plan would meet is glided to (from its amber, reaching the line after it, no slower than the slowest advised
+  speed), or stopped for when it shows within a comfortable stop, or cleared in its amber when it shows where the car
+  can no longer stop for it. The timings are the predictor's (quantiles of its forecast) and a wider component of
+  the mixture (:func:`advisory.advice.advisor._widened_timings`): the outer timings are not the forecast's extremes.
 * **Cost**: paper Eq. 4 (electricity plus battery wear, :mod:`advisory.physics.model`) of that motion, plus a price
   on time (``advisory.physics.params.TIME_VALUE_USD_PER_S``, the lookup tables' own: the one at which cruising
   at the limit is the cheapest steady speed). Priced per step from rate tables made once
   per vehicle with the model itself (:func:`rate_tables`).
 * **Chance constraint**: a plan may make a stop likelier than driving normally only up to ``stop_risk_frac``.
   The safety rule is a hard constraint: a published red is red in every timing (``spat_feed.prediction.observe
-  .red_hold_s``), so a plan that crosses it stops in all of them and is never advised.
+  .red_hold_s``), and a plan that reaches the line inside it (in every timing) is never advised; nor, at a light that
+  shows no amber, one that reaches the line where a red may be on.
 
 Pure numerics; no advice wording here (:mod:`advisory.advice.advisor` words the choice).
 """
@@ -45,6 +52,14 @@ EDGE_S = 2.0
 """A timing's change to red is known to within a couple of seconds (its neighbours in the forecast are seconds apart):
 the chance of meeting the red rises from 0 to 1 over this long before its start, so that reaching the line later is
 never free of risk between two timings. [s]"""
+
+AMBER_STOP_MPS2 = 4.0
+"""A driver stops for an amber it can stop for at this deceleration, and clears the line in one it cannot (the regular
+driver's hardest braking). [m/s²]"""
+
+AMBER_MIN_S = 3.0
+"""An amber lasts at least this long where the light shows one of unstated length (the shortest yellow change interval,
+MUTCD 4D.26). [s]"""
 
 WAIT_CAP_S = 150.0
 """A red whose end no timing knows is priced as a wait this long. [s]"""
@@ -88,28 +103,31 @@ def _at(table, v):
     return lerp_uniform(table, RATE_DV_MPS, v)
 
 
+MAX_KNOTS = 4000
+"""Steps of one priced motion at most (:data:`STEP_S` each, fewer where a speed is reached mid-step). [-]"""
+
+
 @njit(cache=True)
-def _drive(vt, mode, reaction_s, accel_row, accel_mps2, v0, d_stop_m, x_end_m, v_lim, rates, coast, comfort, firm, normal):
+def _drive(vt, mode, reaction_s, accel_row, accel_mps2, v0, d_stop_m, x_end_m, v_lim, rates, coast, comfort, firm, normal, path):
     """Follow one plan from speed ``v0``: a reaction at ``v0``, the change to ``vt`` (``mode`` as the advisor's
     kernels: 0 coast down or speed up, 1 brake gently then coast, 2 brake gently, 3 firmly; speeding up in row
     ``accel_row`` at ``accel_mps2``), then hold; past ``d_stop_m[-1]`` speed up at ``normal`` to ``v_lim``, to
-    ``x_end_m``. Returns (cost, time) to ``x_end_m`` and, per line ``j``, (cost, time) to a comfortable stop at it
-    (braking from where such a stop must begin). [$], [s]"""
+    ``x_end_m``. Writes the motion's knots into ``path`` (4, n): time [s], position [m], speed [m/s] and cost so far
+    [$]. Returns (cost, time) to ``x_end_m`` (inf: the plan stops short of the lines), the number of knots, and per
+    line ``j`` the state (time, position, speed, cost) where a comfortable stop at it must begin (inf where the plan
+    never is that far from it: too close to stop comfortably)."""
     n = d_stop_m.size
-    stop_usd = np.full(n, np.inf)
-    stop_s = np.full(n, np.inf)
+    brake = np.full((n, 4), np.inf)
     t, x, v, usd = 0.0, 0.0, v0, 0.0
     coasting = False
     j = 0
-    for _ in range(4000):
+    k = 0
+    for _ in range(MAX_KNOTS):
+        path[0, k], path[1, k], path[2, k], path[3, k] = t, x, v, usd
+        k += 1
         # a comfortable stop at the next line must begin now
         while j < n and x < d_stop_m[j] and d_stop_m[j] - x <= v * v / (2.0 * comfort) + v * STEP_S:
-            tb = v / comfort
-            k = 8
-            c = 0.0
-            for q in range(k):
-                c += _at(rates[BRAKE_COMFORT], v * (1.0 - (q + 0.5) / k)) * tb / k
-            stop_usd[j], stop_s[j] = usd + c, t + tb
+            brake[j, 0], brake[j, 1], brake[j, 2], brake[j, 3] = t, x, v, usd
             j += 1
         if j < n and x >= d_stop_m[j]:
             j += 1  # passed it (its stop was taken before)
@@ -139,61 +157,224 @@ def _drive(vt, mode, reaction_s, accel_row, accel_mps2, v0, d_stop_m, x_end_m, v
         if v1 < 0.0:
             v1, h = 0.0, v / -a
         if v1 <= 0.0 and v <= 0.0 and t >= reaction_s:
-            return np.inf, np.inf, stop_usd, stop_s  # stopped short of the lines: not a plan
+            return np.inf, np.inf, k, brake  # stopped short of the lines: not a plan
         h = max(h, 1e-6)
         usd += _at(rates[row], 0.5 * (v + v1)) * h
         x += 0.5 * (v + v1) * h
         v = v1
         t += h
-    return usd, t, stop_usd, stop_s
+    path[0, k], path[1, k], path[2, k], path[3, k] = t, x, v, usd
+    return usd, t, k + 1, brake
+
+
+@njit(cache=True)
+def _ramps(rates, comfort, normal):
+    """Cost [$] of speeding up from rest to each grid speed at ``normal``, and of braking from it to rest at ``comfort``
+    (cumulative, on the rate tables' speed grid)."""
+    n = rates.shape[1]
+    up, down = np.zeros(n), np.zeros(n)
+    for i in range(1, n):
+        v = (i - 0.5) * RATE_DV_MPS
+        up[i] = up[i - 1] + _at(rates[ACCEL_NORMAL], v) * RATE_DV_MPS / normal
+        down[i] = down[i - 1] + _at(rates[BRAKE_COMFORT], v) * RATE_DV_MPS / comfort
+    return up, down
+
+
+@njit(cache=True, inline="always")
+def _state_at(path, n, tau):
+    """Position, speed and cost so far of a priced motion (``path``, ``n`` knots) at time ``tau`` (linear in the step)."""
+    if tau <= path[0, 0]:
+        return path[1, 0], path[2, 0], path[3, 0]
+    if tau >= path[0, n - 1]:
+        return path[1, n - 1], path[2, n - 1], path[3, n - 1]
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if path[0, mid] <= tau:
+            lo = mid
+        else:
+            hi = mid
+    f = (tau - path[0, lo]) / max(path[0, hi] - path[0, lo], 1e-12)
+    return (path[1, lo] + f * (path[1, hi] - path[1, lo]), path[2, lo] + f * (path[2, hi] - path[2, lo]),
+            path[3, lo] + f * (path[3, hi] - path[3, lo]))  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _go_s(d_m, v0, reaction_s, v_lim, normal):
+    """Time [s] to a point ``d_m`` ahead speeding up to ``v_lim`` at ``normal`` after ``reaction_s`` at ``v0``."""
+    if d_m <= v0 * reaction_s:
+        return d_m / v0 if v0 > 0.0 else 0.0
+    d = d_m - v0 * reaction_s
+    d_acc = (v_lim * v_lim - v0 * v0) / (2.0 * normal)
+    if d <= d_acc:
+        return reaction_s + (np.sqrt(v0 * v0 + 2.0 * normal * d) - v0) / normal
+    return reaction_s + (v_lim - v0) / normal + (d - d_acc) / v_lim
+
+
+@njit(cache=True, inline="always")
+def _go_usd(x_m, v0, reaction_s, x_end_m, v_lim, rates, up, normal, lam):
+    """Cost [$] with time priced at ``lam``, and time [s], from position ``x_m`` at speed ``v0`` to ``x_end_m``: a
+    reaction at ``v0``, speeding up to ``v_lim`` at ``normal``, then cruising."""
+    d_acc = (v_lim * v_lim - v0 * v0) / (2.0 * normal)
+    rest_m = max(x_end_m - x_m - v0 * reaction_s - d_acc, 0.0)
+    t = reaction_s + (v_lim - v0) / normal + rest_m / v_lim
+    usd = _at(rates[CRUISE], v0) * reaction_s + _at(up, v_lim) - _at(up, v0) + _at(rates[CRUISE], v_lim) * rest_m / v_lim
+    return usd + lam * t, t
+
+
+@njit(cache=True, inline="always")
+def _met(tc, windows, j, s, n_windows, after_red_s, skip, amber_s):
+    """Window index (and the chance [-] of meeting it) of timing ``s`` at line ``j`` that a crossing at ``tc`` meets:
+    inside a red, the margin after it or the amber (``amber_s``) before a red still to come, or within :data:`EDGE_S`
+    before that (likelier the closer); -1 if none."""
+    for k in range(n_windows):
+        if k == skip:
+            continue
+        a, b = windows[j, s, k, 0], windows[j, s, k, 1]
+        if a > 0.0:
+            a = max(a - amber_s, 0.0)
+        if a - EDGE_S < tc < b + after_red_s:
+            return k, 1.0 if tc >= a else (tc - (a - EDGE_S)) / EDGE_S
+    return -1, 0.0
 
 
 @njit(cache=True)
 def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s,
-                   cross_s, rates, coast, idle_usd_per_s, comfort, firm, normal):  # fmt: skip
-    """Expected cost [$] (motion plus ``lam_usd_per_s`` per second to ``x_end_m``) and chance of a stop [-] of each
-    candidate plan (m,), over the equally likely timings ``windows`` (lines, timings, k, 2: red windows, padded with
-    +inf) of the lines ``d_m`` (lines,), reached at ``cross_s`` (m, lines) as the plans go."""
+                   cross_s, rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s):  # fmt: skip
+    """Expected cost [$] (motion plus ``lam_usd_per_s`` per second to ``x_end_m``), chance of a stop [-], and whether
+    the plan crosses a red of every timing (the hard constraint) of each candidate plan (m,), over the equally likely
+    timings ``windows`` (lines, timings, k, 2: red windows, padded with +inf) of the lines ``d_m`` (lines,), reached at
+    ``cross_s`` (m, lines) as the plans go. The amber before a red still to come (``clear_s`` (lines,): how long at
+    least, 0 where the light shows none) comes before its window.
+
+    **With recourse**: the advice is made again every second, so in each timing the car follows the plan only until
+    the light shows what that timing is, then does the best it can knowing it (module docstring):
+
+    * a red that ends before the plan reaches the line (the green comes early): from that instant, a reaction, then
+      speeding up to the limit, if that is cheaper and meets no red of the timing;
+    * a red on now that the plan would meet: the plan until its end; if a comfortable stop must begin first, braking
+      until the red ends (rolling on from the speed then) or to a stop;
+    * a red still to come that the plan would meet, shown (its amber) before a comfortable stop must begin: from then
+      a glide that reaches the line ``after_red_s`` after that red's end, held no lower than ``min_speed_mps``, else a
+      stop at the line; shown where the car can no longer stop at :data:`AMBER_STOP_MPS2`, the amber is cleared (if the
+      car is over the line before the red); shown in between, a stop. A red shows with its amber, ``clear_s`` before
+      it.
+
+    A stop (or a roll below ``min_speed_mps``) counts in the chance of a stop. The hard constraint is about the light
+    as published now: a plan is through a red when it reaches the line inside a red (or amber) on now in every timing,
+    or, where the light shows no amber, inside any red of every timing."""
     m, n_lines, n_sc = vts.size, d_m.size, windows.shape[1]
     cost = np.empty(m)
     p_stop = np.empty(m)
-    # after a stop: the launch from rest to the limit at the regular driver's rate (midpoint rule, 16 steps)
+    through = np.zeros(m, dtype=np.bool_)
+    up, down = _ramps(rates, comfort, normal)
     launch_s = v_lim / normal
     launch_m = 0.5 * v_lim * launch_s
-    launch_usd = 0.0
-    for q in range(16):
-        launch_usd += _at(rates[ACCEL_NORMAL], v_lim * (q + 0.5) / 16) * launch_s / 16
+    path = np.empty((4, MAX_KNOTS + 1))
+    cruise_lim = _at(rates[CRUISE], v_lim)
     for c in range(m):
-        usd, t_end, stop_usd, stop_s = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort, firm, normal)
+        usd, t_end, n_knots, brake = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort,
+                                            firm, normal, path)  # fmt: skip
         if not np.isfinite(t_end):
             cost[c], p_stop[c] = np.inf, 1.0
             continue
-        total, stops = 0.0, 0.0
-        for s in range(n_sc):
-            blocked, wait_end, w = -1, 0.0, 0.0
-            for j in range(n_lines):
-                tc = cross_s[c, j]
-                for k in range(n_windows):
-                    a, b = windows[j, s, k, 0], windows[j, s, k, 1]
-                    if a - EDGE_S < tc < b + after_red_s:
-                        blocked, wait_end = j, min(b, tc + WAIT_CAP_S)
-                        w = 1.0 if tc >= a else (tc - (a - EDGE_S)) / EDGE_S
-                        break
-                if blocked >= 0:
+        for j in range(n_lines):  # the hard constraint: a crossing inside a red of every timing
+            sure = True
+            for s in range(n_sc):
+                k, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, 0.0)
+                if k < 0 or w < 1.0 or cross_s[c, j] < windows[j, s, k, 0] or (windows[j, s, k, 0] > 0.0 and clear_s[j] > 0.0):
+                    sure = False
                     break
-            if blocked < 0 or w < 1.0:
-                total += (1.0 - w) * (usd + lam_usd_per_s * t_end)
+            if sure:
+                through[c] = True
+        total, stops = 0.0, 0.0
+        plan = usd + lam_usd_per_s * t_end
+        for s in range(n_sc):
+            blocked, kb, w = -1, -1, 0.0
+            for j in range(n_lines):
+                kb, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, clear_s[j])
+                if kb >= 0:
+                    blocked = j
+                    break
+            if w < 1.0:
+                # the plan goes through: unless a green comes early, where speeding up from then is cheaper
+                best = plan
+                for j in range(n_lines if blocked < 0 else blocked + 1):
+                    tc = cross_s[c, j]
+                    for k in range(n_windows):
+                        b = windows[j, s, k, 1]
+                        if not 0.0 < b <= tc - after_red_s:
+                            continue
+                        x, v, u = _state_at(path, n_knots, b)
+                        if x >= d_m[j]:
+                            continue
+                        ok = True
+                        for i in range(n_lines):
+                            if d_m[i] > x:
+                                ki, _ = _met(b + _go_s(d_m[i] - x, v, reaction_s, v_lim, normal), windows, i, s, n_windows, after_red_s, k if i == j else -1,
+                                              clear_s[i])
+                                if ki >= 0:
+                                    ok = False
+                        if ok:
+                            g, tg = _go_usd(x, v, reaction_s, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
+                            best = min(best, u + g + lam_usd_per_s * b)
+                total += (1.0 - w) * best
                 if blocked < 0:
                     continue
-            stops += w
-            t_stop = stop_s[blocked]
-            if not np.isfinite(t_stop):  # too close to stop comfortably: a hard stop, as costly as one can be
-                t_stop = tc
-            wait = max(wait_end - t_stop, 0.0)
-            rest_m = max(x_end_m - d_m[blocked] - launch_m, 0.0)
-            rest_s = rest_m / v_lim
-            c_usd = (stop_usd[blocked] if np.isfinite(stop_usd[blocked]) else usd) + idle_usd_per_s * wait + launch_usd + _at(rates[CRUISE], v_lim) * rest_s
-            total += w * (c_usd + lam_usd_per_s * (t_stop + wait + launch_s + rest_s))
+            # the plan meets the red of line ``blocked``: what the car does once the timing shows itself
+            a, b = windows[blocked, s, kb, 0], windows[blocked, s, kb, 1]
+            tb, xb, vb, ub = brake[blocked, 0], brake[blocked, 1], brake[blocked, 2], brake[blocked, 3]
+            d_line = d_m[blocked]
+            stopped = True
+            shown, x, v, u = 0.0, 0.0, 0.0, 0.0
+            if a > 0.0:  # a red still to come: it shows with its amber
+                shown = max(a - clear_s[blocked], 0.0)
+                x, v, u = _state_at(path, n_knots, shown)
+            if a > 0.0 and (d_line - x <= 0.0 or v <= 0.0):
+                c_usd = plan  # over the line before it showed (or stopped short: the plan's own)
+                stopped = False
+            elif a > 0.0 and clear_s[blocked] > 0.0 and cross_s[c, blocked] < a and d_line - x < v * v / (2.0 * AMBER_STOP_MPS2):
+                c_usd = plan  # too close to stop for the amber when it shows: over the line in it, before the red
+                stopped = False
+            elif a > 0.0 and shown < tb:
+                # shown before a stop must begin: glide to the line to reach it after the red, no slower than allowed
+                d = d_line - x
+                vg = min(v, d / max(b + after_red_s - shown, 1e-6))
+                if vg >= min_speed_mps:
+                    g, tg = _go_usd(d_line, vg, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
+                    c_usd = u + _at(rates[CRUISE], vg) * d / vg + g + lam_usd_per_s * (shown + d / vg)
+                    stopped = False
+                else:  # a stop at the line: hold the speed to where it must begin, brake, wait, launch
+                    hold_m = max(d - v * v / (2.0 * comfort), 0.0)
+                    t_stop = shown + hold_m / v + v / comfort
+                    wait = max(min(b, t_stop + WAIT_CAP_S) - t_stop, 0.0)
+                    g, tg = _go_usd(d_line, 0.0, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
+                    c_usd = u + _at(rates[CRUISE], v) * hold_m / v + _at(down, v) + idle_usd_per_s * wait + g + lam_usd_per_s * (t_stop + wait)
+            elif a <= 0.0 and b <= tb:
+                # red now, over before a stop must begin: on with the plan until then, then speed up
+                x, v, u = _state_at(path, n_knots, b)
+                g, tg = _go_usd(x, v, reaction_s, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
+                c_usd = u + g + lam_usd_per_s * b
+                stopped = False
+            elif a <= 0.0 and np.isfinite(tb) and b < tb + vb / comfort:
+                # red now, over while the car brakes for it: roll on from the speed then
+                vr = vb - comfort * (b - tb)
+                xr = xb + (vb * vb - vr * vr) / (2.0 * comfort)
+                g, tg = _go_usd(xr, vr, reaction_s, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
+                c_usd = ub + _at(down, vb) - _at(down, vr) + g + lam_usd_per_s * b
+                stopped = vr < min_speed_mps
+            else:
+                # a stop at the line (braked from where it must begin; too close for that: as costly as one can be)
+                tc = cross_s[c, blocked]
+                t_stop = tb + vb / comfort if np.isfinite(tb) else tc
+                wait = max(min(b, tc + WAIT_CAP_S) - t_stop, 0.0)
+                rest_m = max(x_end_m - d_line - launch_m, 0.0)
+                stop_usd = ub + _at(down, vb) if np.isfinite(tb) else usd
+                c_usd = (stop_usd + idle_usd_per_s * wait + _at(up, v_lim) + cruise_lim * rest_m / v_lim
+                         + lam_usd_per_s * (t_stop + wait + launch_s + rest_m / v_lim))  # fmt: skip
+            total += w * c_usd
+            if stopped:
+                stops += w
         cost[c] = total / n_sc
         p_stop[c] = stops / n_sc
-    return cost, p_stop
+    return cost, p_stop, through

@@ -537,7 +537,8 @@ def _levels(samples: np.ndarray, floor_s: float) -> tuple[float, ...]:
 def _pick(bound: Bound, which) -> float:
     """One instant of a change: ``which`` an index (0 earliest, 1 likely, 2 late) or a quantile level in (0, 1): the
     forecast's where it has one, else read off the (earliest, likely, latest) window, a published one, as piecewise
-    uniform (half the chance on each side of its likely time)."""
+    uniform (half the chance on each side of its likely time; uniform over the window where the likely time is its
+    earliest, which says nothing of where in it)."""
     if isinstance(which, int):
         return bound[which]
     if len(bound) > 3:
@@ -545,6 +546,10 @@ def _pick(bound: Bound, which) -> float:
     lo, mid, hi = bound[:3]
     if not math.isfinite(lo) or hi - lo < EXACT_S:
         return mid  # exact, or before anything is known
+    if mid - lo < EXACT_S and math.isfinite(hi):
+        # a likely time at the earliest (a controller's likely time that has passed is published as "now"): no news
+        # about where in the window, which is read as uniform (not half the chance at its first instant)
+        return lo + (hi - lo) * which
     if which <= 0.5:
         return lo + (mid - lo) * which / 0.5
     return mid + (hi - mid) * (which - 0.5) / 0.5 if math.isfinite(hi) else hi
@@ -816,8 +821,8 @@ def light_view(
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
         windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
         if likely != windows:  # uncertain: the equally likely timings too
-            # (an amber counts: a plan reaching the line in it meets a driver who stops for it)
-            scenarios = tuple(_windows(phases, t_feed - u, horizon_s + u, q, q, BLOCKING_CLASSES | {PhaseClass.AMBER}) for q in SCENARIO_LEVELS)
+            # (the reds: the amber before each, published or not, is the advisor's to weigh, ``LightView.amber_s``)
+            scenarios = tuple(_windows(phases, t_feed - u, horizon_s + u, q, q) for q in SCENARIO_LEVELS)
         # the unknown phases that end (between known ones; the open tail past the plan and the history stays a red)
         unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
     if u > 0.0:
@@ -837,6 +842,7 @@ def light_view(
         unknown_windows_s=unknown,
         scenario_red_windows_s=tuple(scenarios) if scenarios and likely != windows else None,
         queue_m=reading.queue_m if reading.fresh else None,
+        amber_s=reading.amber_s,
     )
 
 
