@@ -155,8 +155,10 @@ class AdvisedDriver:
             amber = dist <= heeded_m and light.amber
             if amber and self.amber_seen.get(n) != light.red_at_s:
                 self.amber_seen[n] = light.red_at_s
-                late = rules.amber == "stop" or t + dist / max(v, 0.5) > light.red_at_s
-                if late and v * v / (2.0 * max(room, 1e-6)) <= planned:
+                short = t + dist / max(v, 0.5) > light.red_at_s  # at its speed it would not clear the line before the red
+                late = rules.amber == "stop" or short
+                need = v * v / (2.0 * max(room, 1e-6))
+                if (late and need <= planned) or (short and need <= rules.brake_max_mps2):  # an amber shorter than ITE's: hard, not red
                     self.committed.discard(n)
                     self.amber_stop.add(n)
                     self.surprises += 1
