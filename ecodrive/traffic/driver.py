@@ -4,18 +4,22 @@ The same person as :func:`advisory.drivers.closed_loop.simulate`'s driver, stepp
 itself: it asks once a second (the caller posts the car's fix to the service and hands the advice back), acts on
 it after a 1 s reaction, tracks an advised speed at comfortable rates (1.5 m/s² up and down, firm 3 m/s² for
 "brake to", a lift-off at the car's own coast-down), drifts up 1 m/s below 25 mph, lifts off for "Red light ahead.",
-prepares to stop and stops at the line for "stop". Its own eyes decide at the regular driver's decision point
-before each line, on the light's real colour (SUMO's) and the phone's display of the countdowns
-(:func:`advisory.drivers.closed_loop.belief` of the views the advice came from): it brakes for a light that will be
-red on arrival at its speed or whose red can begin before it is over the line, never slows down so much that a red
-catches it after deciding to go, waits at a line still red, and stops for an amber it can stop for at the regular
-driver's hardest braking (4 m/s², as SUMO's own drivers do with this project's vehicle type).
+prepares to stop and stops at the line for "stop". Its own eyes decide before each line where the advisor's firm
+3 m/s² still stops the car (at the regular driver's decision point, or farther out when faster), on the light's real
+colour (SUMO's) and the phone's display of the countdowns (:func:`advisory.drivers.closed_loop.belief` of the views
+the advice came from): it brakes for a light that will be red on arrival at its speed or whose red can begin before
+it is over the line, never slows down so much that a red catches it after deciding to go, waits at a line still red,
+and stops for an amber where 3 m/s² suffice (else it clears it: ITE's yellow interval is timed for that rate). It
+sees the car in front: it slows for a queue's standing or crawling tail itself (:func:`follow_mps` at 3 m/s²), and
+behind a car that sets its pace it judges a green by when it gets to the line behind it. A driver never plans a
+braking harder than 3 m/s² (the issue's hard brake: 3.5 m/s²).
 
-:meth:`AdvisedDriver.command` returns the speed the car should have one step later, or None where the advice asks
-nothing (no speed advised, "drive normally", before the zone, past the last light): SUMO's own driver then drives,
-the same person the unadvised run has. SUMO applies a commanded speed within the vehicle type's acceleration and
-braking and below its car-following safe speed (``setSpeedMode`` left at SUMO's default, every check on): the car
-never drives into the one ahead, whatever it was advised.
+:meth:`AdvisedDriver.command` returns the speed the car should have one step later, or None where neither the advice
+nor the driver's eyes ask anything (no speed advised, "drive normally", before the zone, past the last light): SUMO's
+own driver then drives, the same person the unadvised run has. SUMO applies a commanded speed within the vehicle
+type's acceleration and braking and below its car-following safe speed (SUMO's default speed mode, every check on,
+but for its own stop at a red or amber while the driver clears an amber it chose to go through: ``clearing``): the
+car never drives into the one ahead, whatever it was advised.
 """
 
 from __future__ import annotations

@@ -15,7 +15,9 @@ and therefore the arrivals (checked by :mod:`ecodrive.traffic_eval`: every car's
   zone's end) and posts a GPS fix a second (``Engine.apply_fix``: the trip's token and rate bucket, map matching of
   the car's real lat/lon on the corridor, its speed, the SPaT readings at the fix's time, the advisor with the trip's
   memory); :class:`~ecodrive.traffic.driver.AdvisedDriver` acts on the advice (``vehicle.setSpeed``; SUMO's speed
-  mode left at its default, every safety check on).
+  mode left at its default, every safety check on, but for SUMO's own stop at an amber while the virtual driver
+  clears one it chose to go through: :data:`SPEED_MODE_CLEARING`). The person drives the car from its departure
+  (its eyes on the lights and the car in front); its phone posts fixes from ``RunSetup.fix_from_m`` on.
 * ``"blind"``: the same with the service's queue-aware advice off (``advised`` has it on unless
   ``RunSetup.queue_aware`` is False; the service is told the demand per lane and the penetration, as an operator's
   detector counts and fleet share would tell it).
