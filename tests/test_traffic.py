@@ -334,12 +334,12 @@ def test_an_amber_is_cleared_where_the_firm_rate_cannot_stop_the_car_and_stopped
 
 
 def test_in_sumo_advised_cars_do_not_brake_hard_where_sumos_own_drivers_did(tmp_path):
-    """paper_s400, actuated, 600 veh/h, half the cars connected, the first two minutes: before, three advised cars braked
-    at 3.6-4 m/s² (an amber SUMO's driver stopped for after the virtual one chose to go on; a red approached at the
-    limit once the advice fell silent); the same cars unadvised brake that hard too. Now none, and no red entry."""
+    """paper_s400, actuated, 600 veh/h, half the cars connected, two minutes of departures: before, an advised car braked
+    at 4 m/s² (an amber SUMO's driver stopped for after the virtual one chose to go on; at ee013e5: {'main.5'});
+    unadvised, three or more of the same cars brake that hard. Now none, and no red entry."""
     corridor = load_corridor("paper_s400")
     net = build_network(corridor, tmp_path, control="actuated")
-    setup = RunSetup(600.0, 0.5, 1, 130.0, drain_s=90.0, cross_demand_vph=300.0)
+    setup = RunSetup(600.0, 0.5, 1, 125.0, drain_s=30.0, cross_demand_vph=300.0)
     unadvised, advised = (run(net, setup, mode, tmp_path) for mode in ("unadvised", "advised"))
 
     def hard(r):
