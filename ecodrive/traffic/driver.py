@@ -155,11 +155,16 @@ class AdvisedDriver:
             else:
                 green_at = display.next_green_start_s(t) if red_now else t
                 next_red = display.next_red_start_s(display.next_green_start_s(green_at)) if red_now or not display.is_red(t) else np.inf
+            # when it reaches the line: at its speed, or, behind a car that sets the pace, at that car's speed and a
+            # second later (the amber, the held-back rule and the decision judge alike: judged apart, a car held back
+            # braked for one step and went on, to be stopped by SUMO at the line as the red began; a car clearing an
+            # amber behind a slower one entered the red)
+            arrival = t + _arrival_s(dist, v if led_mps is None else min(v, led_mps), v_lim_mps, drv) + (0.0 if led_mps is None else drv.red_end_margin_s)
             heeded_m = max(decision_m, v * v / (2.0 * drv.decel_mps2) + rules.stop_gap_m)
             amber = dist <= heeded_m and light.amber
             if amber and self.amber_seen.get(n) != light.red_at_s:
                 self.amber_seen[n] = light.red_at_s
-                short = t + dist / max(v, 0.5) > light.red_at_s  # at its speed it would not clear the line before the red
+                short = arrival > light.red_at_s  # it would not clear the line before the red
                 late = rules.amber == "stop" or short
                 need = v * v / (2.0 * max(room, 1e-6))
                 if (late and need <= planned) or (short and need <= rules.brake_max_mps2):  # an amber shorter than ITE's: hard, not red
@@ -179,10 +184,6 @@ class AdvisedDriver:
                     self.committed.discard(n)
             if not red_now:
                 self.surprised.pop(n, None)
-            # when it reaches the line: at its speed, or, behind a car that sets the pace, at that car's speed and a
-            # second later (the held-back rule below and the decision after it judge alike: judged apart, a car held
-            # back braked for one step and went on, to be stopped by SUMO at the line as the red began)
-            arrival = t + _arrival_s(dist, v if led_mps is None else min(v, led_mps), v_lim_mps, drv) + (0.0 if led_mps is None else drv.red_end_margin_s)
             if amber and n in self.amber_stop and n not in self.committed:
                 self.braking_for = n
             elif n in self.committed and red_now and v < drv.min_coast_mps and n not in self.amber_go:

@@ -40,7 +40,7 @@ import numpy as np
 
 from advisory.advice.advisor import Advice, AdvisorParams
 from ecodrive.traffic.driver import AdvisedDriver, LightNow
-from ecodrive.traffic.network import TrafficNetwork, write_routes
+from ecodrive.traffic.network import DRIVEN_VTYPE, TrafficNetwork, write_routes
 from spat_feed.timing.plans import PhaseClass, phase_class
 from spat_feed.transport.sumo import SumoLight, SumoSpatSource, link_state
 
@@ -298,6 +298,9 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
                 continue
             if vid not in drivers:  # the person drives from the start; the phone posts fixes from fix_from_m on
                 drivers[vid] = AdvisedDriver(tuple(sim.stop_lines), advisor or AdvisorParams(), vid=vid)
+                # the virtual driver decides about an amber: SUMO's own driver, which stops for any amber its 4 m/s² can
+                # stop for in the very step it begins (the virtual one sees it a step later), waits one step for it
+                conn.vehicle.setType(vid, DRIVEN_VTYPE)
             if vid not in trips and x >= setup.fix_from_m:
                 trips[vid] = await engine.create_trip(TripCreate(corridor=corridor.name), client=vid)
             driver = drivers[vid]
