@@ -1,7 +1,7 @@
 """Bench and figure of issue 28: the 18-scenario matrix of `ecodrive traffic-eval` for a corridor, and saving
 against demand, one line per penetration, ecodrive and SUMO's GLOSA (``use-queue`` on).
 
-Run: .venv/bin/python bench/bench_traffic.py [--corridor NAME ...] [--seeds N] [--jobs J] [--out FILE.jsonl] [--figure]
+Run: .venv/bin/python bench/bench_traffic.py [--corridor NAME ...] [--seeds N] [--first-seed K] [--jobs J] [--out FILE.jsonl] [--figure]
      .venv/bin/python bench/bench_traffic.py --figure-only FILE.jsonl [FILE.jsonl ...]
 
 A scenario is (corridor, control fixed|actuated, demand 300|600|900 veh/h per lane, penetration 10|50|100 %, seed):
@@ -124,6 +124,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--corridor", action="append", help="corridor(s) (default paper_s400)")
     ap.add_argument("--seeds", type=int, default=1, help="seeds 1..N (default %(default)s)")
+    ap.add_argument("--first-seed", type=int, default=1, help="start at this seed: seeds FIRST..N, to add seeds to a matrix in parts")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "traffic_matrix.jsonl")
     ap.add_argument("--figure", action="store_true", help="draw docs/figures/traffic_saving.png from --out afterwards")
@@ -134,7 +135,7 @@ def main(argv=None) -> int:
         print("\n".join(verdicts(rows)))
         print(f"figure: {figure(rows)}")
         return 0
-    todo = list(itertools.product(args.corridor or ["paper_s400"], CONTROLS, DEMANDS_VPH, PENETRATIONS, range(1, args.seeds + 1)))
+    todo = list(itertools.product(args.corridor or ["paper_s400"], CONTROLS, DEMANDS_VPH, PENETRATIONS, range(args.first_seed, args.seeds + 1)))
     started = time.perf_counter()
     rows = []
     with ProcessPoolExecutor(max_workers=max(args.jobs, 1)) as pool, args.out.open("a", encoding="utf-8") as out:

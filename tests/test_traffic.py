@@ -272,6 +272,85 @@ def test_a_driver_held_back_after_deciding_to_go_stops_while_it_still_can():
     assert driver.command(t, x, v, STEP_S, 24.6, LightNow(0, 100.0, False)) is None and 0 in driver.committed  # it goes
     while x + v * STEP_S < 100.0 and driver.braking_for is None:
         x, t, v = x + v * STEP_S, t + STEP_S, v - 0.7
-        cmd = driver.command(t, x, v, STEP_S, 24.6, LightNow(0, 100.0, False))
+        cmd = driver.command(t, x, v, STEP_S, 24.6, LightNow(0, 100.0, False), (v * 1.0, v))  # a reaction time behind it
     assert driver.braking_for == 0 and t + (100.0 - x) / v > 5.0 - 1.0  # it stops for the red it would meet (or cross within 1 s of)
     assert (v - cmd) / STEP_S <= 3.5  # and can do so gently: no hard brake
+
+
+def _drive(driver, x, v, lim, light, leader_at=None, seconds=40.0, eyes=True):
+    """Euler steps as SUMO's: the driver's command, else SUMO's driver (2 m/s² up to the limit), never above the safe
+    speed behind ``leader_at`` (the station of a standing car's back; Krauss's, with the car's 4 m/s²), the gap beyond
+    SUMO's 2.5 m standstill gap handed to the driver (``eyes``)."""
+    from ecodrive.traffic.driver import follow_mps
+
+    t, xs, vs = 0.0, [x], [v]
+    while t < seconds:
+        leader = None if leader_at is None else (leader_at - 2.5 - x, 0.0)
+        cmd = driver.command(t, x, v, STEP_S, lim, light(t, x) if callable(light) else light, leader if eyes else None)
+        v_safe = np.inf if leader is None else follow_mps(leader[0], 0.0, 4.0, 1.0)
+        v = max(min(min(v + 2.0 * STEP_S, lim) if cmd is None else cmd, v_safe, v + 2.0 * STEP_S), v - 4.0 * STEP_S, 0.0)
+        x, t = x + v * STEP_S, t + STEP_S
+        xs.append(x)
+        vs.append(v)
+    return np.array(xs), np.array(vs)
+
+
+def test_a_driver_slows_for_a_standing_queue_at_the_firm_rate_at_most():
+    """Nothing advised, a queue standing 200 m ahead of a car at the limit (55 mph): the driver slows for it itself
+    (Krauss's safe speed with the advisor's firm 3 m/s², :func:`follow_mps`) and never brakes harder than that, where
+    SUMO's own car following, left to it, braked at 3.6 m/s² (traced, paper_s400 at 900 veh/h); it stops behind the
+    queue, not in it, and not far short of it."""
+    from ecodrive.traffic.driver import AdvisedDriver, follow_mps
+
+    lim, back = 24.5872, 200.0
+    _, vs = _drive(AdvisedDriver((1000.0,), vid="main.0"), 0.0, lim, lim, None, leader_at=back, eyes=False)
+    assert np.diff(vs).min() / STEP_S < -3.5  # SUMO's car following alone brakes hard
+    xs, vs = _drive(AdvisedDriver((1000.0,), vid="main.0"), 0.0, lim, lim, None, leader_at=back)
+    assert np.diff(vs).min() / STEP_S >= -3.0 - 1e-9  # never harder than the firm rate
+    assert xs.max() <= back - 2.5 + 1e-6 and vs[-1] == 0.0 and back - 2.5 - xs[-1] < 3.0  # stopped behind it
+    # two cars at the same speed a reaction time apart: nothing to do; the formula by hand
+    assert follow_mps(lim * 1.0, lim, 3.0, 1.0) == pytest.approx(lim)
+    assert follow_mps(50.0, 0.0, 3.0, 1.0) == pytest.approx(-3.0 + math.sqrt(9.0 + 300.0))
+
+
+def test_an_amber_is_cleared_where_the_firm_rate_cannot_stop_the_car_and_stopped_for_where_it_can():
+    """An actuated green turns amber (5 s, the ITE interval at 55 mph) with the car at the limit: 60 m out (a stop
+    needs 5.1 m/s²) the driver goes on and tells the simulator so (``clearing``: SUMO's own driver would stop it at
+    4 m/s², traced 12 times at 900 veh/h); 110 m out (2.8 m/s²) it stops before the line, never braking harder than
+    3 m/s². Either way: no hard brake, and no line crossed in red."""
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line = 24.5872, 500.0
+    for start, goes in ((line - 60.0, True), (line - 110.0, False)):
+        light = lambda t, x: LightNow(0, line, t >= 5.0, t < 5.0, 5.0) if x <= line else None  # noqa: E731  (amber now, red from 5 s)
+        driver = AdvisedDriver((line,), vid="main.0")
+        xs, vs = _drive(driver, start, lim, lim, light, seconds=20.0)
+        assert np.diff(vs).min() / STEP_S >= -3.0 - 1e-9
+        crossed = np.flatnonzero(xs > line)
+        if goes:
+            assert crossed.size and crossed[0] * STEP_S <= 5.0  # over the line before the red
+        else:
+            assert not crossed.size and vs[-1] == 0.0
+
+
+def test_in_sumo_advised_cars_do_not_brake_hard_where_sumos_own_drivers_did(tmp_path):
+    """paper_s400, actuated, 600 veh/h, half the cars connected, two minutes of departures: before, an advised car braked
+    at 4 m/s² (an amber SUMO's driver stopped for after the virtual one chose to go on; at ee013e5: {'main.5'});
+    unadvised, three or more of the same cars brake that hard. Now none, and no red entry."""
+    corridor = load_corridor("paper_s400")
+    net = build_network(corridor, tmp_path, control="actuated")
+    setup = RunSetup(600.0, 0.5, 1, 125.0, drain_s=30.0, cross_demand_vph=300.0)
+    unadvised, advised = (run(net, setup, mode, tmp_path) for mode in ("unadvised", "advised"))
+
+    def hard(r):
+        out = set()
+        for vid, car in r.cars.items():
+            t, x, v = (np.asarray(a) for a in (car.t, car.x, car.v))
+            if car.connected and ((np.diff(v) / np.diff(t) < -3.5)[x[:-1] < corridor.length_m]).any():
+                out.add(vid)
+        return out
+
+    assert len(hard(unadvised)) >= 3  # the scenario is one where braking that hard happens
+    assert hard(advised) == set()
+    assert not [cr for c in advised.cars.values() if c.connected for cr in c.crossings if cr[2] == "red"]
+    assert sum(c.connected for c in advised.cars.values()) >= 10 and advised.collisions == []

@@ -47,7 +47,9 @@ class QueueModel:
     Manual's (6th ed., ch. 19) base values; field measurements cited in issue 28 give about 2.0 s between cars at the
     stop line falling to about 1.4 s further back, after a 2-3 s start-up. 2.0 s is the headway of the first cars, the
     ones a car arriving on the green meets; the jam spacing is a passenger car's 5 m plus a 2.5 m gap (SUMO's
-    passenger type; 7-8 m in field counts of stopped queues)."""
+    passenger type; 7-8 m in field counts of stopped queues). Field values, not the simulator's: SUMO's queue of this
+    project's cars lets the next car go about 1 s + 1.72 s a car after the green (docs/TRAFFIC.md), 3 s + 0.28 s a car
+    earlier than ``startup_s + n x headway_s`` plus the advisor's 2 s margin."""
 
     startup_s: float = 2.0
     headway_s: float = 2.0

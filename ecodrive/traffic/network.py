@@ -59,6 +59,9 @@ VTYPE = dict(id="car", vClass="passenger", accel="2.0", decel="4.0", emergencyDe
              length="5.0", minGap="2.5", speedFactor="1", speedDev="0")  # fmt: skip
 """Every car's SUMO type: the paper's regular driver's rates (Sec. 2: 2 m/s² up, at most 4 m/s² braking), SUMO's
 passenger length and gaps, no dawdling, every car at the limit."""
+DRIVEN_VTYPE = "car_driven"
+"""The same car driven by the virtual driver (advised runs): SUMO's own driver goes on through the first 0.75 s of an
+amber (``jmDriveAfterYellowTime``), so that the virtual driver, who sees the amber one step after SUMO, decides."""
 
 
 def sumo_home() -> Path:
@@ -337,7 +340,8 @@ def write_routes(network: TrafficNetwork, path: str | Path, demand_vph_per_lane:
     cars ``main.0``, ``main.1``, ... departing at these instants (a scenario built car by car, for tests)."""
     path = Path(path)
     attrs = " ".join(f'{k}="{v}"' for k, v in VTYPE.items())
-    out = ["<routes>", f"  <vType {attrs}/>", f'  <route id="main" edges="{" ".join(network.main_edges)}"/>']
+    driven = " ".join(f'{k}="{v}"' for k, v in {**VTYPE, "id": DRIVEN_VTYPE, "jmDriveAfterYellowTime": "0.75"}.items())
+    out = ["<routes>", f"  <vType {attrs}/>", f"  <vType {driven}/>", f'  <route id="main" edges="{" ".join(network.main_edges)}"/>']
     for k, (a, b) in enumerate(network.cross_routes):
         out.append(f'  <route id="cross{k}" edges="{a} {b}"/>')
     rate = demand_vph_per_lane * network.lanes / 3600.0

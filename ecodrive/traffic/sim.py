@@ -15,7 +15,9 @@ and therefore the arrivals (checked by :mod:`ecodrive.traffic_eval`: every car's
   zone's end) and posts a GPS fix a second (``Engine.apply_fix``: the trip's token and rate bucket, map matching of
   the car's real lat/lon on the corridor, its speed, the SPaT readings at the fix's time, the advisor with the trip's
   memory); :class:`~ecodrive.traffic.driver.AdvisedDriver` acts on the advice (``vehicle.setSpeed``; SUMO's speed
-  mode left at its default, every safety check on).
+  mode left at its default, every safety check on, but for SUMO's own stop at an amber while the virtual driver
+  clears one it chose to go through: :data:`SPEED_MODE_CLEARING`). The person drives the car from its departure
+  (its eyes on the lights and the car in front); its phone posts fixes from ``RunSetup.fix_from_m`` on.
 * ``"blind"``: the same with the service's queue-aware advice off (``advised`` has it on unless
   ``RunSetup.queue_aware`` is False; the service is told the demand per lane and the penetration, as an operator's
   detector counts and fleet share would tell it).
@@ -38,7 +40,7 @@ import numpy as np
 
 from advisory.advice.advisor import Advice, AdvisorParams
 from ecodrive.traffic.driver import AdvisedDriver, LightNow
-from ecodrive.traffic.network import TrafficNetwork, write_routes
+from ecodrive.traffic.network import DRIVEN_VTYPE, TrafficNetwork, write_routes
 from spat_feed.timing.plans import PhaseClass, phase_class
 from spat_feed.transport.sumo import SumoLight, SumoSpatSource, link_state
 
@@ -46,6 +48,14 @@ MODES = ("advised", "blind", "glosa", "unadvised")
 LINE_TOL_M = 0.05
 """A front this far past a stop line has crossed it (SUMO stops a car with its front on the line, to rounding). [m]"""
 MAIN_FLOW = "main"
+LOOK_AHEAD_M = 250.0
+"""How far ahead a connected car's driver looks for the car in front. [m]"""
+SPEED_MODE_DEFAULT = 31
+"""SUMO's default speed mode: safe speed, acceleration and deceleration limits, right of way, brake for red and amber."""
+SPEED_MODE_CLEARING = SPEED_MODE_DEFAULT & ~16
+"""The same without bit 4 (SUMO's own driver braking for a red or an amber it can stop for): set while the virtual
+driver goes on through an amber it chose to clear, so that SUMO does not stop it at 4 m/s² (its rule for any amber it
+can stop for); the car in front is still kept (bit 0)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -208,6 +218,14 @@ class _Sim:
             car.v.append(float(r[0x40]))
         return t
 
+    def leader(self, vid: str) -> tuple[float, float] | None:
+        """The car in front of ``vid`` within :data:`LOOK_AHEAD_M`, as its driver sees it: (gap beyond the standstill
+        gap, speed), or None."""
+        found = self.conn.vehicle.getLeader(vid, LOOK_AHEAD_M)
+        if not found or not found[0]:
+            return None
+        return float(found[1]), float(self.conn.vehicle.getSpeed(found[0]))
+
     def light_now(self, x_m: float) -> LightNow | None:
         """The next light ahead of station ``x_m`` as the driver sees it now."""
         for i, line in enumerate(self.stop_lines):
@@ -274,14 +292,19 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
                     await engine.end_trip(trips.pop(vid))
                     conn.vehicle.setSpeed(vid, -1.0)
                     car.overrides, car.surprises = drivers[vid].overrides, drivers[vid].surprises
+                    if drivers[vid].clearing:
+                        conn.vehicle.setSpeedMode(vid, SPEED_MODE_DEFAULT)
+                        drivers[vid].clearing = False
                 continue
-            if vid not in trips:
-                if x < setup.fix_from_m:
-                    continue
-                trips[vid] = await engine.create_trip(TripCreate(corridor=corridor.name), client=vid)
+            if vid not in drivers:  # the person drives from the start; the phone posts fixes from fix_from_m on
                 drivers[vid] = AdvisedDriver(tuple(sim.stop_lines), advisor or AdvisorParams(), vid=vid)
+                # the virtual driver decides about an amber: SUMO's own driver, which stops for any amber its 4 m/s² can
+                # stop for in the very step it begins (the virtual one sees it a step later), waits one step for it
+                conn.vehicle.setType(vid, DRIVEN_VTYPE)
+            if vid not in trips and x >= setup.fix_from_m:
+                trips[vid] = await engine.create_trip(TripCreate(corridor=corridor.name), client=vid)
             driver = drivers[vid]
-            if second:
+            if second and vid in trips:
                 trip = trips[vid]
                 lat, lon = corridor.position(min(max(x, 0.0), corridor.length_m)) if x >= 0 else _before_entry(corridor, x)
                 fix = Fix(now[0], lat, lon, speed_mps=v, accuracy_m=5.0)
@@ -294,7 +317,10 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
                     views = {index[lv.intersection_id]: lv for lv in obs.lights}
                 driver.heard(now[0], x, advice, views)
             limit = corridor.speed_limit_mps_over(max(x, 0.0), max(x, 0.0))
-            cmd = driver.command(now[0], x, v, dt, limit, sim.light_now(x))
+            was_clearing = driver.clearing
+            cmd = driver.command(now[0], x, v, dt, limit, sim.light_now(x), sim.leader(vid))
+            if driver.clearing != was_clearing:  # through an amber the driver chose to clear: SUMO must not stop it there
+                conn.vehicle.setSpeedMode(vid, SPEED_MODE_CLEARING if driver.clearing else SPEED_MODE_DEFAULT)
             conn.vehicle.setSpeed(vid, -1.0 if cmd is None else cmd)
         conn.simulationStep()
         t = sim.after_step()
