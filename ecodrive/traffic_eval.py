@@ -169,7 +169,7 @@ def paired_summary(results: dict, network, params) -> dict:
 
 def evaluate(corridor: str, plan: str | None = None, control: str = "fixed", demand_vph_per_lane: float = 600.0, penetration_frac: float = 0.5,
              seed: int = 1, duration_s: float = 900.0, lanes: int = 1, cross_demand_vph: float | None = None, vehicle: str = "paper_54kwh",
-             queue_aware: bool = True, blind: bool = False) -> dict:  # fmt: skip
+             queue_aware: bool = True, blind: bool = False, spat_queue: bool = False) -> dict:  # fmt: skip
     """One scenario run three ways (see the module docstring): the summary."""
     from ecodrive.traffic.network import build_network
     from ecodrive.traffic.sim import RunSetup, run
@@ -179,7 +179,8 @@ def evaluate(corridor: str, plan: str | None = None, control: str = "fixed", dem
     c = load_corridor(corridor)
     if cross_demand_vph is None:
         cross_demand_vph = 300.0 if control == "actuated" else 0.0
-    setup = RunSetup(demand_vph_per_lane, penetration_frac, seed, duration_s, cross_demand_vph=cross_demand_vph, queue_aware=queue_aware)
+    setup = RunSetup(demand_vph_per_lane, penetration_frac, seed, duration_s, cross_demand_vph=cross_demand_vph, queue_aware=queue_aware,
+                     spat_queue=spat_queue)  # fmt: skip
     modes = ("advised", "blind", "glosa", "unadvised") if blind else ("advised", "glosa", "unadvised")
     with tempfile.TemporaryDirectory(prefix="ecodrive-traffic-") as tmp:
         network = build_network(c, tmp, plan, control, lanes)
@@ -205,6 +206,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--vehicle", default="paper_54kwh", help="EV model preset for the scores (default %(default)s)")
     ap.add_argument("--queue-blind", action="store_true", help="the advised run without queue-aware advice (the advisor alone)")
     ap.add_argument("--compare-blind", action="store_true", help="a fourth run, queue-blind advice, reported as blind_* keys")
+    ap.add_argument("--spat-queue", action="store_true", help="SUMO's lights publish each approach's jam as J2735 queueLength, as a controller with stop-line detectors can; queue-aware advice counts it first")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if not 0.0 <= args.penetration <= 1.0:
@@ -213,7 +215,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error("--demand must be >= 0")
     try:
         out = evaluate(args.corridor, args.plan, args.control, args.demand, args.penetration, args.seed, args.duration, args.lanes, args.cross_demand,
-                       args.vehicle, not args.queue_blind, args.compare_blind)  # fmt: skip
+                       args.vehicle, not args.queue_blind, args.compare_blind, args.spat_queue)  # fmt: skip
     except (OSError, KeyError, ValueError, RuntimeError) as exc:
         print(f"ecodrive traffic-eval: {exc}", file=sys.stderr)
         return 2

@@ -181,3 +181,27 @@ def test_in_sumo_a_queue_makes_the_queue_blind_target_stop_and_the_queue_aware_o
     assert out["unadvised"][0] == 1 and out["blind"][0] == 1 and out["blind"][1] < 0.5
     assert out["advised"][0] == 0 and out["advised"][1] > 3.0
     assert out["advised"][2][1] <= out["blind"][2][1] and out["advised"][2][2] == "green"
+
+
+def test_in_sumo_a_queue_published_in_the_spat_makes_the_unconnected_queue_known(tmp_path):
+    """The same queue, but only the eleventh car is connected: the service sees no car ahead (and is told of no flow),
+    so its advice aims at the green and the car stops behind the ten. With the lights publishing each approach's jam as
+    J2735 ``queueLength`` (``RunSetup(spat_queue=True)``, ``traffic-eval --spat-queue``: stop-line detectors), the
+    advisor counts the standing cars from the SPaT alone and the car glides through without stopping."""
+    from ecodrive.traffic.network import build_network
+    from ecodrive.traffic.sim import RunSetup, run
+    from ecodrive.traffic_eval import count_stops
+    from spat_feed.road.corridors import load_corridor
+
+    corridor = load_corridor("oakland_7th_westbound")
+    net = build_network(corridor, tmp_path)
+    departures = tuple(5.0 + 3.0 * k for k in range(10)) + (44.0,)
+    line = corridor.intersections[0].stop_line_m
+    out = {}
+    for spat_queue in (False, True):
+        setup = RunSetup(0.0, 1.0, 1, 60.0, drain_s=150.0, departures_s=departures, connected=("main.10",), spat_queue=spat_queue)
+        car = run(net, setup, "advised").cars["main.10"]
+        v, x = np.array(car.v), np.array(car.x)
+        out[spat_queue] = (count_stops(v), float(v[(x > 0.0) & (x < line)].min()), car.crossings[0])
+    assert out[False][0] == 1 and out[False][1] < 0.5
+    assert out[True][0] == 0 and out[True][1] > 3.0 and out[True][2][2] == "green"

@@ -75,6 +75,7 @@ class RunSetup:
     queue_aware: bool = True  # the advised run's service with queue-aware advice (server.queue), told the demand and penetration
     departures_s: tuple[float, ...] = ()  # instead of the Poisson flow, cars departing at these instants (tests)
     connected: tuple[str, ...] | None = None  # instead of the penetration's draw, these cars are connected (tests)
+    spat_queue: bool = False  # SUMO's lights publish each approach's jam as J2735 queueLength (detectors at the line)
 
 
 @dataclass
@@ -169,7 +170,7 @@ class _Sim:
         self.setup = setup
         self.connected = connected
         self.lights = _sumo_lights(network)
-        self.source = SumoSpatSource(conn, self.lights, network.t0_unix_s)
+        self.source = SumoSpatSource(conn, self.lights, network.t0_unix_s, queues=setup.spat_queue)
         self.cars: dict[str, CarTrace] = {}
         self.live: set[str] = set()
         self.stop_lines = [lt.stop_line_m for lt in network.lights]

@@ -353,8 +353,10 @@ def test_gps_drive_shows_and_speaks_the_advice(app_service, tmp_path, shots):
     distances_m = [by_seq[s["seq"]]["distance_to_line_m"] for s in light_1]
     assert all(b < a for a, b in zip(distances_m, distances_m[1:]))
     assert len({(s["target"], s["action"], s["countdown"], s["distance"]) for s in seen}) >= 6
-    # speech: exactly the advisories flagged `speak`, in order, in the page's language
-    said = [s for s in spoken if s["text"]]
+    # speech: exactly the advisories flagged `speak`, in order, in the page's language (and, where a fix went
+    # unanswered for the app's 1.5 s on a loaded machine, its own "service lost" once per loss, which it must say:
+    # issue 29, tests/browser/test_service_lost.py)
+    said = [s for s in spoken if s["text"] and s["text"] != "Connection to the service lost. Advice paused."]
     assert [s["text"] for s in said] == [a["message"] for a in received if a["speak"]] and said
     assert {s["lang"] for s in said} == {"en"}
     # the score, beside the regular driver's
