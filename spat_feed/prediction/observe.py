@@ -179,7 +179,7 @@ class PhaseHistory:
     """
 
     __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
-                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_window_score")  # fmt: skip
+                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
         self.keep, self.max_gap_s = keep, max_gap_s
@@ -199,7 +199,8 @@ class PhaseHistory:
         self._path: list[tuple[float, int]] = []  # the phase in progress: (time since it began, the intersection's state) at each change of state
         self._paths: dict[PhaseClass, deque[tuple[float, tuple]]] = {}  # phases seen whole: (duration, their path)
         self._window: list[tuple[float, float, float]] = []  # the phase in progress: (t, minEndTime, maxEndTime) of each reading with a finite window
-        self._windowed: dict[PhaseClass, deque[tuple]] = {}  # phases seen whole: their readings with a finite window (:meth:`window_law`)
+        self._windowed: dict[PhaseClass, deque[int]] = {}  # phases seen whole: how many readings with a finite window each gave its law
+        self._laws: dict[PhaseClass, tuple] = {}  # ... and those readings (:meth:`window_law`)
         self._window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, window law's mean squared error, durations'] (:meth:`_score_window`)
 
     def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
@@ -234,7 +235,7 @@ class PhaseHistory:
                     self._paths.setdefault(self._current, deque(maxlen=self.keep)).append((t_unix_s - self._since, tuple(self._path)))
                     if self._window:
                         self._score_window(t_unix_s, before, self.ended[5])
-                        self._windowed.setdefault(self._current, deque(maxlen=self.keep)).append(self._window_readings(t_unix_s))
+                        self._add_to_law(self._current, self._window_readings(t_unix_s))
                 self._following[self._current] = cls
                 self._ends.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s)
                 excess = self._excess.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
@@ -272,8 +273,9 @@ class PhaseHistory:
     def stats(self) -> CycleStats:
         """A frozen snapshot to pass along with a reading (``PlanReading.cycle``)."""
         if self._sorted is None:
-            self._sorted = (*({c: tuple(sorted(d)) for c, d in dd.items()} for dd in (self._durations, self._excess)), self.window_law())
-        durations, excess, law = self._sorted
+            self._sorted = tuple({c: tuple(sorted(d)) for c, d in dd.items()} for dd in (self._durations, self._excess))
+        durations, excess = self._sorted
+        law = self.window_law()
         ends = {c: tuple(e) for c, e in self._ends.items()}
         return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess, ends_unix_s=ends, window_law_s=law,
                           window_weight={c: self.window_weight(c) for c in self._window_score})  # fmt: skip
@@ -294,7 +296,7 @@ class PhaseHistory:
         own = given if given is not None else [d for d in before.durations(self._current) if d > el]
         if by_window is None or not len(own):
             return
-        errors = (float(np.median(by_window)) - end_unix_s, max(self._since + float(np.median(own)), floor) - end_unix_s)
+        errors = (sample_quantile(np.sort(by_window), 0.5) - end_unix_s, max(self._since + sample_quantile(np.sort(own), 0.5), floor) - end_unix_s)
         score = self._window_score.setdefault(self._current, [0, 0.0, 0.0])
         score[0] += 1
         w = max(1.0 / score[0], 1.0 / METHOD_MEMORY)
@@ -320,16 +322,25 @@ class PhaseHistory:
         """The readings with a finite window of the phase in progress, which ends at ``end_unix_s``, as arrays: how
         long it had run, how far ahead ``minEndTime`` (0 once past) and ``maxEndTime`` were, the intersection's state,
         how long after ``max(reading, minEndTime)`` it ended, and its duration. [s]"""
-        t, lo, hi = (np.array(x) for x in zip(*self._window))
+        t, lo, hi = np.array(self._window).T
         floor = np.maximum(t, lo)
-        at = [a for a, _ in self._path]
-        state = np.array([self._path[k - 1][1] if k else -1 for k in np.searchsorted(at, t - self._since, side="right")], dtype=np.int64)
+        at, states = (np.array(x) for x in zip(*self._path)) if self._path else (np.empty(0), np.empty(0, dtype=np.int64))
+        k = np.searchsorted(at, t - self._since, side="right")
+        state = np.where(k > 0, np.r_[states, -1][k - 1], -1).astype(np.int64)
         return t - self._since, floor - t, hi - t, state, end_unix_s - floor, np.full(len(t), end_unix_s - self._since)
+
+    def _add_to_law(self, cls: PhaseClass, readings: tuple[np.ndarray, ...]) -> None:
+        """Append a phase's :meth:`_window_readings` to the class's law, dropping the oldest phase past ``keep``."""
+        sizes = self._windowed.setdefault(cls, deque())
+        old = self._laws.get(cls)
+        drop = sizes.popleft() if len(sizes) >= self.keep else 0
+        self._laws[cls] = readings if old is None else tuple(np.concatenate([o[drop:], r]) for o, r in zip(old, readings))
+        sizes.append(len(readings[0]))
 
     def window_law(self) -> dict[PhaseClass, tuple[np.ndarray, ...]]:
         """Per class, the readings with a finite window of its last ``keep`` phases seen whole (:meth:`_window_readings`,
         each of the six arrays concatenated over the phases)."""
-        return {c: tuple(np.concatenate(x) for x in zip(*phases)) for c, phases in self._windowed.items() if phases}
+        return dict(self._laws)
 
     @property
     def current(self) -> PhaseClass | None:

@@ -35,16 +35,17 @@ Where the samples come from, in the order they are trusted (each *method* names 
 ``duration``
     Each past duration of the class from the phase's start, given that it has run this long (the empirical
     conditional distribution: durations it has already outlasted are out).
-``+window`` (pooled with ``resumed``, ``state`` or ``duration``)
-    Where the controller publishes a finite window, what it says is half of the forecast: of the readings of past
+the window law (pooled into ``resumed``, ``state`` and ``duration``; the method keeps their name)
+    Where the controller publishes a finite window, what it says is part of the forecast: of the readings of past
     phases of the class that carried one (and outlasted how long this phase has run), the :data:`WINDOW_NEIGHBOURS`
     nearest to the reading now, the intersection in the same state first, then by the sum of the differences in
     seconds of how far ahead ``minEndTime`` and ``maxEndTime`` were and how long the phase had run; each says the
     phase ends as long after ``max(now, minEndTime)`` as that one did after its own (:func:`ends_given_window`).
     A held ``minEndTime`` (moved later with the clock: the controller extends the phase) and a ``maxEndTime``
-    counting down to a force-off read differently from a duration alone; half and half is the linear opinion pool
-    of the two laws [2] (each method's median erred about as much as the other's on Antwerp 2019-05-01, and their
-    errors are far from equal on the same change, so the pool beats either).
+    counting down to a force-off read differently from a duration alone. The two laws are pooled (a linear opinion
+    pool [2]), each with a share in inverse proportion to its mean squared error, scored per (group, class) at each
+    phase end (:meth:`~spat_feed.prediction.observe.PhaseHistory.window_weight`; half each until scored): on Antwerp
+    each one's median errs about as much as the other's, on different changes, so the pool beats either.
 ``published``
     The controller's window is exact (``maxEndTime - minEndTime`` under :data:`EXACT_S`): then.
 ``window``
