@@ -337,8 +337,9 @@ def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_
 
 def _pooled(samples: np.ndarray, method: str, cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: float,
             min_end_unix_s: float, max_end_unix_s: float) -> tuple[np.ndarray, str]:  # fmt: skip
-    """``samples`` of ``method`` pooled with :func:`ends_given_window`'s where the window is finite and the class's
-    readings say, the latter's share the class's ``window_weight`` (half until scored)."""
+    """``samples`` of ``method`` for the phase in progress pooled with :func:`ends_given_window`'s where the window is
+    finite and the class's readings say, the latter's share the class's ``window_weight`` (half until scored). Only
+    for the phase in progress: the law is learnt from readings of phases in progress, with how long they had run."""
     law = cycle.window_law_s.get(cls) if since_unix_s is not None and math.isfinite(max_end_unix_s) else None
     by_window = None if law is None else ends_given_window(law, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
     if by_window is None:
@@ -383,7 +384,10 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
             pooled = np.concatenate([_reduced(since + given, N_SAMPLES - n_plain), _reduced(ahead, n_plain)]) if n_plain else since + given
             return _pooled(_after(pooled, floor_unix_s, None), "state", cycle, cls, since, now_unix_s, published_min_unix_s, published_max_unix_s)
         if len(ahead):
-            return _pooled(_after(ahead, floor_unix_s, None), "duration", cycle, cls, since, now_unix_s, published_min_unix_s, published_max_unix_s)
+            by_duration = _after(ahead, floor_unix_s, None)
+            if not current:  # a later phase of the plan: the window law knows the phase in progress only
+                return by_duration, "duration"
+            return _pooled(by_duration, "duration", cycle, cls, since, now_unix_s, published_min_unix_s, published_max_unix_s)
     if math.isfinite(published_max_unix_s) and published_max_unix_s > floor_unix_s:
         return np.linspace(floor_unix_s, published_max_unix_s, 9), "window"
     if math.isfinite(published_max_unix_s):
