@@ -44,6 +44,7 @@ Conversion of one light (:func:`light_view`):
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -58,6 +59,7 @@ from spat_feed.prediction.predictor import (
     current_end,
     cycle_period_s,
     durations_given_state,
+    ends_given_window,
     next_end,
     sample_quantile,
     scored_errors_s,
@@ -115,6 +117,11 @@ class CycleStats:
     resumed_excess_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # end - minEnd, resumed phases
     linked_end_unix_s: tuple[float, float] | None = None  # the current phase's (likely, late) end from another group's change (:class:`ChangeLinks`)
     linked_ends_unix_s: tuple[float, ...] = ()  # the current phase's end from another group's change, one per lag seen (:class:`ChangeLinks`)
+    # per class, the readings of its phases seen whole that carried a finite window (:meth:`PhaseHistory.window_law`;
+    # arrays, left out of ==: they follow from the same readings as the durations)
+    window_law_s: Mapping[PhaseClass, tuple] = field(default_factory=dict, compare=False)
+    state_id: int = -1  # the intersection's state now (:class:`IntersectionHistory`; -1: not known)
+    window_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # the window law's share in the pool, per class (:meth:`PhaseHistory.window_weight`)
     ends_unix_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # when phases of each class ended
     cycle_classes: frozenset = frozenset()  # classes told better by the point of the cycle they end at than by their durations
     period_s: float | None = None  # the controller's fixed cycle, if its changes keep to one (:func:`~spat_feed.prediction.predictor.cycle_period_s`)
@@ -164,12 +171,15 @@ class PhaseHistory:
     counts it down, *holds* it while it extends the phase (it moves later with the clock), and once it runs again
     (*resumed*) the phase ends at or soon after it (2019-05-01: reds within 1.5 s of it 97 % of the time, against
     36 % before any hold). For each class it keeps how long after the ``minEndTime`` of a resumed phase the phase
-    ended, reading by reading.
+    ended, reading by reading; and, for every phase seen whole, each reading that carried a finite window: how long
+    the phase had run, how far ahead its ``minEndTime`` and ``maxEndTime`` were, the intersection's state, and how long
+    after ``max(reading, minEndTime)`` the phase ended (:meth:`window_law`, what
+    :func:`~spat_feed.prediction.predictor.ends_given_window` reads).
     Pure: no clock, the caller passes the reading's instant (Unix seconds, the plan's axis).
     """
 
     __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
-                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths")  # fmt: skip
+                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
         self.keep, self.max_gap_s = keep, max_gap_s
@@ -188,6 +198,10 @@ class PhaseHistory:
         self.ended: tuple | None = None  # the phase seen whole that the last reading ended: (class, start, end, durations and ends before it)
         self._path: list[tuple[float, int]] = []  # the phase in progress: (time since it began, the intersection's state) at each change of state
         self._paths: dict[PhaseClass, deque[tuple[float, tuple]]] = {}  # phases seen whole: (duration, their path)
+        self._window: list[tuple[float, float, float]] = []  # the phase in progress: (t, minEndTime, maxEndTime) of each reading with a finite window
+        self._windowed: dict[PhaseClass, deque[int]] = {}  # phases seen whole: how many readings with a finite window each gave its law
+        self._laws: dict[PhaseClass, tuple] = {}  # ... and those readings (:meth:`window_law`)
+        self._window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, window law's mean squared error, durations'] (:meth:`_score_window`)
 
     def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
         """Take one reading at ``t_unix_s`` (:meth:`record`) and return the :meth:`stats` after it."""
@@ -202,7 +216,8 @@ class PhaseHistory:
         if self._last_t is not None and t_unix_s <= self._last_t:
             return False  # a repeat or an older reading
         state = plan if isinstance(plan, MovementPhaseState) else published_state(plan, t_unix_s)
-        min_end = None if isinstance(plan, MovementPhaseState) else _published_min_end(plan, t_unix_s)
+        window = None if isinstance(plan, MovementPhaseState) else _published_window(plan, t_unix_s)
+        min_end = None if window is None else window[0]
         cls = phase_class(state)
         gap = self._last_t is not None and t_unix_s - self._last_t > self.max_gap_s
         changed = cls != self._current
@@ -218,6 +233,9 @@ class PhaseHistory:
                                   self._given_before(t_unix_s))  # fmt: skip
                     self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
                     self._paths.setdefault(self._current, deque(maxlen=self.keep)).append((t_unix_s - self._since, tuple(self._path)))
+                    if self._window:
+                        self._score_window(t_unix_s, before, self.ended[5])
+                        self._add_to_law(self._current, self._window_readings(t_unix_s))
                 self._following[self._current] = cls
                 self._ends.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s)
                 excess = self._excess.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
@@ -226,7 +244,7 @@ class PhaseHistory:
             # first seen now: it began now or before (a start dated late makes its end late: the safe side for a red)
             self._since, self._exact = t_unix_s, changed and not gap and self._current is not None
             self._current = cls
-            self._path = []
+            self._path, self._window = [], []
             self._held = self._resumed = False
             self._resumed_min_ends = []
         elif min_end is not None and self._min_end is not None:
@@ -238,6 +256,8 @@ class PhaseHistory:
                 self._resumed_min_ends.append(min_end)
         self._min_end = min_end
         self._last_t = t_unix_s
+        if window is not None and math.isfinite(window[1]):
+            self._window.append((t_unix_s, *window))
         return changed or gap or self._resumed != was_resumed
 
     def _went_on(self, t_unix_s: float) -> bool:
@@ -255,8 +275,72 @@ class PhaseHistory:
         if self._sorted is None:
             self._sorted = tuple({c: tuple(sorted(d)) for c, d in dd.items()} for dd in (self._durations, self._excess))
         durations, excess = self._sorted
+        law = self.window_law()
         ends = {c: tuple(e) for c, e in self._ends.items()}
-        return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess, ends_unix_s=ends)
+        return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess, ends_unix_s=ends, window_law_s=law,
+                          window_weight={c: self.window_weight(c) for c in self._window_score})  # fmt: skip
+
+    def _score_window(self, end_unix_s: float, before: CycleStats, given: np.ndarray | None) -> None:
+        """Score the window law and the durations on the phase in progress, which ends at ``end_unix_s``: the likely
+        end each said (on the history ``before`` it) at its last reading with a window :data:`SCORE_AHEAD_S` or more
+        before the end; ``given``: the durations the intersection's state gave then (``state``), else those not yet
+        outlasted. A running mean of each one's squared error over about :data:`METHOD_MEMORY` phases."""
+        law = before.window_law_s.get(self._current)
+        k = bisect.bisect_right([r[0] for r in self._window], max(self._since, end_unix_s - SCORE_AHEAD_S)) - 1
+        if law is None or k < 0:
+            return
+        t, lo, hi = self._window[k]
+        el, floor = t - self._since, max(t, lo)
+        states = [s for a, s in self._path if a <= el]
+        by_window = ends_given_window(law, self._since, t, lo, hi, states[-1] if states else -1)
+        own = given if given is not None else [d for d in before.durations(self._current) if d > el]
+        if by_window is None or not len(own):
+            return
+        errors = (sample_quantile(np.sort(by_window), 0.5) - end_unix_s, max(self._since + sample_quantile(np.sort(own), 0.5), floor) - end_unix_s)
+        score = self._window_score.setdefault(self._current, [0, 0.0, 0.0])
+        score[0] += 1
+        w = max(1.0 / score[0], 1.0 / METHOD_MEMORY)
+        score[1] += w * (errors[0] ** 2 - score[1])
+        score[2] += w * (errors[1] ** 2 - score[2])
+
+    def window_weight(self, cls: PhaseClass) -> float:
+        """The window law's share of the forecast of ``cls`` where it is pooled with the durations: the weights of the
+        two in inverse proportion to their mean squared errors (:meth:`_score_window`), as in the combination of
+        forecasts of Bates and Granger [1]; half each until :data:`MIN_PHASES_SEEN` phases are scored. [-]
+
+        References
+        ----------
+        .. [1] J. M. Bates and C. W. J. Granger, "The combination of forecasts," Oper. Res. Q., vol. 20, pp. 451-468,
+           1969, doi:10.2307/3008764.
+        """
+        n, by_window, by_durations = self._window_score.get(cls, (0, 0.0, 0.0))
+        if n < MIN_PHASES_SEEN or by_window + by_durations <= 0.0:
+            return 0.5
+        return by_durations / (by_window + by_durations)
+
+    def _window_readings(self, end_unix_s: float) -> tuple[np.ndarray, ...]:
+        """The readings with a finite window of the phase in progress, which ends at ``end_unix_s``, as arrays: how
+        long it had run, how far ahead ``minEndTime`` (0 once past) and ``maxEndTime`` were, the intersection's state,
+        how long after ``max(reading, minEndTime)`` it ended, and its duration. [s]"""
+        t, lo, hi = np.array(self._window).T
+        floor = np.maximum(t, lo)
+        at, states = (np.array(x) for x in zip(*self._path)) if self._path else (np.empty(0), np.empty(0, dtype=np.int64))
+        k = np.searchsorted(at, t - self._since, side="right")
+        state = np.where(k > 0, np.r_[states, -1][k - 1], -1).astype(np.int64)
+        return t - self._since, floor - t, hi - t, state, end_unix_s - floor, np.full(len(t), end_unix_s - self._since)
+
+    def _add_to_law(self, cls: PhaseClass, readings: tuple[np.ndarray, ...]) -> None:
+        """Append a phase's :meth:`_window_readings` to the class's law, dropping the oldest phase past ``keep``."""
+        sizes = self._windowed.setdefault(cls, deque())
+        old = self._laws.get(cls)
+        drop = sizes.popleft() if len(sizes) >= self.keep else 0
+        self._laws[cls] = readings if old is None else tuple(np.concatenate([o[drop:], r]) for o, r in zip(old, readings))
+        sizes.append(len(readings[0]))
+
+    def window_law(self) -> dict[PhaseClass, tuple[np.ndarray, ...]]:
+        """Per class, the readings with a finite window of its last ``keep`` phases seen whole (:meth:`_window_readings`,
+        each of the six arrays concatenated over the phases)."""
+        return dict(self._laws)
 
     @property
     def current(self) -> PhaseClass | None:
@@ -460,14 +544,15 @@ class IntersectionHistory:
             linked = (_quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE)) if ends else None
             cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=linked, linked_ends_unix_s=ends, period_s=self.period_s,
                                                  cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset(),
-                                                 state_spans_s=history.spans_in(history.current, self._state))  # fmt: skip
+                                                 state_spans_s=history.spans_in(history.current, self._state), state_id=self._state)  # fmt: skip
         return cycle
 
 
-def _published_min_end(plan: UncertainPlan, t_unix_s: float) -> float | None:
-    """The ``minEndTime`` of the published phase (:func:`published_state`), None when it has none."""
+def _published_window(plan: UncertainPlan, t_unix_s: float) -> tuple[float, float] | None:
+    """The ``(minEndTime, maxEndTime)`` of the published phase (:func:`published_state`; ``inf`` for an unknown
+    ``maxEndTime``), None when it has none."""
     i = _published_index(plan, t_unix_s)
-    return plan.changes[i].min_end_s if i < len(plan.changes) else None
+    return (plan.changes[i].min_end_s, plan.changes[i].max_end_s) if i < len(plan.changes) else None
 
 
 @dataclass(frozen=True, slots=True)

@@ -552,8 +552,9 @@ def test_links_speak_only_once_they_hold_and_forget_a_gap():
 
 def test_links_on_a_real_controller_tell_when_a_red_ends():
     """2019-05-17, the first 1.5 hours as a receiver reads them: at reds 10-20 s before they really end (the log's
-    next non-red snapshot), where a link speaks, its likely end misses by < 1 s on average, a fraction of what the
-    group's own history says then (durations, minEnd held and resumed). Nothing is fitted: links learnt online."""
+    next non-red snapshot), where a link speaks, its likely end misses by < 1 s on average, no more than what the
+    group's own history says then (durations, minEnd held and resumed, and since the published window is pooled in,
+    the readings of past reds with a like window: 0.15 s, as the links). Nothing is fitted: links learnt online."""
     import csv
     import gzip
     from dataclasses import replace
@@ -590,7 +591,7 @@ def test_links_on_a_real_controller_tell_when_a_red_ends():
     import numpy as np
 
     linked, own = np.abs(np.array(errors)).mean(axis=0)
-    assert len(errors) > 1000 and linked < 1.0 and linked < 0.3 * own, (len(errors), linked, own)
+    assert len(errors) > 1000 and linked < 1.0 and linked <= own, (len(errors), linked, own)
 
 
 def test_what_is_learnt_of_the_phase_in_progress_does_not_end_a_later_one():
