@@ -367,7 +367,9 @@ class HindsightCache:
         return dict(self.contexts.get(self.context_id(context), {}).get("hindsight_saving_frac", {}))
 
     def save(self, context: dict, results: dict[str, float | None]) -> None:
-        """Add ``results`` under ``context`` and write the file (whole, through a temporary file beside it)."""
+        """Add ``results`` under ``context`` and write the file (whole, through a temporary file beside it), with
+        whatever another run wrote to it meanwhile (a run with another driver or log, at the same time)."""
+        self.contexts = {**HindsightCache(self.path).contexts, **self.contexts}
         entry = self.contexts.setdefault(self.context_id(context), {"context": context, "hindsight_saving_frac": {}})
         entry["hindsight_saving_frac"].update(results)
         tmp = self.path.with_name(self.path.name + ".tmp")
