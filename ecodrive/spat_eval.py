@@ -1,4 +1,4 @@
-"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient] [--choice rules|expected_cost]`: the advisor on a recorded controller, judged on
+"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient] [--choice rules|expected_cost] [--hindsight-cache FILE]`: the advisor on a recorded controller, judged on
 what really happened.
 
 The log (the ``../shared/data/spat`` CSV, or our JSON lines: any format
@@ -59,19 +59,31 @@ entry, no hard brake. Every key: ``docs/ADVISOR.md``.
 The hindsight DP is :func:`advisory.drivers.closed_loop.hindsight_optimum`; approaches where it fails are left out
 of the hindsight mean (``hindsight_invalid``). 20 m stages instead of the study's 10 m keep a recording within
 minutes on two cores; at 20 m the DP costs ~0.5 % more (a slightly lenient yardstick).
+
+``--hindsight-cache FILE`` (:class:`HindsightCache`): the hindsight DP is most of a run's time and does not depend
+on the advisor, so its result per approach is kept in a JSON file, written after a run and read at the next; the
+output is bit-identical with or without it. An entry is keyed by what the DP and its regular driver depend on
+(:func:`hindsight_context`): the log's bytes (SHA-256) and ``--limit-s``, the Setup's geometry and speed limit,
+the regular driver's parameters, the DP grid, and a fingerprint of the code they run (physics, optimizer,
+regular driver, the truth's reading of the log); then the approach's groups and entry time. The advisor, its
+``--choice``, the store's rules and ``--every-s`` are not in the key, so one file serves every advisor variant.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
+import inspect
 import json
 import math
+import os
 import multiprocessing as mp
 import sys
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -201,6 +213,8 @@ def replay_store(snapshots: Sequence[IntersectionState], keys: Sequence[tuple[in
 
 _LOGS: list[GroupLog] = []
 _REPLAY: StoreReplay | None = None
+_HINDSIGHT: dict[str, float | None] = {}
+"""The hindsight results known before this run (:class:`HindsightCache`, this log and setup): approach key -> saving."""
 
 
 def load(snapshots: Sequence[IntersectionState], stale_after_s: float = DEFAULT_STALE_AFTER_S) -> list[GroupLog]:
@@ -262,10 +276,105 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
         "approach_s": len(ahead),
         "hindsight_saving_frac": None,
     }
+    key = approach_key(groups, entry_s)
+    if key in _HINDSIGHT:
+        out["hindsight_saving_frac"] = _HINDSIGHT[key]
+        return out
     best = hindsight_optimum(scenario, params, HINDSIGHT_GRID, regular)
     if best is not None:
         out["hindsight_saving_frac"] = 1.0 - score_in_end_state(best, params, v_lim).cost_usd / reg.cost_usd
     return out
+
+
+def approach_key(groups: Sequence[int], entry_s: float) -> str:
+    """The cache key of one approach: its groups (intersection/signal group, in series) and its exact entry time."""
+    return "+".join(f"{_LOGS[g].key[0]}/{_LOGS[g].key[1]}" for g in groups) + f"@{entry_s!r}"
+
+
+_HINDSIGHT_CODE = ("advisory/optimizer", "advisory/physics", "advisory/drivers/regular.py", "advisory/evaluation/endstate.py",
+                   "advisory/signals.py", "advisory/trajectory.py")  # fmt: skip
+"""The code the hindsight DP and the regular driver run, besides the functions :func:`code_fingerprint` reads."""
+
+
+def code_fingerprint() -> str:
+    """SHA-256 (16 hex digits) of the code a hindsight result depends on: the files of :data:`_HINDSIGHT_CODE`, and
+    the source of ``hindsight_optimum``, ``red_light_violations``, the truth's reading (``group_logs``,
+    ``phase_class``) with :data:`AMBER_S` and the stop states. Not the advisor's."""
+    from advisory.drivers import closed_loop
+    from spat_feed.timing import plans
+
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for name in _HINDSIGHT_CODE:
+        path = root / name
+        for f in sorted(path.glob("*.py")) if path.is_dir() else [path]:
+            h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
+    for fn in (closed_loop.hindsight_optimum, closed_loop.red_light_violations, group_logs, plans.phase_class):
+        h.update(inspect.getsource(fn).encode())
+    h.update(repr((AMBER_S, sorted(s.value for s in plans.STOP_STATES))).encode())
+    return h.hexdigest()[:16]
+
+
+def hindsight_context(path: str, setup: Setup, limit_s: float | None) -> dict:
+    """What a hindsight result depends on beyond its approach: the log's bytes and slice, the Setup's geometry, the
+    regular driver's parameters, the DP grid and the code (:func:`code_fingerprint`)."""
+    with open(path, "rb") as fh:
+        digest = hashlib.file_digest(fh, "sha256").hexdigest()
+    return {
+        "log_sha256": digest,
+        "limit_s": limit_s,
+        **{k: getattr(setup, k) for k in ("speed_limit_mps", "approach_m", "spacing_m", "exit_m")},
+        "regular_driver": repr(DRIVERS[setup.driver].regular()),
+        "grid": repr(HINDSIGHT_GRID),
+        "code": code_fingerprint(),
+    }
+
+
+class HindsightCacheError(ValueError):
+    """The cache file exists but is not one this command wrote."""
+
+
+class HindsightCache:
+    """The hindsight results of earlier runs, in a JSON file: ``{"format", "version", "contexts": {id: {"context",
+    "hindsight_saving_frac": {approach key: saving or null}}}}``, one context per log, slice, setup and code
+    (:func:`hindsight_context`; ``id`` is its SHA-256). Floats go through JSON exactly (shortest repr)."""
+
+    FORMAT = "ecodrive spat-eval hindsight cache"
+    VERSION = 1
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self.contexts: dict[str, dict] = {}
+        if not self.path.exists():
+            return
+        try:
+            data = json.loads(self.path.read_text(encoding="utf-8"))
+            ok = isinstance(data, dict) and data.get("format") == self.FORMAT and isinstance(data.get("contexts"), dict)
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise HindsightCacheError(f"hindsight cache {self.path}: not JSON ({exc})") from exc
+        if not ok:
+            raise HindsightCacheError(f"hindsight cache {self.path}: not a spat-eval hindsight cache (no format {self.FORMAT!r}); "
+                                      "give another file, or remove it")  # fmt: skip
+        if data.get("version") == self.VERSION:  # an older layout is dropped, and rewritten at the end of the run
+            self.contexts = data["contexts"]
+
+    @staticmethod
+    def context_id(context: dict) -> str:
+        return hashlib.sha256(json.dumps(context, sort_keys=True).encode()).hexdigest()[:16]
+
+    def results(self, context: dict) -> dict[str, float | None]:
+        """The known results for ``context`` (approach key -> hindsight saving); empty if none."""
+        return dict(self.contexts.get(self.context_id(context), {}).get("hindsight_saving_frac", {}))
+
+    def save(self, context: dict, results: dict[str, float | None]) -> None:
+        """Add ``results`` under ``context`` and write the file (whole, through a temporary file beside it), with
+        whatever another run wrote to it meanwhile (a run with another driver or log, at the same time)."""
+        self.contexts = {**HindsightCache(self.path).contexts, **self.contexts}
+        entry = self.contexts.setdefault(self.context_id(context), {"context": context, "hindsight_saving_frac": {}})
+        entry["hindsight_saving_frac"].update(results)
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text(json.dumps({"format": self.FORMAT, "version": self.VERSION, "contexts": self.contexts}), encoding="utf-8")
+        os.replace(tmp, self.path)
 
 
 def jobs(logs: Sequence[GroupLog], setup: Setup, anchor_s: float | None = None) -> list:
@@ -333,9 +442,11 @@ def _read_head(path: str, limit_s: float) -> list:
 
 
 def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_s: float | None = None, progress: bool = True,
-                 rows_out: list | None = None) -> dict:  # fmt: skip
+                 rows_out: list | None = None, hindsight_cache: str | os.PathLike | None = None) -> dict:  # fmt: skip
     """Replay the log at ``path`` (any format :func:`spat_feed.transport.player.read_spat_log` reads; optionally
-    only its first ``limit_s`` seconds); the summary (and the rows, appended to ``rows_out`` if given)."""
+    only its first ``limit_s`` seconds); the summary (and the rows, appended to ``rows_out`` if given).
+    ``hindsight_cache``: a :class:`HindsightCache` file, read before and written after (same output, less time)."""
+    global _HINDSIGHT
     from tqdm import tqdm
 
     from spat_feed.transport.player import read_spat_log
@@ -343,15 +454,26 @@ def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_
     setup = setup or Setup()
     if setup.driver not in DRIVERS:
         raise ValueError(f"unknown driver {setup.driver!r} (one of {', '.join(DRIVERS)})")
+    cache = HindsightCache(hindsight_cache) if hindsight_cache is not None else None
+    context = hindsight_context(path, setup, limit_s) if cache is not None else None
     snapshots = read_spat_log(path) if limit_s is None else _read_head(path, limit_s)
     load(snapshots, setup.stale_after_s)
     todo = jobs(_LOGS, setup, _REPLAY.t0_s)
+    _HINDSIGHT = cache.results(context) if cache is not None else {}
+    if progress and cache is not None:
+        known = sum(approach_key(g, t) in _HINDSIGHT for g, t, _ in todo)
+        print(f"spat-eval: hindsight of {known} of {len(todo)} approaches from {cache.path}", file=sys.stderr)
     bar = dict(total=len(todo), desc=f"spat-eval {path.rsplit('/', 1)[-1]}", disable=not progress, file=sys.stderr)
-    if workers > 1:
-        with mp.get_context("fork").Pool(workers) as pool:
-            rows = list(tqdm(pool.imap(approach, todo, chunksize=4), **bar))
-    else:
-        rows = [approach(j) for j in tqdm(todo, **bar)]
+    try:
+        if workers > 1:
+            with mp.get_context("fork").Pool(workers) as pool:
+                rows = list(tqdm(pool.imap(approach, todo, chunksize=4), **bar))
+        else:
+            rows = [approach(j) for j in tqdm(todo, **bar)]
+    finally:
+        _HINDSIGHT = {}
+    if cache is not None:
+        cache.save(context, {approach_key(g, t): r["hindsight_saving_frac"] for (g, t, _), r in zip(todo, rows) if r is not None})
     rows = [r for r in rows if r is not None]
     if rows_out is not None:
         rows_out.extend(rows)
@@ -373,14 +495,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--every-s", type=float, default=Setup().every_s, help="seconds between single-light entries (default %(default)s)")
     ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--hindsight-cache", metavar="FILE", default=None,
+                    help="keep each approach's hindsight DP result in this JSON file (read if present, written after the run): "
+                         "the same output, minutes faster when only the advisor changed")  # fmt: skip
     args = ap.parse_args(argv)
     from spat_feed.transport.recorded import RecordedLogError
 
     results = []
     for path in args.logs:
         try:
-            results.append(evaluate_log(path, Setup(every_s=args.every_s, driver=args.driver, choice=args.choice), args.workers, args.limit_s, progress=True))
-        except (OSError, RecordedLogError) as exc:
+            setup = Setup(every_s=args.every_s, driver=args.driver, choice=args.choice)
+            results.append(evaluate_log(path, setup, args.workers, args.limit_s, progress=True, hindsight_cache=args.hindsight_cache))
+        except (OSError, RecordedLogError, HindsightCacheError) as exc:
             print(f"ecodrive spat-eval: {exc}", file=sys.stderr)
             return 2
     if args.json:
