@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import random
 import socket
 import ssl
 import subprocess
@@ -17,8 +18,36 @@ REPO = Path(__file__).resolve().parents[1]
 START_TIMEOUT_S = 60.0  # generous: only there so a broken start cannot hang the suite
 
 
+_HANDED: set[int] = set()
+
+
+def _ephemeral_low() -> int:
+    """The first port the kernel hands to outgoing connections (Linux ``ip_local_port_range``; 32768 elsewhere)."""
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
 def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+    """A loopback port free now and outside the kernel's range for outgoing connections: a port from that range (what
+    binding port 0 gives) may be taken by any client socket of the suite before the server binds it, or while a
+    killed server is restarted on it (seen as "address already in use" on a loaded machine, issue 29). Never the same
+    port twice in one run."""
+    low = _ephemeral_low()
+    rng = random.Random()
+    for _ in range(200):
+        port = rng.randrange(10_000, max(low, 10_001))
+        if port in _HANDED:
+            continue
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        _HANDED.add(port)
+        return port
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:  # (no free port below the range: the kernel's pick)
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 
