@@ -160,12 +160,13 @@ class _Entry:
 
 
 class _Group:
-    """A signal group's latest state: the stamp and arrival of the message that carried it, its plan, the message."""
+    """A signal group's latest state: the stamp and arrival of the message that carried it, its plan, the message, and
+    the queue its movement published (``MovementState.queue_length_m``, read once per message) [m]."""
 
-    __slots__ = ("stamp", "received", "plan", "state")
+    __slots__ = ("stamp", "received", "plan", "state", "queue_m")
 
-    def __init__(self, stamp: float, received: float, plan: UncertainPlan, state: IntersectionState) -> None:
-        self.stamp, self.received, self.plan, self.state = stamp, received, plan, state
+    def __init__(self, stamp: float, received: float, plan: UncertainPlan, state: IntersectionState, queue_m: float | None = None) -> None:
+        self.stamp, self.received, self.plan, self.state, self.queue_m = stamp, received, plan, state, queue_m
 
 
 class SpatStore:
@@ -220,7 +221,7 @@ class SpatStore:
                 entry.ahead_unix_s, entry.ahead_offset = received, received - stamp
                 verdict = "clock_ahead"
             else:
-                groups, plans, seen, implausible = entry.groups, {}, False, False
+                groups, plans, queues, seen, implausible = entry.groups, {}, {}, False, False
                 for movement in state.states:
                     g = movement.signal_group
                     if g in plans:
@@ -232,6 +233,7 @@ class SpatStore:
                     # parsed once per message: the plan the history records (its minEndTime too: held, resumed) is the
                     # one readings get
                     plans[g] = plan_from_movement(movement, stamp)
+                    queues[g] = movement.queue_length_m()
                     if held is not None and _contradicts(held.plan, plans[g], stamp):
                         implausible = True
                         break
@@ -244,9 +246,9 @@ class SpatStore:
                     for g, plan in plans.items():
                         held = groups.get(g)
                         if held is None:
-                            groups[g] = _Group(stamp, received, plan, state)
+                            groups[g] = _Group(stamp, received, plan, state, queues[g])
                         else:
-                            held.stamp, held.received, held.plan, held.state = stamp, received, plan, state
+                            held.stamp, held.received, held.plan, held.state, held.queue_m = stamp, received, plan, state, queues[g]
                     if stamp > entry.stamp:
                         entry.state, entry.stamp, entry.received = state, stamp, received
                     entry.history.record(stamp, plans)  # each group's phases (its own readings), the links between groups
@@ -340,9 +342,9 @@ class SpatStore:
             if reading is None:
                 return PlanReading(None, fresh=False, age_s=float("inf"))
             cycle = entry.history.stats(signal_group)
-        movement = reading.intersection.movement(signal_group) if plan is not None else None
+            held = entry.groups.get(signal_group)
         return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s,
-                           clock_uncertainty_s=reading.clock_uncertainty_s, queue_m=None if movement is None else movement.queue_length_m())
+                           clock_uncertainty_s=reading.clock_uncertainty_s, queue_m=None if held is None else held.queue_m)
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:
         r = self.reading(intersection_id)
