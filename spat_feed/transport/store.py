@@ -392,10 +392,11 @@ class SpatStore:
 
 
 def _contradicts(held: UncertainPlan, new: UncertainPlan, stamp: float) -> bool:
-    """``new`` shows green at ``stamp`` where ``held`` (the controller's previous word) could only be red then."""
+    """``new`` shows green at ``stamp`` where ``held`` (the controller's previous word) could only be red then and for
+    ``PLAUSIBLE_SLACK_S`` after (a held green about to end is no contradiction: it is still green at ``stamp``)."""
     if phase_class(state_at(new, stamp)) is not PhaseClass.GREEN:
         return False
-    return all(phase_class(s) is PhaseClass.RED for s in possible_states_at(held, stamp + PLAUSIBLE_SLACK_S))
+    return all(phase_class(s) is PhaseClass.RED for t in (stamp, stamp + PLAUSIBLE_SLACK_S) for s in possible_states_at(held, t))
 
 
 LatestStore = SpatStore

@@ -476,6 +476,20 @@ def test_a_red_that_turns_green_before_its_published_minimum_is_implausible_neve
     assert store.offer(forged_green(sim.states_at(t)[0], red_ends + 0.1)) == "ok"
 
 
+def test_a_controllers_own_messages_are_never_implausible_around_its_changes():
+    """Every 0.1 s of two cycles, the simulator's own states (a green about to end, a red about to end, the instant
+    of a change): all stored. A held green ending within ``PLAUSIBLE_SLACK_S`` once read as a red the new green
+    contradicted (the live feed's messages were rejected in the half second before each red)."""
+    corridor = load_corridor("paper_s200")
+    sim, clock = IntersectionSimulator([corridor]), Clock(T0)
+    store = SpatStore(TimeRules(clock_tolerance_s=1.0), clock)
+    verdicts = []
+    for k in range(1200):
+        clock.t = T0 + 0.1 * k
+        verdicts += [store.offer(s) for s in sim.states_at(clock.t)]
+    assert set(verdicts) == {"ok"}
+
+
 def test_a_published_queue_reaches_the_light_view_fresh_only():
     """A movement's J2735 ``queueLength`` (its ``maneuverAssistList``) reaches the advisor's view of that light (the
     longest of its connections), per signal group (another group publishes none), and not once the reading is stale."""
