@@ -30,8 +30,11 @@ Where the samples come from, in the order they are trusted (each *method* names 
     The durations of the past phases of the class that, as long after they began as this one now, saw the
     intersection in the state it is in now (every signal group's class), where at least :data:`MIN_SEEN` did: on an
     actuated controller what its phases do depends on which stage runs, and this tells it from the stream alone
-    (no signal plan, no detectors; :meth:`~spat_feed.prediction.observe.PhaseHistory.spans_in`); the plain
-    durations below weigh :data:`PRIOR_PHASES` phases in it.
+    (no signal plan, no detectors; :meth:`~spat_feed.prediction.observe.PhaseHistory.spans_in`); pooled with the
+    *stage's* law, the same phases counted from when the intersection entered that state (those that stayed in it as
+    long as this one has: a stage's end is told by how long the stage has run), each with a share in inverse
+    proportion to its scored mean squared error (:func:`durations_given_state`); the plain durations below weigh
+    :data:`PRIOR_PHASES` phases in it.
 ``duration``
     Each past duration of the class from the phase's start, given that it has run this long (the empirical
     conditional distribution: durations it has already outlasted are out).
