@@ -58,6 +58,7 @@ from spat_feed.prediction.predictor import (
     SCORE_AHEAD_S,
     current_end,
     cycle_period_s,
+    durations_given_stage,
     durations_given_state,
     ends_given_window,
     next_end,
@@ -127,6 +128,8 @@ class CycleStats:
     period_s: float | None = None  # the controller's fixed cycle, if its changes keep to one (:func:`~spat_feed.prediction.predictor.cycle_period_s`)
     # (durations, from, to): past phases of the current class while the intersection was in its state now (:meth:`PhaseHistory.spans_in`)
     state_spans_s: tuple | None = None
+    state_entered_s: float | None = None  # how long after the current phase began the intersection entered its state now
+    stage_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # the stage's law's share in ``state``, per class (:meth:`PhaseHistory.stage_weight`)
 
     def ends(self, cls: PhaseClass) -> tuple[float, ...]:
         """The instants phases of ``cls`` ended at, if enough are seen, else ()."""
@@ -159,6 +162,23 @@ def _quantile(sorted_s: Sequence[float], q: float) -> float:
     return sorted_s[min(len(sorted_s) - 1, max(0, math.ceil(q * len(sorted_s)) - 1))]
 
 
+def _scored(score: list[float], errors) -> None:
+    """Add one phase's errors of two laws to ``score`` = [n, first's mean squared error, second's]: a running mean
+    over about :data:`METHOD_MEMORY` phases. [s²]"""
+    score[0] += 1
+    w = max(1.0 / score[0], 1.0 / METHOD_MEMORY)
+    score[1] += w * (errors[0] ** 2 - score[1])
+    score[2] += w * (errors[1] ** 2 - score[2])
+
+
+def _share(score) -> float:
+    """The first law's share in a pool of two scored by :func:`_scored`: in inverse proportion to the mean squared
+    errors (Bates and Granger, :meth:`PhaseHistory.window_weight`); half each until :data:`MIN_PHASES_SEEN` phases
+    are scored. [-]"""
+    n, first, second = score
+    return 0.5 if n < MIN_PHASES_SEEN or first + second <= 0.0 else second / (first + second)
+
+
 class PhaseHistory:
     """Learns one (intersection, signal group) from successive readings: the durations of its phases, by class.
 
@@ -179,7 +199,7 @@ class PhaseHistory:
     """
 
     __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
-                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score")  # fmt: skip
+                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score", "_stage_score")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
         self.keep, self.max_gap_s = keep, max_gap_s
@@ -202,6 +222,7 @@ class PhaseHistory:
         self._windowed: dict[PhaseClass, deque[int]] = {}  # phases seen whole: how many readings with a finite window each gave its law
         self._laws: dict[PhaseClass, tuple] = {}  # ... and those readings (:meth:`window_law`)
         self._window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, window law's mean squared error, durations'] (:meth:`_score_window`)
+        self._stage_score: dict[PhaseClass, list[float]] = {}  # class -> [n, the stage's law's mean squared error, by the phase's start] (:meth:`_given_before`)
 
     def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
         """Take one reading at ``t_unix_s`` (:meth:`record`) and return the :meth:`stats` after it."""
@@ -278,7 +299,8 @@ class PhaseHistory:
         law = self.window_law()
         ends = {c: tuple(e) for c, e in self._ends.items()}
         return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess, ends_unix_s=ends, window_law_s=law,
-                          window_weight={c: self.window_weight(c) for c in self._window_score})  # fmt: skip
+                          window_weight={c: self.window_weight(c) for c in self._window_score},
+                          stage_weight={c: _share(self._stage_score[c]) for c in self._stage_score})  # fmt: skip
 
     def _score_window(self, end_unix_s: float, before: CycleStats, given: np.ndarray | None) -> None:
         """Score the window law and the durations on the phase in progress, which ends at ``end_unix_s``: the likely
@@ -297,11 +319,7 @@ class PhaseHistory:
         if by_window is None or not len(own):
             return
         errors = (sample_quantile(np.sort(by_window), 0.5) - end_unix_s, max(self._since + sample_quantile(np.sort(own), 0.5), floor) - end_unix_s)
-        score = self._window_score.setdefault(self._current, [0, 0.0, 0.0])
-        score[0] += 1
-        w = max(1.0 / score[0], 1.0 / METHOD_MEMORY)
-        score[1] += w * (errors[0] ** 2 - score[1])
-        score[2] += w * (errors[1] ** 2 - score[2])
+        _scored(self._window_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
 
     def window_weight(self, cls: PhaseClass) -> float:
         """The window law's share of the forecast of ``cls`` where it is pooled with the durations: the weights of the
@@ -313,10 +331,7 @@ class PhaseHistory:
         .. [1] J. M. Bates and C. W. J. Granger, "The combination of forecasts," Oper. Res. Q., vol. 20, pp. 451-468,
            1969, doi:10.2307/3008764.
         """
-        n, by_window, by_durations = self._window_score.get(cls, (0, 0.0, 0.0))
-        if n < MIN_PHASES_SEEN or by_window + by_durations <= 0.0:
-            return 0.5
-        return by_durations / (by_window + by_durations)
+        return _share(self._window_score.get(cls, (0, 0.0, 0.0)))
 
     def _window_readings(self, end_unix_s: float) -> tuple[np.ndarray, ...]:
         """The readings with a finite window of the phase in progress, which ends at ``end_unix_s``, as arrays: how
@@ -349,10 +364,34 @@ class PhaseHistory:
 
     def _given_before(self, end_unix_s: float) -> np.ndarray | None:
         """The durations ``state`` gave :data:`SCORE_AHEAD_S` before the phase in progress ended at ``end_unix_s``
-        (:func:`~spat_feed.prediction.predictor.durations_given_state`), what the cycle is scored against."""
+        (:func:`~spat_feed.prediction.predictor.durations_given_state`), what the cycle is scored against; and the
+        score of its two laws then, by the phase's start and by the stage's (their likely ends' squared errors, a
+        running mean over about :data:`METHOD_MEMORY` phases: :meth:`stage_weight`)."""
         el = max(0.0, end_unix_s - SCORE_AHEAD_S - self._since)
-        then = [s for at, s in self._path if at <= el]
-        return durations_given_state(self.spans_in(self._current, then[-1]), el) if then else None
+        then = [(at, s) for at, s in self._path if at <= el]
+        if not then:
+            return None
+        entered, state = then[-1]
+        spans = self.spans_in(self._current, state)
+        by_phase = durations_given_state(spans, el)
+        if by_phase is None:
+            return None
+        by_stage = durations_given_stage(spans, el, entered)
+        if by_stage is not None:
+            errors = [max(el, sample_quantile(np.sort(x), 0.5)) - (end_unix_s - self._since) for x in (by_stage, by_phase)]
+            _scored(self._stage_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
+        return durations_given_state(spans, el, entered, self.stage_weight(self._current))
+
+    def stage_weight(self, cls: PhaseClass) -> float:
+        """The share of the stage's law in the ``state`` law of ``cls``
+        (:func:`~spat_feed.prediction.predictor.durations_given_state`): in inverse proportion to its mean squared
+        error against the law by the phase's start, as :meth:`window_weight`; half each until scored. [-]"""
+        return _share(self._stage_score.get(cls, (0, 0.0, 0.0)))
+
+    @property
+    def entered_s(self) -> float | None:
+        """How long after the phase in progress began the intersection entered its state now (None: not known). [s]"""
+        return self._path[-1][0] if self._path else None
 
     def note_state(self, t_unix_s: float, state: int) -> None:
         """The intersection's state (an id of every group's class, :class:`IntersectionHistory`) from ``t_unix_s`` on."""
@@ -544,7 +583,8 @@ class IntersectionHistory:
             linked = (_quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE)) if ends else None
             cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=linked, linked_ends_unix_s=ends, period_s=self.period_s,
                                                  cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset(),
-                                                 state_spans_s=history.spans_in(history.current, self._state), state_id=self._state)  # fmt: skip
+                                                 state_spans_s=history.spans_in(history.current, self._state), state_id=self._state,
+                                                 state_entered_s=history.entered_s)  # fmt: skip
         return cycle
 
 

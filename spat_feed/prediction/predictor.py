@@ -30,8 +30,11 @@ Where the samples come from, in the order they are trusted (each *method* names 
     The durations of the past phases of the class that, as long after they began as this one now, saw the
     intersection in the state it is in now (every signal group's class), where at least :data:`MIN_SEEN` did: on an
     actuated controller what its phases do depends on which stage runs, and this tells it from the stream alone
-    (no signal plan, no detectors; :meth:`~spat_feed.prediction.observe.PhaseHistory.spans_in`); the plain
-    durations below weigh :data:`PRIOR_PHASES` phases in it.
+    (no signal plan, no detectors; :meth:`~spat_feed.prediction.observe.PhaseHistory.spans_in`); pooled with the
+    *stage's* law, the same phases counted from when the intersection entered that state (those that stayed in it as
+    long as this one has: a stage's end is told by how long the stage has run), each with a share in inverse
+    proportion to its scored mean squared error (:func:`durations_given_state`); the plain durations below weigh
+    :data:`PRIOR_PHASES` phases in it.
 ``duration``
     Each past duration of the class from the phase's start, given that it has run this long (the empirical
     conditional distribution: durations it has already outlasted are out).
@@ -167,6 +170,30 @@ def _reduced(samples, n: int = N_SAMPLES) -> np.ndarray:
     return s if len(s) <= n else s[_spread_indices(len(s), n)]
 
 
+def _mixed(samples, others, share: float) -> np.ndarray:
+    """A linear pool of two laws given by samples: ``others`` with the share ``share`` of :data:`N_SAMPLES` samples,
+    ``samples`` with the rest, each set as that many of its quantiles (repeated where it has fewer: a law of 3
+    samples weighs its share, not 3 samples' worth). [s]
+
+    Examples
+    --------
+    >>> _mixed(np.arange(100.0), np.full(3, -1.0), 0.25).tolist().count(-1.0), len(_mixed(np.arange(100.0), [], 0.0))
+    (16, 100)
+    """
+    n_others = round(N_SAMPLES * share)
+    if n_others <= 0 or not len(others):
+        return np.asarray(samples, dtype=float)
+    if n_others >= N_SAMPLES or not len(samples):
+        return np.asarray(others, dtype=float)
+    return np.concatenate([_quantiles(samples, N_SAMPLES - n_others), _quantiles(others, n_others)])
+
+
+def _quantiles(samples, n: int) -> np.ndarray:
+    """``n`` evenly spaced quantiles of the samples (sorted; a sample repeated where there are fewer than ``n``)."""
+    s = np.sort(np.asarray(samples, dtype=float))
+    return s[_spread_indices(len(s), n)]
+
+
 @lru_cache(maxsize=1024)
 def _spread_indices(length: int, n: int) -> np.ndarray:
     """``n`` indices evenly spread over ``range(length)``, first and last included."""
@@ -283,15 +310,47 @@ def _as_arrays(spans: tuple[tuple[float, ...], ...]) -> tuple[np.ndarray, ...]:
     return tuple(np.asarray(x, dtype=float) for x in spans)
 
 
-def durations_given_state(spans, elapsed_s: float) -> np.ndarray | None:
+def durations_given_state(spans, elapsed_s: float, entered_s: float | None = None, stage_share: float = 0.0) -> np.ndarray | None:
     """The durations of the past phases of the class that, this long after they began, were in the intersection's
     state now (every group's class as now), if :data:`MIN_SEEN` were, else None. ``spans``: :class:`CycleStats`'s
-    ``state_spans_s``, (durations, from, to) tuples. [s]"""
+    ``state_spans_s``, (durations, from, to) tuples. [s]
+
+    With ``entered_s`` (how long after the phase began the intersection entered its state now), pooled with the
+    durations the *stage* says, with the share ``stage_share``: each past phase of the class that stayed in that
+    state at least as long as this one has so far ended as long after entering it as that one did
+    (``entered + duration - from``): on an actuated controller a red waits for the stage that runs, and a stage's end
+    is told by how long it has run, not by how long the red has (:func:`durations_given_stage`).
+
+    Examples
+    --------
+    >>> spans = ((30.0, 30.0, 30.0, 50.0), (0.0, 0.0, 0.0, 20.0), (30.0, 30.0, 30.0, 50.0))  # three 30 s reds in it from their start, one 50 s from 20 s
+    >>> durations_given_state(spans, 10.0).tolist(), sorted(set(durations_given_state(spans, 25.0, 20.0, 0.5).tolist()))
+    ([30.0, 30.0, 30.0], [30.0, 50.0])
+    """
     if spans is None:
         return None
     d, lo, hi = _as_arrays(spans)
     m = (lo <= elapsed_s) & (elapsed_s < hi)
-    return d[m] if np.count_nonzero(m) >= MIN_SEEN else None
+    if np.count_nonzero(m) < MIN_SEEN:
+        return None
+    by_stage = None if entered_s is None or stage_share <= 0.0 else durations_given_stage(spans, elapsed_s, entered_s)
+    return d[m] if by_stage is None else _mixed(d[m], by_stage, stage_share)
+
+
+def durations_given_stage(spans, elapsed_s: float, entered_s: float) -> np.ndarray | None:
+    """The durations of a phase now ``elapsed_s`` in, whose intersection entered its state now ``entered_s`` after it
+    began, that past phases of the class in that state say when counted from their entering it: each one that stayed
+    in it at least ``elapsed - entered`` ended ``entered + (duration - from)`` after this one began; None with fewer
+    than :data:`MIN_SEEN`. ``spans``: as :func:`durations_given_state`. [s]
+
+    Examples
+    --------
+    >>> durations_given_stage(((30.0, 30.0, 30.0, 50.0), (0.0, 0.0, 0.0, 20.0), (30.0, 30.0, 30.0, 50.0)), 25.0, 20.0).tolist()
+    [50.0, 50.0, 50.0, 50.0]
+    """
+    d, lo, hi = _as_arrays(spans)
+    m = hi - lo > elapsed_s - entered_s
+    return entered_s + (d - lo)[m] if np.count_nonzero(m) >= MIN_SEEN else None
 
 
 WINDOW_NEIGHBOURS = N_SAMPLES // 2
@@ -344,8 +403,25 @@ def _pooled(samples: np.ndarray, method: str, cycle, cls: PhaseClass, since_unix
     by_window = None if law is None else ends_given_window(law, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
     if by_window is None:
         return samples, method
-    n_window = round(N_SAMPLES * cycle.window_weight.get(cls, 0.5))
-    return np.concatenate([_reduced(samples, N_SAMPLES - n_window), _reduced(by_window, n_window)]), method
+    return _mixed(samples, by_window, cycle.window_weight.get(cls, 0.5)), method
+
+
+def _by_durations(cycle, cls: PhaseClass, since_unix_s: float, now_unix_s: float, floor_unix_s: float, given: np.ndarray | None, n_given: int,
+                  published_min_unix_s: float, published_max_unix_s: float, current: bool) -> tuple[np.ndarray, str] | None:  # fmt: skip
+    """Samples of the end of the phase in progress by its class's durations: ``state`` where the intersection's state
+    now speaks (``given``: :func:`durations_given_state`, from ``n_given`` phases), with the plain durations as its prior
+    (:data:`PRIOR_PHASES`), else ``duration`` (those not yet outlasted); pooled with the window law where the phase is
+    the current one (:func:`_pooled`). None when the phase has outlasted every duration seen and no state speaks."""
+    ahead = _durations_ahead(since_unix_s, cycle.durations(cls), now_unix_s)
+    if given is not None:
+        pooled = _mixed(since_unix_s + given, ahead, PRIOR_PHASES / (n_given + PRIOR_PHASES)) if len(ahead) else since_unix_s + given
+        return _pooled(_after(pooled, floor_unix_s, None), "state", cycle, cls, since_unix_s, now_unix_s, published_min_unix_s, published_max_unix_s)
+    if not len(ahead):
+        return None
+    by_duration = _after(ahead, floor_unix_s, None)
+    if not current:  # a later phase of the plan: the window law knows the phase in progress only
+        return by_duration, "duration"
+    return _pooled(by_duration, "duration", cycle, cls, since_unix_s, now_unix_s, published_min_unix_s, published_max_unix_s)
 
 
 def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: float, published_min_unix_s: float = -math.inf,
@@ -358,9 +434,12 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
     floor_unix_s = max(now_unix_s, published_min_unix_s)
     if published_max_unix_s - published_min_unix_s < EXACT_S:  # an exact window: the controller says when
         return np.array([max(floor_unix_s, published_max_unix_s)]), "published"
-    given = None  # the durations of the phases of the class seen in the intersection's state now, this far in
+    given, n_given = None, 0  # the durations of the phases of the class seen in the intersection's state now, this far in
     if cycle is not None and current and since_unix_s is not None:
         given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s)
+        if given is not None:  # (pooled with the stage's law; the prior is weighed against the phases seen)
+            n_given = len(given)
+            given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
     if cycle is not None and current:
         linked = np.asarray(cycle.linked_ends_unix_s or cycle.linked_end_unix_s or (), dtype=float)  # every lag seen, or (likely, late)
         ahead = linked[linked >= now_unix_s]  # the link has not failed (the phase went on past its lags) while some are ahead
@@ -369,7 +448,7 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         if cycle.resumed and (excess := cycle.after_resumed(cls)) and math.isfinite(published_min_unix_s):
             resumed = _after(published_min_unix_s + np.asarray(excess, dtype=float), floor_unix_s, None)
             if given is not None:  # pooled with the state's, half each
-                resumed = np.concatenate([_reduced(resumed, N_SAMPLES // 2), _reduced(_after(since_unix_s + given, floor_unix_s, None), N_SAMPLES // 2)])
+                resumed = _mixed(resumed, _after(since_unix_s + given, floor_unix_s, None), 0.5)
             return _pooled(resumed, "resumed", cycle, cls, since_unix_s, now_unix_s, published_min_unix_s, published_max_unix_s)
     durations = cycle.durations(cls) if cycle is not None else ()
     since = since_unix_s
@@ -378,16 +457,9 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         d, cycle_ends = _class_model(durations, cycle.ends(cls), period is not None and cls in cycle.cycle_classes)
         if cycle_ends is not None:
             return _after(_on_cycle(since + d, cycle_ends, period), floor_unix_s, period), "cycle"
-        ahead = _durations_ahead(since, durations, now_unix_s)
-        if given is not None:  # the state's law, with the plain durations as its prior (PRIOR_PHASES)
-            n_plain = round(N_SAMPLES * PRIOR_PHASES / (len(given) + PRIOR_PHASES)) if len(ahead) else 0
-            pooled = np.concatenate([_reduced(since + given, N_SAMPLES - n_plain), _reduced(ahead, n_plain)]) if n_plain else since + given
-            return _pooled(_after(pooled, floor_unix_s, None), "state", cycle, cls, since, now_unix_s, published_min_unix_s, published_max_unix_s)
-        if len(ahead):
-            by_duration = _after(ahead, floor_unix_s, None)
-            if not current:  # a later phase of the plan: the window law knows the phase in progress only
-                return by_duration, "duration"
-            return _pooled(by_duration, "duration", cycle, cls, since, now_unix_s, published_min_unix_s, published_max_unix_s)
+        own = _by_durations(cycle, cls, since, now_unix_s, floor_unix_s, given, n_given, published_min_unix_s, published_max_unix_s, current)
+        if own is not None:
+            return own
     if math.isfinite(published_max_unix_s) and published_max_unix_s > floor_unix_s:
         return np.linspace(floor_unix_s, published_max_unix_s, 9), "window"
     if math.isfinite(published_max_unix_s):

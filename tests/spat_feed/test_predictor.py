@@ -134,6 +134,49 @@ def test_durations_are_conditioned_on_the_other_groups_state():
     assert np.mean([e for _, e, _ in rows]) <= 3.5 and np.mean([c for _, _, c in rows]) >= 0.75
 
 
+@pytest.mark.parametrize("stage_tells", [True, False])
+def test_a_red_that_waits_for_a_stage_is_told_by_how_long_the_stage_has_run(stage_tells):
+    """An actuated controller: group 2's green (a stage) begins 2-20 s (evenly, whole seconds) after group 1's red
+    does. With ``stage_tells``, 1's red ends 3 s after that green, which lasts 20-24 s: from a reading 5 s into the
+    stage the red ends 18-22 s later, evenly (its median errs 1.2 s), where counted from the red's start it spreads
+    over 25-47 s (the stage's law by the phase's start errs ~4 s). Otherwise 1's red lasts 40-44 s whatever the
+    stage does (its green ends 2 s before), and the stage's start says nothing. The two laws of ``state`` are scored
+    at each red's end: the one that tells takes most of the pool (``stage_weight``), and the forecast 5 s into the
+    stage errs about what the true law does."""
+    rng = np.random.default_rng(13)
+    history = IntersectionHistory()
+    t, errors, true_mad = T0, [], []
+    for k in range(120):
+        delay_s, stage_s = float(rng.integers(2, 21)), float(rng.integers(20, 25))
+        red_s = delay_s + stage_s + 3.0 if stage_tells else float(rng.integers(40, 45))
+        stage_s = stage_s if stage_tells else red_s - delay_s - 2.0
+        start = t
+        while t < start + red_s - 1e-9:
+            s2 = GREEN if delay_s <= t - start < delay_s + stage_s else RED
+            history.record(t, {1: state_only(RED, t), 2: state_only(s2, t)})
+            if k >= 60 and t - start == delay_s + 5.0:
+                fc = forecast(state_only(RED, t), t, history.stats(1))[0]
+                errors.append((fc.method, abs(fc.likely_unix_s - (start + red_s))))
+            t += 1.0
+        t = _drive(history, [(GREEN, float(rng.integers(25, 36)))], t)
+    weight = history.stats(1).stage_weight[PhaseClass.RED]
+    mae = np.mean([e for _, e in errors])
+    assert len(errors) == 60 and all(m == "state" for m, _ in errors)
+    if stage_tells:  # the true law 18-22 s ahead, evenly: mean absolute deviation 1.2 s
+        assert weight > 0.8 and mae <= 2.0, (weight, mae)
+    else:  # 40-44 s from the red's start, evenly: 1.2 s
+        assert weight < 0.2 and mae <= 2.0, (weight, mae)
+
+
+def test_a_pool_gives_each_law_its_share_however_few_its_samples():
+    """The linear pool of two laws weighs each by its share of the forecast's samples, not by how many samples it
+    has: the ``state`` law of 3 phases with its prior of 3 (``PRIOR_PHASES``) is half and half."""
+    from spat_feed.prediction.predictor import N_SAMPLES, _mixed
+
+    pooled = _mixed(np.array([10.0, 11.0, 12.0]), np.arange(100.0, 140.0), 0.5)
+    assert len(pooled) == N_SAMPLES and np.count_nonzero(pooled < 50.0) == N_SAMPLES // 2
+
+
 def test_a_published_window_is_read_by_the_readings_of_past_phases_with_a_like_window():
     """An actuated controller that publishes each red's window from its start: reds last 20-60 s (whole seconds,
     evenly), ``minEndTime`` is a draw ``U`` (0-10 s, evenly) before the real end and ``maxEndTime`` 10 s after it, so
