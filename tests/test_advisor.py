@@ -89,6 +89,31 @@ def test_advised_speed_never_above_limit_and_always_crosses_on_green(v, d1, gap,
         assert np.isfinite(t1) and not obs.lights[0].is_red_at(t1)
 
 
+@pytest.mark.parametrize("choice", ["rules", "expected_cost"])
+@settings(max_examples=30, deadline=None)
+@given(st.floats(100.0, 150.0) | st.just(124.46))
+def test_a_slowing_plan_keeps_a_margin_before_a_reds_start(choice, d1_m):
+    """Issue 28's red entry (docs/TRAFFIC.md, ``--spat-queue``): light 1, 124.46 m ahead, green for 6 s more, then red
+    with no amber; light 2, 400 m on, red until 42 s; 55 mph. "Second light: green in 42 seconds. Slow to 25 miles per
+    hour, then coast." was priced crossing light 1 at 5.75 s, 0.25 s before its red: the driver, a reaction late,
+    crossed 0.5 s into it. At a light that shows no amber no plan that slows the car reaches the line within
+    ``green_margin_s`` before a red begins, nor in the red or the margin after it (at 124.46 m: holding the speed is
+    over light 1 at 5.06 s, as the regular driver would be)."""
+    params = AdvisorParams(uncertain_choice=choice)
+    obs = Observation(24.58, 24.587, (LightView(1, d1_m, red_windows_s=((6.0, 36.0), (66.0, 96.0)), amber_s=0.0),
+                                      LightView(2, d1_m + 400.0, red_windows_s=((0.0, 42.0), (66.0, 96.0)), amber_s=0.0)))  # fmt: skip
+    adv, _ = advise(obs, params=params)
+    if d1_m == 124.46:
+        assert (adv.action, adv.target_speed_mps) == ("cruise", 24.587)
+    mode = KEEP_MODES.get(adv.action)
+    if mode is None or adv.target_speed_mps is None:
+        return
+    t1 = crossing_time_s(d1_m, 24.58, adv.target_speed_mps, params, mode)
+    assert not 6.0 <= t1 < 36.0 + params.green_margin_s
+    if mode == "brake_coast" or adv.target_speed_mps < 24.58 - 1e-9:
+        assert not 6.0 - params.green_margin_s <= t1 < 6.0
+
+
 def test_speak_only_on_meaningful_change_and_hysteresis():
     obs = Observation(V, V, (light(600, (-5, 25), (55, 85)),))
     first, mem = advise(obs)

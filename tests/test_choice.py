@@ -50,9 +50,10 @@ LAM = 4.5e-4  # $/s, the price on time in these tests
 LINE_M, END_M = 300.0, 400.0
 
 
-def _priced(vt, mode, reaction_s, accel_mps2, timings, line_m=LINE_M, clear_s=0.0):
+def _priced(vt, mode, reaction_s, accel_mps2, timings, line_m=LINE_M, clear_s=0.0, stop_plan=False):
     """One plan from the limit towards one line, priced over ``timings`` (each a tuple of red windows, beginning with an
-    amber at least ``clear_s`` long; 0: none): cost, chance of a stop, through a red of every timing."""
+    amber at least ``clear_s`` long; 0: none), equally likely (``stop_plan``: "prepare to stop"): cost, chance of a
+    stop, through a red of every timing."""
     k = max(max(len(w) for w in timings), 1)
     windows = np.full((1, len(timings), k, 2), np.inf)
     for i, w in enumerate(timings):
@@ -63,7 +64,7 @@ def _priced(vt, mode, reaction_s, accel_mps2, timings, line_m=LINE_M, clear_s=0.
     cost, p_stop, through = choice.expected_costs(np.array([vt]), np.array([mode]), np.array([reaction_s]), np.array([row]), np.array([accel_mps2]),
                                                   V_LIM, np.array([line_m]), windows, k, END_M, V_LIM, PARAMS.green_margin_s, LAM,
                                                   np.array([[cross]]), RATES, COAST, IDLE, 1.5, 3.0, 2.0, PARAMS.reaction_s, PARAMS.min_cruise_speed_mps,
-                                                  np.array([clear_s]))  # fmt: skip
+                                                  np.array([clear_s]), np.full(len(timings), 1.0 / len(timings)), np.array([stop_plan]))  # fmt: skip
     return float(cost[0]), float(p_stop[0]), bool(through[0])
 
 
@@ -130,6 +131,23 @@ def test_a_red_shown_before_a_stop_must_begin_is_glided_to(red_end_s, stops):
     assert glide == pytest.approx(late, rel=1e-2) if stops else glide < late
 
 
+def test_prepare_to_stop_is_a_plan_priced_with_the_stop_it_makes():
+    """"Prepare to stop" as a plan (the driver lifts off, then stops at the line for the red it meets): towards a red
+    shown long before a stop must begin that ends at 25 s, the same lift-off without the stop glides to the line after
+    the red (no stop), the stop plan stops and waits: dearer, a stop for sure. Towards a red on now that outlasts any
+    arrival, both stop alike, at one price. On a green that lasts, the lift-off goes through and the stop plan stops
+    all the same (told to stop, the driver does): a stop for nothing, never the cheaper plan there."""
+    lift = MODE_CODES["brake_coast"]
+    glide, p_glide, _ = _priced(V_LIM, lift, 1.0, 1.5, (((5.0, 25.0),),) * 4)
+    stop, p_stop, _ = _priced(V_LIM, lift, 1.0, 1.5, (((5.0, 25.0),),) * 4, stop_plan=True)
+    assert (p_glide, p_stop) == (0.0, 1.0) and stop > glide
+    red = (((0.0, 90.0),),) * 4
+    assert _priced(V_LIM, lift, 1.0, 1.5, red) == pytest.approx(_priced(V_LIM, lift, 1.0, 1.5, red, stop_plan=True))
+    green = (((60.0, 90.0),),) * 4
+    (go, p_go, _), (halt, p_halt, _) = _priced(V_LIM, lift, 1.0, 1.5, green), _priced(V_LIM, lift, 1.0, 1.5, green, stop_plan=True)
+    assert (p_go, p_halt) == (0.0, 1.0) and halt > go
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.tuples(st.floats(0.0, 60.0), st.floats(0.5, 40.0)), min_size=1, max_size=8), st.floats(30.0, 600.0), st.floats(4.5, V_LIM))
 def test_a_plan_is_through_a_red_only_when_it_meets_the_red_of_every_timing(reds, line_m, vt):
@@ -158,20 +176,22 @@ def _view(distance_m, scenarios, amber_s=0.0):
 def _stop_share(advice, obs):
     """The chance of a stop (with recourse, :func:`choice.expected_costs`) of the advised plan, or of driving normally
     for no speed advice, over the timings the advisor weighs (the forecast's and its wide component)."""
-    from advisory.advice.advisor import _normal_drive_s, _timings
+    from advisory.advice.advisor import _normal_drive_s
+    from advisory.advice.advisor import _timings as advisor_timings
 
     light = obs.lights[0]
     if advice.target_speed_mps is None:
         vt, mode, reaction, accel = obs.speed_limit_mps, "auto", 0.0, PARAMS.normal_accel_mps2
     else:
         vt, mode, reaction, accel = advice.target_speed_mps, KEEP_MODES[advice.action], PARAMS.reaction_s, PARAMS.comfort_accel_mps2
-    windows = _timings(obs.lights[:1])
+    windows, weights = advisor_timings(obs.lights[:1])
     row = choice.ACCEL_COMFORT if accel == PARAMS.comfort_accel_mps2 else choice.ACCEL_NORMAL
     cross = crossing_time_s(light.distance_m, obs.speed_mps, vt, PARAMS, mode, reaction) if advice.target_speed_mps else _normal_drive_s(light.distance_m, obs, PARAMS)
     _, p_stop, _ = choice.expected_costs(np.array([vt]), np.array([MODE_CODES[mode]]), np.array([reaction]), np.array([row]), np.array([accel]),
                                          obs.speed_mps, np.array([light.distance_m]), windows, windows.shape[2], light.distance_m + 100.0, V_LIM,
                                          PARAMS.green_margin_s, LAM, np.array([[cross]]), RATES, COAST, IDLE, 1.5, 3.0, 2.0, PARAMS.reaction_s,
-                                         PARAMS.min_cruise_speed_mps, np.array([0.0 if light.amber_s == 0.0 else choice.AMBER_MIN_S]))  # fmt: skip
+                                         PARAMS.min_cruise_speed_mps, np.array([0.0 if light.amber_s == 0.0 else choice.AMBER_MIN_S]), weights,
+                                         np.array([False]))  # fmt: skip
     return float(p_stop[0])
 
 
@@ -250,3 +270,15 @@ def test_the_plan_followed_is_kept_while_it_is_as_good_as_any():
     again, _ = advise(nxt, memory, PARAMS)
     assert again.target_speed_mps == pytest.approx(first.target_speed_mps)
     assert MODE_CODES[KEEP_MODES[again.action]] == MODE_CODES[KEEP_MODES[first.action]]
+
+
+def test_a_red_of_unknown_end_ends_at_one_instant_for_every_plan():
+    """A red on now whose end no timing knows (a state-only controller's red longer than any seen) is priced as ending
+    :data:`choice.WAIT_CAP_S` after now for every plan: as if that were its end, and a crawl that reaches the line
+    later waits less, at no price on time (priced from its arrival, the crawl paid for its own lateness: "drive normally"
+    won, the car sped up to brake at the line, -34 points on 2019-05-01 groups 7-8)."""
+    for vt, mode in ((V_LIM, 0), (5.0, MODE_CODES["brake"])):
+        assert _priced(vt, mode, 1.0, 1.5, (((0.0, np.inf),),) * 4) == pytest.approx(_priced(vt, mode, 1.0, 1.5, (((0.0, choice.WAIT_CAP_S),),) * 4))
+    crawl, p_crawl, _ = _priced(5.0, MODE_CODES["brake"], 1.0, 1.5, (((0.0, np.inf),),) * 4)
+    hold, p_hold, _ = _priced(V_LIM, 0, 1.0, 1.5, (((0.0, np.inf),),) * 4)
+    assert p_crawl == p_hold == 1.0 and crawl < hold

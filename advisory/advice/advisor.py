@@ -369,18 +369,29 @@ def _crossing_times_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, acce
 
 
 @njit(cache=True)
-def _green_mask(speeds, distances_m, windows_s, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+def _green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v,
+                t_of_x):  # fmt: skip
     """Per candidate speed: each of the first ``n_lines`` lines reached on green, at least ``after_red_s``
-    after a red ends (``windows_s``: padded red windows, (lines, k, 2)). bool (n,)"""
+    after a red ends and, for a plan that slows the car at a light that shows no amber (``no_amber``, (lines,)), as
+    long before a red to come begins (``windows_s``: padded red windows, (lines, k, 2)). bool (n,)
+
+    The margin before a red's start (issue 28): a slowing plan is a speed change the driver makes a reaction late and
+    tracks loosely, as it is after a red's end; "Slow to 25 mph, then coast" priced 0.25 s before a red with no amber
+    crossed 0.5 s into it (docs/TRAFFIC.md, the ``--spat-queue`` red entry). A plan that holds or speeds up is the
+    regular driver's own motion, over the line no later than planned; where an amber comes first, it warns the driver
+    (who clears it or stops, as without advice)."""
     ok = np.ones(speeds.size, dtype=np.bool_)
     for i in range(speeds.size):
+        slowing = mode == 1 or speeds[i] < v0 - 1e-9
         for j in range(n_lines):
+            before_red_s = after_red_s if slowing and no_amber[j] else 0.0
             tc = _time_to_line_s(distances_m[j], v0, speeds[i], mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x)
             if not np.isfinite(tc):
                 ok[i] = False
                 break
             for k in range(windows_s.shape[1]):
-                if windows_s[j, k, 0] <= tc < windows_s[j, k, 1] + after_red_s:
+                a = windows_s[j, k, 0]
+                if (a - before_red_s if a > 0.0 else a) <= tc < windows_s[j, k, 1] + after_red_s:
                     ok[i] = False
                     break
             if not ok[i]:
@@ -389,7 +400,7 @@ def _green_mask(speeds, distances_m, windows_s, n_lines, after_red_s, v0, mode, 
 
 
 @njit(cache=True)
-def _first_feasible(speeds, distances_m, windows_s, after_red_s, v0, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
+def _first_feasible(speeds, distances_m, windows_s, no_amber, after_red_s, v0, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
     """The advisor's search in one call: all lines, else the first alone; in each, the modes in the order
     auto, brake_coast, brake, firm (:data:`MODE_CODES`). Returns (lines used, mode code, mask of speeds)."""
     n = distances_m.size
@@ -397,7 +408,8 @@ def _first_feasible(speeds, distances_m, windows_s, after_red_s, v0, reaction_s,
     for attempt in range(2 if n > 1 else 1):
         n_lines = n if attempt == 0 else 1
         for mode in range(4):
-            ok = _green_mask(speeds, distances_m, windows_s, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x)
+            ok = _green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v,
+                             t_of_v, t_of_x)  # fmt: skip
             if ok.any():
                 return n_lines, mode, ok
     return n, 0, ok
@@ -430,10 +442,12 @@ def _candidates_mps(low_mps: float, limit_mps: float, step_mps: float) -> np.nda
 
 @dataclass(frozen=True, slots=True)
 class _Lines:
-    """The lights to cross, packed for the kernels: distances (n,) and red windows (n, k, 2), padded with +inf."""
+    """The lights to cross, packed for the kernels: distances (n,), red windows (n, k, 2), padded with +inf, and
+    which lights show no amber (n,)."""
 
     distances_m: np.ndarray
     windows_s: np.ndarray
+    no_amber: np.ndarray
 
     @classmethod
     def of(cls, lights) -> _Lines:
@@ -444,7 +458,7 @@ class _Lines:
                 flat += (start, end)
             flat += (np.inf,) * (2 * (k - len(light.red_windows_s)))
         windows = np.array(flat, dtype=float).reshape(len(lights), k, 2)
-        return cls(np.array([light.distance_m for light in lights], dtype=float), windows)
+        return cls(np.array([light.distance_m for light in lights], dtype=float), windows, np.array([light.amber_s == 0.0 for light in lights], dtype=np.bool_))
 
 
 def _kernel_args(obs: Observation, params: AdvisorParams, reaction_s: float | None) -> tuple:
@@ -457,7 +471,7 @@ def _green(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, sp
     """Which of ``speeds`` reach each of the first ``n_lines`` lines (all by default) on green. bool (n,)"""
     _, v0, reaction, *rest = _kernel_args(obs, params, reaction_s)
     n = lines.distances_m.size if n_lines is None else n_lines
-    return _green_mask(speeds, lines.distances_m, lines.windows_s, n, params.green_margin_s, v0, MODE_CODES[mode], reaction, *rest)
+    return _green_mask(speeds, lines.distances_m, lines.windows_s, lines.no_amber, n, params.green_margin_s, v0, MODE_CODES[mode], reaction, *rest)
 
 
 def _feasible(lines: _Lines, obs: Observation, params: AdvisorParams, mode: str, reaction_s: float | None = None, n_lines: int | None = None) -> np.ndarray:
@@ -481,7 +495,7 @@ def _search(lines: _Lines, obs: Observation, params: AdvisorParams) -> tuple[int
     firmly only if gentle braking cannot; if no speed makes all lines, plan for the next one alone.
     Returns (lines planned for, mode, feasible speeds)."""
     speeds, v0, reaction, *rest = _kernel_args(obs, params, None)
-    n_lines, mode, ok = _first_feasible(speeds, lines.distances_m, lines.windows_s, params.green_margin_s, v0, reaction, *rest)
+    n_lines, mode, ok = _first_feasible(speeds, lines.distances_m, lines.windows_s, lines.no_amber, params.green_margin_s, v0, reaction, *rest)
     return n_lines, MODE_NAMES[mode], _earliest_green(speeds, ok)
 
 
@@ -672,7 +686,8 @@ def _likely_only(light: LightView) -> LightView:
     """The light with each change at its likely instant, as a plan under uncertainty sees it (an exact light as it is)."""
     if light.likely_red_windows_s is None:
         return light
-    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or (), light.likely_red_windows_s)
+    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or (), light.likely_red_windows_s,
+                     amber_s=light.amber_s)
 
 
 def _beats_maybe(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, speed_mps: float | None = None) -> bool:
@@ -807,16 +822,17 @@ spread. [-]"""
 
 
 def _widened_timings(timings: tuple) -> tuple:
-    """The forecast's equally likely timings of one light, and a wider component of the mixture: a copy of the forecast
-    with :data:`WIDE_STRETCH` times its spread about its median timing, at the levels :data:`WIDE_LEVELS`, so that
-    the outer timings are not the forecast's extremes (a forecast from a few dozen past phases is its sample: a change
-    outside every timing came 7-10 s past the outer ones on the recorded controllers). Weight
-    ``len(WIDE_LEVELS) / (N + len(WIDE_LEVELS))`` (1/6 for 20 timings). Windows pair up by their order (the k-th red of
+    """The wide component of one light's mixture: a copy of the forecast's equally likely timings with
+    :data:`WIDE_STRETCH` times its spread about its median timing, at the levels :data:`WIDE_LEVELS` (one timing each),
+    so that the outer timings are not the forecast's extremes (a forecast from a few dozen past phases is its sample: a
+    change outside every timing came 7-10 s past the outer ones on the recorded controllers). Its weight is the chance
+    of a change outside the window the light states (:func:`_timings`). Windows pair up by their order (the k-th red of
     each timing; one past the median's horizon stays as it is). A red on now never ends earlier than in every timing
-    (the published red is held: the safety rule); no change comes before now."""
+    (the published red is held: the safety rule); no change comes before now; a level whose stretched reds run into
+    each other is that level's own timing."""
     n = len(timings)
     if n < 2:
-        return timings
+        return tuple(timings) * len(WIDE_LEVELS)
     med = timings[n // 2]
     wide = []
     for i in (round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS):
@@ -829,27 +845,44 @@ def _widened_timings(timings: tuple) -> tuple:
                 continue
             a2 = max(am + WIDE_STRETCH * (a - am), 0.0) if math.isfinite(a) and math.isfinite(am) else a
             out.append((a2, max(b2, a2)))
-        if out and any(out[k][0] < out[k - 1][1] for k in range(1, len(out))):
-            continue  # stretched into each other: not a timing
-        wide.append(tuple(out))
-    return timings + tuple(wide)
+        stretched_into_each_other = any(out[k][0] < out[k - 1][1] for k in range(1, len(out)))
+        wide.append(timings[i] if stretched_into_each_other else tuple(out))
+    return tuple(wide)
 
 
-def _timings(lights: tuple[LightView, ...]) -> np.ndarray:
-    """The lights' equally likely timings packed for :func:`advisory.advice.choice.expected_costs`: red windows
-    (lines, timings, k, 2), padded with +inf; an exact light has one timing in all of them. Each uncertain light's
-    forecast with its wide component (:func:`_widened_timings`)."""
-    per_light = [_widened_timings(light.scenario_red_windows_s or _implied_timings(light)) if light.likely_red_windows_s is not None
-                 or light.scenario_red_windows_s is not None else _implied_timings(light) for light in lights]  # fmt: skip
-    n_sc = max(len(timings) for timings in per_light)
-    per_light = [timings if len(timings) == n_sc else tuple(timings[k * len(timings) // n_sc] for k in range(n_sc)) for timings in per_light]
+def _resampled(timings: tuple, n: int) -> tuple:
+    """``n`` of the equally likely ``timings``, evenly by level (the same ones where there are ``n``)."""
+    return timings if len(timings) == n else tuple(timings[k * len(timings) // n] for k in range(n))
+
+
+def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The lights' timings packed for :func:`advisory.advice.choice.expected_costs`: red windows (lines, timings, k, 2),
+    padded with +inf, and each timing's weight (timings,), summing to 1. An exact light has one timing in all of them.
+
+    The mixture of each uncertain light: its forecast (equally likely timings, ``LightView.scenario_red_windows_s`` or
+    read off its windows, :func:`_implied_timings`), and the wide component (:func:`_widened_timings`) weighted by the
+    chance that a change comes outside the window the light states: ``1 - confidence_frac`` (J2735: the probability
+    that the change comes within it; the lowest of the lights planned for). Timings are comonotone across the lights (the
+    k-th of each, as the forecast's are within one)."""
+    uncertain = [light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in lights]
+    forecast = [light.scenario_red_windows_s or _implied_timings(light) if u else _implied_timings(light) for light, u in zip(lights, uncertain)]
+    n_fc = max(len(timings) for timings in forecast)
+    forecast = [_resampled(timings, n_fc) for timings in forecast]
+    if any(uncertain):
+        per_light = [fc + (_widened_timings(fc) if u else fc[:1] * len(WIDE_LEVELS)) for fc, u in zip(forecast, uncertain)]
+        stated = min(light.confidence_frac for light, u in zip(lights, uncertain) if u)
+        outside = min(max(1.0 - stated, 1.0 / n_fc), 1.0)
+        weights = np.concatenate((np.full(n_fc, (1.0 - outside) / n_fc), np.full(len(WIDE_LEVELS), outside / len(WIDE_LEVELS))))
+    else:
+        per_light, weights = forecast, np.full(n_fc, 1.0 / n_fc)
+    n_sc = weights.size
     k = max(max((len(w) for sc in per_light for w in sc), default=0), 1)
     out = np.full((len(lights), n_sc, k, 2), np.inf)
     for j, scenarios in enumerate(per_light):
         for i, windows in enumerate(scenarios):
             if windows:
                 out[j, i, : len(windows)] = windows
-    return out
+    return out, weights
 
 
 def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None, params: AdvisorParams, red: bool, to_change: float | None) -> Advice:
@@ -861,54 +894,57 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     v, v_lim = float(obs.speed_mps), float(obs.speed_limit_mps)
     speeds, v0, reaction, brake, firm, accel, *coast_tables = _kernel_args(obs, params, None)
     # the candidates: every speed in each of the advisor's modes (lift off, brake then coast, brake gently, firmly),
-    # driving normally (no reaction, the regular driver's rate, to the limit), and the plan the driver follows now (no
-    # new reaction)
+    # driving normally (no reaction, the regular driver's rate, to the limit), "prepare to stop" (lift off, then a stop
+    # at the line for a red met: choice.expected_costs), and the plan the driver follows now (no new reaction)
     m, n_modes = speeds.size, len(MODE_CODES)
     # (a lift-off for a likely red is a plan followed too: coasting on, it is kept as any other while it is as good)
     keep = last is not None and last.reason in ("green_wave", "red_ahead") and last.target_speed_mps is not None and last.action in KEEP_MODES
-    vts = np.concatenate((np.tile(speeds, n_modes), [v_lim], [last.target_speed_mps if keep else v_lim]))
-    modes = np.concatenate((np.repeat(np.arange(n_modes), m), [0], [MODE_CODES[KEEP_MODES[last.action]] if keep else 0])).astype(np.int64)
-    reactions = np.concatenate((np.full(n_modes * m, reaction), [0.0, 0.0]))
-    accels = np.concatenate((np.full(n_modes * m, accel), [params.normal_accel_mps2, accel]))
+    vts = np.concatenate((np.tile(speeds, n_modes), [v_lim, v], [last.target_speed_mps if keep else v_lim]))
+    modes = np.concatenate((np.repeat(np.arange(n_modes), m), [0, MODE_CODES["brake_coast"]], [MODE_CODES[KEEP_MODES[last.action]] if keep else 0])).astype(np.int64)
+    reactions = np.concatenate((np.full(n_modes * m, reaction), [0.0, reaction, 0.0]))
+    accels = np.concatenate((np.full(n_modes * m, accel), [params.normal_accel_mps2, accel, accel]))
+    normal, stop = n_modes * m, n_modes * m + 1
+    stop_plan = np.zeros(vts.size, dtype=np.bool_)
+    stop_plan[stop] = True
+    stop_plan[-1] = keep and last.reason == "red_ahead"  # a lift-off for a red, followed now: the same plan
     rows = np.where(accels == accel, choice.ACCEL_COMFORT, choice.ACCEL_NORMAL).astype(np.int64)
     d_m = np.array([light.distance_m for light in usable], dtype=float)
     cross = _cross_matrix(vts, modes, reactions, accels, d_m, v0, brake, firm, *coast_tables)
     rates, coast, idle = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
     x_end = float(d_m[-1]) + v_lim * v_lim / (2.0 * params.normal_accel_mps2)
-    windows = _timings(usable)
+    windows, weights = _timings(usable)
     clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
     cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,
                                                   params.green_margin_s, params.time_value_usd_per_s, cross, rates, coast, idle, brake, firm,
-                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear)  # fmt: skip
+                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan)  # fmt: skip
+    slowing = (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9)
     for j, light in enumerate(usable):
-        if clear[j] == 0.0:  # no amber warns of its reds: no plan reaches the line where one may be on (the sure windows)
+        if clear[j] == 0.0:  # no amber warns of its reds: no plan reaches the line where one may be on (the sure windows),
+            # nor, slowing the car, within the margin before one may begin (as :func:`_green_mask`)
             for a, b in light.red_windows_s:
-                through |= (cross[:, j] >= a) & (cross[:, j] < b + params.green_margin_s)
-    normal = n_modes * m
+                through |= (cross[:, j] >= (a - params.green_margin_s * slowing if a > 0.0 else a)) & (cross[:, j] < b + params.green_margin_s)
     allowed = (p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9) & ~through
     if not keep:
         allowed[-1] = False
-    forced = not allowed.any()
-    if forced:  # every plan crosses a red of every timing: a stop comes whatever the plan
-        allowed[normal], p_stop[normal] = True, 1.0
-    best = int(np.argmin(np.where(allowed, cost, np.inf)))
-    if keep and allowed[-1] and cost[-1] <= cost[best] + params.time_value_usd_per_s * params.reaction_s:
+    best = int(np.argmin(np.where(allowed, cost, np.inf))) if allowed.any() else stop  # none: a stop comes whatever the plan
+    reaction_usd = params.time_value_usd_per_s * params.reaction_s
+    if keep and allowed[-1] and cost[-1] <= cost[best] + reaction_usd:
         best = vts.size - 1  # the plan followed now, unless another is better by more than a new reaction costs
+    elif allowed[stop] and cost[stop] <= cost[best] + reaction_usd:
+        best = stop  # as good a plan as any (within a reaction's worth): the stop it comes to, said
     if p_stop[best] >= 0.5 and any(light.unknown_at(float(cross[normal, j])) for j, light in enumerate(usable)):
         # what comes as the car goes is a phase whose state nobody knows: no stop is asked for it (the regular driver
         # went through it), and no plan slows the car for the green after it: no data, said so
         return Advice("none", "no_spat", light_red=red, seconds_to_change_s=to_change)
-    if best == normal and not forced:  # nothing does better than driving on as the driver would (the red may come late): no speed advice
+    if best == normal:  # nothing does better than driving on as the driver would (the red may come late): no speed advice
         arrival = float(cross[normal, 0])
         reason = "no_spat" if nxt.unknown_at(arrival) else "tight_green" if not red and to_change is not None and arrival < to_change else "low_confidence"
         return Advice("none", reason, light_red=red, seconds_to_change_s=to_change)
-    i = _binding(usable, obs, params)
-    if forced or float(p_stop[allowed].min()) >= 0.5:
-        # a stop is likely whatever the plan: prepare to stop when one must begin soon; farther out lift off (arriving
-        # later only helps: the red may end first), or nothing while the car pulls away at a crawl (the light it is
-        # about: the first the car as it goes would not cross on green; a stop only at the next one). Where some plan
-        # likely avoids a stop, the cheapest plan's words, even if it stops more often: it was priced with the stop,
-        # glide or amber cleared that the car makes once the light shows its timing, not with a stop now
+    if stop_plan[best]:
+        # "prepare to stop" is the plan: said when a stop must begin soon; farther out lift off (its motion until then:
+        # arriving later only helps, the red may end first), or nothing while the car pulls away at a crawl (the light
+        # it is about: the first the car as it goes would not cross on green; a stop only at the next one)
+        i = _binding(usable, obs, params)
         if i == 0 and red and v > 0.0 and nxt.seconds_to_green() - crossing_time_s(nxt.distance_m, v, v, params) < params.short_wait_s:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)  # a stop to wait a moment: none
         if v < params.min_cruise_speed_mps:  # pulling away at a crawl: what is ahead, said

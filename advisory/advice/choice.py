@@ -13,8 +13,11 @@ forecast) and chooses the cheapest in expectation (docs/ADVISOR.md, "Under uncer
   line must begin, rolling on when the green comes, a stop if it does not come first); a red still to come that the
   plan would meet is glided to (from its amber, reaching the line after it, no slower than the slowest advised
   speed), or stopped for when it shows within a comfortable stop, or cleared in its amber when it shows where the car
-  can no longer stop for it. The timings are the predictor's (quantiles of its forecast) and a wider component of
-  the mixture (:func:`advisory.advice.advisor._widened_timings`): the outer timings are not the forecast's extremes.
+  can no longer stop for it. "Prepare to stop" is a plan too: the car stops at the line whatever the light shows,
+  rolling on only where a red on now ends while it brakes. The timings are the predictor's (quantiles of its
+  forecast) and a wider component of the mixture (:func:`advisory.advice.advisor._widened_timings`), each with its
+  probability: the outer timings are not the forecast's extremes, and the wide ones weigh the chance of a change
+  outside the window the light states.
 * **Cost**: paper Eq. 4 (electricity plus battery wear, :mod:`advisory.physics.model`) of that motion, plus a price
   on time (``advisory.physics.params.TIME_VALUE_USD_PER_S``, the lookup tables' own: the one at which cruising
   at the limit is the cheapest steady speed). Priced per step from rate tables made once
@@ -62,7 +65,8 @@ AMBER_MIN_S = 3.0
 MUTCD 4D.26). [s]"""
 
 WAIT_CAP_S = 150.0
-"""A red whose end no timing knows is priced as a wait this long. [s]"""
+"""A red whose end no timing knows is priced as lasting this long from its start (the same instant for every plan: a
+plan that gets there later waits less, not as long). [s]"""
 
 
 @lru_cache(maxsize=16)
@@ -238,12 +242,28 @@ def _met(tc, windows, j, s, n_windows, after_red_s, skip, amber_s):
     return -1, 0.0
 
 
+@njit(cache=True, inline="always")
+def _stop_usd(tb, xb, vb, ub, usd, tc, green_s, d_line, x_end_m, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam):
+    """Cost [$] (time priced at ``lam``) of a stop at a line ``d_line`` ahead and the drive on to ``x_end_m``: braked
+    comfortably from the state (``tb`` [s], ``xb`` [m], ``vb`` [m/s], ``ub`` [$]) where such a stop must begin (none,
+    ``tb`` inf: the car too close for that, as costly as the plan's whole motion ``usd``, stopped at its crossing ``tc``),
+    a wait until ``green_s``, then a launch at ``normal`` to ``v_lim``."""
+    t_stop = tb + vb / comfort if np.isfinite(tb) else tc
+    wait = max(green_s - t_stop, 0.0)
+    launch_s = v_lim / normal
+    rest_m = max(x_end_m - d_line - 0.5 * v_lim * launch_s, 0.0)
+    stop_usd = ub + _at(down, vb) if np.isfinite(tb) else usd
+    return (stop_usd + idle_usd_per_s * wait + _at(up, v_lim) + _at(rates[CRUISE], v_lim) * rest_m / v_lim
+            + lam * (t_stop + wait + launch_s + rest_m / v_lim))  # fmt: skip
+
+
 @njit(cache=True)
 def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s,
-                   cross_s, rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s):  # fmt: skip
+                   cross_s, rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan):  # fmt: skip
     """Expected cost [$] (motion plus ``lam_usd_per_s`` per second to ``x_end_m``), chance of a stop [-], and whether
-    the plan crosses a red of every timing (the hard constraint) of each candidate plan (m,), over the equally likely
-    timings ``windows`` (lines, timings, k, 2: red windows, padded with +inf) of the lines ``d_m`` (lines,), reached at
+    the plan crosses a red of every timing (the hard constraint) of each candidate plan (m,), over the timings
+    ``windows`` (lines, timings, k, 2: red windows, padded with +inf), of probability ``weights`` (timings,: summing to
+    1), of the lines ``d_m`` (lines,), reached at
     ``cross_s`` (m, lines) as the plans go. The amber before a red still to come (``clear_s`` (lines,): how long at
     least, 0 where the light shows none) comes before its window.
 
@@ -260,6 +280,11 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
       car is over the line before the red); shown in between, a stop. A red shows with its amber, ``clear_s`` before
       it.
 
+    A plan flagged in ``stop_plan`` (m,) is "prepare to stop" at the first line it meets a red at: its motion is the
+    plan's (a lift-off: the driver coasts until a comfortable stop must begin), and a red still to come that it meets is
+    stopped for wherever the car can stop for it (no glide to its end); a green on arrival is driven through (the
+    driver's eye at its decision point), a red on now that ends first is rolled through, as for any plan.
+
     A stop (or a roll below ``min_speed_mps``) counts in the chance of a stop. The hard constraint is about the light
     as published now: a plan is through a red when it reaches the line inside a red (or amber) on now in every timing,
     or, where the light shows no amber, inside any red of every timing."""
@@ -268,10 +293,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     p_stop = np.empty(m)
     through = np.zeros(m, dtype=np.bool_)
     up, down = _ramps(rates, comfort, normal)
-    launch_s = v_lim / normal
-    launch_m = 0.5 * v_lim * launch_s
     path = np.empty((4, MAX_KNOTS + 1))
-    cruise_lim = _at(rates[CRUISE], v_lim)
     for c in range(m):
         usd, t_end, n_knots, brake = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort,
                                             firm, normal, path)  # fmt: skip
@@ -296,7 +318,16 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 if kb >= 0:
                     blocked = j
                     break
-            if w < 1.0:
+            if w < 1.0 and stop_plan[c]:
+                # told to stop, the car stops at the line however the light shows (braked from where a comfortable stop
+                # must begin), then pulls away: dear wherever the light is likely green
+                j = max(blocked, 0)
+                total += weights[s] * (1.0 - w) * _stop_usd(brake[j, 0], brake[j, 1], brake[j, 2], brake[j, 3], usd, cross_s[c, j], 0.0, d_m[j], x_end_m,
+                                                            v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam_usd_per_s)  # fmt: skip
+                stops += weights[s] * (1.0 - w)
+                if blocked < 0:
+                    continue
+            elif w < 1.0:
                 # the plan goes through: unless a green comes early, where speeding up from then is cheaper
                 best = plan
                 for j in range(n_lines if blocked < 0 else blocked + 1):
@@ -318,11 +349,13 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                         if ok:
                             g, tg = _go_usd(x, v, reaction_s, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
                             best = min(best, u + g + lam_usd_per_s * b)
-                total += (1.0 - w) * best
+                total += weights[s] * (1.0 - w) * best
                 if blocked < 0:
                     continue
             # the plan meets the red of line ``blocked``: what the car does once the timing shows itself
             a, b = windows[blocked, s, kb, 0], windows[blocked, s, kb, 1]
+            if not np.isfinite(b):
+                b = max(a, 0.0) + WAIT_CAP_S
             tb, xb, vb, ub = brake[blocked, 0], brake[blocked, 1], brake[blocked, 2], brake[blocked, 3]
             d_line = d_m[blocked]
             stopped = True
@@ -336,7 +369,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
             elif a > 0.0 and clear_s[blocked] > 0.0 and cross_s[c, blocked] < a and d_line - x < v * v / (2.0 * AMBER_STOP_MPS2):
                 c_usd = plan  # too close to stop for the amber when it shows: over the line in it, before the red
                 stopped = False
-            elif a > 0.0 and shown < tb:
+            elif a > 0.0 and shown < tb and not stop_plan[c]:
                 # shown before a stop must begin: glide to the line to reach it after the red, no slower than allowed
                 d = d_line - x
                 vg = min(v, d / max(b + after_red_s - shown, 1e-6))
@@ -347,7 +380,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 else:  # a stop at the line: hold the speed to where it must begin, brake, wait, launch
                     hold_m = max(d - v * v / (2.0 * comfort), 0.0)
                     t_stop = shown + hold_m / v + v / comfort
-                    wait = max(min(b, t_stop + WAIT_CAP_S) - t_stop, 0.0)
+                    wait = max(b - t_stop, 0.0)
                     g, tg = _go_usd(d_line, 0.0, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
                     c_usd = u + _at(rates[CRUISE], v) * hold_m / v + _at(down, v) + idle_usd_per_s * wait + g + lam_usd_per_s * (t_stop + wait)
             elif a <= 0.0 and b <= tb:
@@ -365,16 +398,11 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 stopped = vr < min_speed_mps
             else:
                 # a stop at the line (braked from where it must begin; too close for that: as costly as one can be)
-                tc = cross_s[c, blocked]
-                t_stop = tb + vb / comfort if np.isfinite(tb) else tc
-                wait = max(min(b, tc + WAIT_CAP_S) - t_stop, 0.0)
-                rest_m = max(x_end_m - d_line - launch_m, 0.0)
-                stop_usd = ub + _at(down, vb) if np.isfinite(tb) else usd
-                c_usd = (stop_usd + idle_usd_per_s * wait + _at(up, v_lim) + cruise_lim * rest_m / v_lim
-                         + lam_usd_per_s * (t_stop + wait + launch_s + rest_m / v_lim))  # fmt: skip
-            total += w * c_usd
+                c_usd = _stop_usd(tb, xb, vb, ub, usd, cross_s[c, blocked], b, d_line, x_end_m, v_lim, rates, up, down, idle_usd_per_s, comfort, normal,
+                                  lam_usd_per_s)  # fmt: skip
+            total += weights[s] * w * c_usd
             if stopped:
-                stops += w
-        cost[c] = total / n_sc
-        p_stop[c] = stops / n_sc
+                stops += weights[s] * w
+        cost[c] = total
+        p_stop[c] = stops
     return cost, p_stop, through
