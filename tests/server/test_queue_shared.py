@@ -27,20 +27,10 @@ from server.schemas import TripCreate
 from server.spat import SpatHub
 from spat_feed.road.corridors import load_corridor
 from spat_feed.transport.scenarios import make_scenario, spat_message_at
-from tests.procs import RedisServer, redis_server_path
 from tests.server.conftest import service_proc
 
 T0 = 1_714_590_030.0
 """paper_s400 under plan 15_15: light 1 (stop line at 100 m) red from :15 to :45 of the minute, so red for 15 s more."""
-
-
-@pytest.fixture
-def store(tmp_path):
-    if redis_server_path() is None:
-        pytest.skip("redis-server is not installed and scripts/system-deps.sh could not install it (needs root and apt-get)")
-    server = RedisServer(tmp_path).start()
-    yield server
-    server.kill()
 
 
 @pytest.fixture(scope="module")
