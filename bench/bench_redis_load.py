@@ -17,7 +17,11 @@ Beside each service: the CPU (of one core) of the workers, Redis and the load ge
 machine's CPU taken by other jobs, and the 1-minute load average. The machine is shared: compare the services
 within one run, not across runs.
 
-    .venv/bin/python bench/bench_redis_load.py [--low 500] [--high 2000] [--seconds 10] [--workers 2]
+``--queue-aware on`` runs each service with queue-aware advice (``ECO_QUEUE_AWARE=1``: every fix a probe of the
+corridor's traffic; with Redis every worker's probes shared, ``server/queue_store.py``), ``both`` each service with it
+off, then on, in one run.
+
+    .venv/bin/python bench/bench_redis_load.py [--low 500] [--high 2000] [--seconds 10] [--workers 2] [--queue-aware off|on|both]
 """
 
 from __future__ import annotations
@@ -143,6 +147,8 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=2, help="Redis: worker processes")
     ap.add_argument("--only", choices=["memory", "redis"], help="run one service only")
     ap.add_argument("--transport", choices=["http", "ws"], default="http", help="fixes as REST POSTs (default) or on each trip's WebSocket stream, as the app sends them")
+    ap.add_argument("--queue-aware", choices=["off", "on", "both"], help="queue-aware advice (ECO_QUEUE_AWARE) off, on, or each service both ways; "
+                    "default: as the environment says (off)")  # fmt: skip
     args = ap.parse_args()
     if shutil.which("redis-server") is None:
         print("redis-server is not installed: sh scripts/system-deps.sh (as root) installs it")
@@ -154,10 +160,13 @@ def main() -> int:
     with bench_redis() as (folder, redis):
         idle = {"ECO_KEEP_ALIVE_S": "60", "ECO_READ_TIMEOUT_S": "60"}  # the phones beyond --low wait, connected, through two phases
         services = [("in-process store, 1 worker", idle, 1), (f"Redis, {args.workers} workers", {**idle, "ECO_STORE_URL": redis.url}, args.workers)]
+        queue = {None: [None], "off": ["0"], "on": ["1"], "both": ["0", "1"]}[args.queue_aware]
         for name, env, workers in services:
             if args.only and (args.only == "redis") != ("ECO_STORE_URL" in env):
                 continue
-            one_service(name, env, workers, redis, args, folder, positions)
+            for aware in queue:
+                label = name if aware is None else f"{name}, queue-aware advice {'on' if aware == '1' else 'off'}"
+                one_service(label, env if aware is None else {**env, "ECO_QUEUE_AWARE": aware}, workers, redis, args, folder, positions)
     return 0
 
 

@@ -33,12 +33,13 @@ from server.config import Settings
 from server.errors import ApiError
 from server.gps import Fix, RouteMatcher
 from server.queue import QUEUE_MESSAGE, QueueBoard
+from server.queue_store import SharedBoard
 from server.quotas import Creator, address_quota, key_quotas
 from spat_feed.prediction.observe import observation
 from server.ratelimit import TokenBucket
 from server.schemas import MS_TIMESTAMP_MIN, TripCreate
 from server.spat import ScenarioSpat, SharedSpat, SpatHub, TripSpat
-from server.store import Limits, make_store, retry_after  # noqa: F401  (retry_after: re-exported)
+from server.store import Limits, RedisTrips, make_store, retry_after  # noqa: F401  (retry_after: re-exported)
 from server.trips import Trip
 from spat_feed.transport.simulator import shared_scenario
 
@@ -85,8 +86,12 @@ class Engine:
         self.trips = make_store(settings, self.limits, self.trip_from_meta, self._release, clock)
         self._params = {units: replace(self.params, units=ADVISOR_UNITS[units]) for units in ADVISOR_UNITS}
         self._approach: dict[str, float] = {}  # corridor -> how far before its entry a fix is on the route
-        self.queue = QueueBoard(arrivals_vph=settings.queue_arrivals_vph, connected_share=settings.queue_connected_share) if settings.queue_aware else None
-        """Queue-aware advice (server.queue): every trip's fix a probe of its corridor's traffic; None: off."""
+        self.queue: QueueBoard | None = None
+        """Queue-aware advice (server.queue): every trip's fix a probe of its corridor's traffic, on every worker with
+        the Redis store (its ``shared`` board synced by the app, server.queue_store); None: off."""
+        if settings.queue_aware:
+            shared = SharedBoard(self.trips.redis, settings.store_prefix, corridors, settings.queue_sync_s, clock) if isinstance(self.trips, RedisTrips) else None
+            self.queue = QueueBoard(arrivals_vph=settings.queue_arrivals_vph, connected_share=settings.queue_connected_share, shared=shared)
         self.on_advice: Callable[[Trip, Advice, str, float], None] | None = None  # metrics hooks
         self.on_ignored_fix: Callable[[str], None] | None = None
 
@@ -180,6 +185,8 @@ class Engine:
         samples = await self.trips.samples(trip)
         trip = await self.trips.remove(trip.id)
         await trip.spat.close()
+        if self.queue is not None:
+            self.queue.forget(trip.corridor.name, trip.id)
         return trip, samples
 
     async def apply_fix(self, trip_id: str, token: str | None, parse: Callable[[], Fix]) -> dict:

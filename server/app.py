@@ -149,12 +149,15 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         await hub.start()
         sweeper = asyncio.create_task(_expire_idle(engine, metrics, min(60.0, settings.trip_idle_ttl_s / 2)))
         lag_probe = asyncio.create_task(shedder.watch())
+        tasks = [sweeper, lag_probe]
+        if engine.queue is not None and engine.queue.shared is not None:  # every worker's probes (server.queue_store)
+            tasks.append(asyncio.create_task(engine.queue.shared.run()))
         gc.freeze()  # start-up objects (tables, corridors, numba) to the permanent generation: collections stop rescanning them
         log.info("advisory service ready in %.1f s: %d corridors, tables for %s, speech %s", time.perf_counter() - t0, len(corridors_), sorted(tables), speech.reason)
         try:
             yield
         finally:
-            for task in (sweeper, lag_probe):
+            for task in tasks:
                 task.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await task
@@ -168,7 +171,8 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
     app.state.settings = settings
     speech = Speech(settings.speech, settings.audio_cache_size)
     app.state.speech = speech
-    metrics = Metrics(lambda: len(app.state.engine.trips) if hasattr(app.state, "engine") else 0, lambda: app.state.engine.spat if hasattr(app.state, "engine") else None)
+    metrics = Metrics(lambda: len(app.state.engine.trips) if hasattr(app.state, "engine") else 0, lambda: app.state.engine.spat if hasattr(app.state, "engine") else None,
+                      lambda: app.state.engine.queue if hasattr(app.state, "engine") else None)  # fmt: skip
     app.state.metrics = metrics
     app.state.streams = StreamCounts()
     # Routes are tried in order, a regex and some bookkeeping each, so the per-second ones (fixes, stream)

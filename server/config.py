@@ -61,6 +61,8 @@ class Settings(BaseSettings):
     queue_aware: bool = Field(default=False, description="aim advice at the moment the queue ahead has cleared (every trip's fix a probe of its corridor); a car standing in a queue is told to follow the car in front")
     queue_arrivals_vph: float | None = Field(default=None, ge=0, description="flow arriving at each light, per lane (detector counts), to count the cars that are not connected; None: connected cars alone [veh/h]")
     queue_connected_share: float = Field(default=1.0, ge=0, le=1, description="share of the arriving cars that are connected (with queue_arrivals_vph)")
+    queue_sync_s: float = Field(default=0.25, gt=0, le=1.0, description="with the Redis store: each worker publishes its trips' probes and loads every other "
+                                "worker's this often, in the background (server.queue_store) [s]")
 
     # lookup tables (advisory.advice.tables), built or loaded at start-up
     tables: bool = Field(default=True, description="build/load the DP lookup tables at start-up")

@@ -58,8 +58,29 @@ class SpatCollector:
         yield from (age, fresh, offset, messages, rejected, connected, reconnects)
 
 
+class QueueBoardCollector:
+    """The queue board's storage (server.queue_store), read at each scrape: ``ecodrive_queue_board_shared`` (1 while every
+    worker's probes are shared through Redis, 0 while this worker counts its own trips only) and
+    ``ecodrive_queue_board_sync_failures_total``. Nothing when queue-aware advice is off or the store is in process."""
+
+    def __init__(self, board: Callable[[], object | None]) -> None:
+        self.board = board
+
+    def collect(self):
+        board = self.board()
+        shared = getattr(board, "shared", None)
+        if shared is None:
+            return
+        up = GaugeMetricFamily("ecodrive_queue_board_shared", "1 while the queue board holds every worker's probes (Redis), 0: this worker's trips only")
+        up.add_metric([], 1.0 if shared.down is None else 0.0)
+        failures = CounterMetricFamily("ecodrive_queue_board_sync_failures", "the queue board's calls to Redis that failed")
+        failures.add_metric([], shared.failures)
+        yield from (up, failures)
+
+
 class Metrics:
-    def __init__(self, open_trips: Callable[[], int], spat_hub: Callable[[], object | None] | None = None) -> None:
+    def __init__(self, open_trips: Callable[[], int], spat_hub: Callable[[], object | None] | None = None,
+                 queue_board: Callable[[], object | None] | None = None) -> None:  # fmt: skip
         r = self.registry = CollectorRegistry(auto_describe=True)
         self._children: dict[tuple, object] = {}
         self.requests = Counter("ecodrive_http_requests", "HTTP requests by route and status", ["method", "route", "status"], registry=r)
@@ -75,6 +96,8 @@ class Metrics:
         self.trips_open.set_function(open_trips)
         if spat_hub is not None:
             r.register(SpatCollector(spat_hub))
+        if queue_board is not None:
+            r.register(QueueBoardCollector(queue_board))
         ProcessCollector(registry=r)  # process_resident_memory_bytes, process_open_fds, process_max_fds, CPU seconds (Linux /proc)
 
     def observe_advice(self, trip, advice, outcome: str, seconds: float) -> None:

@@ -10,14 +10,20 @@ Follow the car in front." (reason ``queue``); the advisor then plans afresh.
 
 On when ``ECO_QUEUE_AWARE=1``; ``ECO_QUEUE_ARRIVALS_VPH`` (the flow arriving at each light per lane, e.g. from
 detector counts) and ``ECO_QUEUE_CONNECTED_SHARE`` (the share of those cars that are connected) let it count the cars
-that are not connected (docs/TRAFFIC.md). With several workers each sees its own trips only (a shared board in the
-trip store is not built).
+that are not connected (docs/TRAFFIC.md).
+
+Where the probes and red starts are kept (``shared``): in this worker with the in-process store (one process: it
+sees every trip); with the Redis store (several workers, ``ECO_STORE_URL``) in :class:`server.queue_store.SharedBoard`
+tables, which every worker publishes its changes to and loads the others' from in the background every
+``ECO_QUEUE_SYNC_S``, so that a fix on one worker counts the cars that the others serve (no Redis call on a fix's path;
+Redis unreachable: this worker's own probes, said in ``/health`` and ``/metrics``).
 """
 
 from __future__ import annotations
 
 from advisory.advice.advisor import Advice, AdvisorParams, Observation
 from advisory.advice.queue import Probe, QueueModel, apply, drive_normally, estimate, gives_up_green
+from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
 """A trip's position older than this is no longer a probe. [s]"""
@@ -27,12 +33,15 @@ QUEUE_MESSAGE = "Queue ahead. Follow the car in front."
 class QueueBoard:
     """Probes per corridor and red starts per intersection (see the module docstring)."""
 
-    def __init__(self, model: QueueModel | None = None, arrivals_vph: float | None = None, connected_share: float = 1.0) -> None:
+    def __init__(self, model: QueueModel | None = None, arrivals_vph: float | None = None, connected_share: float = 1.0,
+                 shared: SharedBoard | None = None) -> None:  # fmt: skip
         self.model = model or QueueModel()
         self.arrivals_vps = None if arrivals_vph is None else arrivals_vph / 3600.0
         self.connected_share = connected_share
-        self._cars: dict[str, dict[str, tuple[float, float, float]]] = {}
-        self._red_since: dict[int, float] = {}
+        self.shared = shared
+        """Every worker's probes and red starts (the Redis store), or None: this worker's dicts."""
+        self._cars: dict[str, dict[str, tuple[float, float, float]]] = shared.cars if shared is not None else {}
+        self._red_since: dict[int, float] = shared.red_since if shared is not None else {}
         self._queued: dict[str, int] = {}  # trip -> the light whose queue it stands in
         self.held = 0  # fixes answered "follow the car in front"
 
@@ -80,3 +89,13 @@ class QueueBoard:
     def fresh(last_reason: str | None) -> bool:
         """The advisor plans afresh (no memory of a plan) on the first fix after the car was told to follow."""
         return last_reason == "queue"
+
+    def forget(self, corridor: str, trip_id: str) -> None:
+        """The trip has ended: it is no probe any more (on every worker, with the shared board)."""
+        self._cars.get(corridor, {}).pop(trip_id, None)
+        self._queued.pop(trip_id, None)
+
+    def state(self) -> str:
+        """Where the probes come from (``/health``): ``local`` (this process, which serves every trip), ``shared``
+        (every worker's, through Redis) or ``own_trips_only`` (Redis unreachable: this worker's)."""
+        return "local" if self.shared is None else self.shared.state()

@@ -259,10 +259,14 @@ class SpatHealthOut(_Out):
 
 
 class HealthOut(_Out):
-    status: Literal["ok", "degraded"] = Field(description="degraded: a SPaT source is down or an intersection's SPaT is not fresh (the service still answers)")
+    status: Literal["ok", "degraded"] = Field(description="degraded: a SPaT source is down, an intersection's SPaT is not fresh, or the queue board counts "
+                                                      "this worker's trips only (queue_board; the service still answers)")
     now_unix_s: float
     trips: int
     spat: str = Field(description="where the SPaT comes from, in words (spat_health has the details)")
     spat_health: SpatHealthOut
     tables: list[str]
     speech: bool
+    queue_board: Literal["local", "shared", "own_trips_only"] | None = Field(
+        default=None, description="queue-aware advice's probes (ECO_QUEUE_AWARE; None: off): local (one process, every trip), shared (every worker's, "
+                                  "through Redis), own_trips_only (Redis unreachable for the board: this worker's trips only)")  # fmt: skip

@@ -32,6 +32,8 @@ the trip's last request (up to ``touch_every_s`` later: the idle clock is reset 
   trip takes the place of the newest (``server.quotas``); members of expired trips are dropped by ``sweep``;
 * ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets;
 * ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`server.streams.RedisStreams`, leases).
+* ``eco:q:p:<corridor>`` and ``eco:q:red``: the queue board's probes and red starts, with queue-aware advice
+  (:class:`server.queue_store.SharedBoard`, over this store's connection).
 
 Each call is one round trip (a Lua script, atomic in Redis; a fix's write is 3 commands in it) over the worker's
 one pipelined connection (:class:`server.redispipe.RedisPipe`: the calls of one event-loop turn in one write). A worker keeps the trips it served in a small

@@ -17,14 +17,16 @@ router = APIRouter(tags=["service"])
 async def health(engine: EngineDep, settings: SettingsDep, speech: SpeechDep) -> HealthOut:
     """The service is up and its tables are loaded; each SPaT source's state and each intersection's freshness."""
     spat = engine.spat.health()
+    board = engine.queue.state() if engine.queue is not None else None
     return HealthOut(
-        status=spat["status"],
+        status="degraded" if board == "own_trips_only" else spat["status"],
         now_unix_s=time.time(),
         trips=await engine.trips.count(),
         spat=spat["source"],
         spat_health=SpatHealthOut.model_validate({k: v for k, v in spat.items() if k != "status"}),
         tables=sorted(engine.tables),
         speech=speech.available,
+        queue_board=board,
     )
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from spat_feed.road.corridors import load_corridor
 
-from tests.procs import REPO, Proc, free_port  # noqa: F401  (re-exported for the test modules)
+from tests.procs import REPO, Proc, RedisServer, free_port, redis_server_path  # noqa: F401  (re-exported for the test modules)
 
 
 SERVICE_ENV = {
@@ -38,6 +38,16 @@ def service(tmp_path_factory) -> Iterator[Proc]:
                         ECO_TABLES_DIR=str(tmp_path_factory.mktemp("tables"))).start()  # fmt: skip
     yield proc
     proc.kill()
+
+
+@pytest.fixture
+def store(tmp_path) -> Iterator[RedisServer]:
+    """A ``redis-server`` of this test's own on loopback (skipped where it cannot be installed), killed at the end."""
+    if redis_server_path() is None:
+        pytest.skip("redis-server is not installed and scripts/system-deps.sh could not install it (needs root and apt-get)")
+    server = RedisServer(tmp_path).start()
+    yield server
+    server.kill()
 
 
 @pytest.fixture(scope="session")

@@ -13,16 +13,6 @@ import pytest
 from redis.exceptions import ConnectionError, ResponseError, TimeoutError
 
 from server.redispipe import RedisPipe, Script
-from tests.procs import RedisServer, redis_server_path
-
-
-@pytest.fixture
-def store(tmp_path):
-    if redis_server_path() is None:
-        pytest.skip("redis-server is not installed and scripts/system-deps.sh could not install it (needs root and apt-get)")
-    server = RedisServer(tmp_path).start()
-    yield server
-    server.kill()
 
 
 def test_concurrent_calls_share_one_connection_and_get_their_own_replies(store):
