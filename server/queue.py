@@ -55,7 +55,7 @@ class QueueBoard:
         else:
             self._red_since.pop(nxt.intersection_id, None)
             since = None
-        probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s > here]
+        probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s != here]  # ahead, and behind (followers)
         est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, None if since is None else t_unix_s - since)
         if est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
             self._queued[trip_id] = nxt.intersection_id  # it follows the car in front until over that light's line
@@ -68,11 +68,10 @@ class QueueBoard:
                                light_id=nxt.intersection_id)  # fmt: skip
         return apply(obs, est), None
 
-    @staticmethod
-    def check(obs: Observation, advice: Advice, params: AdvisorParams) -> Advice:
-        """The advisor's advice, or "drive normally" where it gives up a green that a normal drive makes
-        (:func:`advisory.advice.queue.gives_up_green`)."""
-        if gives_up_green(obs, advice, params):
+    def check(self, obs: Observation, advice: Advice, params: AdvisorParams) -> Advice:
+        """The advisor's advice, or "drive normally" where it gives up green time that a normal drive uses, priced with
+        the followers it holds up (:func:`advisory.advice.queue.gives_up_green`)."""
+        if gives_up_green(obs, advice, params, model=self.model):
             return drive_normally(advice, params.units)
         return advice
 
