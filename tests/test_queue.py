@@ -264,3 +264,19 @@ def test_the_choice_prices_the_followers_time():
     assert alone.reason == "green_wave" and alone.target_speed_mps < v - 1.0
     assert followed.target_speed_mps is None or followed.target_speed_mps > alone.target_speed_mps
     assert time_price(Observation(v, v, followers=20.0)) == 21.0
+
+
+def test_a_car_already_slowed_for_a_red_further_on_is_not_sent_back_up():
+    """Coasting at 13 m/s on a plan for the second light's green (red at a normal arrival there, 21.5 s), over the
+    first line 2.3 s after a normal drive would be: with five cars expected behind, 5 x 2.3 s would be given up, but the
+    car has slowed already: sent back up to the limit it would meet that red (or a queue's tail) faster, and the
+    followers' time is lost already. The same plan still to be begun at the limit, 200 m from a first light green for
+    12 s more, gives way (over that line 3 s late, the first follower pushed past its green)."""
+    params = AdvisorParams()
+    plan = Advice("coast", "green_wave", 12.96)
+    slowed = (LightView(1, 100.0, red_windows_s=((9.0, 39.0),)), LightView(2, 500.0, red_windows_s=((10.0, 40.0),)))
+    assert crossing_time_s(100.0, 13.0, 12.96, params, "brake_coast") - normal_drive_s(100.0, 13.0, 24.6, 2.0) > 2.0
+    assert not gives_up_green(Observation(13.0, 24.6, slowed, followers=5.0), plan, params)
+    ahead = (LightView(1, 200.0, red_windows_s=((12.0, 42.0),)), LightView(2, 600.0, red_windows_s=((15.0, 45.0),)))
+    assert gives_up_green(Observation(24.6, 24.6, ahead, followers=5.0), plan, params)
+    assert not gives_up_green(Observation(24.6, 24.6, ahead), plan, params)  # alone: the red further on takes it back

@@ -27,6 +27,12 @@ follows the car in front, and the advice resumes, planned afresh, once it is fre
 traffic ahead allows; and a plan made in a queue is a crawl: every faster speed reaches the line before the queue has
 gone, and the advisor keeps a plan that still works, to the green after next).
 
+The cars behind count too (issue 28, item 2: the traffic behind is not to be slowed): :func:`followers` expects the
+cars a slower plan holds up (the connected ones behind it, the others from the flow), the advisor prices time ``1 +
+followers`` times (:func:`advisory.advice.advisor.time_price`), and :func:`gives_up_green` weighs the green a plan gives
+up at each light a normal drive makes by the cars that lose it, and the red each follower it pushes past the end of that
+green waits out (:func:`cut_off`).
+
 Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 """
 
@@ -250,7 +256,10 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
     * ``late`` for the car itself, at the last light ahead where the normal drive makes every light (before that, a red
       further on takes the time back: the car waits there either way);
     * ``late`` for each follower it holds up (``Observation.followers``), at every such light, and the red each one
-      pushed past the end of that light's green waits out (:func:`cut_off`).
+      pushed past the end of that light's green waits out (:func:`cut_off`); where a red further on stops the normal
+      drive, only while the plan has still to slow the car (its target below the car's speed): a car already slowed
+      is not sent back up to the limit towards that red (traced in SUMO: such cars met it or a queue's tail braking
+      harder than 3.5 m/s², or entered it), and the followers' time is already lost.
 
     The plan is not credited with a stop it avoids at a red further on: a car that drives normally through this light
     is advised again after it, with the distance to the next one to slow down in. Traced in SUMO (docs/TRAFFIC.md): a car
@@ -268,7 +277,8 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
         if late <= 0.0:
             continue
         own = 1.0 if made == len(obs.lights) and j == made - 1 else 0.0
-        if (own + max(obs.followers, 0.0)) * late + cut_off(obs.lights[j], normal[j], normal[j] + late, obs.followers, model.headway_s) > slack_s:
+        behind = max(obs.followers, 0.0) if made == len(obs.lights) or advice.target_speed_mps < obs.speed_mps - params.hysteresis_mps else 0.0
+        if (own + behind) * late + cut_off(obs.lights[j], normal[j], normal[j] + late, behind, model.headway_s) > slack_s:
             return True
     return False
 
