@@ -6,7 +6,9 @@ light's current red was first seen on. For a fix on the route it hands the advis
 the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~advisory.advice.queue.apply`: each red the car
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.
-Follow the car in front." (reason ``queue``); the advisor then plans afresh.
+Follow the car in front." (reason ``queue``); the advisor then plans afresh. The trips behind a car are probes too:
+with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
+:meth:`QueueBoard.check` price (docs/TRAFFIC.md, "Queue-aware advice", item 4).
 
 On when ``ECO_QUEUE_AWARE=1``; ``ECO_QUEUE_ARRIVALS_VPH`` (the flow arriving at each light per lane, e.g. from
 detector counts) and ``ECO_QUEUE_CONNECTED_SHARE`` (the share of those cars that are connected) let it count the cars
