@@ -6,7 +6,9 @@ light's current red was first seen on. For a fix on the route it hands the advis
 the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~advisory.advice.queue.apply`: each red the car
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.
-Follow the car in front." (reason ``queue``); the advisor then plans afresh.
+Follow the car in front." (reason ``queue``); the advisor then plans afresh. The trips behind a car are probes too:
+with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
+:meth:`QueueBoard.check` price (docs/TRAFFIC.md, "Queue-aware advice", item 4).
 
 On when ``ECO_QUEUE_AWARE=1``; ``ECO_QUEUE_ARRIVALS_VPH`` (the flow arriving at each light per lane, e.g. from
 detector counts) and ``ECO_QUEUE_CONNECTED_SHARE`` (the share of those cars that are connected) let it count the cars
@@ -64,7 +66,7 @@ class QueueBoard:
         else:
             self._red_since.pop(nxt.intersection_id, None)
             since = None
-        probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s > here]
+        probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s != here]  # ahead, and behind (followers)
         est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, None if since is None else t_unix_s - since)
         if est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
             self._queued[trip_id] = nxt.intersection_id  # it follows the car in front until over that light's line
@@ -77,11 +79,10 @@ class QueueBoard:
                                light_id=nxt.intersection_id)  # fmt: skip
         return apply(obs, est), None
 
-    @staticmethod
-    def check(obs: Observation, advice: Advice, params: AdvisorParams) -> Advice:
-        """The advisor's advice, or "drive normally" where it gives up a green that a normal drive makes
-        (:func:`advisory.advice.queue.gives_up_green`)."""
-        if gives_up_green(obs, advice, params):
+    def check(self, obs: Observation, advice: Advice, params: AdvisorParams) -> Advice:
+        """The advisor's advice, or "drive normally" where it gives up green time that a normal drive uses, priced with
+        the followers it holds up (:func:`advisory.advice.queue.gives_up_green`)."""
+        if gives_up_green(obs, advice, params, model=self.model):
             return drive_normally(advice, params.units)
         return advice
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from advisory.advice.advisor import Advice, AdvisorParams, LightView, Observation, advise
-from advisory.advice.queue import Probe, QueueModel, apply, estimate, gives_up_green, normal_drive_s
+from advisory.advice.advisor import Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, time_price
+from advisory.advice.queue import Probe, QueueModel, apply, cut_off, estimate, followers, gives_up_green, normal_drive_s
 from server.queue import QueueBoard
 
 M = QueueModel()
@@ -205,3 +205,78 @@ def test_in_sumo_a_queue_published_in_the_spat_makes_the_unconnected_queue_known
         out[spat_queue] = (count_stops(v), float(v[(x > 0.0) & (x < line)].min()), car.crossings[0])
     assert out[False][0] == 1 and out[False][1] < 0.5
     assert out[True][0] == 0 and out[True][1] > 3.0 and out[True][2][2] == "green"
+
+
+def test_followers_known_behind_and_expected_from_the_flow():
+    """The cars a slower plan holds up (issue 28, the traffic behind): 300 m from the line at 13 m/s (limit 13.4), this
+    car is there unimpeded in 0.2 + (300 - 2.64) / 13.4 = 22.39 s; the queue in front holds the line until 30 s, so
+    every car reaching the line within 30 - 22.39 + 3 (the follow gap) = 10.61 s after it is held up: half of 720 veh/h
+    not connected, 0.1 x 10.61 = 1.06 cars, plus a connected car 50 m behind (there 3.7 s after it), not one 200 m
+    behind (14.9 s after). On a green with no queue, the window is the follow gap alone."""
+    obs = _obs(reds=((0.0, 20.0),))
+    behind = [Probe(-50.0, 13.0), Probe(-200.0, 13.0)]
+    window = 30.0 - (0.2 + (300.0 - (13.4**2 - 13.0**2) / 4.0) / 13.4) + M.follow_gap_s
+    assert followers(obs, [], 30.0, M, 0.2, 0.5) == pytest.approx(0.1 * window)
+    assert followers(obs, behind, 30.0, M, 0.2, 0.5) == pytest.approx(1.0 + 0.1 * window)
+    assert followers(obs, behind, 0.0, M, 0.2, 1.0) == 0.0  # 3.7 s behind: more than the follow gap on a free line
+    # the estimate carries it, and the advisor's view of the lights gets it
+    standing = [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(4)]
+    est = estimate(obs, standing + behind, M)
+    assert est.free_at_s[0] == pytest.approx(30.0) and est.followers == 1.0
+    assert apply(obs, est).followers == 1.0
+
+
+def test_a_plan_that_pushes_followers_past_the_end_of_a_green_gives_way():
+    """At the limit (24.6 m/s), 150 m from a light green for 9 s more (then red for 30 s), the next light red at a
+    normal arrival: the advisor slows the car for the second light's green, over the first line 1.2 s later than a
+    normal drive (7.3 s against 6.1 s). Alone, that costs nothing (the car waits at the second light either way). With
+    half a car expected behind, 2 s back: it crosses at 8.1 s behind a normal drive, at 9.3 s behind this plan, past
+    the red: there with probability 1 - exp(-0.5) = 0.39, it waits 30 s: 11.8 s lost for 5 s allowed: "drive normally"
+    (the car is advised again past the first light, with 400 m to slow down in)."""
+    params = AdvisorParams()
+    lights = (LightView(1, 150.0, red_windows_s=((9.0, 39.0), (69.0, 99.0))), LightView(2, 550.0, red_windows_s=((10.0, 40.0), (70.0, 100.0))))
+    alone = Observation(24.6, 24.6, lights)
+    plan, _ = advise(alone, None, params)
+    assert plan.action == "coast" and plan.target_speed_mps < 24.6 - 5.0
+    late = crossing_time_s(150.0, 24.6, plan.target_speed_mps, params, "brake_coast") - 150.0 / 24.6
+    assert 1.0 < late < 1.5
+    assert cut_off(lights[0], 150.0 / 24.6, 150.0 / 24.6 + late, 0.5, M.headway_s) == pytest.approx((1.0 - np.exp(-0.5)) * 30.0)
+    assert not gives_up_green(alone, plan, params)
+    followed = Observation(24.6, 24.6, lights, followers=0.5)
+    assert gives_up_green(followed, plan, params)
+    board = QueueBoard()
+    told = board.check(followed, plan, params)
+    assert (told.action, told.reason, told.target_speed_mps) == ("none", "tight_green", None)
+    assert board.check(alone, plan, params) is plan
+
+
+def test_the_choice_prices_the_followers_time():
+    """Under uncertain timing (the choice of least expected cost), a red on now that ends 19-31 s from now, 350 m
+    ahead at 50 km/h: alone, the car is slowed to reach the line after it; with twenty cars behind that lose what it
+    loses, time is priced 21 times over and the plan reaches the line no later (a faster target, or no speed advice:
+    drive on and stop if the red is still on)."""
+    params = AdvisorParams(uncertain_choice="expected_cost")
+    v = 50 / 3.6
+    light = LightView(1, 350.0, red_windows_s=((0.0, 31.0),), likely_red_windows_s=((0.0, 25.0),), late_red_windows_s=((0.0, 31.0),),
+                      scenario_red_windows_s=tuple(((0.0, 19.0 + k),) for k in range(13)))  # fmt: skip
+    alone, _ = advise(Observation(v, v, (light,)), None, params)
+    followed, _ = advise(Observation(v, v, (light,), followers=20.0), None, params)
+    assert alone.reason == "green_wave" and alone.target_speed_mps < v - 1.0
+    assert followed.target_speed_mps is None or followed.target_speed_mps > alone.target_speed_mps
+    assert time_price(Observation(v, v, followers=20.0)) == 21.0
+
+
+def test_a_car_already_slowed_for_a_red_further_on_is_not_sent_back_up():
+    """Coasting at 13 m/s on a plan for the second light's green (red at a normal arrival there, 21.5 s), over the
+    first line 2.3 s after a normal drive would be: with five cars expected behind, 5 x 2.3 s would be given up, but the
+    car has slowed already: sent back up to the limit it would meet that red (or a queue's tail) faster, and the
+    followers' time is lost already. The same plan still to be begun at the limit, 200 m from a first light green for
+    12 s more, gives way (over that line 3 s late, the first follower pushed past its green)."""
+    params = AdvisorParams()
+    plan = Advice("coast", "green_wave", 12.96)
+    slowed = (LightView(1, 100.0, red_windows_s=((9.0, 39.0),)), LightView(2, 500.0, red_windows_s=((10.0, 40.0),)))
+    assert crossing_time_s(100.0, 13.0, 12.96, params, "brake_coast") - normal_drive_s(100.0, 13.0, 24.6, 2.0) > 2.0
+    assert not gives_up_green(Observation(13.0, 24.6, slowed, followers=5.0), plan, params)
+    ahead = (LightView(1, 200.0, red_windows_s=((12.0, 42.0),)), LightView(2, 600.0, red_windows_s=((15.0, 45.0),)))
+    assert gives_up_green(Observation(24.6, 24.6, ahead, followers=5.0), plan, params)
+    assert not gives_up_green(Observation(24.6, 24.6, ahead), plan, params)  # alone: the red further on takes it back

@@ -137,6 +137,10 @@ class Observation:
     position_m: float | None = None  # along the corridor, for the DP tables
     on_route: bool = True
     zone_exit: bool = False  # left the route past its last light: the advice ends, nothing is wrong
+    followers: float = 0.0
+    """Cars expected behind this one that a slower plan holds up (the service's estimate in traffic:
+    :func:`advisory.advice.queue.estimate`; 0 on an empty road). Each loses what the car loses, so every price the
+    advisor puts on time lost is ``1 + followers`` times its own (:func:`time_price`). [-]"""
 
 
 ACTIONS = ("cruise", "ease_off", "coast", "slow_down", "brake_to", "accelerate", "stop", "resume", "none")
@@ -175,6 +179,20 @@ class Advice:
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__slots__}
+
+
+def time_price(obs: Observation) -> float:
+    """How many cars lose the time a plan gives up: this one and the followers it holds up (``1 + obs.followers``).
+    The price on time (``time_value_usd_per_s``, the choice under uncertainty) is multiplied by it, and the time a plan
+    may give up for its energy (``table_slack_s``, the tables' target) divided by it (issue 28: the traffic behind; the
+    service's own check counts it alike, :func:`advisory.advice.queue.gives_up_green`). [-]
+
+    Examples
+    --------
+    >>> time_price(Observation(10.0, 20.0)), time_price(Observation(10.0, 20.0, followers=1.5))
+    (1.0, 2.5)
+    """
+    return 1.0 + max(obs.followers, 0.0)
 
 
 UNCERTAIN_CHOICES = ("rules", "expected_cost")
@@ -913,9 +931,10 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     rates, coast, idle = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
     x_end = float(d_m[-1]) + v_lim * v_lim / (2.0 * params.normal_accel_mps2)
     windows, weights = _timings(usable)
+    lam = params.time_value_usd_per_s * time_price(obs)  # the car's time and its followers' (Observation.followers)
     clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
     cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,
-                                                  params.green_margin_s, params.time_value_usd_per_s, cross, rates, coast, idle, brake, firm,
+                                                  params.green_margin_s, lam, cross, rates, coast, idle, brake, firm,
                                                   params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan)  # fmt: skip
     slowing = (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9)
     for j, light in enumerate(usable):
@@ -927,7 +946,7 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     if not keep:
         allowed[-1] = False
     best = int(np.argmin(np.where(allowed, cost, np.inf))) if allowed.any() else stop  # none: a stop comes whatever the plan
-    reaction_usd = params.time_value_usd_per_s * params.reaction_s
+    reaction_usd = lam * params.reaction_s
     if keep and allowed[-1] and cost[-1] <= cost[best] + reaction_usd:
         best = vts.size - 1  # the plan followed now, unless another is better by more than a new reaction costs
     elif allowed[stop] and cost[stop] <= cost[best] + reaction_usd:
@@ -1086,7 +1105,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             # no lingering: at most ``table_slack_s`` later over the lines planned for than the fastest feasible speed
             last_m = float(both.distances_m[n_lines - 1])
             arrive = _crossing_times_s(last_m, v0, feasible, MODE_CODES[mode], reaction, *rest)
-            feasible = feasible[arrive <= arrive[-1] + params.table_slack_s]
+            feasible = feasible[arrive <= arrive[-1] + params.table_slack_s / time_price(obs)]  # followers: less time given up
             miss = np.abs(_line_speeds_mps(float(nxt.distance_m), v0, feasible, MODE_CODES[mode], reaction, *rest) - wanted)
             # targets still being braked to at the line reach it alike: of those, the one nearest the wanted speed
             close = feasible[miss <= miss.min() + LINE_SPEED_TIE_MPS]

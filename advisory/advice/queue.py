@@ -27,6 +27,12 @@ follows the car in front, and the advice resumes, planned afresh, once it is fre
 traffic ahead allows; and a plan made in a queue is a crawl: every faster speed reaches the line before the queue has
 gone, and the advisor keeps a plan that still works, to the green after next).
 
+The cars behind count too (issue 28, item 2: the traffic behind is not to be slowed): :func:`followers` expects the
+cars a slower plan holds up (the connected ones behind it, the others from the flow), the advisor prices time ``1 +
+followers`` times (:func:`advisory.advice.advisor.time_price`), and :func:`gives_up_green` weighs the green a plan gives
+up at each light a normal drive makes by the cars that lose it, and the red each follower it pushes past the end of that
+green waits out (:func:`cut_off`).
+
 Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 """
 
@@ -37,6 +43,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, crossing_time_s, phrase
+from advisory.advice.choice import WAIT_CAP_S
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,7 +67,7 @@ class QueueModel:
 
 @dataclass(frozen=True, slots=True)
 class Probe:
-    """Another connected car on the route ahead of the one asking: how far ahead [m] and its speed [m/s]."""
+    """Another connected car on the route: how far ahead of the one asking (negative: behind) [m] and its speed [m/s]."""
 
     ahead_m: float
     speed_mps: float
@@ -77,6 +84,8 @@ class QueueEstimate:
     free_at_s: tuple[float, ...]
     in_queue: bool = False
     follow_mps: float | None = None
+    followers: float = 0.0
+    """Cars expected behind this one that a slower plan holds up (:func:`followers`). [-]"""
 
 
 def _first_red(light: LightView) -> tuple[float, float] | None:
@@ -147,7 +156,43 @@ def estimate(
         close = nearest.ahead_m <= obs.speed_mps * model.follow_gap_s + model.jam_spacing_m
         if close and nearest.speed_mps < min(obs.speed_mps, obs.speed_limit_mps) - 1.0:  # closing in on a slower car
             follow = nearest.speed_mps
-    return QueueEstimate(tuple(cars), tuple(known), tuple(free_at), in_queue, follow)
+    n_behind = followers(obs, probes, free_at[0] if free_at else 0.0, model, arrivals_vps, connected_share)
+    return QueueEstimate(tuple(cars), tuple(known), tuple(free_at), in_queue, follow, n_behind)
+
+
+def followers(
+    obs: Observation, probes: Sequence[Probe], free_at_s: float = 0.0, model: QueueModel | None = None, arrivals_vps: float | None = None,
+    connected_share: float = 1.0,
+) -> float:
+    """The cars expected behind the car of ``obs`` that a slower plan holds up: the ones that reach the next light's
+    line behind it before it can cross there (``free_at_s`` from now, where the queue in front holds it) plus
+    ``follow_gap_s`` (a car closer than that behind a slower one is slowed with it; one lane, no overtaking).
+
+    The connected cars are known (``probes`` behind it: ``ahead_m < 0``): each counts whose unimpeded arrival at the
+    line (speeding up to the limit at 2 m/s² from its speed now, as the regular driver) falls within that window after
+    this car's own. The others are expected from the flow: ``(1 - connected_share) x arrivals_vps x`` the window
+    (Poisson arrivals; at 600 veh/h and half of them connected, 0.25 cars within 3 s: one or more with probability
+    1 - exp(-0.25) = 22 %). The advisor prices the time a plan gives up ``1 + followers`` times
+    (:func:`advisory.advice.advisor.time_price`). [-]
+
+    Examples
+    --------
+    >>> from advisory.advice.advisor import LightView
+    >>> obs = Observation(20.0, 20.0, (LightView(1, 200.0),))
+    >>> round(followers(obs, [], arrivals_vps=600 / 3600, connected_share=0.5), 2)
+    0.25
+    >>> followers(obs, [Probe(-30.0, 20.0), Probe(-100.0, 20.0)])  # 1.5 s and 5 s behind
+    1.0
+    """
+    model = model or QueueModel()
+    if not obs.lights:
+        return 0.0
+    d, lim = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
+    mine = normal_drive_s(d, obs.speed_mps, lim, 2.0)
+    window = max(free_at_s - mine, 0.0) + model.follow_gap_s
+    known = sum(1 for p in probes if p.ahead_m < 0.0 and normal_drive_s(d - p.ahead_m, p.speed_mps, lim, 2.0) - mine < window)
+    unseen = (1.0 - connected_share) * arrivals_vps * window if arrivals_vps else 0.0
+    return float(known + unseen)
 
 
 def _held_until(windows, until_s: float):
@@ -178,7 +223,7 @@ def apply(obs: Observation, est: QueueEstimate) -> Observation:
         if t > 0.0 else lv
         for lv, t in zip(obs.lights, est.free_at_s + (0.0,) * len(obs.lights))
     )
-    return replace(obs, lights=lights)
+    return replace(obs, lights=lights, followers=est.followers)
 
 
 GIVE_UP_SLACK_S = 5.0
@@ -202,20 +247,71 @@ def normal_drive_s(distance_m: float, v_mps: float, limit_mps: float, accel_mps2
     return (lim - v) / accel_mps2 + (distance_m - d_acc) / lim
 
 
-def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S) -> bool:
-    """A normal drive (speeding up to the limit at the regular driver's ``normal_accel_mps2``, no advice to react to)
-    crosses every light ahead outside its reds (the queue's included, :func:`apply`), while the advised plan reaches the
-    last of them more than ``slack_s`` later: the plan gives up a green the driver makes without advice. In traffic this
-    is a car launching from a queue at the first light, told to crawl 400 m to the second light's green after next
-    (traced in SUMO, docs/TRAFFIC.md): the advisor plans with comfortable accelerations, and the green closing at the
-    second light is one only a normal launch makes (the advisor's own ``tight_green`` rule looks at the next light)."""
+def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S, model: QueueModel | None = None) -> bool:
+    """The advised plan gives up green time that a normal drive (speeding up to the limit at the regular driver's
+    ``normal_accel_mps2``, no advice to react to) uses: at a light that the normal drive crosses outside its reds (the
+    queue's included, :func:`apply`), as every light before it, the plan arrives ``late`` after it, and the time lost
+    is more than ``slack_s``:
+
+    * ``late`` for the car itself, at the last light ahead where the normal drive makes every light (before that, a red
+      further on takes the time back: the car waits there either way);
+    * ``late`` for each follower it holds up (``Observation.followers``), at every such light, and the red each one
+      pushed past the end of that light's green waits out (:func:`cut_off`); where a red further on stops the normal
+      drive, only while the plan has still to slow the car (its target below the car's speed): a car already slowed
+      is not sent back up to the limit towards that red (traced in SUMO: such cars met it or a queue's tail braking
+      harder than 3.5 m/s², or entered it), and the followers' time is already lost.
+
+    The plan is not credited with a stop it avoids at a red further on: a car that drives normally through this light
+    is advised again after it, with the distance to the next one to slow down in. Traced in SUMO (docs/TRAFFIC.md): a car
+    launching from a queue at the first light, told to crawl 400 m to the second light's green after next (the advisor
+    plans with comfortable accelerations, and its own ``tight_green`` rule looks at the next light); seven connected
+    cars told to crawl through the first light towards the second one's queue having cleared, the cars behind them cut
+    off at the first light (35 s each). On an empty road (no followers) only the first case is checked, as before."""
     if advice.target_speed_mps is None or advice.action not in KEEP_MODES or not obs.lights:
         return False
+    model = model or QueueModel()
     normal = [normal_drive_s(lv.distance_m, obs.speed_mps, obs.speed_limit_mps, params.normal_accel_mps2) for lv in obs.lights]
-    if any(lv.is_red_at(t) for lv, t in zip(obs.lights, normal)):
-        return False
-    planned = crossing_time_s(obs.lights[-1].distance_m, obs.speed_mps, advice.target_speed_mps, params, KEEP_MODES[advice.action])
-    return planned > normal[-1] + slack_s
+    made = next((j for j, (lv, t) in enumerate(zip(obs.lights, normal)) if lv.is_red_at(t)), len(obs.lights))
+    for j in range(made):
+        late = crossing_time_s(obs.lights[j].distance_m, obs.speed_mps, advice.target_speed_mps, params, KEEP_MODES[advice.action]) - normal[j]
+        if late <= 0.0:
+            continue
+        own = 1.0 if made == len(obs.lights) and j == made - 1 else 0.0
+        behind = max(obs.followers, 0.0) if made == len(obs.lights) or advice.target_speed_mps < obs.speed_mps - params.hysteresis_mps else 0.0
+        if (own + behind) * late + cut_off(obs.lights[j], normal[j], normal[j] + late, behind, model.headway_s) > slack_s:
+            return True
+    return False
+
+
+def cut_off(light: LightView, normal_s: float, planned_s: float, followers: float, headway_s: float) -> float:
+    """The wait [s] that the followers lose at ``light`` when the car crosses it at ``planned_s`` instead of
+    ``normal_s``, where the green then ends at the next red's start ``R``: the ``k``-th follower crosses a headway after
+    the one before, so it is pushed past ``R`` when ``normal_s + k h < R <= planned_s + k h``, and then waits the whole
+    red (:data:`advisory.advice.choice.WAIT_CAP_S` where its end is unknown). ``followers`` is a mean: the ``k``-th is
+    there with probability ``P(K >= k)``, ``K`` Poisson (cars arriving at random).
+
+    Examples
+    --------
+    >>> lv = LightView(1, 100.0, red_windows_s=((10.0, 40.0),))
+    >>> round(cut_off(lv, 5.0, 7.0, 1.0, 2.0), 2)  # the 2nd follower (normal 9 s, pushed to 11 s) is there with P = 0.26
+    7.93
+    >>> cut_off(lv, 5.0, 7.0, 0.0, 2.0), cut_off(lv, 1.0, 2.0, 5.0, 3.0)  # none behind; followers 3 s apart, none pushed
+    (0.0, 0.0)
+    >>> round(cut_off(LightView(1, 100.0, red_windows_s=((10.0, math.inf),)), 5.0, 7.0, 1.0, 2.0), 1)  # its end unknown: 150 s
+    39.6
+    """
+    start, end = next(((a, b) for a, b in light.red_windows_s if a > normal_s), (math.inf, math.inf))
+    if not math.isfinite(start) or followers <= 0.0 or planned_s <= normal_s:
+        return 0.0
+    lost, p_at_least, p_k, k = 0.0, 1.0, math.exp(-followers), 0  # P(K >= k), P(K = k)
+    while True:
+        p_at_least -= p_k  # P(K >= k + 1)
+        k += 1
+        p_k *= followers / k
+        if normal_s + k * headway_s >= start or p_at_least < 1e-4:
+            return lost
+        if planned_s + k * headway_s >= start:
+            lost += p_at_least * min(end - start, WAIT_CAP_S)
 
 
 def drive_normally(advice: Advice, units: str) -> Advice:
