@@ -147,13 +147,6 @@ class CycleStats:
         return d if len(d) >= MIN_PHASES_SEEN else ()
 
     @property
-    def amber_s(self) -> float | None:
-        """0 where the group's latest green was seen to turn red at once (a light that shows no amber: SUMO's lights
-        built from a plan without one, the paper's corridors), else None (some amber, as traffic law requires:
-        :attr:`PlanReading.amber_s`). A lost reading may hide an amber: that errs on the cautious side. [s]"""
-        return 0.0 if self.following.get(PhaseClass.GREEN) is PhaseClass.RED else None
-
-    @property
     def cycle_s(self) -> float | None:
         """Median cycle: the sum of the median durations around the cycle of classes seen (None if not closed)."""
         cls, total, seen = self.current, 0.0, set()

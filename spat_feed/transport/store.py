@@ -335,8 +335,7 @@ class SpatStore:
         """What the advisor's observation needs of one light (:class:`~spat_feed.prediction.observe.PlanReading`): the plan,
         freshness and age (the group's own), what the group has been seen to do (bounds the phases after the published
         one), and the controller's clock offset (within the tolerance; beyond it the reading is not fresh anyway) with
-        how far it may be off (red windows widened by it), and whether its greens were seen to turn red with no amber
-        (:attr:`~spat_feed.prediction.observe.CycleStats.amber_s`)."""
+        how far it may be off (red windows widened by it)."""
         with self._lock:
             entry = self._entries.get(intersection_id)
             plan, reading = self._plan(entry, signal_group)
@@ -345,8 +344,7 @@ class SpatStore:
             cycle = entry.history.stats(signal_group)
             held = entry.groups.get(signal_group)
         return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s,
-                           clock_uncertainty_s=reading.clock_uncertainty_s, queue_m=None if held is None else held.queue_m,
-                           amber_s=None if cycle is None else cycle.amber_s)
+                           clock_uncertainty_s=reading.clock_uncertainty_s, queue_m=None if held is None else held.queue_m)
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:
         r = self.reading(intersection_id)

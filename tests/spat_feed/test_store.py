@@ -490,32 +490,6 @@ def test_a_controllers_own_messages_are_never_implausible_around_its_changes():
     assert set(verdicts) == {"ok"}
 
 
-def test_a_light_seen_to_turn_red_with_no_amber_reads_amber_s_zero():
-    """``PlanReading.amber_s`` from what the group was seen to do: None until a green is seen to end; 0 once one turns
-    red at once (the simulator's paper plans, SUMO's lights built from them: the advisor then keeps its margin before
-    such a red); None where a green turns amber (state-only history: green 30 s, amber 3 s, red 30 s)."""
-    from spat_feed.prediction.observe import PhaseHistory
-    from spat_feed.timing.plans import MovementPhaseState as S, PhaseClass
-
-    sim, clock = IntersectionSimulator([load_corridor("paper_s200")]), Clock(T0)
-    store = SpatStore(TimeRules(), clock)
-    ix = sim.states_at(T0)[0]
-    sg = ix.states[0].signal_group
-    amber = []
-    for k in range(200):
-        clock.t = T0 + k
-        store.offer(sim.states_at(clock.t)[0])
-        amber.append(store.plan_reading(ix.id, sg).amber_s)
-    assert amber[0] is None and amber[-1] == 0.0 and set(amber) == {None, 0.0}
-
-    history, t = PhaseHistory(), T0
-    for state, n in ((S.PROTECTED_MOVEMENT_ALLOWED, 30), (S.PROTECTED_CLEARANCE, 3), (S.STOP_AND_REMAIN, 30), (S.PROTECTED_MOVEMENT_ALLOWED, 5)):
-        for _ in range(n):
-            stats = history.update(t, state)
-            t += 1.0
-    assert stats.following[PhaseClass.GREEN] is PhaseClass.AMBER and stats.amber_s is None
-
-
 def test_a_published_queue_reaches_the_light_view_fresh_only():
     """A movement's J2735 ``queueLength`` (its ``maneuverAssistList``) reaches the advisor's view of that light (the
     longest of its connections), per signal group (another group publishes none), and not once the reading is stale."""
