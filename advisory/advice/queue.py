@@ -62,6 +62,7 @@ class QueueModel:
     headway_s: float = 2.0
     jam_spacing_m: float = 7.5
     queued_mps: float = 2.0  # a car slower than this short of a line stands in a queue
+    drive_accel_mps2: float = 2.0  # another car (ahead or behind) speeds up to the limit at this, as the regular driver does (paper Sec. 2)
     follow_gap_s: float = 3.0  # a connected car ahead within this time gap (plus one jam spacing) sets the pace
 
 
@@ -105,7 +106,7 @@ def estimate(
 
     The cars ahead cross each line in their order (one lane): one standing (slower than ``queued_mps``) or arriving
     during the red waits for its end; the queue's first car crosses ``startup_s`` after it, each next one ``headway_s``
-    after the one before; a car arriving later (speeding up to the limit at 2 m/s² from its speed now, as the regular
+    after the one before; a car arriving later (speeding up to the limit at ``drive_accel_mps2``, 2 m/s², from its speed now, as the regular
     driver does) joins the queue if it comes before the queue has gone, else it holds nobody up (car following keeps
     the gap); this car can cross ``headway_s`` after the queue's last car. On a green the standing cars are a queue already
     discharging (one a headway from now). ``arrivals_vps``: the flow arriving at the next light, per
@@ -122,8 +123,7 @@ def estimate(
         queue_m = light.queue_m if light.fresh else None
         if queue_m is not None:  # the detectors' count: connected cars standing inside the published queue are in it
             ahead = [(to_line, v) for to_line, v in ahead if to_line > queue_m or v >= model.queued_mps]
-        accel = 2.0  # a car ahead speeds up to the limit as the regular driver does (paper Sec. 2)
-        arrivals = [0.0 if v < model.queued_mps else normal_drive_s(to_line, v, obs.speed_limit_mps, accel) for to_line, v in ahead]
+        arrivals = [0.0 if v < model.queued_mps else normal_drive_s(to_line, v, obs.speed_limit_mps, model.drive_accel_mps2) for to_line, v in ahead]
         if queue_m is not None:  # standing: one car per jam spacing, as many as fit between the line and this car
             arrivals = [0.0] * int(round(max(min(queue_m, light.distance_m - model.jam_spacing_m), 0.0) / model.jam_spacing_m)) + arrivals
         n_unseen = 0.0
@@ -169,7 +169,7 @@ def followers(
     ``follow_gap_s`` (a car closer than that behind a slower one is slowed with it; one lane, no overtaking).
 
     The connected cars are known (``probes`` behind it: ``ahead_m < 0``): each counts whose unimpeded arrival at the
-    line (speeding up to the limit at 2 m/s² from its speed now, as the regular driver) falls within that window after
+    line (speeding up to the limit at ``drive_accel_mps2`` from its speed now, as the regular driver) falls within that window after
     this car's own. The others are expected from the flow: ``(1 - connected_share) x arrivals_vps x`` the window
     (Poisson arrivals; at 600 veh/h and half of them connected, 0.25 cars within 3 s: one or more with probability
     1 - exp(-0.25) = 22 %). The advisor prices the time a plan gives up ``1 + followers`` times
@@ -188,9 +188,9 @@ def followers(
     if not obs.lights:
         return 0.0
     d, lim = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
-    mine = normal_drive_s(d, obs.speed_mps, lim, 2.0)
+    mine = normal_drive_s(d, obs.speed_mps, lim, model.drive_accel_mps2)
     window = max(free_at_s - mine, 0.0) + model.follow_gap_s
-    known = sum(1 for p in probes if p.ahead_m < 0.0 and normal_drive_s(d - p.ahead_m, p.speed_mps, lim, 2.0) - mine < window)
+    known = sum(1 for p in probes if p.ahead_m < 0.0 and normal_drive_s(d - p.ahead_m, p.speed_mps, lim, model.drive_accel_mps2) - mine < window)
     unseen = (1.0 - connected_share) * arrivals_vps * window if arrivals_vps else 0.0
     return float(known + unseen)
 
