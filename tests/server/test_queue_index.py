@@ -59,13 +59,14 @@ class LoopBoard:
         return apply(obs, est), None
 
 
-def observation_at(station_m: float, speed_mps: float, t_unix_s: float, rng: random.Random, on_route: bool = True) -> Observation:
-    """A car at ``station_m`` on a corridor of four fixed-time lights (60 s cycles, 30 s red, offsets 0/15/30/45 s),
-    the next one or two ahead in view (cars beyond the farthest light in view count too: a slower one close ahead);
-    now and then a light's SPaT publishes a queue length."""
+def observation_at(station_m: float, speed_mps: float, t_unix_s: float, rng: random.Random, on_route: bool = True,
+                   stop_lines_m: tuple[float, ...] = STOP_LINES_M, in_view: int | None = None) -> Observation:  # fmt: skip
+    """A car at ``station_m`` on a corridor of fixed-time lights (60 s cycles, 30 s red, offsets 15 s apart), the next
+    ``in_view`` ahead in view (default: one or two; cars beyond the farthest light in view count too: a slower one close
+    ahead); now and then a light's SPaT publishes a queue length."""
     lights: list[LightView] = []
-    in_view = rng.choice((1, 2))
-    for k, stop_m in enumerate(STOP_LINES_M):
+    in_view = in_view or rng.choice((1, 2))
+    for k, stop_m in enumerate(stop_lines_m):
         if stop_m <= station_m or len(lights) == in_view:
             continue
         phase_s = (t_unix_s + 15.0 * k) % 60.0  # red during [0, 30) of the cycle
@@ -118,6 +119,8 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
             loop.cars = dict(snapshot)
     assert board.held == loop.held == held > 100
     assert dict(board._cars["c"]) == loop.cars
+    lane = board.lane("c")
+    assert lane.order == sorted(lane.entry.values()) and {tid for _, _, tid, _ in lane.order} == set(loop.cars)
 
 
 def test_a_fix_looks_at_the_cars_near_it_only():
