@@ -37,7 +37,7 @@ def run(n_cars: int, length_m: float, stop_lines_m: tuple[float, ...], n_fixes: 
     fixes += [(tid, 1001.0 + k / n_fixes, obs) for k, (tid, _, obs) in enumerate(rng.choices(fixes, k=n_fixes))]
     board, loop = QueueBoard(), LoopBoard(None, 1.0)
     out, cpu = [], []
-    for see in (lambda tid, t, obs: board.see("c", tid, t, obs), lambda tid, t, obs: loop.see(tid, t, obs, None)):
+    for see in (lambda tid, t, obs: board.see("c", tid, t, obs), lambda tid, t, obs: loop.see("c", tid, t, obs)):
         answers = []
         c0 = time.process_time()
         for tid, t, obs in fixes:

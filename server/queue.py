@@ -34,7 +34,7 @@ from bisect import bisect_left, bisect_right, insort
 from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, Observation
-from advisory.advice.queue import Probe, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, normal_drive_s
+from advisory.advice.queue import Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, normal_drive_s
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -172,13 +172,22 @@ class QueueBoard:
         here = float(obs.position_m)
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
         lane.expire(t_unix_s, MAX_AGE_S)
+        est = self.estimate(lane, here, obs, self.red_elapsed(obs, t_unix_s))
+        return self.answer(trip_id, obs, est, last_reason)
+
+    def red_elapsed(self, obs: Observation, t_unix_s: float) -> float | None:
+        """How long the next light's current red has been on at ``t_unix_s`` (from the first fix that saw it on, on any
+        trip), None when it is not red (the red's start is forgotten)."""
         nxt = obs.lights[0]
-        if nxt.red_now:
-            since = self._red_since.setdefault(nxt.intersection_id, t_unix_s)
-        else:
+        if not nxt.red_now:
             self._red_since.pop(nxt.intersection_id, None)
-            since = None
-        est = self.estimate(lane, here, obs, None if since is None else t_unix_s - since)
+            return None
+        return t_unix_s - self._red_since.setdefault(nxt.intersection_id, t_unix_s)
+
+    def answer(self, trip_id: str, obs: Observation, est: QueueEstimate, last_reason: str | None) -> tuple[Observation, Advice | None]:
+        """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
+        stands in the next light's queue or closes in on a slower car, until it is over that light's line."""
+        nxt = obs.lights[0]
         if est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
             self._queued[trip_id] = nxt.intersection_id  # it follows the car in front until over that light's line
         elif self._queued.get(trip_id) not in (None, nxt.intersection_id):
@@ -199,7 +208,7 @@ class QueueBoard:
             lane.fresh()
         return lane
 
-    def estimate(self, lane: Lane, here_m: float, obs: Observation, red_elapsed_s: float | None):
+    def estimate(self, lane: Lane, here_m: float, obs: Observation, red_elapsed_s: float | None) -> QueueEstimate:
         """:func:`advisory.advice.queue.estimate` over the cars that can change it, the same answer as over every car of
         the corridor (``tests/server/test_queue_index.py``): the cars between this one and the farthest light of ``obs``
         (and the nearest one ahead), then, for the followers, the cars behind that can reach the next line within the

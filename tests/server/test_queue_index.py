@@ -8,55 +8,40 @@ import types
 
 import pytest
 
-from advisory.advice.advisor import Advice, LightView, Observation
-from advisory.advice.queue import Probe, QueueModel, apply, estimate
-from server.queue import MAX_AGE_S, QUEUE_MESSAGE, QueueBoard
+from advisory.advice.advisor import LightView, Observation
+from advisory.advice.queue import Probe, estimate
+from server.queue import MAX_AGE_S, QueueBoard
 from server.queue_store import Corridors, Noted
 
 STOP_LINES_M = (200.0, 600.0, 1000.0, 1400.0)
 LIMIT_MPS = 13.4
 
 
-class LoopBoard:
-    """The board as it was: every car of the corridor a probe at every fix (``QueueBoard.see`` before the index)."""
+class LoopBoard(QueueBoard):
+    """The board as it was: every car of the corridor a probe at every fix, the stale ones swept by a loop over them all
+    (``QueueBoard.see`` before the index; what it does with the estimate is the board's own :meth:`QueueBoard.answer`)."""
 
     def __init__(self, arrivals_vph: float | None, connected_share: float) -> None:
-        self.model = QueueModel()
-        self.arrivals_vps = None if arrivals_vph is None else arrivals_vph / 3600.0
-        self.connected_share = connected_share
+        super().__init__(arrivals_vph=arrivals_vph, connected_share=connected_share)
         self.cars: dict[str, tuple[float, float, float]] = {}
-        self.red_since: dict[int, float] = {}
-        self.queued: dict[str, int] = {}
-        self.held = 0
 
-    def see(self, trip_id: str, t_unix_s: float, obs: Observation, last_reason: str | None):
+    def see(self, corridor: str, trip_id: str, t_unix_s: float, obs: Observation, last_reason: str | None = None):
         cars = self.cars
         if not obs.on_route or obs.position_m is None or not obs.lights:
             cars.pop(trip_id, None)
-            self.queued.pop(trip_id, None)
+            self._queued.pop(trip_id, None)
             return obs, None
         here = float(obs.position_m)
         cars[trip_id] = (t_unix_s, here, float(obs.speed_mps))
         for tid in [tid for tid, (t, _, _) in cars.items() if t_unix_s - t > MAX_AGE_S]:
             del cars[tid]
-        nxt = obs.lights[0]
-        if nxt.red_now:
-            since = self.red_since.setdefault(nxt.intersection_id, t_unix_s)
-        else:
-            self.red_since.pop(nxt.intersection_id, None)
-            since = None
         probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s != here]
-        est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, None if since is None else t_unix_s - since)
-        if est.in_queue or est.follow_mps is not None:
-            self.queued[trip_id] = nxt.intersection_id
-        elif self.queued.get(trip_id) not in (None, nxt.intersection_id):
-            del self.queued[trip_id]
-        if trip_id in self.queued:
-            self.held += 1
-            countdown = nxt.seconds_to_green() if nxt.red_now else nxt.seconds_to_red()
-            return obs, Advice("none", "queue", light_red=nxt.red_now, seconds_to_change_s=countdown, message=QUEUE_MESSAGE, speak=last_reason != "queue",
-                               light_id=nxt.intersection_id)  # fmt: skip
-        return apply(obs, est), None
+        est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, self.red_elapsed(obs, t_unix_s))
+        return self.answer(trip_id, obs, est, last_reason)
+
+    def forget(self, corridor: str, trip_id: str) -> None:
+        self.cars.pop(trip_id, None)
+        self._queued.pop(trip_id, None)
 
 
 def observation_at(station_m: float, speed_mps: float, t_unix_s: float, rng: random.Random, on_route: bool = True,
@@ -101,12 +86,11 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
             where[trip] = rng.uniform(-150.0, 100.0)
         if rng.random() < 0.01:  # the trip ends
             board.forget("c", trip)
-            loop.cars.pop(trip, None)
-            loop.queued.pop(trip, None)
+            loop.forget("c", trip)
             continue
         obs = observation_at(station, speed, t, rng, on_route=rng.random() > 0.03)
         got = board.see("c", trip, t, obs, last.get(trip))
-        want = loop.see(trip, t, obs, last.get(trip))
+        want = loop.see("c", trip, t, obs, last.get(trip))
         assert got == want, (n, trip)
         held += got[1] is not None
         last[trip] = got[1].reason if got[1] is not None else None
@@ -115,7 +99,7 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
             for table in (tables.cars["c"], tables.red_since):
                 table.take()
             tables.cars["c"].load(snapshot)
-            tables.red_since.load(dict(loop.red_since))
+            tables.red_since.load(dict(loop._red_since))
             loop.cars = dict(snapshot)
     assert board.held == loop.held == held > 100
     assert dict(board._cars["c"]) == loop.cars
