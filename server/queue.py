@@ -14,6 +14,11 @@ On when ``ECO_QUEUE_AWARE=1``; ``ECO_QUEUE_ARRIVALS_VPH`` (the flow arriving at 
 detector counts) and ``ECO_QUEUE_CONNECTED_SHARE`` (the share of those cars that are connected) let it count the cars
 that are not connected (docs/TRAFFIC.md).
 
+A fix looks only at the cars that can change its estimate (:class:`Lane`: the probes ordered by station): the ones
+between it and the farthest light in its view (and the nearest one ahead), and the ones behind that can reach its next
+line while it may be held there; the answer is the one the loop over every car of the corridor gave
+(``tests/server/test_queue_index.py``), at a cost that grows with the cars near it, not with the corridor's.
+
 Where the probes and red starts are kept (``shared``): in this worker with the in-process store (one process: it
 sees every trip); with the Redis store (several workers, ``ECO_STORE_URL``) in :class:`server.queue_store.SharedBoard`
 tables, which every worker publishes its changes to and loads the others' from in the background every
@@ -23,13 +28,120 @@ Redis unreachable: this worker's own probes, said in ``/health`` and ``/metrics`
 
 from __future__ import annotations
 
+import heapq
+import math
+from bisect import bisect_left, bisect_right, insort
+from dataclasses import replace
+
 from advisory.advice.advisor import Advice, AdvisorParams, Observation
-from advisory.advice.queue import Probe, QueueModel, apply, drive_normally, estimate, gives_up_green
+from advisory.advice.queue import Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, normal_drive_s
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
 """A trip's position older than this is no longer a probe. [s]"""
 QUEUE_MESSAGE = "Queue ahead. Follow the car in front."
+
+
+class Lane:
+    """One corridor's probes (``table``: trip -> ``(t_unix_s, station_m, speed_mps)``, the board's dict or the shared
+    board's :class:`~server.queue_store.Noted`) indexed for :meth:`QueueBoard.see`, so that a fix looks only at the cars
+    that can change its estimate instead of at every car on the corridor:
+
+    * ``order``: ``(station_m, seq, trip, speed_mps)`` sorted by station; ``seq`` is the table's insertion order, so
+      cars at one station come in the order a loop over the table meets them (the nearest car ahead is the same one);
+    * ``by_time``: ``(t_unix_s, trip)`` as a heap, to forget the stale probes without looking at the others (an entry
+      left by a later fix of the same trip is skipped when it comes up);
+    * ``top_mps``: at least the fastest probe's speed (exact after a rebuild, raised by each fix), which bounds how far
+      behind a car can still reach a line in time (:meth:`behind`).
+
+    Every change to the table goes through :meth:`put`, :meth:`drop` and :meth:`expire`; a table replaced as a whole
+    (the shared board's sync: its ``loads`` counter moved) is indexed again at the next call (:meth:`fresh`)."""
+
+    __slots__ = ("table", "loads", "order", "entry", "seq", "next_seq", "by_time", "top_mps")
+
+    def __init__(self, table: dict) -> None:
+        self.table = table
+        self.loads = -1
+        self.fresh()
+
+    def fresh(self) -> None:
+        """Index the table again if it was replaced since the last call."""
+        loads = getattr(self.table, "loads", 0)
+        if loads == self.loads:
+            return
+        self.loads = loads
+        self.seq = {tid: k for k, tid in enumerate(self.table)}
+        self.next_seq = len(self.seq)
+        self.entry = {tid: (s, self.seq[tid], tid, v) for tid, (_, s, v) in self.table.items()}
+        self.order = sorted(self.entry.values())
+        self.by_time = [(t, tid) for tid, (t, _, _) in self.table.items()]
+        heapq.heapify(self.by_time)
+        self.top_mps = max((v for _, _, v in self.table.values()), default=0.0)
+
+    def _unindex(self, trip_id: str) -> None:
+        entry = self.entry.pop(trip_id, None)
+        if entry is not None:
+            del self.order[bisect_left(self.order, entry)]
+            del self.seq[trip_id]
+
+    def put(self, trip_id: str, probe: tuple[float, float, float]) -> None:
+        """The trip's probe replaces its last one (in the table and the index)."""
+        t, s, v = probe
+        old = self.entry.get(trip_id)
+        if old is not None:
+            del self.order[bisect_left(self.order, old)]
+            seq = self.seq[trip_id]
+        else:
+            seq = self.seq[trip_id] = self.next_seq
+            self.next_seq += 1
+        self.table[trip_id] = probe
+        entry = self.entry[trip_id] = (s, seq, trip_id, v)
+        insort(self.order, entry)
+        heapq.heappush(self.by_time, (t, trip_id))
+        if v > self.top_mps:
+            self.top_mps = v
+
+    def drop(self, trip_id: str) -> None:
+        """The trip is no probe any more (off the route, ended)."""
+        self.table.pop(trip_id, None)
+        self._unindex(trip_id)
+
+    def expire(self, t_unix_s: float, max_age_s: float) -> None:
+        """Forget the probes older than ``max_age_s`` at ``t_unix_s`` (``t_unix_s - t > max_age_s``, as a loop over the
+        table would; a deletion the shared board does not send on: Redis drops stale probes itself)."""
+        heap = self.by_time
+        while heap and t_unix_s - heap[0][0] > max_age_s:
+            t, trip_id = heapq.heappop(heap)
+            probe = self.table.get(trip_id)
+            if probe is not None and probe[0] == t:
+                del self.table[trip_id]
+                self._unindex(trip_id)
+
+    def ahead(self, here_m: float, reach_m: float) -> list[Probe]:
+        """The cars ahead of station ``here_m`` by less than ``reach_m`` (the farthest light the estimate looks at),
+        and the nearest one ahead wherever it is (a slower car close ahead sets the pace)."""
+        order, n = self.order, len(self.order)
+        first = bisect_right(order, (here_m, math.inf))
+        end = bisect_left(order, (here_m + reach_m,), first)
+        while end < n and order[end][0] - here_m < reach_m:  # the bounds as ``s - here_m < reach_m`` rounds
+            end += 1
+        while end > first and order[end - 1][0] - here_m >= reach_m:
+            end -= 1
+        return [Probe(s - here_m, v) for s, _, _, v in order[first : max(end, min(first + 1, n))]]
+
+    def behind(self, here_m: float, line_m: float, reach_s: float, limit_mps: float) -> list[Probe]:
+        """The cars behind station ``here_m`` that could reach the line ``line_m`` ahead of it within ``reach_s``: none
+        farther than ``reach_s`` at the faster of the limit and ``top_mps`` (a normal drive is never faster, see
+        :func:`advisory.advice.queue.normal_drive_s`)."""
+        order = self.order
+        reach_m = reach_s * max(self.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6  # rounding: rather one car too many
+        end = bisect_left(order, (here_m,))
+        first = bisect_left(order, (here_m + line_m - reach_m,), 0, end)
+        while first > 0 and line_m - (order[first - 1][0] - here_m) <= reach_m:  # the bound as ``line_m - ahead_m`` rounds
+            first -= 1
+        while first < end and line_m - (order[first][0] - here_m) > reach_m:
+            first += 1
+        return [Probe(s - here_m, v) for s, _, _, v in order[first:end]]
 
 
 class QueueBoard:
@@ -45,29 +157,37 @@ class QueueBoard:
         self._cars: dict[str, dict[str, tuple[float, float, float]]] = shared.cars if shared is not None else {}
         self._red_since: dict[int, float] = shared.red_since if shared is not None else {}
         self._queued: dict[str, int] = {}  # trip -> the light whose queue it stands in
+        self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
         self.held = 0  # fixes answered "follow the car in front"
 
     def see(self, corridor: str, trip_id: str, t_unix_s: float, obs: Observation, last_reason: str | None = None) -> tuple[Observation, Advice | None]:
         """Note the car's fix; the observation the advisor should get, or the service's advice for a car in a queue
         or behind a slower one (spoken when the trip's last advice, ``last_reason``, was another). After such advice
         the advisor plans afresh (:meth:`fresh`)."""
-        cars = self._cars.setdefault(corridor, {})
+        lane = self.lane(corridor)
         if not obs.on_route or obs.position_m is None or not obs.lights:
-            cars.pop(trip_id, None)
+            lane.drop(trip_id)
             self._queued.pop(trip_id, None)
             return obs, None
         here = float(obs.position_m)
-        cars[trip_id] = (t_unix_s, here, float(obs.speed_mps))
-        for tid in [tid for tid, (t, _, _) in cars.items() if t_unix_s - t > MAX_AGE_S]:
-            del cars[tid]
+        lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
+        lane.expire(t_unix_s, MAX_AGE_S)
+        est = self.estimate(lane, here, obs, self.red_elapsed(obs, t_unix_s))
+        return self.answer(trip_id, obs, est, last_reason)
+
+    def red_elapsed(self, obs: Observation, t_unix_s: float) -> float | None:
+        """How long the next light's current red has been on at ``t_unix_s`` (from the first fix that saw it on, on any
+        trip), None when it is not red (the red's start is forgotten)."""
         nxt = obs.lights[0]
-        if nxt.red_now:
-            since = self._red_since.setdefault(nxt.intersection_id, t_unix_s)
-        else:
+        if not nxt.red_now:
             self._red_since.pop(nxt.intersection_id, None)
-            since = None
-        probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s != here]  # ahead, and behind (followers)
-        est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, None if since is None else t_unix_s - since)
+            return None
+        return t_unix_s - self._red_since.setdefault(nxt.intersection_id, t_unix_s)
+
+    def answer(self, trip_id: str, obs: Observation, est: QueueEstimate, last_reason: str | None) -> tuple[Observation, Advice | None]:
+        """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
+        stands in the next light's queue or closes in on a slower car, until it is over that light's line."""
+        nxt = obs.lights[0]
         if est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
             self._queued[trip_id] = nxt.intersection_id  # it follows the car in front until over that light's line
         elif self._queued.get(trip_id) not in (None, nxt.intersection_id):
@@ -78,6 +198,28 @@ class QueueBoard:
             return obs, Advice("none", "queue", light_red=nxt.red_now, seconds_to_change_s=countdown, message=QUEUE_MESSAGE, speak=last_reason != "queue",
                                light_id=nxt.intersection_id)  # fmt: skip
         return apply(obs, est), None
+
+    def lane(self, corridor: str) -> Lane:
+        """The corridor's probes, indexed (:class:`Lane`; indexed again when the shared board replaced them)."""
+        lane = self._lanes.get(corridor)
+        if lane is None:
+            lane = self._lanes[corridor] = Lane(self._cars.setdefault(corridor, {}))
+        else:
+            lane.fresh()
+        return lane
+
+    def estimate(self, lane: Lane, here_m: float, obs: Observation, red_elapsed_s: float | None) -> QueueEstimate:
+        """:func:`advisory.advice.queue.estimate` over the cars that can change it, the same answer as over every car of
+        the corridor (``tests/server/test_queue_index.py``): the cars between this one and the farthest light of ``obs``
+        (and the nearest one ahead), then, for the followers, the cars behind that can reach the next line within the
+        window :func:`~advisory.advice.queue.followers` counts them in (this car's own normal drive to it or the
+        instant the queue ahead lets it cross, whichever is later, plus ``follow_gap_s``)."""
+        m = self.model
+        est = estimate(obs, lane.ahead(here_m, max(light.distance_m for light in obs.lights)), m, self.arrivals_vps, self.connected_share, red_elapsed_s)
+        line_m, limit_mps = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
+        mine_s = normal_drive_s(line_m, obs.speed_mps, limit_mps, m.drive_accel_mps2)
+        behind = lane.behind(here_m, line_m, max(est.free_at_s[0], mine_s) + m.follow_gap_s, limit_mps)
+        return replace(est, followers=followers(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share))
 
     def check(self, obs: Observation, advice: Advice, params: AdvisorParams) -> Advice:
         """The advisor's advice, or "drive normally" where it gives up green time that a normal drive uses, priced with
@@ -93,7 +235,7 @@ class QueueBoard:
 
     def forget(self, corridor: str, trip_id: str) -> None:
         """The trip has ended: it is no probe any more (on every worker, with the shared board)."""
-        self._cars.get(corridor, {}).pop(trip_id, None)
+        self.lane(corridor).drop(trip_id)
         self._queued.pop(trip_id, None)
 
     def state(self) -> str:

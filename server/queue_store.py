@@ -99,12 +99,14 @@ class Noted(dict):
     (probes), else the earlier (red starts). A deletion with ``del`` (the board forgetting a stale probe) is not
     logged: Redis drops stale probes itself."""
 
-    __slots__ = ("newer", "ops")
+    __slots__ = ("newer", "ops", "loads")
 
     def __init__(self, newer: bool) -> None:
         super().__init__()
         self.newer = newer
         self.ops: list[tuple[Any, Any, bool]] = []
+        self.loads = 0
+        """How many times :meth:`load` replaced the table (an index over it, ``server.queue.Lane``, is then rebuilt)."""
 
     def __setitem__(self, key, value) -> None:
         dict.__setitem__(self, key, value)
@@ -140,6 +142,7 @@ class Noted(dict):
         dict.update(self, state)
         for op in self.ops:
             self._apply(*op)
+        self.loads += 1
 
     def take(self) -> list[tuple[Any, Any, bool]]:
         ops, self.ops = self.ops, []
