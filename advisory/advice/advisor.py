@@ -39,7 +39,7 @@ from numba import njit
 
 from advisory.advice import choice
 from advisory.physics.energy import road_load_force_n
-from advisory.physics.params import PAPER_54KWH, TIME_VALUE_USD_PER_S, VehicleParams
+from advisory.physics.params import PAPER_54KWH, VehicleParams
 
 MPH_PER_MPS = 1 / 0.44704
 KMH_PER_MPS = 3.6
@@ -220,7 +220,7 @@ class AdvisorParams:
     hysteresis_mps: float = 1.0
     uncertain_choice: str = "rules"  # under uncertain timing: "rules" (the ordered rules) or "expected_cost" (advisory.advice.choice)
     stop_risk_frac: float = 0.1  # expected_cost: a plan may make a stop likelier than driving normally by at most this [-]
-    time_value_usd_per_s: float = TIME_VALUE_USD_PER_S  # expected_cost: the price on time (as the tables') [$/s]
+    time_value_usd_per_s: float | None = None  # expected_cost: the price on time; None: the road's (choice.steady_time_value_usd_per_s) [$/s]
     speak_change_mps: float = 5 * 0.44704
     speed_step_mps: float = 0.44704  # candidates in whole mph: the spoken number is the advised one
     units: str = "mph"
@@ -386,6 +386,31 @@ def _crossing_times_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, acce
     return out
 
 
+@njit(cache=True, inline="always")
+def _in_red(tc, windows_s, j, slowing, no_amber, after_red_s):
+    """A crossing at ``tc`` of line ``j`` inside a red of ``windows_s`` (padded red windows, (lines, k, 2)), or within
+    ``after_red_s`` after one ends, or, for a plan that slows the car (``slowing``) at a light that shows no amber
+    (``no_amber``, (lines,)), as long before one begins (:func:`_green_mask`)."""
+    before_red_s = after_red_s if slowing and no_amber[j] else 0.0
+    for k in range(windows_s.shape[1]):
+        a = windows_s[j, k, 0]
+        if (a - before_red_s if a > 0.0 else a) <= tc < windows_s[j, k, 1] + after_red_s:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _red_crossings(cross, windows_s, slowing, no_amber, after_red_s):
+    """Which plans (m,) reach a line that shows no amber inside a red of ``windows_s`` or its margins (:func:`_in_red`;
+    ``cross``: time to each line (m, lines), ``slowing``: the plans that slow the car (m,)). bool (m,)"""
+    out = np.zeros(cross.shape[0], dtype=np.bool_)
+    for c in range(cross.shape[0]):
+        for j in range(cross.shape[1]):
+            if no_amber[j] and _in_red(cross[c, j], windows_s, j, slowing[c], no_amber, after_red_s):
+                out[c] = True
+    return out
+
+
 @njit(cache=True)
 def _green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v,
                 t_of_x):  # fmt: skip
@@ -402,17 +427,9 @@ def _green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, 
     for i in range(speeds.size):
         slowing = mode == 1 or speeds[i] < v0 - 1e-9
         for j in range(n_lines):
-            before_red_s = after_red_s if slowing and no_amber[j] else 0.0
             tc = _time_to_line_s(distances_m[j], v0, speeds[i], mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x)
-            if not np.isfinite(tc):
+            if not np.isfinite(tc) or _in_red(tc, windows_s, j, slowing, no_amber, after_red_s):
                 ok[i] = False
-                break
-            for k in range(windows_s.shape[1]):
-                a = windows_s[j, k, 0]
-                if (a - before_red_s if a > 0.0 else a) <= tc < windows_s[j, k, 1] + after_red_s:
-                    ok[i] = False
-                    break
-            if not ok[i]:
                 break
     return ok
 
@@ -931,17 +948,17 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     rates, coast, idle = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
     x_end = float(d_m[-1]) + v_lim * v_lim / (2.0 * params.normal_accel_mps2)
     windows, weights = _timings(usable)
-    lam = params.time_value_usd_per_s * time_price(obs)  # the car's time and its followers' (Observation.followers)
+    lam_road = choice.steady_time_value_usd_per_s(rates, v_lim) if params.time_value_usd_per_s is None else params.time_value_usd_per_s
+    lam = lam_road * time_price(obs)  # the car's time and its followers' (Observation.followers)
     clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
     cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,
                                                   params.green_margin_s, lam, cross, rates, coast, idle, brake, firm,
-                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan)  # fmt: skip
-    slowing = (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9)
-    for j, light in enumerate(usable):
-        if clear[j] == 0.0:  # no amber warns of its reds: no plan reaches the line where one may be on (the sure windows),
-            # nor, slowing the car, within the margin before one may begin (as :func:`_green_mask`)
-            for a, b in light.red_windows_s:
-                through |= (cross[:, j] >= (a - params.green_margin_s * slowing if a > 0.0 else a)) & (cross[:, j] < b + params.green_margin_s)
+                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan,
+                                                  np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S for light in usable]))  # fmt: skip
+    # no amber warns of a light's reds: no plan reaches the line where one may be on (the sure windows), nor, slowing the
+    # car, within the margin before one may begin (the feasibility of the rules, :func:`_green_mask`)
+    lines = _Lines.of(usable)
+    through |= _red_crossings(cross, lines.windows_s, (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9), lines.no_amber, params.green_margin_s)
     allowed = (p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9) & ~through
     if not keep:
         allowed[-1] = False
