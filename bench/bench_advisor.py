@@ -73,14 +73,14 @@ def random_run(seed: int):
     return len(red_light_violations(run.trajectory, sc)), run.max_advised_mps > sc.speed_limit_mps + 1e-9, run.overrides
 
 
-def actuated_run(seed: int, choice: str = "rules"):
+def actuated_run(seed: int, choice: str = AdvisorParams().uncertain_choice):
     truth, feed, noise = random_case(seed)
     run = simulate(truth, AdvisorParams(uncertain_choice=choice), driver=DriverModel(noise_mps=noise, seed=seed), feed=feed)
     return (bool(red_light_violations(run.trajectory, truth)), bool(run.trajectory.accel_mps2.min() < -4.0 - 1e-9),
             run.max_advised_mps > truth.speed_limit_mps + 1e-9, run.surprises)  # fmt: skip
 
 
-def window_case(args, choice: str = "rules"):
+def window_case(args, choice: str = AdvisorParams().uncertain_choice):
     """One paper timing with actuated lights of half-width ``w`` (draw ``seed``): advised, regular and hindsight-DP
     costs on the same truth [$] (0 width: the fixed-time lights and the perfect feed); the advisor deciding by
     ``choice`` (``AdvisorParams.uncertain_choice``)."""
@@ -101,7 +101,7 @@ def window_case(args, choice: str = "rules"):
             cost[0].time_s - cost[1].time_s, bool(red_light_violations(run.trajectory, truth)))  # fmt: skip
 
 
-def window_sweep(widths_s=(0.0, 5.0, 10.0, 15.0), draws: int = 3, workers: int = 2, choice: str = "rules") -> dict[float, np.ndarray]:
+def window_sweep(widths_s=(0.0, 5.0, 10.0, 15.0), draws: int = 3, workers: int = 2, choice: str = AdvisorParams().uncertain_choice) -> dict[float, np.ndarray]:
     """``window_case`` over the 64 paper timings for each half-width: rows (advised, regular, DP, time lost, red)."""
     cases = [(x, y, s) for s in PAPER_SPACINGS_M for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S]
     out = {}
@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="bench_advisor", description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=10_000, help="randomized fixed-time closed-loop runs (default 10,000)")
     parser.add_argument("--actuated-runs", type=int, default=10_000, help="randomized actuated closed-loop runs (default 10,000)")
-    parser.add_argument("--choice", choices=UNCERTAIN_CHOICES, default="rules",
+    parser.add_argument("--choice", choices=UNCERTAIN_CHOICES, default=AdvisorParams().uncertain_choice,
                         help="the advisor's decision under uncertain timing in the actuated sweeps and runs (default %(default)s)")  # fmt: skip
     args = parser.parse_args(argv)
     runs, actuated_runs, choice = args.runs, args.actuated_runs, args.choice

@@ -85,7 +85,7 @@ def _progress(label: str, done: int, total: int, t0: float) -> None:
     print(f"\r  {label}: {done:,}/{total:,} ({elapsed:.0f} s, ~{eta:.0f} s left)", end="", file=sys.stderr, flush=True)
 
 
-def run_variant(variant: str, seeds: range, driver: str, pool: ProcessPoolExecutor, choice: str = "rules") -> list:
+def run_variant(variant: str, seeds: range, driver: str, pool: ProcessPoolExecutor, choice: str = AdvisorParams().uncertain_choice) -> list:
     t0 = time.perf_counter()
     out = []
     every = max(1, len(seeds) // 50)
@@ -106,7 +106,7 @@ def _line(seed: int, e) -> str:
     return f"  seed {seed} light {e.light + 1}: {what}; {known}; {decided}; {'AVOIDABLE' if e.avoidable else 'unavoidable'}"
 
 
-def report_variant(variant: str, res: list, driver: str, elapsed_s: float, choice: str = "rules") -> dict:
+def report_variant(variant: str, res: list, driver: str, elapsed_s: float, choice: str = AdvisorParams().uncertain_choice) -> dict:
     events = [(seed, e) for seed, es, *_ in res for e in es]
     counts = {}
     for kind in ("red_entry", "hard_brake"):
@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--variants", default="amber,no-amber", help="comma-separated, of: " + ", ".join(VARIANTS))
     parser.add_argument("--driver", default="lenient", choices=sorted(DRIVERS))
-    parser.add_argument("--choice", default="rules", choices=UNCERTAIN_CHOICES,
+    parser.add_argument("--choice", default=AdvisorParams().uncertain_choice, choices=UNCERTAIN_CHOICES,
                         help="how the advisor decides under uncertain timing (AdvisorParams.uncertain_choice; default %(default)s)")
     parser.add_argument("--no-paper", action="store_true", help="skip the paper's 64 scenarios")
     parser.add_argument("--no-tables", action="store_true", help="paper scenarios with the rules only")

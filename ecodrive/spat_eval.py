@@ -120,7 +120,7 @@ class Setup:
     horizon_s: float = 240.0  # an approach needs this much recording after its entry
     stale_after_s: float = DEFAULT_STALE_AFTER_S  # the store's (the service's ``spat_stale_after_s``)
     driver: str = "careful"  # the virtual driver (advisory.drivers.closed_loop.DRIVERS); the regular driver is the same person
-    choice: str = "rules"  # how the advisor decides under uncertain timing (AdvisorParams.uncertain_choice)
+    choice: str = AdvisorParams().uncertain_choice  # how the advisor decides under uncertain timing (AdvisorParams.uncertain_choice)
 
 
 @dataclass

@@ -29,6 +29,9 @@ from advisory.advice.tables import AdviceTables, TableGrid, paper_offsets_s
 
 V = SPEED_LIMIT_MPS
 P = AdvisorParams()
+RULES = AdvisorParams(uncertain_choice="rules")
+"""The ordered rules under uncertain timing, for the recorded cases they were written for (the default decides on the
+distribution: tests/test_choice.py, and the same cases in closed loop: tests/test_closed_loop_actuated.py)."""
 
 
 def light(distance, *windows, fresh=True, confidence=1.0, ident=1):
@@ -474,10 +477,10 @@ def test_no_sure_plan_slows_the_car_for_the_green_after_a_red_it_may_beat():
     v = 50 / 3.6
     green = LightView(1, 300.0, True, 0.9, ((13.5, 65.5), (73.5, 245.5)), likely_red_windows_s=((16.7, 51.7), (85.7, 120.7)),
                       late_red_windows_s=((25.1, 65.5), (115.1, 155.5)))  # fmt: skip
-    adv = advise(Observation(v, v, (green,)), params=AdvisorParams(units="kmh"))[0]
+    adv = advise(Observation(v, v, (green,)), params=AdvisorParams(units="kmh", uncertain_choice="rules"))[0]
     assert (adv.action, adv.reason) == ("none", "low_confidence") and 16.7 < 300.0 / v < 25.1
     later = replace(green, late_red_windows_s=((20.0, 65.5), (115.1, 155.5)))
-    sure = advise(Observation(v, v, (later,)), params=AdvisorParams(units="kmh"))[0]
+    sure = advise(Observation(v, v, (later,)), params=AdvisorParams(units="kmh", uncertain_choice="rules"))[0]
     assert sure.reason == "green_wave" and crossing_time_s(300.0, v, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 65.5 + P.green_margin_s
 
 
@@ -493,14 +496,14 @@ def test_a_red_the_car_may_beat_at_the_second_light_does_not_slow_it_for_the_gre
     light2 = LightView(2, 500.0, True, 0.88, ((5.0, 55.0), (65.0, 297.0)), likely_red_windows_s=((15.0, 45.0), (82.0, 111.0)),
                        late_red_windows_s=((25.0, 55.0), (86.0, 129.0)))  # fmt: skip
     assert 100.0 / V < 5.0 and 15.0 < 500.0 / V < 25.0
-    adv = advise(Observation(V, V, (light1, light2)))[0]
+    adv = advise(Observation(V, V, (light1, light2)), params=RULES)[0]
     assert (adv.action, adv.reason, adv.message) == ("none", "low_confidence", "Signal timing uncertain. Drive normally.")
     early = replace(light2, late_red_windows_s=((19.0, 55.0), (86.0, 129.0)))  # surely red before the car is there
-    sure = advise(Observation(V, V, (light1, early)))[0]
+    sure = advise(Observation(V, V, (light1, early)), params=RULES)[0]
     assert sure.reason == "green_wave" and sure.light_ahead == 2 and sure.target_speed_mps < V - 5.0
     assert crossing_time_s(500.0, V, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 55.0 + P.green_margin_s
     slowed = AdvisorMemory(last=replace(sure, target_speed_mps=8.0))  # already following a plan that slows it: kept at it
-    assert advise(Observation(V, V, (light1, light2)), slowed)[0].reason == "green_wave"
+    assert advise(Observation(V, V, (light1, light2)), slowed, RULES)[0].reason == "green_wave"
 
 
 def test_a_driver_reacting_to_a_plan_that_slows_it_is_judged_at_the_plans_speed():
@@ -510,7 +513,7 @@ def test_a_driver_reacting_to_a_plan_that_slows_it_is_judged_at_the_plans_speed(
     stands (the advice flipped between the two every second as the car sped up and slowed down: 2019-05-17 group 12,
     +18 % and +21 % against the regular driver, now savings of 19 % and 21 %). (Green now as likely: with a red now,
     likely over at 20 s, that red from 40 s would come after the next green, out of the advice's horizon, issue 29.)"""
-    v, params = 50 / 3.6, AdvisorParams(units="kmh")
+    v, params = 50 / 3.6, AdvisorParams(units="kmh", uncertain_choice="rules")
     lit = LightView(1, 600.0, True, 0.9, ((0.0, 300.0),), likely_red_windows_s=((40.0, 80.0),), late_red_windows_s=((55.0, 95.0),))
     assert 40.0 < 600.0 / v < 55.0
     assert advise(Observation(v, v, (lit,)), params=params)[0].reason == "low_confidence"
@@ -577,11 +580,11 @@ def test_no_slowing_for_an_uncertain_red_that_likely_ends_before_the_car_gets_th
     lights = (LightView(1, 100.0, True, 0.9, ((5.0, 55.0),), likely_red_windows_s=((15.0, 45.0),), late_red_windows_s=((25.0, 55.0),)),
               LightView(2, 500.0, True, 0.9, ((0.0, 25.0), (35.0, 84.0)), likely_red_windows_s=((0.0, 15.0), (45.0, 70.0)),
                         late_red_windows_s=((0.0, 25.0), (55.0, 84.0))))  # fmt: skip
-    adv = advise(Observation(V, V, lights))[0]
+    adv = advise(Observation(V, V, lights), params=RULES)[0]
     assert (adv.action, adv.target_speed_mps) == ("cruise", V)
     later = (lights[0], LightView(2, 500.0, True, 0.9, ((0.0, 25.0), (35.0, 84.0)), likely_red_windows_s=((0.0, 19.0), (45.0, 70.0)),
                                   late_red_windows_s=((0.0, 25.0), (55.0, 84.0))))  # fmt: skip
-    sure = advise(Observation(V, V, later))[0]
+    sure = advise(Observation(V, V, later), params=RULES)[0]
     assert sure.target_speed_mps < V - 1.0 and crossing_time_s(500.0, V, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 25.0 + P.green_margin_s
 
 
@@ -631,7 +634,7 @@ def test_a_plan_on_the_likely_changes_is_kept_while_it_works_on_them():
     (Since the ninth session the car, at the limit, is not slowed for the green after light 2's next red where it may
     beat that red as it goes: recorded, that red began at the latest 59.4 s out and the car is there at 42 s, so no
     speed advice. With the red surely begun by then, the plan and its keeping, as they were.)"""
-    limit, params = 50 / 3.6, AdvisorParams(units="kmh")
+    limit, params = 50 / 3.6, AdvisorParams(units="kmh", uncertain_choice="rules")
 
     def lights(x_m, shift_s, late_next_s=59.42):
         return tuple(LightView(n + 1, d - x_m, True, 1.0, ((0.0, end - shift_s),), ((0.0, lik - shift_s), (35.82 - shift_s + 1.0, nxt - shift_s)),
@@ -671,14 +674,14 @@ def test_a_car_launching_towards_an_uncertain_light_is_not_held_at_a_crawl():
     v, limit = 4.5, 50 / 3.6
     green_now = LightView(1, 300.0, True, 1.0, red_windows_s=((15.0, 120.0),), likely_red_windows_s=((40.0, 100.0),),
                           late_red_windows_s=((60.0, 120.0),))
-    advice, _ = advise(Observation(v, limit, (green_now,)), AdvisorMemory(last=Advice("none", "red_ahead")))
+    advice, _ = advise(Observation(v, limit, (green_now,)), AdvisorMemory(last=Advice("none", "red_ahead")), RULES)
     # a plan at the limit, or none because a normal drive makes it ("tight_green": the driver speeds up as it would)
     assert advice.action != "coast" and advice.reason in ("green_wave", "tight_green"), advice
     assert advice.target_speed_mps is None or (advice.target_speed_mps >= 3 * v and 300.0 / advice.target_speed_mps < 40.0)
     red_now = LightView(1, 300.0, True, 1.0, red_windows_s=((0.0, 150.0),), likely_red_windows_s=((0.0, 20.0),),
                         late_red_windows_s=((0.0, 150.0),))
-    advice, _ = advise(Observation(v, limit, (red_now,)), AdvisorMemory(last=Advice("none", "red_ahead")))
+    advice, _ = advise(Observation(v, limit, (red_now,)), AdvisorMemory(last=Advice("none", "red_ahead")), RULES)
     assert advice.target_speed_mps is not None and advice.target_speed_mps >= 2 * v
     # a car cruising at the limit is still not told to race an uncertain red
-    cruising, _ = advise(Observation(limit, limit, (replace(green_now, distance_m=600.0),)), AdvisorMemory())
+    cruising, _ = advise(Observation(limit, limit, (replace(green_now, distance_m=600.0),)), AdvisorMemory(), RULES)
     assert cruising.target_speed_mps is None or cruising.target_speed_mps <= limit + 1e-9

@@ -218,7 +218,7 @@ class AdvisorParams:
     stop_lead_s: float = 2.0  # "prepare to stop" this long before a comfortable stop must begin (earlier: "Red light ahead.") [s]
     hold_stale_s: float = 30.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
     hysteresis_mps: float = 1.0
-    uncertain_choice: str = "rules"  # under uncertain timing: "rules" (the ordered rules) or "expected_cost" (advisory.advice.choice)
+    uncertain_choice: str = "expected_cost"  # under uncertain timing: "expected_cost" (advisory.advice.choice) or "rules" (the ordered rules, for comparison)
     stop_risk_frac: float = 0.1  # expected_cost: a plan may make a stop likelier than driving normally by at most this [-]
     time_value_usd_per_s: float | None = None  # expected_cost: the price on time; None: the road's (choice.steady_time_value_usd_per_s) [$/s]
     speak_change_mps: float = 5 * 0.44704
