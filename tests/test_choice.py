@@ -14,7 +14,7 @@ from advisory.advice.advisor import KEEP_MODES, MODE_CODES, AdvisorParams, Light
 from advisory.evaluation.scoring import score_trace
 from advisory.physics.params import model_params
 
-PARAMS = AdvisorParams(uncertain_choice="expected_cost")
+PARAMS = AdvisorParams()
 RATES, COAST, IDLE = choice.rate_tables(PARAMS.vehicle, PARAMS.comfort_decel_mps2, PARAMS.normal_accel_mps2, PARAMS.firm_decel_mps2)
 V_LIM = 50 / 3.6
 
