@@ -31,6 +31,21 @@ def test_rate_tables_price_a_drive_as_the_scoring_does(row, a_mps2):
     assert priced == pytest.approx(scored, rel=5e-3)
 
 
+@pytest.mark.parametrize("limit_mps", [50 / 3.6, 20.1, 24.6])
+def test_the_roads_price_on_time_makes_the_limit_the_cheapest_cruise(limit_mps):
+    """Brute force over the rate tables' speed grid: at the road's price on time, cost per metre (P(v) + λ) / v is
+    least at the limit (within a grid step), and a lower price makes a slower cruise cheaper. At the paper car's 55 mph
+    it is the lookup tables' own price (4.5e-4 $/s, chosen by the same rule: docs/ADVISOR.md, section 3)."""
+    lam = choice.steady_time_value_usd_per_s(RATES, limit_mps)
+    v = np.arange(1, RATES.shape[1]) * choice.RATE_DV_MPS
+    per_m = (RATES[choice.CRUISE, 1:] + lam) / v
+    assert abs(v[np.argmin(per_m)] - limit_mps) <= choice.RATE_DV_MPS
+    cheaper = (RATES[choice.CRUISE, 1:] + 0.5 * lam) / v
+    assert v[np.argmin(cheaper)] < limit_mps - choice.RATE_DV_MPS
+    if limit_mps == 24.6:
+        assert lam == pytest.approx(4.5e-4, rel=0.06)
+
+
 def test_a_plan_that_holds_the_limit_with_no_light_in_the_way_costs_cruising():
     """Hand answer: at the limit already, to a point 500 m on, the motion is a cruise: 500 / v seconds at the cruise rate."""
     d = np.array([300.0])

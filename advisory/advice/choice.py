@@ -19,9 +19,9 @@ forecast) and chooses the cheapest in expectation (docs/ADVISOR.md, "Under uncer
   probability: the outer timings are not the forecast's extremes, and the wide ones weigh the chance of a change
   outside the window the light states.
 * **Cost**: paper Eq. 4 (electricity plus battery wear, :mod:`advisory.physics.model`) of that motion, plus a price
-  on time (``advisory.physics.params.TIME_VALUE_USD_PER_S``, the lookup tables' own: the one at which cruising
-  at the limit is the cheapest steady speed). Priced per step from rate tables made once
-  per vehicle with the model itself (:func:`rate_tables`).
+  on time: the road's, the least at which cruising at its limit is the cheapest steady speed
+  (:func:`steady_time_value_usd_per_s`; the lookup tables' ``TIME_VALUE_USD_PER_S`` is the same rule at 55 mph).
+  Priced per step from rate tables made once per vehicle with the model itself (:func:`rate_tables`).
 * **Chance constraint**: a plan may make a stop likelier than driving normally only up to ``stop_risk_frac``.
   The safety rule is a hard constraint: a published red is red in every timing (``spat_feed.prediction.observe
   .red_hold_s``), and a plan that reaches the line inside it (in every timing) is never advised; nor, at a light that
