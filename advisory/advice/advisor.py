@@ -209,8 +209,8 @@ class AdvisorParams:
     stop_lead_s: float = 2.0  # "prepare to stop" this long before a comfortable stop must begin (earlier: "Red light ahead.") [s]
     hold_stale_s: float = 30.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
     hysteresis_mps: float = 1.0
-    stop_risk_frac: float = 0.1  # expected_cost: a plan may make a stop likelier than driving normally by at most this [-]
-    time_value_usd_per_s: float | None = None  # expected_cost: the price on time; None: the road's (choice.steady_time_value_usd_per_s) [$/s]
+    stop_risk_frac: float = 0.1  # uncertain timing: a plan may make a stop likelier than driving normally by at most this [-]
+    time_value_usd_per_s: float | None = None  # uncertain timing: the price on time; None: the road's (choice.steady_time_value_usd_per_s) [$/s]
     speak_change_mps: float = 5 * 0.44704
     speed_step_mps: float = 0.44704  # candidates in whole mph: the spoken number is the advised one
     units: str = "mph"
