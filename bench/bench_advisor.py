@@ -1,9 +1,7 @@
 """Advisor benchmarks: advise() latency, table build time and memory, closed-loop quality and safety.
 
-Run: .venv/bin/python bench/bench_advisor.py [--runs N] [--actuated-runs N] [--choice rules|expected_cost]
-     (default 10,000 randomized closed-loop runs of each kind; ``--choice``: how the advisor decides under uncertain
-     timing, ``AdvisorParams.uncertain_choice``, in the actuated window sweep and the randomized actuated runs;
-     default ``rules``)
+Run: .venv/bin/python bench/bench_advisor.py [--runs N] [--actuated-runs N]
+     (default 10,000 randomized closed-loop runs of each kind)
 
 * advise() latency in-process over realistic observations (p50 / p99, target p99 < 0.5 ms), with tables.
 * Lookup tables for the paper corridor (4 spacings x 4 relative offsets): build time and memory.
@@ -31,14 +29,13 @@ import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from advisory.advice.advisor import UNCERTAIN_CHOICES, AdvisorMemory, AdvisorParams, advise  # noqa: E402
+from advisory.advice.advisor import AdvisorMemory, AdvisorParams, advise  # noqa: E402
 from advisory.drivers.closed_loop import DriverModel, evaluate, hindsight_optimum, observe, red_light_violations, simulate  # noqa: E402
 from advisory.optimizer.dp import GridSpec  # noqa: E402
 from spat_feed.transport.actuated import ActuatedFeed, actuated_scenario, random_case  # noqa: E402
@@ -73,20 +70,19 @@ def random_run(seed: int):
     return len(red_light_violations(run.trajectory, sc)), run.max_advised_mps > sc.speed_limit_mps + 1e-9, run.overrides
 
 
-def actuated_run(seed: int, choice: str = "rules"):
+def actuated_run(seed: int):
     truth, feed, noise = random_case(seed)
-    run = simulate(truth, AdvisorParams(uncertain_choice=choice), driver=DriverModel(noise_mps=noise, seed=seed), feed=feed)
+    run = simulate(truth, AdvisorParams(), driver=DriverModel(noise_mps=noise, seed=seed), feed=feed)
     return (bool(red_light_violations(run.trajectory, truth)), bool(run.trajectory.accel_mps2.min() < -4.0 - 1e-9),
             run.max_advised_mps > truth.speed_limit_mps + 1e-9, run.surprises)  # fmt: skip
 
 
-def window_case(args, choice: str = "rules"):
+def window_case(args):
     """One paper timing with actuated lights of half-width ``w`` (draw ``seed``): advised, regular and hindsight-DP
-    costs on the same truth [$] (0 width: the fixed-time lights and the perfect feed); the advisor deciding by
-    ``choice`` (``AdvisorParams.uncertain_choice``)."""
+    costs on the same truth [$] (0 width: the fixed-time lights and the perfect feed)."""
     (x, y, s), w, seed = args
     sc = paper_scenario(x, y, s)
-    advisor = AdvisorParams(uncertain_choice=choice)
+    advisor = AdvisorParams()
     if w == 0:
         run, truth = simulate(sc, advisor), sc
     else:
@@ -101,14 +97,14 @@ def window_case(args, choice: str = "rules"):
             cost[0].time_s - cost[1].time_s, bool(red_light_violations(run.trajectory, truth)))  # fmt: skip
 
 
-def window_sweep(widths_s=(0.0, 5.0, 10.0, 15.0), draws: int = 3, workers: int = 2, choice: str = "rules") -> dict[float, np.ndarray]:
+def window_sweep(widths_s=(0.0, 5.0, 10.0, 15.0), draws: int = 3, workers: int = 2) -> dict[float, np.ndarray]:
     """``window_case`` over the 64 paper timings for each half-width: rows (advised, regular, DP, time lost, red)."""
     cases = [(x, y, s) for s in PAPER_SPACINGS_M for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S]
     out = {}
     with ProcessPoolExecutor(workers) as pool:
         for w in widths_s:
             jobs = [(c, w, d) for c in cases for d in range(1 if w == 0 else draws)]
-            out[w] = np.array(list(pool.map(partial(window_case, choice=choice), jobs, chunksize=4)), dtype=float)
+            out[w] = np.array(list(pool.map(window_case, jobs, chunksize=4)), dtype=float)
     return out
 
 
@@ -116,10 +112,8 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="bench_advisor", description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=10_000, help="randomized fixed-time closed-loop runs (default 10,000)")
     parser.add_argument("--actuated-runs", type=int, default=10_000, help="randomized actuated closed-loop runs (default 10,000)")
-    parser.add_argument("--choice", choices=UNCERTAIN_CHOICES, default="rules",
-                        help="the advisor's decision under uncertain timing in the actuated sweeps and runs (default %(default)s)")  # fmt: skip
     args = parser.parse_args(argv)
-    runs, actuated_runs, choice = args.runs, args.actuated_runs, args.choice
+    runs, actuated_runs = args.runs, args.actuated_runs
     workers = os.cpu_count() or 1
 
     t0 = time.perf_counter()
@@ -193,19 +187,19 @@ def main(argv: list[str] | None = None) -> None:
               f"(paper field test: -29 / -38 / -32 %)")
 
     t0 = time.perf_counter()
-    sweep = window_sweep((0.0, 10.0), workers=workers, choice=choice)
+    sweep = window_sweep((0.0, 10.0), workers=workers)
     fixed, act = sweep[0.0], sweep[10.0]
     fixed_saving = np.mean(1 - fixed[:, 0] / fixed[:, 1])
     act_saving = 1 - act[:, 0] / act[:, 1]
-    print(f"64 paper timings, actuated ±10 s (3 draws each, choice {choice}): mean saving vs the regular driver on the same truth "
+    print(f"64 paper timings, actuated ±10 s (3 draws each): mean saving vs the regular driver on the same truth "
           f"{100 * act_saving.mean():.1f} % = {100 * act_saving.mean() / fixed_saving:.0f} % of the fixed-time {100 * fixed_saving:.1f} % "
           f"(target >= 75 %); worst case {100 * -act_saving.min():+.1f} % cost (target <= +10 %); hindsight DP "
           f"{100 * np.nanmean(1 - act[:, 2] / act[:, 1]):.1f} %; red entries {int(act[:, 4].sum())} ({time.perf_counter() - t0:.0f} s)")
 
     t0 = time.perf_counter()
     with ProcessPoolExecutor(workers) as pool:
-        res = list(pool.map(partial(actuated_run, choice=choice), range(actuated_runs), chunksize=50))
-    print(f"{actuated_runs:,} randomized closed-loop runs with ACTUATED lights, choice {choice} (windows up to ±15 s, switch up to 10 % beyond, "
+        res = list(pool.map(actuated_run, range(actuated_runs), chunksize=50))
+    print(f"{actuated_runs:,} randomized closed-loop runs with ACTUATED lights (windows up to ±15 s, switch up to 10 % beyond, "
           f"dropouts, ±3 s skew; half the controllers publish their current phase only): {sum(r[0] for r in res)} red entries, {sum(r[1] for r in res)} hard brakes (> 4 m/s²), "
           f"{sum(r[2] for r in res)} advised speeds above the limit; {sum(r[3] for r in res)} surprises "
           f"(targets 0 / 0 / 0; {time.perf_counter() - t0:.0f} s on {workers} processes)")

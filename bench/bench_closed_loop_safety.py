@@ -1,7 +1,7 @@
 """Closed-loop safety: red entries and hard brakes over randomized actuated runs and the paper's 64 scenarios.
 
 Run: .venv/bin/python bench/bench_closed_loop_safety.py [--runs N] [--workers W] [--variants amber,no-amber]
-     [--driver lenient|careful] [--choice rules|expected_cost] [--first-seed S] [--no-paper] [--no-tables]
+     [--driver lenient|careful] [--first-seed S] [--no-paper] [--no-tables]
 
 * N randomized closed-loop runs per variant (``spat_feed.transport.actuated.random_case``, default 10,000): two
   lights 150-1000 m apart, cycle 40-120 s, windows up to ±15 s with the real switch anywhere inside and up to 10 %
@@ -14,8 +14,6 @@ Run: .venv/bin/python bench/bench_closed_loop_safety.py [--runs N] [--workers W]
   that red (at the crossing, or at the braking), have stopped at the line? Only the avoidable ones are the advisor's
   failures; both counts are printed.
 * The paper's 64 scenarios (fixed-time, exact SPaT), rules only and with the DP tables: red entries, hard brakes.
-* ``--choice``: how the advisor decides under uncertain timing (``AdvisorParams.uncertain_choice``), in every run
-  above; default ``rules``.
 
 Targets (issue 31): 0 red entries and 0 hard brakes with an amber and on the paper's scenarios; without an amber, 0
 avoidable ones (the exit status is 1 otherwise). Progress goes
@@ -35,7 +33,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from advisory.advice.advisor import UNCERTAIN_CHOICES, AdvisorParams  # noqa: E402
+from advisory.advice.advisor import AdvisorParams  # noqa: E402
 from advisory.drivers.closed_loop import DRIVERS, red_light_violations, simulate  # noqa: E402
 from advisory.signals import PAPER_SPACINGS_M, PAPER_TIMINGS_S, paper_scenario  # noqa: E402
 from spat_feed.transport.actuated import random_case, safety_events  # noqa: E402
@@ -47,18 +45,18 @@ VARIANTS = {"amber": None, "no-amber": 0.0}
 """Each variant's ``amber_s`` for :func:`random_case` (None: the lights' own 4 s amber)."""
 
 
-def actuated_run(job: tuple[int, str, str, str]):
+def actuated_run(job: tuple[int, str, str]):
     """One randomized run: (seed, red entries and hard brakes (:func:`safety_events`), advised above the limit, surprises)."""
-    seed, variant, driver, choice = job
+    seed, variant, driver = job
     truth, feed, noise = random_case(seed, amber_s=VARIANTS[variant])
-    run = simulate(truth, AdvisorParams(uncertain_choice=choice), driver=replace(DRIVERS[driver], noise_mps=noise, seed=seed), feed=feed)
+    run = simulate(truth, AdvisorParams(), driver=replace(DRIVERS[driver], noise_mps=noise, seed=seed), feed=feed)
     events = safety_events(run.trajectory, feed, AdvisorParams().firm_decel_mps2, HARD_BRAKE_MPS2)
     return seed, events, run.max_advised_mps > truth.speed_limit_mps + 1e-9, run.surprises
 
 
-def paper_run(job: tuple[tuple[float, float, float], bool, str]):
+def paper_run(job: tuple[tuple[float, float, float], bool]):
     """One paper scenario with exact SPaT: (case, red entries, hardest braking [m/s²])."""
-    case, with_tables, choice = job
+    case, with_tables = job
     sc = paper_scenario(*case)
     tables = None
     if with_tables:
@@ -66,7 +64,7 @@ def paper_run(job: tuple[tuple[float, float, float], bool, str]):
         from advisory.physics.params import model_params
 
         tables = _tables(case[2], AdviceTables, TableGrid, paper_offsets_s, model_params)
-    run = simulate(sc, AdvisorParams(uncertain_choice=choice), tables=tables)
+    run = simulate(sc, AdvisorParams(), tables=tables)
     return case, len(red_light_violations(run.trajectory, sc)), float(-run.trajectory.accel_mps2.min())
 
 
@@ -85,11 +83,11 @@ def _progress(label: str, done: int, total: int, t0: float) -> None:
     print(f"\r  {label}: {done:,}/{total:,} ({elapsed:.0f} s, ~{eta:.0f} s left)", end="", file=sys.stderr, flush=True)
 
 
-def run_variant(variant: str, seeds: range, driver: str, pool: ProcessPoolExecutor, choice: str = "rules") -> list:
+def run_variant(variant: str, seeds: range, driver: str, pool: ProcessPoolExecutor) -> list:
     t0 = time.perf_counter()
     out = []
     every = max(1, len(seeds) // 50)
-    for k, res in enumerate(pool.map(actuated_run, [(s, variant, driver, choice) for s in seeds], chunksize=max(1, min(50, len(seeds) // 40))), 1):
+    for k, res in enumerate(pool.map(actuated_run, [(s, variant, driver) for s in seeds], chunksize=max(1, min(50, len(seeds) // 40))), 1):
         out.append(res)
         if k % every == 0 or k == len(seeds):
             _progress(variant, k, len(seeds), t0)
@@ -106,7 +104,7 @@ def _line(seed: int, e) -> str:
     return f"  seed {seed} light {e.light + 1}: {what}; {known}; {decided}; {'AVOIDABLE' if e.avoidable else 'unavoidable'}"
 
 
-def report_variant(variant: str, res: list, driver: str, elapsed_s: float, choice: str = "rules") -> dict:
+def report_variant(variant: str, res: list, driver: str, elapsed_s: float) -> dict:
     events = [(seed, e) for seed, es, *_ in res for e in es]
     counts = {}
     for kind in ("red_entry", "hard_brake"):
@@ -117,7 +115,7 @@ def report_variant(variant: str, res: list, driver: str, elapsed_s: float, choic
     amber = "4 s amber (published as protected-clearance)" if VARIANTS[variant] is None else "no amber (a green turns red at once)"
     firm = AdvisorParams().firm_decel_mps2
     (red, red_avoidable), (hard, hard_avoidable) = counts["red_entry"], counts["hard_brake"]
-    print(f"{variant}: {len(res):,} randomized actuated runs, {amber}, {driver} driver, choice {choice}, ±3 s skew, dropouts: "
+    print(f"{variant}: {len(res):,} randomized actuated runs, {amber}, {driver} driver, ±3 s skew, dropouts: "
           f"{red} red entries ({red_avoidable} avoidable: advisor failures; {red - red_avoidable} unavoidable: told too late to stop at "
           f"{firm:g} m/s²); {hard} hard brakes > {HARD_BRAKE_MPS2:g} m/s² ({hard_avoidable} avoidable, {hard - hard_avoidable} unavoidable); "
           f"{above} advised speeds above the limit; {surprises} surprises ({elapsed_s:.0f} s)")
@@ -135,8 +133,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--variants", default="amber,no-amber", help="comma-separated, of: " + ", ".join(VARIANTS))
     parser.add_argument("--driver", default="lenient", choices=sorted(DRIVERS))
-    parser.add_argument("--choice", default="rules", choices=UNCERTAIN_CHOICES,
-                        help="how the advisor decides under uncertain timing (AdvisorParams.uncertain_choice; default %(default)s)")
     parser.add_argument("--no-paper", action="store_true", help="skip the paper's 64 scenarios")
     parser.add_argument("--no-tables", action="store_true", help="paper scenarios with the rules only")
     args = parser.parse_args(argv)
@@ -150,17 +146,17 @@ def main(argv: list[str] | None = None) -> int:
             cases = [(x, y, s) for s in PAPER_SPACINGS_M for x in PAPER_TIMINGS_S for y in PAPER_TIMINGS_S]
             for with_tables in (False,) if args.no_tables else (False, True):
                 t0 = time.perf_counter()
-                res = list(pool.map(paper_run, [(c, with_tables, args.choice) for c in cases], chunksize=4))
+                res = list(pool.map(paper_run, [(c, with_tables) for c in cases], chunksize=4))
                 red = [(c, n) for c, n, _ in res if n]
                 hard = [(c, b) for c, _, b in res if b > HARD_BRAKE_MPS2 + 1e-9]
-                print(f"paper's 64 scenarios, exact SPaT, {'with DP tables' if with_tables else 'rules only'}, choice {args.choice}: {sum(n for _, n in red)} red entries, "
+                print(f"paper's 64 scenarios, exact SPaT, {'with DP tables' if with_tables else 'rules only'}: {sum(n for _, n in red)} red entries, "
                       f"{len(hard)} hard brakes (> {HARD_BRAKE_MPS2:g} m/s²); hardest braking {max(b for *_, b in res):.2f} m/s² "
                       f"({time.perf_counter() - t0:.0f} s)" + (f"; red: {red}" if red else "") + (f"; hard: {hard}" if hard else ""))
                 failures += len(red) + len(hard)
         for variant in variants:
             t0 = time.perf_counter()
-            res = run_variant(variant, seeds, args.driver, pool, args.choice)
-            summary = report_variant(variant, res, args.driver, time.perf_counter() - t0, args.choice)
+            res = run_variant(variant, seeds, args.driver, pool)
+            summary = report_variant(variant, res, args.driver, time.perf_counter() - t0)
             failures += summary["avoidable"] + summary["above_limit"] + (summary["red_entries"] + summary["hard_brakes"] if variant == "amber" else 0)
     return 1 if failures else 0
 

@@ -1,4 +1,4 @@
-"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient] [--choice rules|expected_cost] [--hindsight-cache FILE]`: the advisor on a recorded controller, judged on
+"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient] [--hindsight-cache FILE]`: the advisor on a recorded controller, judged on
 what really happened.
 
 The log (the ``../shared/data/spat`` CSV, or our JSON lines: any format
@@ -65,8 +65,8 @@ on the advisor, so its result per approach is kept in a JSON file, written after
 output is bit-identical with or without it. An entry is keyed by what the DP and its regular driver depend on
 (:func:`hindsight_context`): the log's bytes (SHA-256) and ``--limit-s``, the Setup's geometry and speed limit,
 the regular driver's parameters, the DP grid, and a fingerprint of the code they run (physics, optimizer,
-regular driver, the truth's reading of the log); then the approach's groups and entry time. The advisor, its
-``--choice``, the store's rules and ``--every-s`` are not in the key, so one file serves every advisor variant.
+regular driver, the truth's reading of the log); then the approach's groups and entry time. The advisor, the store's
+rules and ``--every-s`` are not in the key, so one file serves every advisor variant.
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ from pathlib import Path
 
 import numpy as np
 
-from advisory.advice.advisor import UNCERTAIN_CHOICES, AdvisorParams, LightView, Observation
+from advisory.advice.advisor import AdvisorParams, LightView, Observation
 from advisory.drivers.closed_loop import DRIVERS, hindsight_optimum, red_light_violations, simulate
 from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import score_in_end_state
@@ -120,7 +120,6 @@ class Setup:
     horizon_s: float = 240.0  # an approach needs this much recording after its entry
     stale_after_s: float = DEFAULT_STALE_AFTER_S  # the store's (the service's ``spat_stale_after_s``)
     driver: str = "careful"  # the virtual driver (advisory.drivers.closed_loop.DRIVERS); the regular driver is the same person
-    choice: str = "rules"  # how the advisor decides under uncertain timing (AdvisorParams.uncertain_choice)
 
 
 @dataclass
@@ -255,7 +254,7 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
 
     params = model_params()
     driver = DRIVERS[setup.driver]
-    run = simulate(scenario, AdvisorParams(units="kmh", uncertain_choice=setup.choice), None, driver, feed=feed)
+    run = simulate(scenario, AdvisorParams(units="kmh"), None, driver, feed=feed)
     regular = regular_driver(scenario, driver.regular())  # the same person without advice
     reg = score_in_end_state(regular, params, v_lim)
     adv = score_in_end_state(run.trajectory, params, v_lim)
@@ -490,8 +489,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     ap.add_argument("--driver", choices=sorted(DRIVERS), default=Setup().driver,
                     help="the virtual driver, and the regular driver it is judged against (default %(default)s)")  # fmt: skip
-    ap.add_argument("--choice", choices=UNCERTAIN_CHOICES, default=Setup().choice,
-                    help="how the advisor decides under uncertain timing: its ordered rules, or the plan of least expected cost (default %(default)s)")
     ap.add_argument("--every-s", type=float, default=Setup().every_s, help="seconds between single-light entries (default %(default)s)")
     ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
     ap.add_argument("--workers", type=int, default=2)
@@ -504,7 +501,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = []
     for path in args.logs:
         try:
-            setup = Setup(every_s=args.every_s, driver=args.driver, choice=args.choice)
+            setup = Setup(every_s=args.every_s, driver=args.driver)
             results.append(evaluate_log(path, setup, args.workers, args.limit_s, progress=True, hindsight_cache=args.hindsight_cache))
         except (OSError, RecordedLogError, HindsightCacheError) as exc:
             print(f"ecodrive spat-eval: {exc}", file=sys.stderr)

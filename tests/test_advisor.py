@@ -89,17 +89,16 @@ def test_advised_speed_never_above_limit_and_always_crosses_on_green(v, d1, gap,
         assert np.isfinite(t1) and not obs.lights[0].is_red_at(t1)
 
 
-@pytest.mark.parametrize("choice", ["rules", "expected_cost"])
 @settings(max_examples=30, deadline=None)
 @given(st.floats(100.0, 150.0) | st.just(124.46))
-def test_a_slowing_plan_keeps_a_margin_before_a_reds_start(choice, d1_m):
+def test_a_slowing_plan_keeps_a_margin_before_a_reds_start(d1_m):
     """Issue 28's red entry (docs/TRAFFIC.md, ``--spat-queue``): light 1, 124.46 m ahead, green for 6 s more, then red
     with no amber; light 2, 400 m on, red until 42 s; 55 mph. "Second light: green in 42 seconds. Slow to 25 miles per
     hour, then coast." was priced crossing light 1 at 5.75 s, 0.25 s before its red: the driver, a reaction late,
     crossed 0.5 s into it. At a light that shows no amber no plan that slows the car reaches the line within
     ``green_margin_s`` before a red begins, nor in the red or the margin after it (at 124.46 m: holding the speed is
     over light 1 at 5.06 s, as the regular driver would be)."""
-    params = AdvisorParams(uncertain_choice=choice)
+    params = AdvisorParams()
     obs = Observation(24.58, 24.587, (LightView(1, d1_m, red_windows_s=((6.0, 36.0), (66.0, 96.0)), amber_s=0.0),
                                       LightView(2, d1_m + 400.0, red_windows_s=((0.0, 42.0), (66.0, 96.0)), amber_s=0.0)))  # fmt: skip
     adv, _ = advise(obs, params=params)
@@ -465,61 +464,6 @@ def test_a_red_the_car_may_beat_at_the_second_light_does_not_void_the_plan_for_t
     assert crossing_time_s(250.0, V, adv.target_speed_mps, P, KEEP_MODES[adv.action]) >= 20.0 + P.green_margin_s
 
 
-def test_no_sure_plan_slows_the_car_for_the_green_after_a_red_it_may_beat():
-    """The recorded controller (2019-05-17, group 12): green now, the next red may begin in 13.5 s, likely in 16.7 s,
-    at the latest in 25.1 s; 300 m at 50 km/h reaches the line at 21.6 s. A crawl to the green after that red is sure
-    ("Slow to 21 kilometers per hour, then coast"), and cost +68 % and 43 s when the red came at 23.3 s: the regular
-    driver went through. As with no sure plan, a car that may beat the red as it is is not slowed for the green after
-    it: no speed advice. Where it arrives after the red's latest start, the sure plan stands."""
-    v = 50 / 3.6
-    green = LightView(1, 300.0, True, 0.9, ((13.5, 65.5), (73.5, 245.5)), likely_red_windows_s=((16.7, 51.7), (85.7, 120.7)),
-                      late_red_windows_s=((25.1, 65.5), (115.1, 155.5)))  # fmt: skip
-    adv = advise(Observation(v, v, (green,)), params=AdvisorParams(units="kmh"))[0]
-    assert (adv.action, adv.reason) == ("none", "low_confidence") and 16.7 < 300.0 / v < 25.1
-    later = replace(green, late_red_windows_s=((20.0, 65.5), (115.1, 155.5)))
-    sure = advise(Observation(v, v, (later,)), params=AdvisorParams(units="kmh"))[0]
-    assert sure.reason == "green_wave" and crossing_time_s(300.0, v, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 65.5 + P.green_margin_s
-
-
-def test_a_red_the_car_may_beat_at_the_second_light_does_not_slow_it_for_the_green_after():
-    """Paper timing [15 15] s = 400 with ±10 s actuated windows (the bench's 3-draw sweep, draw 1), at entry: light 1
-    (100 m) is crossed on green; light 2 (500 m) may turn red at 5 s, likely at 15 s, at the latest at 25 s, and the
-    car at the limit is there at 20.3 s. A sure plan crawls to the green after that red ("Second light: red in 15
-    seconds. Slow to 18 miles per hour, then coast."), which lost the cycle the regular driver made when the red came
-    at 23.8 s (+65 %). As at the next light, a car that may beat the red as it is is not slowed: no speed advice. Where
-    it arrives after the red's latest start, the sure plan stands."""
-    light1 = LightView(1, 100.0, True, 0.88, ((5.0, 55.0), (65.0, 217.0)), likely_red_windows_s=((15.0, 45.0), (84.0, 100.0)),
-                       late_red_windows_s=((25.0, 55.0), (92.0, 131.0)))  # fmt: skip
-    light2 = LightView(2, 500.0, True, 0.88, ((5.0, 55.0), (65.0, 297.0)), likely_red_windows_s=((15.0, 45.0), (82.0, 111.0)),
-                       late_red_windows_s=((25.0, 55.0), (86.0, 129.0)))  # fmt: skip
-    assert 100.0 / V < 5.0 and 15.0 < 500.0 / V < 25.0
-    adv = advise(Observation(V, V, (light1, light2)))[0]
-    assert (adv.action, adv.reason, adv.message) == ("none", "low_confidence", "Signal timing uncertain. Drive normally.")
-    early = replace(light2, late_red_windows_s=((19.0, 55.0), (86.0, 129.0)))  # surely red before the car is there
-    sure = advise(Observation(V, V, (light1, early)))[0]
-    assert sure.reason == "green_wave" and sure.light_ahead == 2 and sure.target_speed_mps < V - 5.0
-    assert crossing_time_s(500.0, V, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 55.0 + P.green_margin_s
-    slowed = AdvisorMemory(last=replace(sure, target_speed_mps=8.0))  # already following a plan that slows it: kept at it
-    assert advise(Observation(V, V, (light1, light2)), slowed)[0].reason == "green_wave"
-
-
-def test_a_driver_reacting_to_a_plan_that_slows_it_is_judged_at_the_plans_speed():
-    """No plan is sure (a red of unknown end); the next red is likely from 40 s, at the latest from 55 s. At 50 km/h the
-    car is at the line at 43 s: it may beat that red as it goes, so no speed advice. A driver a second behind "slow to
-    8 m/s", not yet slowed, goes at 8 m/s: it meets that red, so the plan on the likely changes for the green after it
-    stands (the advice flipped between the two every second as the car sped up and slowed down: 2019-05-17 group 12,
-    +18 % and +21 % against the regular driver, now savings of 19 % and 21 %). (Green now as likely: with a red now,
-    likely over at 20 s, that red from 40 s would come after the next green, out of the advice's horizon, issue 29.)"""
-    v, params = 50 / 3.6, AdvisorParams(units="kmh")
-    lit = LightView(1, 600.0, True, 0.9, ((0.0, 300.0),), likely_red_windows_s=((40.0, 80.0),), late_red_windows_s=((55.0, 95.0),))
-    assert 40.0 < 600.0 / v < 55.0
-    assert advise(Observation(v, v, (lit,)), params=params)[0].reason == "low_confidence"
-    told = Advice("coast", "green_wave", 8.0, True, 20.0)
-    plan = advise(Observation(v, v, (lit,)), AdvisorMemory(last=told, spoken=told), params)[0]
-    assert plan.reason == "green_wave" and plan.target_speed_mps < v
-    assert crossing_time_s(600.0, v, plan.target_speed_mps, P, KEEP_MODES[plan.action]) >= 80.0 + P.green_margin_s
-
-
 class _Wants:
     """Tables stand-in that always wants ``speed_mps`` at the next line (the tables' crawl to a later green)."""
 
@@ -569,22 +513,6 @@ def test_no_paper_scenario_ends_far_behind_the_regular_driver(case):
     assert advised.time_s <= regular.time_s + 5.0
 
 
-def test_no_slowing_for_an_uncertain_red_that_likely_ends_before_the_car_gets_there():
-    """Paper [15 -15] s=400 with ±10 s windows: light 2 (500 m) is red, likely until 15 s, surely over by 25 s. Holding
-    the limit (20.3 s there) makes it if the red ends as likely; the sure plan ("slow to 43 mph, then coast") cost +19 %
-    against the regular driver when the red ended at 12 s. Holding is the regular driver's own motion: hold. Where
-    holding misses even the likely green, the sure plan stands."""
-    lights = (LightView(1, 100.0, True, 0.9, ((5.0, 55.0),), likely_red_windows_s=((15.0, 45.0),), late_red_windows_s=((25.0, 55.0),)),
-              LightView(2, 500.0, True, 0.9, ((0.0, 25.0), (35.0, 84.0)), likely_red_windows_s=((0.0, 15.0), (45.0, 70.0)),
-                        late_red_windows_s=((0.0, 25.0), (55.0, 84.0))))  # fmt: skip
-    adv = advise(Observation(V, V, lights))[0]
-    assert (adv.action, adv.target_speed_mps) == ("cruise", V)
-    later = (lights[0], LightView(2, 500.0, True, 0.9, ((0.0, 25.0), (35.0, 84.0)), likely_red_windows_s=((0.0, 19.0), (45.0, 70.0)),
-                                  late_red_windows_s=((0.0, 25.0), (55.0, 84.0))))  # fmt: skip
-    sure = advise(Observation(V, V, later))[0]
-    assert sure.target_speed_mps < V - 1.0 and crossing_time_s(500.0, V, sure.target_speed_mps, P, KEEP_MODES[sure.action]) >= 25.0 + P.green_margin_s
-
-
 def test_under_uncertain_timing_no_time_is_given_up_before_a_green_ends():
     """The recorded controller (2019-05-17, group 3): a car that coasted towards a red's likely end meets the green
     early; the next red may begin in 10 s, likely in 19 s; 145 m at 40 km/h. Coasting on (the kept plan: "Lift off and
@@ -619,66 +547,3 @@ def test_a_plan_is_not_dropped_while_the_driver_still_reacts_to_it():
     kept = advise(later, memory, params)[0]
     assert kept.reason == "green_wave" and kept.target_speed_mps == pytest.approx(limit)  # (was "Red light ahead. Lift off and coast.")
     assert advise(later, AdvisorMemory(), params)[0].reason != "green_wave"  # told nothing before: no racing an uncertain red
-
-
-def test_a_plan_on_the_likely_changes_is_kept_while_it_works_on_them():
-    """The recorded controller (2019-05-17, groups 8 and 9 in series, 300 m apart): both reds likely over in 16-19 s,
-    the next ones likely from 36 s. A plan for both lights (coast, to light 2's green after its next red) is found
-    one second, and not the next (the driver's reaction second moves the arrival past the plan's narrow window), so
-    the advice flipped between it and "Hold 50" every second for 16 s (+27 % against the regular driver; the
-    hindsight optimum saves 36 %). A plan made on the likely changes is kept while a driver following it still makes
-    the greens on them, as a sure plan is: -27 % -> 0 % here; both days 12.8 -> 13.4 % and 13.6 -> 14.7 % saving.
-    (Since the ninth session the car, at the limit, is not slowed for the green after light 2's next red where it may
-    beat that red as it goes: recorded, that red began at the latest 59.4 s out and the car is there at 42 s, so no
-    speed advice. With the red surely begun by then, the plan and its keeping, as they were.)"""
-    limit, params = 50 / 3.6, AdvisorParams(units="kmh")
-
-    def lights(x_m, shift_s, late_next_s=59.42):
-        return tuple(LightView(n + 1, d - x_m, True, 1.0, ((0.0, end - shift_s),), ((0.0, lik - shift_s), (35.82 - shift_s + 1.0, nxt - shift_s)),
-                               ((0.0, late - shift_s), (late_next_s - shift_s + 1.0, lnxt - shift_s)))
-                     for n, (d, end, lik, nxt, late, lnxt) in enumerate(((300.0, 224.02, 17.22, 103.22, 35.62, 129.82),
-                                                                         (600.0, 227.02, 20.22, 106.22, 38.62, 132.82))))  # fmt: skip
-
-    maybe = advise(Observation(limit, limit, lights(13.9, 1.0)), AdvisorMemory(), params)[0]
-    assert (maybe.action, maybe.reason) == ("none", "low_confidence") and 35.82 < (600.0 - 13.9) / limit < 59.42
-    plan, memory = advise(Observation(limit, limit, lights(13.9, 1.0, 38.0)), AdvisorMemory(), params)
-    assert (plan.action, plan.light_ahead) == ("coast", 2)
-    kept = advise(Observation(limit, limit, lights(27.8, 2.0, 38.0)), memory, params)[0]
-    assert (kept.action, kept.target_speed_mps) == ("coast", plan.target_speed_mps)  # (was "Hold 50.")
-    assert advise(Observation(limit, limit, lights(27.8, 2.0, 38.0)), AdvisorMemory(), params)[0].action == "cruise"  # a new plan: not found
-
-
-def test_a_plan_on_the_likely_changes_keeps_an_exact_lights_reds():
-    """Under uncertain timing the plan sees each light with its changes at their likely instants; a light whose
-    windows are exact (no likely view: both its changes known) is seen as it is. It was seen with no red at all, so a
-    plan for an uncertain first light could cross the second one in its red (05-01/05-17: 11 approaches moved)."""
-    from advisory.advice.advisor import _likely_only
-
-    exact = LightView(2, 600.0, True, 1.0, ((20.0, 50.0),))
-    assert _likely_only(exact).red_windows_s == ((20.0, 50.0),) and _likely_only(exact).is_red_at(30.0)
-    uncertain = LightView(1, 300.0, True, 1.0, ((0.0, 40.0),), ((0.0, 25.0),), ((0.0, 40.0),))
-    assert _likely_only(uncertain).red_windows_s == ((0.0, 25.0),)
-
-
-def test_a_car_launching_towards_an_uncertain_light_is_not_held_at_a_crawl():
-    """A car pulling away from the light before at 16 km/h, 300 m from the next one (50 km/h limit), with no plan to
-    follow. Green now, its red possibly from 15 s (likely from 40 s, surely by 60 s): no speed makes the green for
-    sure, so the plan is on the likely changes, and a normal drive (the limit in ~24 s) makes it. Capping that plan at
-    the car's own speed ("no racing an uncertain red") held it at 16 km/h ("Lift off and coast", 67 s to the line:
-    the green missed, 78 s lost on 2019-05-01 groups 9-10). And red now, likely green at 20 s, surely only in 150 s
-    (a phase skipped in some cycles): the plan meets the likely green at up to the limit, not at the crawl (it met a
-    short green after it too late: +150 s, US 1136 groups 2-5)."""
-    v, limit = 4.5, 50 / 3.6
-    green_now = LightView(1, 300.0, True, 1.0, red_windows_s=((15.0, 120.0),), likely_red_windows_s=((40.0, 100.0),),
-                          late_red_windows_s=((60.0, 120.0),))
-    advice, _ = advise(Observation(v, limit, (green_now,)), AdvisorMemory(last=Advice("none", "red_ahead")))
-    # a plan at the limit, or none because a normal drive makes it ("tight_green": the driver speeds up as it would)
-    assert advice.action != "coast" and advice.reason in ("green_wave", "tight_green"), advice
-    assert advice.target_speed_mps is None or (advice.target_speed_mps >= 3 * v and 300.0 / advice.target_speed_mps < 40.0)
-    red_now = LightView(1, 300.0, True, 1.0, red_windows_s=((0.0, 150.0),), likely_red_windows_s=((0.0, 20.0),),
-                        late_red_windows_s=((0.0, 150.0),))
-    advice, _ = advise(Observation(v, limit, (red_now,)), AdvisorMemory(last=Advice("none", "red_ahead")))
-    assert advice.target_speed_mps is not None and advice.target_speed_mps >= 2 * v
-    # a car cruising at the limit is still not told to race an uncertain red
-    cruising, _ = advise(Observation(limit, limit, (replace(green_now, distance_m=600.0),)), AdvisorMemory())
-    assert cruising.target_speed_mps is None or cruising.target_speed_mps <= limit + 1e-9

@@ -14,7 +14,7 @@ from advisory.advice.advisor import KEEP_MODES, MODE_CODES, AdvisorParams, Light
 from advisory.evaluation.scoring import score_trace
 from advisory.physics.params import model_params
 
-PARAMS = AdvisorParams(uncertain_choice="expected_cost")
+PARAMS = AdvisorParams()
 RATES, COAST, IDLE = choice.rate_tables(PARAMS.vehicle, PARAMS.comfort_decel_mps2, PARAMS.normal_accel_mps2, PARAMS.firm_decel_mps2)
 V_LIM = 50 / 3.6
 
@@ -29,6 +29,21 @@ def test_rate_tables_price_a_drive_as_the_scoring_does(row, a_mps2):
     mid = 0.5 * (t[1:] + t[:-1])
     priced = sum(np.interp(v0 + a_mps2 * m, np.arange(RATES.shape[1]) * choice.RATE_DV_MPS, RATES[row]) * 0.01 for m in mid)
     assert priced == pytest.approx(scored, rel=5e-3)
+
+
+@pytest.mark.parametrize("limit_mps", [50 / 3.6, 20.1, 24.6])
+def test_the_roads_price_on_time_makes_the_limit_the_cheapest_cruise(limit_mps):
+    """Brute force over the rate tables' speed grid: at the road's price on time, cost per metre (P(v) + λ) / v is
+    least at the limit (within a grid step), and a lower price makes a slower cruise cheaper. At the paper car's 55 mph
+    it is the lookup tables' own price (4.5e-4 $/s, chosen by the same rule: docs/ADVISOR.md, section 3)."""
+    lam = choice.steady_time_value_usd_per_s(RATES, limit_mps)
+    v = np.arange(1, RATES.shape[1]) * choice.RATE_DV_MPS
+    per_m = (RATES[choice.CRUISE, 1:] + lam) / v
+    assert abs(v[np.argmin(per_m)] - limit_mps) <= choice.RATE_DV_MPS
+    cheaper = (RATES[choice.CRUISE, 1:] + 0.5 * lam) / v
+    assert v[np.argmin(cheaper)] < limit_mps - choice.RATE_DV_MPS
+    if limit_mps == 24.6:
+        assert lam == pytest.approx(4.5e-4, rel=0.06)
 
 
 def test_a_plan_that_holds_the_limit_with_no_light_in_the_way_costs_cruising():
@@ -50,21 +65,23 @@ LAM = 4.5e-4  # $/s, the price on time in these tests
 LINE_M, END_M = 300.0, 400.0
 
 
-def _priced(vt, mode, reaction_s, accel_mps2, timings, line_m=LINE_M, clear_s=0.0, stop_plan=False):
+def _priced(vt, mode, reaction_s, accel_mps2, timings, line_m=LINE_M, clear_s=0.0, stop_plan=False, amber_max_s=None):
     """One plan from the limit towards one line, priced over ``timings`` (each a tuple of red windows, beginning with an
-    amber at least ``clear_s`` long; 0: none), equally likely (``stop_plan``: "prepare to stop"): cost, chance of a
+    amber at least ``clear_s`` long, at most ``amber_max_s``, default ``clear_s``; 0: none), equally likely (``stop_plan``: "prepare to stop"): cost, chance of a
     stop, through a red of every timing."""
     k = max(max(len(w) for w in timings), 1)
     windows = np.full((1, len(timings), k, 2), np.inf)
     for i, w in enumerate(timings):
         if w:
             windows[0, i, : len(w)] = w
+    amber_max_s = clear_s if amber_max_s is None else amber_max_s
     row = choice.ACCEL_COMFORT if accel_mps2 == PARAMS.comfort_accel_mps2 else choice.ACCEL_NORMAL
     cross = crossing_time_s(line_m, V_LIM, vt, PARAMS, {v: n for n, v in MODE_CODES.items()}[mode], reaction_s)
     cost, p_stop, through = choice.expected_costs(np.array([vt]), np.array([mode]), np.array([reaction_s]), np.array([row]), np.array([accel_mps2]),
                                                   V_LIM, np.array([line_m]), windows, k, END_M, V_LIM, PARAMS.green_margin_s, LAM,
                                                   np.array([[cross]]), RATES, COAST, IDLE, 1.5, 3.0, 2.0, PARAMS.reaction_s, PARAMS.min_cruise_speed_mps,
-                                                  np.array([clear_s]), np.full(len(timings), 1.0 / len(timings)), np.array([stop_plan]))  # fmt: skip
+                                                  np.array([clear_s]), np.full(len(timings), 1.0 / len(timings)), np.array([stop_plan]),
+                                                  np.array([amber_max_s]))  # fmt: skip
     return float(cost[0]), float(p_stop[0]), bool(through[0])
 
 
@@ -191,7 +208,7 @@ def _stop_share(advice, obs):
                                          obs.speed_mps, np.array([light.distance_m]), windows, windows.shape[2], light.distance_m + 100.0, V_LIM,
                                          PARAMS.green_margin_s, LAM, np.array([[cross]]), RATES, COAST, IDLE, 1.5, 3.0, 2.0, PARAMS.reaction_s,
                                          PARAMS.min_cruise_speed_mps, np.array([0.0 if light.amber_s == 0.0 else choice.AMBER_MIN_S]), weights,
-                                         np.array([False]))  # fmt: skip
+                                         np.array([False]), np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S]))  # fmt: skip
     return float(p_stop[0])
 
 
@@ -232,22 +249,26 @@ def test_a_red_that_comes_whatever_the_plan_is_met_by_lifting_off_then_a_stop():
     near, _ = advise(Observation(V_LIM, V_LIM, (_view(70.0, scenarios),)), params=PARAMS)
     assert far.action in ("coast", "ease_off") and far.target_speed_mps < V_LIM - PARAMS.hysteresis_mps or far.reason == "red_ahead"
     assert (near.action, near.reason) == ("stop", "red_ahead")
-    # the same reds after an amber (of unstated length, so at least 3 s): shown 0-3 s from now, while the car can still
-    # stop for it (at least 28 m out at 4 m/s²): a stop all the same
-    amber, _ = advise(Observation(V_LIM, V_LIM, (_view(70.0, scenarios, amber_s=None),)), params=PARAMS)
+    # the same reds after an amber (of unstated length, so at least 3 s): shown 0-3 s from now (give or take a second),
+    # while the car, 90 m out, can still stop for it (until 4.7 s, 24 m out at 4 m/s²): a stop all the same
+    amber, _ = advise(Observation(V_LIM, V_LIM, (_view(90.0, scenarios, amber_s=None),)), params=PARAMS)
     assert (amber.action, amber.reason) == ("stop", "red_ahead")
 
 
 def test_an_amber_the_car_cannot_stop_for_is_cleared():
-    """Recourse at an amber, hand numbers: at the limit, 60 m from the line (over it at 4.3 s), a red at 6.5 s in every
-    timing after at least 3 s of amber: when the amber shows (3.5 s) the car is 11 m out, short of the 24 m it needs at
-    4 m/s²: it clears the line in the amber, no stop, as cheap as no light at all. 150 m out with the red at 11.5 s,
-    the amber shows 32 m out: the car stops for it."""
-    near, p_near, _ = _priced(V_LIM, 0, 0.0, 2.0, (((6.5, 60.0),),) * 4, line_m=60.0, clear_s=3.0)
+    """Recourse at an amber, hand numbers: at the limit, 60 m from the line (over it at 4.3 s), a red at 7 s in every
+    timing after at least 3 s of amber: when the amber shows (4 s, give or take a second: ``choice.EDGE_S``) the car is
+    4-18 m out, short of the 24 m it needs at 4 m/s²: it clears the line in the amber, no stop, as cheap as no light at
+    all. 150 m out with the red at 10.5 s, the amber shows 32-60 m out: the car stops for it. Between the two, with
+    the red at 6 s, the amber shows at 2-4 s, the car can still stop until it is 24 m out (2.58 s): a stop with a chance
+    of 0.58 / 2 = 0.29 (a plan a second slower would stop for an amber that this one clears)."""
+    near, p_near, _ = _priced(V_LIM, 0, 0.0, 2.0, (((7.0, 60.0),),) * 4, line_m=60.0, clear_s=3.0)
     free, _, _ = _priced(V_LIM, 0, 0.0, 2.0, ((),), line_m=60.0)
     assert p_near == 0.0 and near == pytest.approx(free, rel=1e-9)
-    _, p_far, _ = _priced(V_LIM, 0, 0.0, 2.0, (((11.5, 60.0),),) * 4, line_m=150.0, clear_s=3.0)
+    _, p_far, _ = _priced(V_LIM, 0, 0.0, 2.0, (((10.5, 60.0),),) * 4, line_m=150.0, clear_s=3.0)
     assert p_far == 1.0
+    _, p_edge, _ = _priced(V_LIM, 0, 0.0, 2.0, (((6.0, 60.0),),) * 4, line_m=60.0, clear_s=3.0)
+    assert p_edge == pytest.approx(((60.0 - V_LIM**2 / 8.0) / V_LIM - 2.0) / 2.0, abs=0.01)
 
 
 def test_a_green_the_car_makes_as_it_goes_in_every_timing_is_not_advised_away():

@@ -255,7 +255,7 @@ def test_the_choice_prices_the_followers_time():
     ahead at 50 km/h: alone, the car is slowed to reach the line after it; with twenty cars behind that lose what it
     loses, time is priced 21 times over and the plan reaches the line no later (a faster target, or no speed advice:
     drive on and stop if the red is still on)."""
-    params = AdvisorParams(uncertain_choice="expected_cost")
+    params = AdvisorParams()
     v = 50 / 3.6
     light = LightView(1, 350.0, red_windows_s=((0.0, 31.0),), likely_red_windows_s=((0.0, 25.0),), late_red_windows_s=((0.0, 31.0),),
                       scenario_red_windows_s=tuple(((0.0, 19.0 + k),) for k in range(13)))  # fmt: skip

@@ -14,18 +14,13 @@ How the advice is made (docs/ADVISOR.md):
    speeds within [min cruise speed, limit] are ever advised.
 3. **Target**: among feasible speeds, the DP lookup tables' target for this position, speed and signal
    phase when the tables match the live SPaT; otherwise the highest feasible speed (the rule-based closed
-   form). If no speed is sure under an actuated light's windows: a plan on its likely changes (never faster
-   than now, never slowing for a red the car may beat as it is). If none: prepare to stop when a stop is
-   likely and near, "Red light ahead." when far.
-4. **Hysteresis**: the previous target is kept while it stays feasible and close (a plan made on the likely
-   changes, while it works on them for a driver already following it, unless the car may beat a red as it is
-   or the plan gives up time before a green ends); ``speak`` is raised only when the action changes, or the
-   target moves by ``speak_change_mps``.
+   form). If none: prepare to stop when a stop is near, "Red light ahead." when far.
+4. **Hysteresis**: the previous target is kept while it stays feasible and close; ``speak`` is raised only when
+   the action changes, or the target moves by ``speak_change_mps``.
 
-Under uncertain timing ``AdvisorParams(uncertain_choice="expected_cost")`` replaces the rules of 3 and 4 by the plan
-of least expected cost over the lights' equally likely timings, each plan priced with recourse (:func:`_choose`,
-:mod:`advisory.advice.choice`; docs/ADVISOR.md, "The choice on the distribution"); not yet the default (its targets
-are not met: the same section).
+Under uncertain timing (an actuated or predicted light) the plan of least expected cost over the lights' equally
+likely timings, each plan priced with recourse, replaces 2-4 (:func:`_choose`, :mod:`advisory.advice.choice`;
+docs/ADVISOR.md, "The choice on the distribution"); the ordered rules it replaced are gone.
 """
 
 from __future__ import annotations
@@ -39,7 +34,7 @@ from numba import njit
 
 from advisory.advice import choice
 from advisory.physics.energy import road_load_force_n
-from advisory.physics.params import PAPER_54KWH, TIME_VALUE_USD_PER_S, VehicleParams
+from advisory.physics.params import PAPER_54KWH, VehicleParams
 
 MPH_PER_MPS = 1 / 0.44704
 KMH_PER_MPS = 3.6
@@ -195,10 +190,6 @@ def time_price(obs: Observation) -> float:
     return 1.0 + max(obs.followers, 0.0)
 
 
-UNCERTAIN_CHOICES = ("rules", "expected_cost")
-"""How the advisor decides under uncertain timing (``AdvisorParams.uncertain_choice``)."""
-
-
 @dataclass(frozen=True, slots=True)
 class AdvisorParams:
     """Advisor settings. Units in names."""
@@ -218,9 +209,8 @@ class AdvisorParams:
     stop_lead_s: float = 2.0  # "prepare to stop" this long before a comfortable stop must begin (earlier: "Red light ahead.") [s]
     hold_stale_s: float = 30.0  # through a dropout this short the last advice is held (re-checked on the last SPaT) [s]
     hysteresis_mps: float = 1.0
-    uncertain_choice: str = "rules"  # under uncertain timing: "rules" (the ordered rules) or "expected_cost" (advisory.advice.choice)
-    stop_risk_frac: float = 0.1  # expected_cost: a plan may make a stop likelier than driving normally by at most this [-]
-    time_value_usd_per_s: float = TIME_VALUE_USD_PER_S  # expected_cost: the price on time (as the tables') [$/s]
+    stop_risk_frac: float = 0.1  # uncertain timing: a plan may make a stop likelier than driving normally by at most this [-]
+    time_value_usd_per_s: float | None = None  # uncertain timing: the price on time; None: the road's (choice.steady_time_value_usd_per_s) [$/s]
     speak_change_mps: float = 5 * 0.44704
     speed_step_mps: float = 0.44704  # candidates in whole mph: the spoken number is the advised one
     units: str = "mph"
@@ -229,8 +219,6 @@ class AdvisorParams:
     def __post_init__(self) -> None:
         if self.units not in ("mph", "kmh"):
             raise ValueError("units must be 'mph' or 'kmh'")
-        if self.uncertain_choice not in UNCERTAIN_CHOICES:
-            raise ValueError(f"uncertain_choice must be one of {UNCERTAIN_CHOICES}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -269,9 +257,6 @@ def coast_decel_mps2(v_mps: float, vehicle: VehicleParams) -> float:
 LINE_SPEED_TIE_MPS = 0.2
 """Targets whose speeds at the next line differ by less than this count as equally close to the tables'
 wanted speed there; the tie goes to the target nearest it. [m/s]"""
-TIGHT_SLACK_S = 0.5
-"""Under uncertain timing, a plan reaching the line more than this much later than a normal drive gives up time
-against a red that may come early: the driver is left to drive normally instead (reason ``tight_green``). [s]"""
 
 MODE_CODES = {"auto": 0, "brake_coast": 1, "brake": 2, "firm": 3}
 """How the speed changes towards a target (see :func:`crossing_time_s`), as kernel codes."""
@@ -386,6 +371,31 @@ def _crossing_times_s(d_m, v0, vt, mode, reaction_s, brake_mps2, firm_mps2, acce
     return out
 
 
+@njit(cache=True, inline="always")
+def _in_red(tc, windows_s, j, slowing, no_amber, after_red_s):
+    """A crossing at ``tc`` of line ``j`` inside a red of ``windows_s`` (padded red windows, (lines, k, 2)), or within
+    ``after_red_s`` after one ends, or, for a plan that slows the car (``slowing``) at a light that shows no amber
+    (``no_amber``, (lines,)), as long before one begins (:func:`_green_mask`)."""
+    before_red_s = after_red_s if slowing and no_amber[j] else 0.0
+    for k in range(windows_s.shape[1]):
+        a = windows_s[j, k, 0]
+        if (a - before_red_s if a > 0.0 else a) <= tc < windows_s[j, k, 1] + after_red_s:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _red_crossings(cross, windows_s, slowing, no_amber, after_red_s):
+    """Which plans (m,) reach a line that shows no amber inside a red of ``windows_s`` or its margins (:func:`_in_red`;
+    ``cross``: time to each line (m, lines), ``slowing``: the plans that slow the car (m,)). bool (m,)"""
+    out = np.zeros(cross.shape[0], dtype=np.bool_)
+    for c in range(cross.shape[0]):
+        for j in range(cross.shape[1]):
+            if no_amber[j] and _in_red(cross[c, j], windows_s, j, slowing[c], no_amber, after_red_s):
+                out[c] = True
+    return out
+
+
 @njit(cache=True)
 def _green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v,
                 t_of_x):  # fmt: skip
@@ -402,17 +412,9 @@ def _green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, 
     for i in range(speeds.size):
         slowing = mode == 1 or speeds[i] < v0 - 1e-9
         for j in range(n_lines):
-            before_red_s = after_red_s if slowing and no_amber[j] else 0.0
             tc = _time_to_line_s(distances_m[j], v0, speeds[i], mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x)
-            if not np.isfinite(tc):
+            if not np.isfinite(tc) or _in_red(tc, windows_s, j, slowing, no_amber, after_red_s):
                 ok[i] = False
-                break
-            for k in range(windows_s.shape[1]):
-                a = windows_s[j, k, 0]
-                if (a - before_red_s if a > 0.0 else a) <= tc < windows_s[j, k, 1] + after_red_s:
-                    ok[i] = False
-                    break
-            if not ok[i]:
                 break
     return ok
 
@@ -700,84 +702,6 @@ def _kept(lines: _Lines, usable: tuple[LightView, ...], obs: Observation, params
     )
 
 
-def _likely_only(light: LightView) -> LightView:
-    """The light with each change at its likely instant, as a plan under uncertainty sees it (an exact light as it is)."""
-    if light.likely_red_windows_s is None:
-        return light
-    return LightView(light.intersection_id, light.distance_m, light.fresh, light.confidence_frac, light.likely_red_windows_s or (), light.likely_red_windows_s,
-                     amber_s=light.amber_s)
-
-
-def _beats_maybe(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, speed_mps: float | None = None) -> bool:
-    """Holding its speed (``speed_mps``, default the car's), the car reaches a line before a red's latest start but
-    after its likely one: it may go through as it is (the regular driver would try). Slowing for the green after
-    that red cost a whole cycle whenever the red came late; no speed makes the green for sure: no speed advice
-    (issue 13, spat-eval)."""
-    v = obs.speed_mps if speed_mps is None else speed_mps
-    if v <= 0.0:
-        return False
-    for light in lights:
-        if light.late_red_windows_s is None or light.likely_red_windows_s is None:
-            continue
-        t = light.distance_m / v
-        if any(a <= t < b for a, b in light.likely_red_windows_s) and not any(a <= t < b for a, b in light.late_red_windows_s):
-            return True
-    return False
-
-
-def _reacting_mps(obs: Observation, last: Advice | None) -> float:
-    """The car's speed as it goes: a driver still reacting to a plan that slows it goes at the plan's speed (a car
-    still speeding up, a second behind "slow to 18", is not about to beat the red it was slowed for)."""
-    if last is not None and last.reason == "green_wave" and last.target_speed_mps is not None:
-        return min(obs.speed_mps, last.target_speed_mps)
-    return obs.speed_mps
-
-
-def _may_beat(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, last: Advice | None) -> bool:
-    """Rule (2) of the robust rule: the car, as it goes, may beat a red (:func:`_beats_maybe`) at the next line, or,
-    driving normally (at the limit, following no slower plan) and crossing the next line on green as likely, at the
-    one after it. A plan that slows it for the green after that red gives way to no speed advice. "As it goes": a
-    driver still reacting to a plan that slows it is taken at the plan's speed (:func:`_reacting_mps`)."""
-    if _beats_maybe(lights[:1], obs, params, _reacting_mps(obs, last)):
-        return True
-    v, nxt = obs.speed_mps, lights[0]
-    normal = v >= obs.speed_limit_mps - params.hysteresis_mps and not (
-        last is not None and last.target_speed_mps is not None and last.target_speed_mps < v - params.hysteresis_mps)
-    return (len(lights) > 1 and normal and _green_crossing(_likely_only(nxt), nxt.distance_m / v, params.green_margin_s)
-            and _beats_maybe(lights[1:], obs, params))  # fmt: skip
-
-
-def _holds_on_likely(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> bool:
-    """Holding its speed, the car crosses every line on green if each change comes at its likely time (margin kept)."""
-    return obs.speed_mps > 0.0 and all(
-        _green_crossing(_likely_only(light), light.distance_m / obs.speed_mps, params.green_margin_s)
-        for light in lights
-    )
-
-
-def _gives_up_time(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, planned_s: float, to_red_s: float | None) -> bool:
-    """Green now, under uncertain timing: a normal drive is over the next line before its likely red (``to_red_s``)
-    and makes the lines after it as likely, while the plan reaches the line more than :data:`TIGHT_SLACK_S` later
-    (still before that red): time given up against a red that may come early."""
-    if to_red_s is None or (normal_s := _normal_drive_s(lights[0].distance_m, obs, params)) >= to_red_s:
-        return False
-    return normal_s + TIGHT_SLACK_S < planned_s < to_red_s and all(
-        _green_crossing(light, _normal_drive_s(light.distance_m, obs, params), params.green_margin_s) for light in lights[1:])
-
-
-def _kept_on_likely(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams, last: Advice, red: bool) -> bool:
-    """A plan made on the likely changes still works on them for a driver already following it (no new reaction
-    delay): it is kept, as a sure plan is while it stays sure. Not while the car may beat a red as it is, nor where it
-    gives up time before a green ends (those rules stand over a kept plan as over a new one)."""
-    likely = tuple(_likely_only(light) for light in lights)
-    if likely == lights or not _kept(_Lines.of(likely), likely, obs, params, last):
-        return False
-    if red:
-        return True
-    planned_s = crossing_time_s(lights[0].distance_m, obs.speed_mps, last.target_speed_mps, params, KEEP_MODES[last.action], 0.0)
-    return not _beats_maybe(lights[:1], obs, params) and not _gives_up_time(likely, obs, params, planned_s, _countdown_view(lights[0]).seconds_to_red())
-
-
 def _countdown_view(light: LightView) -> LightView:
     """The light with each change at its likely instant (what is said: "Green in 12 seconds")."""
     if light.likely_red_windows_s is None:
@@ -931,17 +855,17 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     rates, coast, idle = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
     x_end = float(d_m[-1]) + v_lim * v_lim / (2.0 * params.normal_accel_mps2)
     windows, weights = _timings(usable)
-    lam = params.time_value_usd_per_s * time_price(obs)  # the car's time and its followers' (Observation.followers)
+    lam_road = choice.steady_time_value_usd_per_s(rates, v_lim) if params.time_value_usd_per_s is None else params.time_value_usd_per_s
+    lam = lam_road * time_price(obs)  # the car's time and its followers' (Observation.followers)
     clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
     cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,
                                                   params.green_margin_s, lam, cross, rates, coast, idle, brake, firm,
-                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan)  # fmt: skip
-    slowing = (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9)
-    for j, light in enumerate(usable):
-        if clear[j] == 0.0:  # no amber warns of its reds: no plan reaches the line where one may be on (the sure windows),
-            # nor, slowing the car, within the margin before one may begin (as :func:`_green_mask`)
-            for a, b in light.red_windows_s:
-                through |= (cross[:, j] >= (a - params.green_margin_s * slowing if a > 0.0 else a)) & (cross[:, j] < b + params.green_margin_s)
+                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan,
+                                                  np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S for light in usable]))  # fmt: skip
+    # no amber warns of a light's reds: no plan reaches the line where one may be on (the sure windows), nor, slowing the
+    # car, within the margin before one may begin (the feasibility of the rules, :func:`_green_mask`)
+    lines = _Lines.of(usable)
+    through |= _red_crossings(cross, lines.windows_s, (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9), lines.no_amber, params.green_margin_s)
     allowed = (p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9) & ~through
     if not keep:
         allowed[-1] = False
@@ -1010,84 +934,38 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         return Advice("none", "too_close", light_red=red, seconds_to_change_s=to_change)
     usable = tuple(light for light in obs.lights[:2] if light.fresh and light.confidence_frac >= params.min_confidence_frac)
     last = memory.last
-    if params.uncertain_choice == "expected_cost" and any(light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in usable):
+    if any(light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in usable):
         return _choose(obs, usable, last, params, red, to_change)  # uncertain timing: the plan of least expected cost
     both = _Lines.of(usable)
     if last is not None and last.target_speed_mps is not None and last.action in KEEP_MODES:
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
-        if _kept(both, usable, obs, params, last) or (last.reason == "green_wave" and _kept_on_likely(usable, obs, params, last, red)):
+        if _kept(both, usable, obs, params, last):
             action = last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise"
             return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source)
     n_lines, mode, feasible = _search(both, obs, params)
-    uncertain = any(light.likely_red_windows_s is not None for light in usable)
-    slows = uncertain and feasible.size and feasible.max() < obs.speed_mps - params.hysteresis_mps
-    if slows and _holds_on_likely(usable, obs, params):
-        # the sure plan slows the car for a red that likely ends before it gets there as it is: holding its speed is
-        # the regular driver's own motion (it meets a late red only where the regular driver does too), while slowing
-        # for a red that ends early cost up to +19 % against it (±10 s windows): plan on the likely changes
-        feasible = feasible[:0]
-    elif slows and _may_beat(usable, obs, params, last):
-        # the sure plan slows the car for the green after a red it may beat as it is: as where no plan is sure, no speed
-        # advice (a crawl to the next green cost +68 % when the red came late: 2019-05-17, group 12; at the second light,
-        # "slow to 18 mph" 500 m out for a red likely in 15 s lost the cycle the regular driver made at 20 s: +65 %,
-        # ±10 s windows); a driver a second behind a plan that slows it is taken at the plan's speed (else the advice
-        # see-sawed between the plan and "drive normally" as the car sped up and slowed down)
-        return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
-    on_likely = False  # the plan is on the likely changes: no speed is sure
-    if feasible.size == 0 and uncertain:
-        # no speed makes the greens whenever the changes come: plan on the likely changes (never into a red that
-        # minEnd guarantees: the likely windows contain it; the after-red margin still applies), never faster than now
-        # (no racing an uncertain red), and never slowing for a red the car may beat as it goes (_may_beat)
-        # (at the second light only where the car, driving normally, crosses the first on green: a red the car may beat
-        # at the second light does not void a plan for the first)
-        if _may_beat(usable, obs, params, last):
-            return Advice("none", "low_confidence", light_red=red, seconds_to_change_s=to_change)
-        if obs.speed_mps > 0.0 and nxt.unknown_at(nxt.distance_m / obs.speed_mps):
-            # as it is, the car meets a phase whose state nobody knows: no plan slows it for the green after that
-            # phase (the regular driver went through it), and none crosses in it: no data, said so
-            return Advice("none", "no_spat", light_red=red, seconds_to_change_s=to_change)
-        usable = tuple(_likely_only(light) for light in usable)
-        both = _Lines.of(usable)
-        n_lines, mode, feasible = _search(both, obs, params)
-        # (the speed the last plan asked for counts as the car's: a driver still reacting to it is not racing). Not a
-        # cap for a car pulling away with no plan (below twice the slowest advised speed: from a stop or a crawl it
-        # speeds up to the limit as the regular driver does): capped there, a car launching from the light before
-        # crawled at 16 km/h to the next light and missed its green (+150 s, US 1136 groups 2-5; +78 s, 2019-05-01
-        # groups 9-10). A car near the limit told nothing is still not sent racing an uncertain red.
-        told = last.target_speed_mps if last is not None and last.reason == "green_wave" and last.target_speed_mps is not None else 0.0
-        launching = told == 0.0 and obs.speed_mps < 2.0 * params.min_cruise_speed_mps
-        if not launching:
-            feasible = feasible[feasible <= max(obs.speed_mps, told, params.min_cruise_speed_mps) + 1e-9]
-        on_likely = True
-    exact = nxt.likely_red_windows_s is None
-    to_red = None if red or not (exact or on_likely) else _countdown_view(nxt).seconds_to_red()
+    to_red = None if red else nxt.seconds_to_red()  # (every light here is exact: uncertain ones went to _choose)
     if to_red is not None and (normal_s := _normal_drive_s(nxt.distance_m, obs, params)) < to_red:
         planned_s = crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible.max()), params, mode) if feasible.size else np.inf
-        if planned_s >= to_red if exact else _gives_up_time(usable, obs, params, planned_s, to_red):
+        if planned_s >= to_red:
             # green now, and a normal drive (speeding up to the limit at the regular driver's rate: no advice to react
-            # to) is over the line before the red, where no comfortable speed is (exact timing): a plan for the green
-            # after the red, or a "prepare to stop", would lose a cycle that the driver makes without advice. Under
-            # uncertain timing, a plan that reaches this line later than a normal drive, which makes the lines after it
-            # too (as likely): any time given up is a chance of meeting the red (was: a lift-off kept into such a
-            # green, a cycle lost); a plan slowed for the next light's green is kept
+            # to) is over the line before the red, where no comfortable speed is: a plan for the green after the red,
+            # or a "prepare to stop", would lose a cycle that the driver makes without advice
             return Advice("none", "tight_green", light_red=False, seconds_to_change_s=to_change)
     if feasible.size == 0:
         arrival = crossing_time_s(nxt.distance_m, obs.speed_mps, obs.speed_mps, params) if obs.speed_mps > 0 else np.inf
         if red and nxt.seconds_to_green() - arrival < params.short_wait_s and obs.speed_mps > 0:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)
         slowest = crossing_time_s(nxt.distance_m, obs.speed_mps, params.min_cruise_speed_mps, params, "brake")
-        uncertain = nxt.likely_red_windows_s is not None
-        if (uncertain or nxt.unknown_windows_s) and not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
-            # a stop is possible but not likely: no "prepare to stop" for a car that most likely goes through; nor for
+        if nxt.unknown_windows_s and not (nxt.likely_red_at(arrival) or nxt.likely_red_at(slowest)):
             # a phase whose state nobody knows (a group published "unavailable" between its greens: the regular
-            # driver went through it, the advised one was stopped): no data, said so
+            # driver went through it, the advised one was stopped): no "prepare to stop", no data, said so
             reason = "no_spat" if nxt.unknown_at(arrival) or nxt.unknown_at(slowest) else "low_confidence"
             return Advice("none", reason, light_red=red, seconds_to_change_s=to_change)
         v = obs.speed_mps
         to_green = _countdown_view(nxt).seconds_to_green_after(min(arrival, slowest))
         far = nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)
-        if far and (uncertain or not math.isfinite(to_green)):
-            # far from a red whose end is uncertain: no stop asked for yet (a stop so far out halted the car 220 m
+        if far and not math.isfinite(to_green):
+            # far from a red whose end is unknown: no stop asked for yet (a stop so far out halted the car 220 m
             # short of the line), but lift off: arriving later only helps (the red may end first), and what coasting
             # sheds the stop would have braked away anyway. Not at a crawl (launching from the light before): there
             # only what is ahead. A known end keeps the early gentle stop (the advisor re-plans from it)

@@ -19,9 +19,9 @@ forecast) and chooses the cheapest in expectation (docs/ADVISOR.md, "Under uncer
   probability: the outer timings are not the forecast's extremes, and the wide ones weigh the chance of a change
   outside the window the light states.
 * **Cost**: paper Eq. 4 (electricity plus battery wear, :mod:`advisory.physics.model`) of that motion, plus a price
-  on time (``advisory.physics.params.TIME_VALUE_USD_PER_S``, the lookup tables' own: the one at which cruising
-  at the limit is the cheapest steady speed). Priced per step from rate tables made once
-  per vehicle with the model itself (:func:`rate_tables`).
+  on time: the road's, the least at which cruising at its limit is the cheapest steady speed
+  (:func:`steady_time_value_usd_per_s`; the lookup tables' ``TIME_VALUE_USD_PER_S`` is the same rule at 55 mph).
+  Priced per step from rate tables made once per vehicle with the model itself (:func:`rate_tables`).
 * **Chance constraint**: a plan may make a stop likelier than driving normally only up to ``stop_risk_frac``.
   The safety rule is a hard constraint: a published red is red in every timing (``spat_feed.prediction.observe
   .red_hold_s``), and a plan that reaches the line inside it (in every timing) is never advised; nor, at a light that
@@ -63,6 +63,10 @@ driver's hardest braking). [m/s²]"""
 AMBER_MIN_S = 3.0
 """An amber lasts at least this long where the light shows one of unstated length (the shortest yellow change interval,
 MUTCD 4D.26). [s]"""
+
+AMBER_MAX_S = 6.0
+"""An amber of unstated length lasts at most this long (the longest yellow change interval, MUTCD 4D.26): when it
+shows, and so whether the car can still stop for it, is known only to within the two. [s]"""
 
 WAIT_CAP_S = 150.0
 """A red whose end no timing knows is priced as lasting this long from its start (the same instant for every plan: a
@@ -162,6 +166,11 @@ def _drive(vt, mode, reaction_s, accel_row, accel_mps2, v0, d_stop_m, x_end_m, v
             v1, h = 0.0, v / -a
         if v1 <= 0.0 and v <= 0.0 and t >= reaction_s:
             return np.inf, np.inf, k, brake  # stopped short of the lines: not a plan
+        if x + 0.5 * (v + v1) * h > x_end_m:  # the last step ends at x_end_m (a whole step past it priced time not driven)
+            d = x_end_m - x
+            disc = v * v + 2.0 * a * d
+            h = d / v if abs(a) < 1e-12 else (np.sqrt(disc) - v) / a if disc >= 0.0 else h
+            v1 = v + a * h
         h = max(h, 1e-6)
         usd += _at(rates[row], 0.5 * (v + v1)) * h
         x += 0.5 * (v + v1) * h
@@ -201,6 +210,21 @@ def _state_at(path, n, tau):
     f = (tau - path[0, lo]) / max(path[0, hi] - path[0, lo], 1e-12)
     return (path[1, lo] + f * (path[1, hi] - path[1, lo]), path[2, lo] + f * (path[2, hi] - path[2, lo]),
             path[3, lo] + f * (path[3, hi] - path[3, lo]))  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _no_stop_s(path, n, d_line, decel):
+    """When the car of a priced motion (``path``, ``n`` knots) can no longer stop before a line ``d_line`` ahead at
+    ``decel`` (the distance left shorter than v² / 2 decel; linear between knots); inf if it always can. [s]"""
+    g_prev = np.inf
+    for i in range(n):
+        g = d_line - path[1, i] - path[2, i] * path[2, i] / (2.0 * decel)
+        if g < 0.0:
+            if i == 0:
+                return path[0, 0]
+            return path[0, i - 1] + g_prev / (g_prev - g) * (path[0, i] - path[0, i - 1])
+        g_prev = g
+    return np.inf
 
 
 @njit(cache=True, inline="always")
@@ -259,13 +283,14 @@ def _stop_usd(tb, xb, vb, ub, usd, tc, green_s, d_line, x_end_m, v_lim, rates, u
 
 @njit(cache=True)
 def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s,
-                   cross_s, rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan):  # fmt: skip
+                   cross_s, rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan,
+                   amber_max_s):  # fmt: skip
     """Expected cost [$] (motion plus ``lam_usd_per_s`` per second to ``x_end_m``), chance of a stop [-], and whether
     the plan crosses a red of every timing (the hard constraint) of each candidate plan (m,), over the timings
     ``windows`` (lines, timings, k, 2: red windows, padded with +inf), of probability ``weights`` (timings,: summing to
     1), of the lines ``d_m`` (lines,), reached at
     ``cross_s`` (m, lines) as the plans go. The amber before a red still to come (``clear_s`` (lines,): how long at
-    least, 0 where the light shows none) comes before its window.
+    least, 0 where the light shows none; ``amber_max_s`` (lines,): how long at most) comes before its window.
 
     **With recourse**: the advice is made again every second, so in each timing the car follows the plan only until
     the light shows what that timing is, then does the best it can knowing it (module docstring):
@@ -294,12 +319,15 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     through = np.zeros(m, dtype=np.bool_)
     up, down = _ramps(rates, comfort, normal)
     path = np.empty((4, MAX_KNOTS + 1))
+    no_stop = np.empty(n_lines)
     for c in range(m):
         usd, t_end, n_knots, brake = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort,
                                             firm, normal, path)  # fmt: skip
         if not np.isfinite(t_end):
             cost[c], p_stop[c] = np.inf, 1.0
             continue
+        for j in range(n_lines):
+            no_stop[j] = _no_stop_s(path, n_knots, d_m[j], AMBER_STOP_MPS2)
         for j in range(n_lines):  # the hard constraint: a crossing inside a red of every timing
             sure = True
             for s in range(n_sc):
@@ -318,6 +346,16 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 if kb >= 0:
                     blocked = j
                     break
+            amber = blocked >= 0 and windows[blocked, s, kb, 0] > 0.0 and clear_s[blocked] > 0.0 and cross_s[c, blocked] < windows[blocked, s, kb, 0]
+            if amber:
+                # a red still to come, after an amber, that the car would be over the line before: the amber's onset is
+                # known to within EDGE_S as the red's start is (_met), and to within its length (``clear_s`` to
+                # ``amber_max_s``), uniform between; where it shows while the car can still stop for it at
+                # AMBER_STOP_MPS2 the car stops, where it shows later the car clears it (a knife edge priced as a chance:
+                # a plan a second slower than another stops for an amber that the other clears)
+                a = windows[blocked, s, kb, 0]
+                first, last = max(a - amber_max_s[blocked], 0.0) - 0.5 * EDGE_S, max(a - clear_s[blocked], 0.0) + 0.5 * EDGE_S
+                w = min(max((no_stop[blocked] - first) / (last - first), 0.0), 1.0)
             if w < 1.0 and stop_plan[c]:
                 # told to stop, the car stops at the line however the light shows (braked from where a comfortable stop
                 # must begin), then pulls away: dear wherever the light is likely green
@@ -363,11 +401,8 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
             if a > 0.0:  # a red still to come: it shows with its amber
                 shown = max(a - clear_s[blocked], 0.0)
                 x, v, u = _state_at(path, n_knots, shown)
-            if a > 0.0 and (d_line - x <= 0.0 or v <= 0.0):
+            if a > 0.0 and (v <= 0.0 or (d_line - x <= 0.0 and not amber)):
                 c_usd = plan  # over the line before it showed (or stopped short: the plan's own)
-                stopped = False
-            elif a > 0.0 and clear_s[blocked] > 0.0 and cross_s[c, blocked] < a and d_line - x < v * v / (2.0 * AMBER_STOP_MPS2):
-                c_usd = plan  # too close to stop for the amber when it shows: over the line in it, before the red
                 stopped = False
             elif a > 0.0 and shown < tb and not stop_plan[c]:
                 # shown before a stop must begin: glide to the line to reach it after the red, no slower than allowed
@@ -406,3 +441,15 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
         cost[c] = total
         p_stop[c] = stops
     return cost, p_stop, through
+
+
+def steady_time_value_usd_per_s(rates: np.ndarray, speed_mps: float) -> float:
+    r"""The least price on time [$/s] at which cruising at ``speed_mps`` is the cheapest steady speed: with cost rate
+    :math:`P(v)` [$/s] (the cruise row of :func:`rate_tables`), cost per metre :math:`(P + \lambda) / v` is least at
+    :math:`v` where :math:`\lambda = v P'(v) - P(v)`. Time priced lower, a plan dawdles below the limit for its own sake;
+    priced higher, it buys seconds with energy. ``advisory.physics.params.TIME_VALUE_USD_PER_S`` is this price at the
+    paper car's 55 mph (24.6 m/s). Never below 0."""
+    v = np.arange(rates.shape[1]) * RATE_DV_MPS
+    i = min(max(int(round(speed_mps / RATE_DV_MPS)), 1), v.size - 2)
+    slope = (rates[CRUISE, i + 1] - rates[CRUISE, i - 1]) / (2.0 * RATE_DV_MPS)
+    return max(float(speed_mps * slope - np.interp(speed_mps, v, rates[CRUISE])), 0.0)
