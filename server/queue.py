@@ -6,7 +6,9 @@ light's current red was first seen on. For a fix on the route it hands the advis
 the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~advisory.advice.queue.apply`: each red the car
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.
-Follow the car in front." (reason ``queue``); the advisor then plans afresh. The trips behind a car are probes too:
+Follow the car in front." (reason ``queue``); the advisor then plans afresh. Not where the cars ahead leave it no time
+to cross before the next light's red (``QueueEstimate.stop_behind``, :func:`advisory.advice.queue.behind_s`): that
+car is advised by the advisor, which sees the line closed to it until the red's end, and prepares to stop. The trips behind a car are probes too:
 with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
 :meth:`QueueBoard.check` price (docs/TRAFFIC.md, "Queue-aware advice", item 4).
 
@@ -68,7 +70,9 @@ class QueueBoard:
             since = None
         probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s != here]  # ahead, and behind (followers)
         est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, None if since is None else t_unix_s - since)
-        if est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
+        if est.stop_behind:  # the cars ahead take the last of the green: following them would take it into the red
+            self._queued.pop(trip_id, None)  # (the advisor plans its stop: the line is closed to it until the red's end)
+        elif est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
             self._queued[trip_id] = nxt.intersection_id  # it follows the car in front until over that light's line
         elif self._queued.get(trip_id) not in (None, nxt.intersection_id):
             del self._queued[trip_id]
