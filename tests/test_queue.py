@@ -3,7 +3,6 @@ queue-blind target stop while the queue-aware one glides."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -121,16 +120,18 @@ def test_board_holds_a_queued_car_until_it_is_over_the_line_then_plans_afresh():
     assert board.held == 3
 
 
-@pytest.mark.parametrize("amber_s, red_s, stops", [(0.0, 4.0, True), (0.0, 6.0, True), (0.0, 8.0, False), (None, 5.0, True), (None, 6.0, False)])
+@pytest.mark.parametrize("amber_s, red_s, stops", [(0.0, 4.0, True), (0.0, 6.0, True), (0.0, 8.0, False), (None, 5.0, False), (4.0, 4.0, False)])
 def test_a_car_behind_one_that_takes_the_last_of_the_green_prepares_to_stop_instead_of_following(amber_s, red_s, stops):
     """At 22 m/s, 80 m before a light that turns red in ``red_s`` (its own drive at the limit there in 3.25 s: it
     would make it alone), 20 m behind a connected car at 15 m/s, slower: the old service said "follow the car in
-    front", behind which it crosses after the red. By hand: that car, speeding up at 2 m/s² from 15 m/s, is 7.5 m past
-    the line (67.5 m) after (sqrt(15² + 2 x 2 x 67.5) - 15) / 2 = 3.62 s, this car crosses 2 s later, at 5.62 s; it is
-    to stop where that is after the red (with an amber) or less than 2 s before it (a red that no amber announces:
-    SUMO's paper lights, seed 1 at 900 veh/h, entered 0.5 s into it), and advised so; else it follows."""
-    lead = (math.sqrt(15.0**2 + 4.0 * 67.5) - 15.0) / 2.0 + M.headway_s
-    assert behind_s(80.0, [(20.0, 15.0)], 24.5872) == pytest.approx(lead) and lead == pytest.approx(5.62, abs=0.01)
+    front", behind which it crosses after the red. By hand: that car, holding its speed, is 7.5 m past the line
+    (67.5 m) after 4.5 s, and this car crosses (20 - 7.5) / 15 = 0.83 s later (the time it is behind that car now, less
+    than the 2 s headway), at 5.33 s. At a light that shows no amber (SUMO's paper lights, seed 1 at 900 veh/h: entered
+    0.5 s into such a red) it is to stop where that is less than 2 s before the red (it closes in on a slower car), and
+    advised so; else it follows, and where an amber announces the red (or may: unknown) it follows too, as the
+    regular driver meets any amber."""
+    lead = 67.5 / 15.0 + 12.5 / 15.0
+    assert behind_s(80.0, [(20.0, 15.0)]) == pytest.approx(lead) and lead == pytest.approx(5.33, abs=0.01)
     lights = (LightView(1, 80.0, red_windows_s=((red_s, red_s + 30.0), (red_s + 60.0, red_s + 90.0)), amber_s=amber_s),)
     obs = Observation(22.0, 24.5872, lights, position_m=100.0)
     est = estimate(obs, [Probe(20.0, 15.0)])
