@@ -68,7 +68,9 @@ class QueueBoard:
         else:
             self._red_since.pop(nxt.intersection_id, None)
             since = None
-        probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s != here]  # ahead, and behind (followers)
+        # ahead, and behind (followers); each where it is now: its last fix (up to a second older than this one, as
+        # the fixes of a corridor arrive one after the other) advanced at its speed
+        probes = [Probe(s + v * (t_unix_s - t) - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s != here]
         est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, None if since is None else t_unix_s - since)
         if est.stop_behind:  # the cars ahead take the last of the green: following them would take it into the red
             self._queued.pop(trip_id, None)  # (the advisor plans its stop: the line is closed to it until the red's end)

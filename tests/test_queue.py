@@ -147,6 +147,18 @@ def test_a_car_behind_one_that_takes_the_last_of_the_green_prepares_to_stop_inst
     assert advice.action == "stop" and advice.target_speed_mps == 0.0 and "Prepare to stop" in advice.message
 
 
+def test_the_board_sees_each_probe_where_it_is_at_the_fix_not_where_it_was():
+    """A corridor's fixes arrive one after the other: a car behind that posted 0.9 s before this one is counted where it
+    is now (its fix advanced at its speed): 86.4 - 0.9 x 24 = 64.8 m behind at 24 m/s, 2.7 s, within the 3 s window
+    of the followers (:func:`followers`), though its fix says 3.6 s."""
+    lights = (LightView(1, 125.0, red_windows_s=((10.0, 40.0),)),)
+    board = QueueBoard()
+    board.see("c", "behind", 100.0, Observation(24.0, 24.5872, tuple(replace(lv, distance_m=211.4) for lv in lights), position_m=13.6))
+    seen, held = board.see("c", "car", 100.9, Observation(24.0, 24.5872, lights, position_m=100.0))
+    assert held is None and seen.followers == 1.0
+    assert followers(Observation(24.0, 24.5872, lights), [Probe(-86.4, 24.0)]) == 0.0  # where its fix was: not behind
+
+
 def test_engine_with_queue_awareness_tells_a_car_behind_a_queue_to_follow():
     """Through the service's own path: two trips on one corridor, the first standing at a red, the second creeping
     up behind it: the second is told to follow (reason ``queue``) once the queue board is on (ECO_QUEUE_AWARE)."""

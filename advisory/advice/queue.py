@@ -27,14 +27,14 @@ follows the car in front, and the advice resumes, planned afresh, once it is fre
 traffic ahead allows; and a plan made in a queue is a crawl: every faster speed reaches the line before the queue has
 gone, and the advisor keeps a plan that still works, to the green after next).
 
-The cars ahead bound when this car can cross, holding their speed now (their plans are not known here), and this car
-following them (Newell's car following: their trajectory shifted by a headway and a jam spacing,
-:func:`behind_s`). Where that bound leaves a car that could make a green alone no time to cross before a red that no
-amber announces (less ``no_amber_margin_s`` where it closes in on a slower car), the line is closed to it until the
-red's end and it is not told to follow (``stop_behind``): it prepares to stop. Decided within the distance the car needs to stop at the
-others' rate plus a headway's travel (traced in SUMO, paper_s400 at 900 veh/h, every car connected: cars told to
-follow a platoon slowing for the next light's queue entered a red no amber announced, 0.5 s in; a cap at the car
-ahead's speed instead cost the advised cars +49-115 % of time).
+The cars ahead bound when this car can cross (:func:`behind_s`: each holds its speed now, its plan not known here,
+and this car follows it as in Newell's car following, a time gap and a jam spacing behind). Where that bound leaves a
+car that could make a green alone no time to cross before a red that no amber announces (less ``no_amber_margin_s``
+where they set its crossing), the line is closed to it until the red's end and it is not told to follow
+(``stop_behind``): it prepares to stop. Decided within the distance the car needs to stop at the others' rate plus a
+headway's travel. (Traced in SUMO, paper_s400 at 900 veh/h, every car connected: cars told to follow a platoon
+slowing for the next light's queue entered a red no amber announced, 0.5 s in; a cap at the car ahead's speed
+instead cost the advised cars +49-115 % of time.)
 
 The cars behind count too (issue 28, item 2: the traffic behind is not to be slowed): :func:`followers` expects the
 cars a slower plan holds up (the connected ones behind it, the others from the flow), the advisor prices time ``1 +
@@ -74,9 +74,10 @@ class QueueModel:
     drive_accel_mps2: float = 2.0  # another car (ahead or behind) speeds up to the limit at this, as the regular driver does (paper Sec. 2)
     follow_gap_s: float = 3.0  # a connected car ahead within this time gap (plus one jam spacing) sets the pace
     no_amber_margin_s: float = 2.0
-    """Closing in on a slower car, at a light that shows no amber (``LightView.amber_s`` = 0), this car is to be over
-    the line this long before the red behind it (:func:`behind_s`), or it stops there: the advisor's ``green_margin_s``
-    before such a red, for a car whose crossing a car ahead sets. [s]"""
+    """Where the cars ahead set its crossing (:func:`behind_s` later than its own drive, or closing in on a slower car),
+    at a light that shows no amber (``LightView.amber_s`` = 0), this car is to be over the line this long before the
+    red, or it stops there: the advisor's ``green_margin_s`` before such a red, for a car whose crossing a car ahead
+    sets. [s]"""
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,7 +103,7 @@ class QueueEstimate:
     """Cars expected behind this one that a slower plan holds up (:func:`followers`). [-]"""
     stop_behind: bool = False
     """At the next light, whose red no amber announces, the connected cars ahead let this car cross no sooner than that
-    red (less the margin behind a slower car, :func:`behind_s`): it is to stop there, not to follow them."""
+    red (less the margin where they set its crossing, :func:`behind_s`): it is to stop there, not to follow them."""
 
 
 def _first_red(light: LightView) -> tuple[float, float] | None:
@@ -161,20 +162,20 @@ def estimate(
                 continue
             holding += 1
         free = max(crossed + model.headway_s, 0.0) if holding else 0.0
-        # behind the cars ahead (their trajectories, :func:`behind_s`): where they leave this car no time to cross
-        # before a red that no amber announces, one it could otherwise make, the line is closed to it until that red's
-        # end (an amber warns the driver behind them as it warns any other: the regular driver's rule)
-        # (decided within the distance the car needs to stop at the others' rate plus a headway's travel: farther out,
-        # the cars ahead may yet leave it time, and it can still stop when it gets there)
-        # (the margin where no amber announces the red: behind a slower car, whose own plan the service does not know:
-        # traced, such cars were slowing for the next light's queue, not speeding up as the model has them)
+        # behind the cars ahead (:func:`behind_s`): where they leave this car no time to cross before a red that no
+        # amber announces, one it could make alone, the line is closed to it until that red's end (an amber warns the
+        # driver behind a car as any other). Decided within the distance the car needs to stop at the others' rate plus a headway's travel: farther out
+        # the cars ahead may yet leave it time, and it can still stop when it gets there.
         v = obs.speed_mps
         deciding = light.distance_m <= v * v / (2.0 * model.drive_accel_mps2) + v * model.headway_s
         if light.amber_s == 0.0 and 0.0 < start and free < start and light.distance_m / v_free < start and deciding:
             lead_cars = [(p.ahead_m, p.speed_mps) for p in probes if before < p.ahead_m]
             lead = behind_s(light.distance_m, lead_cars, model)
             nearest = min(lead_cars, default=None)
-            margin = model.no_amber_margin_s if nearest is not None and _closing(obs, nearest[1]) else 0.0
+            # the margin where the cars ahead set its crossing (later than its own drive, or closing in on a slower car):
+            # their plans, not known here, make it uncertain (traced: platoons slowing for the next light's queue)
+            held = lead > normal_drive_s(light.distance_m, v, obs.speed_limit_mps, model.drive_accel_mps2)
+            margin = model.no_amber_margin_s if held or (nearest is not None and _closing(obs, nearest[1])) else 0.0
             if lead + margin > start:
                 free = max(free, lead, start)
                 stop_behind = stop_behind or i == 0
