@@ -107,7 +107,7 @@ def warm_up(engine: Engine) -> None:
     t = np.array([0.0, 1.0, 2.0])
     v = np.array([20.0, 20.0, 20.0])
     trip_score("warm-up", scenario, engine.settings.default_vehicle, t, v, np.array([0.0, 20.0, 40.0]), engine.settings.speed_limit_mps)
-    readings = {ix: PlanReading(plan) for (ix, _), plan in scenario.fixed_plans().items()}
+    readings = {ix: PlanReading.of_plan(plan) for (ix, _), plan in scenario.fixed_plans().items()}
     for station_m in (0.0, corridor.length_m / 2):  # the advisor's kernels, with the tables and without
         obs = observation(corridor, station_m, 15.0, 30.0, readings, engine.settings.speed_limit_mps)
         for tables in (engine.tables.get(corridor.name), None):

@@ -6,7 +6,9 @@ light's current red was first seen on. For a fix on the route it hands the advis
 the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~advisory.advice.queue.apply`: each red the car
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.
-Follow the car in front." (reason ``queue``); the advisor then plans afresh. The trips behind a car are probes too:
+Follow the car in front." (reason ``queue``); the advisor then plans afresh. Not where the cars ahead leave it no time
+to cross before the next light's red (``QueueEstimate.stop_behind``, :func:`advisory.advice.queue.behind_s`): that
+car is advised by the advisor, which sees the line closed to it until the red's end, and prepares to stop. The trips behind a car are probes too:
 with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
 :meth:`QueueBoard.check` price (docs/TRAFFIC.md, "Queue-aware advice", item 4).
 
@@ -29,8 +31,7 @@ Redis unreachable: this worker's own probes, said in ``/health`` and ``/metrics`
 from __future__ import annotations
 
 import heapq
-import math
-from bisect import bisect_left, bisect_right, insort
+from bisect import bisect_left, insort
 from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, Observation
@@ -52,7 +53,7 @@ class Lane:
     * ``by_time``: ``(t_unix_s, trip)`` as a heap, to forget the stale probes without looking at the others (an entry
       left by a later fix of the same trip is skipped when it comes up);
     * ``top_mps``: at least the fastest probe's speed (exact after a rebuild, raised by each fix), which bounds how far
-      behind a car can still reach a line in time (:meth:`behind`).
+      a car can have moved since its fix and how far behind it can still reach a line in time (:meth:`near`, :meth:`QueueBoard.estimate`).
 
     Every change to the table goes through :meth:`put`, :meth:`drop` and :meth:`expire`; a table replaced as a whole
     (the shared board's sync: its ``loads`` counter moved) is indexed again at the next call (:meth:`fresh`)."""
@@ -117,31 +118,22 @@ class Lane:
                 del self.table[trip_id]
                 self._unindex(trip_id)
 
-    def ahead(self, here_m: float, reach_m: float) -> list[Probe]:
-        """The cars ahead of station ``here_m`` by less than ``reach_m`` (the farthest light the estimate looks at),
-        and the nearest one ahead wherever it is (a slower car close ahead sets the pace)."""
-        order, n = self.order, len(self.order)
-        first = bisect_right(order, (here_m, math.inf))
-        end = bisect_left(order, (here_m + reach_m,), first)
-        while end < n and order[end][0] - here_m < reach_m:  # the bounds as ``s - here_m < reach_m`` rounds
-            end += 1
-        while end > first and order[end - 1][0] - here_m >= reach_m:
-            end -= 1
-        return [Probe(s - here_m, v) for s, _, _, v in order[first : max(end, min(first + 1, n))]]
+    def near(self, here_m: float, t_unix_s: float, lo_m: float, hi_m: float) -> list[Probe]:
+        """The cars that were, at their last fix, between ``lo_m - top_mps x MAX_AGE_S`` and ``hi_m`` ahead of station
+        ``here_m`` (a superset of those that can be in ``[lo_m, hi_m)`` now, rather a few too many), each where it is at
+        ``t_unix_s`` (:func:`probe_at`); none at ``here_m`` itself (this car)."""
+        order, table = self.order, self.table
+        first = bisect_left(order, (here_m + lo_m - self.top_mps * MAX_AGE_S - 1e-6,))
+        end = bisect_left(order, (here_m + hi_m + 1e-6,), first)
+        return [probe_at(table[tid], here_m, t_unix_s) for s, _, tid, _ in order[first:end] if s != here_m]
 
-    def behind(self, here_m: float, line_m: float, reach_s: float, limit_mps: float) -> list[Probe]:
-        """The cars behind station ``here_m`` that could reach the line ``line_m`` ahead of it within ``reach_s``: none
-        farther than ``reach_s`` at the faster of the limit and ``top_mps`` (a normal drive is never faster, see
-        :func:`advisory.advice.queue.normal_drive_s`)."""
-        order = self.order
-        reach_m = reach_s * max(self.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6  # rounding: rather one car too many
-        end = bisect_left(order, (here_m,))
-        first = bisect_left(order, (here_m + line_m - reach_m,), 0, end)
-        while first > 0 and line_m - (order[first - 1][0] - here_m) <= reach_m:  # the bound as ``line_m - ahead_m`` rounds
-            first -= 1
-        while first < end and line_m - (order[first][0] - here_m) > reach_m:
-            first += 1
-        return [Probe(s - here_m, v) for s, _, _, v in order[first:end]]
+
+def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) -> Probe:
+    """A car's last fix ``(t_unix_s, station_m, speed_mps)`` as a probe for a fix at ``here_m`` at ``t_unix_s``: where
+    it is now, its last fix (up to a second older, as a corridor's fixes arrive one after the other; never moved
+    back for one stamped later) advanced at its speed (a car 2.5 s behind is not read 3.5 s behind)."""
+    t, s, v = probe
+    return Probe(s + v * max(t_unix_s - t, 0.0) - here_m, v)
 
 
 class QueueBoard:
@@ -172,7 +164,7 @@ class QueueBoard:
         here = float(obs.position_m)
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
         lane.expire(t_unix_s, MAX_AGE_S)
-        est = self.estimate(lane, here, obs, self.red_elapsed(obs, t_unix_s))
+        est = self.estimate(lane, here, t_unix_s, obs, self.red_elapsed(obs, t_unix_s))
         return self.answer(trip_id, obs, est, last_reason)
 
     def red_elapsed(self, obs: Observation, t_unix_s: float) -> float | None:
@@ -188,7 +180,9 @@ class QueueBoard:
         """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
         stands in the next light's queue or closes in on a slower car, until it is over that light's line."""
         nxt = obs.lights[0]
-        if est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
+        if est.stop_behind:  # the cars ahead take the last of the green: following them would take it into the red
+            self._queued.pop(trip_id, None)  # (the advisor plans its stop: the line is closed to it until the red's end)
+        elif est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
             self._queued[trip_id] = nxt.intersection_id  # it follows the car in front until over that light's line
         elif self._queued.get(trip_id) not in (None, nxt.intersection_id):
             del self._queued[trip_id]
@@ -208,17 +202,24 @@ class QueueBoard:
             lane.fresh()
         return lane
 
-    def estimate(self, lane: Lane, here_m: float, obs: Observation, red_elapsed_s: float | None) -> QueueEstimate:
+    def estimate(self, lane: Lane, here_m: float, t_unix_s: float, obs: Observation, red_elapsed_s: float | None) -> QueueEstimate:
         """:func:`advisory.advice.queue.estimate` over the cars that can change it, the same answer as over every car of
-        the corridor (``tests/server/test_queue_index.py``): the cars between this one and the farthest light of ``obs``
-        (and the nearest one ahead), then, for the followers, the cars behind that can reach the next line within the
-        window :func:`~advisory.advice.queue.followers` counts them in (this car's own normal drive to it or the
-        instant the queue ahead lets it cross, whichever is later, plus ``follow_gap_s``)."""
+        the corridor, each where it is at the fix (``tests/server/test_queue_index.py``): the cars ahead up to the
+        farthest light of ``obs`` plus what one following them across it keeps behind them (a jam spacing and a
+        headway: :func:`~advisory.advice.queue.behind_s`), or up to the time gap a car ahead sets the pace within,
+        whichever is farther; then, for the followers, the cars behind that can reach the next line within the window
+        :func:`~advisory.advice.queue.followers` counts them in (this car's own normal drive to it or the instant the
+        queue ahead lets it cross, whichever is later, plus ``follow_gap_s``): none farther than that window at the
+        faster of the limit and the fastest car (a normal drive is never faster)."""
         m = self.model
-        est = estimate(obs, lane.ahead(here_m, max(light.distance_m for light in obs.lights)), m, self.arrivals_vps, self.connected_share, red_elapsed_s)
+        far_m = max(light.distance_m for light in obs.lights) + m.jam_spacing_m + m.headway_s * lane.top_mps
+        reach_m = max(far_m, obs.speed_mps * m.follow_gap_s + m.jam_spacing_m)
+        ahead = [p for p in lane.near(here_m, t_unix_s, 0.0, reach_m) if p.ahead_m > 0.0]
+        est = estimate(obs, ahead, m, self.arrivals_vps, self.connected_share, red_elapsed_s)
         line_m, limit_mps = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
         mine_s = normal_drive_s(line_m, obs.speed_mps, limit_mps, m.drive_accel_mps2)
-        behind = lane.behind(here_m, line_m, max(est.free_at_s[0], mine_s) + m.follow_gap_s, limit_mps)
+        window_m = (max(est.free_at_s[0], mine_s) + m.follow_gap_s) * max(lane.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6
+        behind = [p for p in lane.near(here_m, t_unix_s, line_m - window_m, 0.0) if p.ahead_m < 0.0]
         return replace(est, followers=followers(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share))
 
     def check(self, obs: Observation, advice: Advice, params: AdvisorParams) -> Advice:

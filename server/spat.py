@@ -177,7 +177,7 @@ class SharedSpat:
         for ix in scenario.corridor.intersections:
             sg = ix.signal_groups[0].id
             if (ix.id, sg) in plans:
-                self._fixed[ix.id] = PlanReading(plans[(ix.id, sg)])
+                self._fixed[ix.id] = PlanReading.of_plan(plans[(ix.id, sg)])
             else:
                 self._live.append((ix.id, sg))
 
@@ -231,7 +231,7 @@ class ScenarioSpat:
             self._fixed = self._from_plans(scenario.fixed_plans())
 
     def _from_plans(self, plans: dict[tuple[int, int], Plan]) -> dict[int, PlanReading]:
-        return {ix.id: PlanReading(plans.get((ix.id, ix.signal_groups[0].id))) for ix in self.scenario.corridor.intersections}  # live light: no data
+        return {ix.id: PlanReading.of_plan(plans.get((ix.id, ix.signal_groups[0].id))) for ix in self.scenario.corridor.intersections}  # live light: no data
 
     def readings(self, t_unix_s: float) -> dict[int, PlanReading]:
         if self._fixed is not None:

@@ -3,11 +3,13 @@ queue-blind target stop while the queue-aware one glides."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from advisory.advice.advisor import Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, time_price
-from advisory.advice.queue import Probe, QueueModel, apply, cut_off, estimate, followers, gives_up_green, normal_drive_s
+from advisory.advice.queue import Probe, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s
 from server.queue import QueueBoard
 
 M = QueueModel()
@@ -116,6 +118,45 @@ def test_board_holds_a_queued_car_until_it_is_over_the_line_then_plans_afresh():
     past = Observation(9.0, 13.4, (LightView(2, 300.0, red_windows_s=((50.0, 80.0),)),), position_m=303.0)
     assert board.see("c", "car", t + 13.0, past, "queue")[1] is None and QueueBoard.fresh("queue")
     assert board.held == 3
+
+
+@pytest.mark.parametrize("amber_s, red_s, stops", [(0.0, 4.0, True), (0.0, 6.0, True), (0.0, 8.0, False), (None, 5.0, False), (4.0, 4.0, False)])
+def test_a_car_behind_one_that_takes_the_last_of_the_green_prepares_to_stop_instead_of_following(amber_s, red_s, stops):
+    """At 22 m/s, 80 m before a light that turns red in ``red_s`` (its own drive at the limit there in 3.25 s: it
+    would make it alone), 20 m behind a connected car at 15 m/s, slower: the old service said "follow the car in
+    front", behind which it crosses after the red. By hand: that car, holding its speed, is 7.5 m past the line
+    (67.5 m) after 4.5 s, and this car crosses (20 - 7.5) / 15 = 0.83 s later (the time it is behind that car now, less
+    than the 2 s headway), at 5.33 s. At a light that shows no amber (SUMO's paper lights, seed 1 at 900 veh/h: entered
+    0.5 s into such a red) it is to stop where that is less than 2 s before the red (it closes in on a slower car), and
+    advised so; else it follows, and where an amber announces the red (or may: unknown) it follows too, as the
+    regular driver meets any amber."""
+    lead = 67.5 / 15.0 + 12.5 / 15.0
+    assert behind_s(80.0, [(20.0, 15.0)]) == pytest.approx(lead) and lead == pytest.approx(5.33, abs=0.01)
+    lights = (LightView(1, 80.0, red_windows_s=((red_s, red_s + 30.0), (red_s + 60.0, red_s + 90.0)), amber_s=amber_s),)
+    obs = Observation(22.0, 24.5872, lights, position_m=100.0)
+    est = estimate(obs, [Probe(20.0, 15.0)])
+    assert est.follow_mps == 15.0 and est.stop_behind is stops  # closing in on a slower car, either way
+    board = QueueBoard()
+    board.see("c", "lead", 0.0, Observation(15.0, 24.5872, tuple(replace(lv, distance_m=60.0) for lv in lights), position_m=120.0))
+    seen, held = board.see("c", "car", 0.0, obs)
+    if not stops:
+        assert held is not None and held.reason == "queue"
+        return
+    assert held is None and seen.lights[0].red_windows_s[0] == (0.0, red_s + 30.0)  # closed to it until the red's end
+    advice, _ = advise(seen)
+    assert advice.action == "stop" and advice.target_speed_mps == 0.0 and "Prepare to stop" in advice.message
+
+
+def test_the_board_sees_each_probe_where_it_is_at_the_fix_not_where_it_was():
+    """A corridor's fixes arrive one after the other: a car behind that posted 0.9 s before this one is counted where it
+    is now (its fix advanced at its speed): 86.4 - 0.9 x 24 = 64.8 m behind at 24 m/s, 2.7 s, within the 3 s window
+    of the followers (:func:`followers`), though its fix says 3.6 s."""
+    lights = (LightView(1, 125.0, red_windows_s=((10.0, 40.0),)),)
+    board = QueueBoard()
+    board.see("c", "behind", 100.0, Observation(24.0, 24.5872, tuple(replace(lv, distance_m=211.4) for lv in lights), position_m=13.6))
+    seen, held = board.see("c", "car", 100.9, Observation(24.0, 24.5872, lights, position_m=100.0))
+    assert held is None and seen.followers == 1.0
+    assert followers(Observation(24.0, 24.5872, lights), [Probe(-86.4, 24.0)]) == 0.0  # where its fix was: not behind
 
 
 def test_engine_with_queue_awareness_tells_a_car_behind_a_queue_to_follow():

@@ -246,6 +246,38 @@ def test_an_actuated_green_ends_in_an_amber_even_where_the_plan_has_none():
         assert main_amber == ([] if amber is None else [pytest.approx(amber)])
 
 
+@pytest.mark.parametrize("control, amber_s", [("fixed", 0.0), ("actuated", 5.0)])
+def test_sumos_lights_declare_the_amber_their_program_shows_and_readings_carry_it(control, amber_s, tmp_path):
+    """The paper's timings have no amber: fixed-time, SUMO's program goes from green straight to red, and the source
+    says so (amber 0, as the program's phases read by hand: G then r); actuated, the program's 5.0 s ITE amber (test
+    above). The store carries the declaration into every reading of the group; a group no source declared reads None
+    (unknown: a recorded log, MQTT), whatever it was seen to do."""
+    net = build_network(load_corridor("paper_s400"), tmp_path, control=control)
+    libsumo.start(["sumo", "-n", str(net.net_file), "--step-length", str(STEP_S), "--no-step-log", "true", "--no-warnings", "true"])
+    try:
+        lights = [SumoLight(lt.intersection_id, lt.signal_group, lt.tls_id, lt.link_index) for lt in net.lights]
+        src, now = SumoSpatSource(libsumo, lights, net.t0_unix_s), [net.t0_unix_s]
+        store, undeclared = SpatStore(clock=lambda: now[0]), SpatStore(clock=lambda: now[0])
+        for k in range(1, 121):
+            libsumo.simulationStep()
+            if k % 2 == 0:
+                now[0] = net.t0_unix_s + libsumo.simulation.getTime()
+                src.publish(store)
+                undeclared.offer_many(src.states())
+        for lt in lights:
+            mains = [p.state[lt.link_index] for p in libsumo.trafficlight.getAllProgramLogics(lt.tls_id)[0].phases]
+            assert ("y" in mains) == (amber_s > 0.0)
+            assert src.amber_s(lt) == pytest.approx(amber_s)
+            assert store.plan_reading(lt.intersection_id, lt.signal_group).amber_s == pytest.approx(amber_s)
+            assert undeclared.plan_reading(lt.intersection_id, lt.signal_group).amber_s is None
+    finally:
+        libsumo.close()
+    store.declare_amber(lights[0].intersection_id, lights[0].signal_group, None)  # withdrawn: unknown again
+    assert store.plan_reading(lights[0].intersection_id, lights[0].signal_group).amber_s is None
+    with pytest.raises(ValueError):
+        store.declare_amber(1, 1, -1.0)
+
+
 def test_a_glosa_run_does_not_inherit_the_previous_glosa_runs_cars(tmp_path):
     """libsumo keeps the GLOSA device's state between simulations in one process: a 10 % GLOSA run after a 100 %
     one equipped cars that are not connected. Each GLOSA run goes to a fresh process, so the cars ahead of the

@@ -618,6 +618,12 @@ class PlanReading:
     amber_s: float | None = None
     queue_m: float | None = None
 
+    @classmethod
+    def of_plan(cls, plan: Plan | None) -> PlanReading:
+        """A plan the service knows in advance (a plan file, the simulator's corridor plans), with the amber it says:
+        a fixed-time plan's ``amber_s`` (0: its greens turn red at once); unknown (None) for any other plan."""
+        return cls(plan, amber_s=plan.amber_s if isinstance(plan, FixedTimePlan) else None)
+
 
 def as_uncertain(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> UncertainPlan:
     """An :class:`UncertainPlan` covering at least ``[t - cycle, t + horizon]``; fixed plans become exact windows."""

@@ -191,6 +191,7 @@ class SpatStore:
         self.observers: list[Callable[[IntersectionState], None]] = []  # called with every accepted state
         self._lock = threading.Lock()
         self._entries: dict[int, _Entry] = {}
+        self._amber_s: dict[tuple[int, int], float] = {}  # (intersection, group) -> the amber its source declared [s]
 
     @property
     def stale_after_s(self) -> float:
@@ -265,6 +266,21 @@ class SpatStore:
             observer(state)
         return "ok"
 
+    def declare_amber(self, intersection_id: int, signal_group: int, amber_s: float | None) -> None:
+        """A source that knows the amber a signal group shows before its reds says so (SUMO's program,
+        :meth:`~spat_feed.transport.sumo.SumoSpatSource.amber_s`): its readings then carry it
+        (``PlanReading.amber_s``; 0: no amber, the advisor keeps a margin before such a red); None withdraws it. J2735
+        SPaT carries no such field: for a group no source declared, readings say None (unknown: some amber). The store
+        never infers it from the phases it saw (recorded controllers go from green to red where their amber is not
+        published)."""
+        if amber_s is not None and not amber_s >= 0.0:
+            raise ValueError(f"amber_s must be >= 0 or None, got {amber_s}")
+        with self._lock:
+            if amber_s is None:
+                self._amber_s.pop((intersection_id, signal_group), None)
+            else:
+                self._amber_s[(intersection_id, signal_group)] = float(amber_s)
+
     def offer_many(self, states: Iterable[IntersectionState], received_unix_s: float | None = None) -> int:
         """Offer each state; returns how many were stored."""
         return sum(self.offer(s, received_unix_s) == "ok" for s in states)
@@ -335,7 +351,7 @@ class SpatStore:
         """What the advisor's observation needs of one light (:class:`~spat_feed.prediction.observe.PlanReading`): the plan,
         freshness and age (the group's own), what the group has been seen to do (bounds the phases after the published
         one), and the controller's clock offset (within the tolerance; beyond it the reading is not fresh anyway) with
-        how far it may be off (red windows widened by it)."""
+        how far it may be off (red windows widened by it), and the amber its source declared (:meth:`declare_amber`)."""
         with self._lock:
             entry = self._entries.get(intersection_id)
             plan, reading = self._plan(entry, signal_group)
@@ -343,8 +359,9 @@ class SpatStore:
                 return PlanReading(None, fresh=False, age_s=float("inf"))
             cycle = entry.history.stats(signal_group)
             held = entry.groups.get(signal_group)
+            amber_s = self._amber_s.get((intersection_id, signal_group))
         return PlanReading(plan, fresh=reading.fresh, age_s=reading.age_s, cycle=cycle, clock_offset_s=-reading.clock_offset_s,
-                           clock_uncertainty_s=reading.clock_uncertainty_s, queue_m=None if held is None else held.queue_m)
+                           clock_uncertainty_s=reading.clock_uncertainty_s, queue_m=None if held is None else held.queue_m, amber_s=amber_s)
 
     def fresh(self, intersection_id: int) -> IntersectionState | None:
         r = self.reading(intersection_id)

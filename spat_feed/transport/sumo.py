@@ -30,6 +30,12 @@ What SUMO knows and the message says, per signal group (one SUMO link: the corri
 For a static program the next ``n_events - 1`` events follow the current one (default 3 in all), as the simulator
 sends.
 
+The amber each group shows before its reds (:meth:`SumoSpatSource.amber_s`) is read from the program too, and
+declared to the store with every publication (:meth:`~spat_feed.transport.store.SpatStore.declare_amber`): 0 where a
+green goes straight to red (SUMO's lights built from a plan without amber, the paper's corridors), so the advisor
+keeps its margin before such a red (``PlanReading.amber_s``); J2735 has no field for it, and the store does not guess
+it from what it saw (recorded controllers also go from green to red where their amber is not published).
+
 With ``queues=True`` each movement also carries what stop-line detectors on its approach would measure (J2735
 ``maneuverAssistList``, one ``ConnectionManeuverAssist`` per incoming lane of its SUMO link, ``connectionID`` the
 link index: no MAP here): ``queueLength``, the jam standing back from the stop line (:func:`jam_length_m`, the
@@ -45,7 +51,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from spat_feed.timing.messages import ConnectionManeuverAssist, IntersectionState, MovementEvent, MovementState, TimeChangeDetails, from_unix_s
-from spat_feed.timing.plans import MovementPhaseState as S
+from spat_feed.timing.plans import MovementPhaseState as S, PhaseClass, phase_class
 
 LINK_STATES: dict[str, S] = {
     "r": S.STOP_AND_REMAIN,
@@ -138,6 +144,15 @@ class SumoSpatSource:
         times = [(float(p.duration), float(p.minDur), float(p.maxDur)) for p in logic.phases]
         self._programs[tls_id] = cached = (pid, int(logic.type), states, times)
         return cached
+
+    def amber_s(self, light: SumoLight) -> float | None:
+        """The shortest amber the light's program shows between a green and the red after it: 0 where some green goes
+        straight to red (no amber warns of that red), None where no green of the program ends in amber or red (a link
+        that is never green): :func:`program_amber_s` of the running program. An actuated program's amber is its
+        phase's ``minDur`` where that is shorter. [s]"""
+        _, kind, states, times = self._program(light.tls_id)
+        return program_amber_s([link_state(p[light.link_index]) for p in states],
+                               [min(d, mn) if kind == ACTUATED and mn > 0.0 else d for d, mn, _ in times])  # fmt: skip
 
     def now_unix_s(self) -> float:
         return self.t0_unix_s + float(self.conn.simulation.getTime())
@@ -263,6 +278,8 @@ class SumoSpatSource:
     def publish(self, store) -> list[str]:
         """Offer every intersection's state now to ``store`` (a :class:`~spat_feed.transport.store.SpatStore`); the
         verdicts, counted in ``verdicts``."""
+        for light in self.lights:
+            store.declare_amber(light.intersection_id, light.signal_group, self.amber_s(light))
         out = []
         for state in self.states():
             verdict = store.offer(state)
@@ -279,6 +296,31 @@ def _with_next_times(events: list[MovementEvent]) -> list[MovementEvent]:
     for i, ev in enumerate(events):
         nxt = events[i + 1].timing.likely_time if i + 1 < len(events) and events[i + 1].timing is not None else None
         out.append(ev if nxt is None else ev.model_copy(update={"timing": ev.timing.model_copy(update={"next_time": nxt})}))
+    return out
+
+
+def program_amber_s(states: Sequence[S], durations_s: Sequence[float]) -> float | None:
+    """The shortest amber between a green and the red after it in a cyclic program of one link: its phases' states
+    and durations; 0 where a green is followed at once by a red, None where no green ends in amber or red. [s]
+
+    Examples
+    --------
+    >>> G, Y, R = S.PROTECTED_MOVEMENT_ALLOWED, S.PROTECTED_CLEARANCE, S.STOP_AND_REMAIN
+    >>> program_amber_s([R, R, G], [27.0, 3.0, 30.0]), program_amber_s([R, G, Y], [30.0, 26.0, 4.0])
+    (0.0, 4.0)
+    >>> program_amber_s([R, G, Y, Y], [30.0, 25.0, 3.0, 2.0]), program_amber_s([R, R], [30.0, 3.0]) is None
+    (5.0, True)
+    """
+    classes = [phase_class(s) for s in states]
+    n, out = len(classes), None
+    for k in range(n):
+        if classes[k] is not PhaseClass.GREEN or classes[(k + 1) % n] is PhaseClass.GREEN:
+            continue  # not the end of a green
+        amber_s, j = 0.0, (k + 1) % n
+        while classes[j] is PhaseClass.AMBER and j != k:
+            amber_s, j = amber_s + float(durations_s[j]), (j + 1) % n
+        if classes[j] is PhaseClass.RED:
+            out = amber_s if out is None else min(out, amber_s)
     return out
 
 

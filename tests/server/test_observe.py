@@ -647,6 +647,19 @@ def test_a_green_that_turns_red_at_once_is_planned_to_its_earliest_end():
     assert light_view(ix, PlanReading(exact, amber_s=0.0), 0.0, T0).likely_red_windows_s == ((20.0, 70.0),)  # an exact start: as it is
 
 
+def test_a_fixed_plan_the_service_simulates_says_its_amber():
+    """The service's own fixed-time lights (a plan file, the paper's plans) know their amber: the paper's go from green
+    straight to red (0: the advisor keeps its margin before those reds), the Oakland plan file shows 4 s; the reading
+    reaches the advisor's view. Uncertain plans say nothing of it (None: some amber)."""
+    for corridor, timing, amber_s in (("paper_s400", "15_15", 0.0), ("oakland_7th_westbound", None, 4.0)):
+        sc = make_scenario(corridor, timing)
+        readings = SimulatedSpat(sc).readings(T0)
+        assert {r.amber_s for r in readings.values()} == {amber_s}
+        assert all(light_view(ix, readings[ix.id], 0.0, T0).amber_s == amber_s for ix in sc.corridor.intersections)
+    uncertain = SimulatedSpat(make_scenario("paper_s400", "15_15", uncertainty=Uncertainty(2.0, 5.0, 0.8))).readings(T0)
+    assert {r.amber_s for r in uncertain.values()} == {None}
+
+
 def test_a_change_into_the_unknown_that_the_clock_puts_just_behind_us_is_not_no_data():
     """A controller that publishes its current phase only: green, ending exactly at T0 + 1 by its clock, which may be
     3 s off ours. At our T0 + 2 the end may be up to 2 s ahead still: the light is not "no data" (randomized run 926

@@ -10,7 +10,7 @@ import pytest
 
 from advisory.advice.advisor import LightView, Observation
 from advisory.advice.queue import Probe, estimate
-from server.queue import MAX_AGE_S, QueueBoard
+from server.queue import MAX_AGE_S, QueueBoard, probe_at
 from server.queue_store import Corridors, Noted
 
 STOP_LINES_M = (200.0, 600.0, 1000.0, 1400.0)
@@ -35,7 +35,7 @@ class LoopBoard(QueueBoard):
         cars[trip_id] = (t_unix_s, here, float(obs.speed_mps))
         for tid in [tid for tid, (t, _, _) in cars.items() if t_unix_s - t > MAX_AGE_S]:
             del cars[tid]
-        probes = [Probe(s - here, v) for tid, (t, s, v) in cars.items() if tid != trip_id and s != here]
+        probes = [probe_at(p, here, t_unix_s) for tid, p in cars.items() if tid != trip_id and p[1] != here]
         est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, self.red_elapsed(obs, t_unix_s))
         return self.answer(trip_id, obs, est, last_reason)
 
@@ -114,9 +114,7 @@ def test_a_fix_looks_at_the_cars_near_it_only():
     lane = board.lane("c")
     for i in range(2000):  # a car every 2.5 m over 5 km, at 10 m/s
         lane.put(f"t{i}", (100.0, 2.5 * i, 10.0))
-    ahead = lane.ahead(2500.0, 300.0)
-    assert [p.ahead_m for p in ahead] == [2.5 * k for k in range(1, 120)]  # (0, 300) m ahead
-    behind = lane.behind(2500.0, 300.0, 33.0, LIMIT_MPS)  # 33 s to the line at 13.4 m/s: 442.2 m, 142.2 m of it behind
-    assert sorted(p.ahead_m for p in behind) == [-2.5 * k for k in range(56, 0, -1)]
+    near = lane.near(2500.0, 100.5, -100.0, 300.0)  # raw stations in [-100 - 10 x MAX_AGE_S, 300] m (the bounds round outwards), each 5 m on
+    assert [p.ahead_m for p in near] == [2.5 * k + 5.0 for k in range(-int((100.0 + 10.0 * MAX_AGE_S) / 2.5), 121) if k != 0]
     lane.expire(100.0 + MAX_AGE_S + 0.1, MAX_AGE_S)
     assert not lane.order and not board._cars["c"]
