@@ -21,7 +21,7 @@ import numpy as np
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
-from advisory.advice.advisor import AdvisorParams, advise
+from advisory.advice.advisor import AdvisorParams, LightView, Observation, advise
 from advisory.physics.params import model_params
 from spat_feed.road.corridors import Corridor, load_corridor, load_corridor_dir
 
@@ -112,6 +112,12 @@ def warm_up(engine: Engine) -> None:
         obs = observation(corridor, station_m, 15.0, 30.0, readings, engine.settings.speed_limit_mps)
         for tables in (engine.tables.get(corridor.name), None):
             advise(obs, None, engine.params, tables)
+    # the choice under uncertain timing (recorded, MQTT, actuated controllers): its kernels took 11 s to compile on the
+    # first such fix with a cold numba cache (that fix timed out, and the event loop with it), so compile them here
+    timings = tuple(((10.0 + k, 40.0 + k),) for k in range(4))
+    light = LightView(0, 200.0, red_windows_s=((10.0, 43.0),), likely_red_windows_s=((11.5, 41.5),), late_red_windows_s=((13.0, 43.0),),
+                      scenario_red_windows_s=timings)  # fmt: skip
+    advise(Observation(15.0, engine.settings.speed_limit_mps, (light,)), None, engine.params, None)
 
 
 async def _expire_idle(engine: Engine, metrics: Metrics, period_s: float) -> None:

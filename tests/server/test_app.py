@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
@@ -65,3 +68,20 @@ def test_trip_capacity_and_injected_clock():
         assert ok.status_code == 200 and ok.json()["action"] != "none"
         late = client.post(f"/v1/trips/{a['trip_id']}/fixes", json={"t_unix_s": time.time() + 7200 if now[0] < time.time() else now[0] + 3600, "lat_deg": lat, "lon_deg": lon}, headers=auth)
         assert late.status_code == 422
+
+
+def test_start_up_compiles_the_choice_under_uncertain_timing():
+    """Start-up runs the advisor's choice under uncertain timing once (``server.app.warm_up``): the first fix on a
+    recorded, MQTT or actuated controller must not wait for numba to compile it (11 s with a cold cache, the event loop
+    blocked: a fresh clone's MQTT test timed out on it). In a fresh interpreter, so nothing else ran it before."""
+    code = (
+        "from fastapi.testclient import TestClient\n"
+        "from advisory.advice import choice\n"
+        "from server.app import create_app\n"
+        "from server.config import Settings\n"
+        "before = len(choice.expected_costs.signatures)\n"
+        "with TestClient(create_app(Settings(corridors=('paper_s200',), default_corridor='paper_s200', tables=False, speech=False))):\n"
+        "    print(before, len(choice.expected_costs.signatures))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parents[2])
+    assert out.stdout.split()[-2:] == ["0", "1"], out.stdout + out.stderr
