@@ -414,16 +414,11 @@ def pushed_past(light: LightView, normal_s: float, planned_s: float, behind: Seq
     """The wait [s] that the connected cars ``behind`` this one (nearest first, each where it is now) lose at ``light``
     when this car's front is a jam spacing past its line at ``planned_s`` instead of ``normal_s``: each crosses the
     line at its own normal drive (speeding up to the limit at ``drive_accel_mps2``) or, where the car in front of it
-    holds it, as it follows now (Newell's shift [1]_ with the driver's own lag: its gap less the jam spacing over its
-    speed, after that car is a jam spacing past the line; these cars are the ones :func:`held_up` finds within
-    ``follow_gap_s``, which a slower car ahead slows with it: a driver 2.5 s behind kept its 2.5 s in SUMO, where
-    :func:`behind_s`'s ``headway_s`` would have it close up to 2 s); one pushed from before the red it meets to after
-    that red's start waits it out (:data:`advisory.advice.choice.WAIT_CAP_S` where its end is unknown).
-
-    References
-    ----------
-    .. [1] G. F. Newell, "A simplified car-following theory: a lower order model," *Transp. Res. Part B*, vol. 36,
-       no. 3, pp. 195-205, 2002, doi:10.1016/S0191-2615(00)00044-8.
+    holds it, as it follows now (Newell's shift, as in :func:`behind_s`, with the driver's own lag: its gap less the
+    jam spacing over its speed, after that car is a jam spacing past the line; these cars are the ones :func:`held_up`
+    finds within ``follow_gap_s``, which a slower car ahead slows with it: a driver 2.5 s behind kept its 2.5 s in
+    SUMO, where :func:`behind_s`'s ``headway_s`` would have it close up to 2 s); one pushed from before the red it meets
+    to after that red's start waits it out (:data:`advisory.advice.choice.WAIT_CAP_S` where its end is unknown).
 
     Examples
     --------
