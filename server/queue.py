@@ -35,7 +35,7 @@ from bisect import bisect_left, insort
 from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, Observation
-from advisory.advice.queue import Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, normal_drive_s
+from advisory.advice.queue import Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, held_up, normal_drive_s
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -149,6 +149,7 @@ class QueueBoard:
         self._cars: dict[str, dict[str, tuple[float, float, float]]] = shared.cars if shared is not None else {}
         self._red_since: dict[int, float] = shared.red_since if shared is not None else {}
         self._queued: dict[str, int] = {}  # trip -> the light whose queue it stands in
+        self._behind: dict[str, tuple[Probe, ...]] = {}  # trip -> the connected cars its last fix found it holds up (:meth:`check`)
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
         self.held = 0  # fixes answered "follow the car in front"
 
@@ -160,6 +161,7 @@ class QueueBoard:
         if not obs.on_route or obs.position_m is None or not obs.lights:
             lane.drop(trip_id)
             self._queued.pop(trip_id, None)
+            self._behind.pop(trip_id, None)
             return obs, None
         here = float(obs.position_m)
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
@@ -178,8 +180,10 @@ class QueueBoard:
 
     def answer(self, trip_id: str, obs: Observation, est: QueueEstimate, last_reason: str | None) -> tuple[Observation, Advice | None]:
         """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
-        stands in the next light's queue or closes in on a slower car, until it is over that light's line."""
+        stands in the next light's queue or closes in on a slower car, until it is over that light's line. The connected
+        cars it holds up are kept for :meth:`check`."""
         nxt = obs.lights[0]
+        self._behind[trip_id] = est.behind
         if est.stop_behind:  # the cars ahead take the last of the green: following them would take it into the red
             self._queued.pop(trip_id, None)  # (the advisor plans its stop: the line is closed to it until the red's end)
         elif est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
@@ -220,13 +224,15 @@ class QueueBoard:
         mine_s = normal_drive_s(line_m, obs.speed_mps, limit_mps, m.drive_accel_mps2)
         window_m = (max(est.free_at_s[0], mine_s) + m.follow_gap_s) * max(lane.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6
         behind = [p for p in lane.near(here_m, t_unix_s, line_m - window_m, 0.0) if p.ahead_m < 0.0]
-        return replace(est, followers=followers(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share))
+        return replace(est, followers=followers(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share),
+                       behind=held_up(obs, behind, est.free_at_s[0], m))
 
-    def check(self, obs: Observation, advice: Advice, params: AdvisorParams) -> Advice:
+    def check(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None = None) -> Advice:
         """The advisor's advice, or "drive normally" where it gives up green time that a normal drive uses, priced with
-        the followers it holds up (:func:`advisory.advice.queue.gives_up_green`)."""
-        if gives_up_green(obs, advice, params, model=self.model):
-            return drive_normally(advice, params.units)
+        the followers it holds up (:func:`advisory.advice.queue.gives_up_green`), the connected ones where the trip's
+        last fix (:meth:`see`) found them."""
+        if gives_up_green(obs, advice, params, model=self.model, behind=self._behind.get(trip_id, ()) if trip_id is not None else ()):
+            return drive_normally(advice, params.units, obs.lights[0])
         return advice
 
     @staticmethod
@@ -238,6 +244,7 @@ class QueueBoard:
         """The trip has ended: it is no probe any more (on every worker, with the shared board)."""
         self.lane(corridor).drop(trip_id)
         self._queued.pop(trip_id, None)
+        self._behind.pop(trip_id, None)
 
     def state(self) -> str:
         """Where the probes come from (``/health``): ``local`` (this process, which serves every trip), ``shared``

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from advisory.advice.advisor import Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, time_price
-from advisory.advice.queue import Probe, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s
+from advisory.advice.queue import Probe, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s, pushed_past
 from server.queue import QueueBoard
 
 M = QueueModel()
@@ -321,3 +321,38 @@ def test_a_car_already_slowed_for_a_red_further_on_is_not_sent_back_up():
     ahead = (LightView(1, 200.0, red_windows_s=((12.0, 42.0),)), LightView(2, 600.0, red_windows_s=((15.0, 45.0),)))
     assert gives_up_green(Observation(24.6, 24.6, ahead, followers=5.0), plan, params)
     assert not gives_up_green(Observation(24.6, 24.6, ahead), plan, params)  # alone: the red further on takes it back
+
+
+def test_a_plan_that_pushes_a_connected_follower_into_a_red_without_amber_gives_way():
+    """Traced in SUMO (paper_s400 fixed 600 veh/h, every car connected, seed 1): at the limit (24.58 m/s), 124.5 m
+    from a light turning red in 8 s without amber, the second light red at a normal arrival, the advisor slows the car
+    for the second light's green, over the first line at 5.75 s instead of 5.06 s. A connected car 61.4 m (2.5 s)
+    behind, over the line 0.44 s before the red at its speed, follows 53.9 / 24.59 = 2.19 s after the car in front is
+    a jam spacing past the line (Newell's shift, its own lag): 5.37 + 2.19 = 7.56 s behind a normal drive, about 8.4 s
+    behind the plan: pushed into the red, whose 30 s it would wait out (it entered it in SUMO, 0.5 s in). Counted as a
+    follower arriving at random 2 s behind (one car expected, no position), it crosses at 7.75 s: not pushed."""
+    params = AdvisorParams()
+    reds = ((8.0, 38.0), (68.0, 98.0))
+    lights = (LightView(1, 124.5, red_windows_s=reds, amber_s=0.0), LightView(2, 524.5, red_windows_s=reds, amber_s=0.0))
+    obs = Observation(24.58, 24.587, lights, followers=1.0)
+    plan = Advice("coast", "green_wave", 9.38)
+    follower = Probe(-61.4, 24.59)
+    past = crossing_time_s(124.5 + M.jam_spacing_m, 24.58, 9.38, params, "brake_coast")
+    normal_past = (124.5 + M.jam_spacing_m) / 24.58
+    assert past - normal_past > 0.6
+    own = (124.5 + 61.4) / 24.59
+    assert own < 8.0 <= past + (61.4 - M.jam_spacing_m) / 24.59
+    assert pushed_past(lights[0], normal_past, past, [follower], 24.587, M) == 30.0
+    assert not gives_up_green(obs, plan, params)  # the follower as one of the flow's
+    assert gives_up_green(obs, plan, params, behind=(follower,))
+    assert not gives_up_green(obs, plan, params, behind=(Probe(-100.0, 24.59),))  # 4 s behind: its own drive is past the red's start
+    # the board finds the follower at the fixes and the check gives way: "drive normally" (over the line at 5.06 s)
+    board = QueueBoard()
+    board.see("c", "follower", 1000.0, replace(obs, speed_mps=24.59, position_m=100.0 - 61.4, followers=0.0,
+                                                lights=tuple(replace(lv, distance_m=lv.distance_m + 61.4) for lv in lights)))  # fmt: skip
+    seen, held = board.see("c", "leader", 1000.0, replace(obs, position_m=100.0, followers=0.0))
+    assert held is None and seen.followers == 1.0 and board._behind["leader"] == (follower,)
+    told = board.check(seen, plan, params, "leader")
+    assert (told.action, told.reason, told.target_speed_mps) == ("none", "tight_green", None)
+    assert (told.light_red, told.seconds_to_change_s, told.light_id) == (False, 8.0, 1)  # the countdown of the light it drives through
+    assert board.check(seen, plan, params) is plan  # no trip: no follower known where it is

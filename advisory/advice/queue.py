@@ -101,6 +101,8 @@ class QueueEstimate:
     follow_mps: float | None = None
     followers: float = 0.0
     """Cars expected behind this one that a slower plan holds up (:func:`followers`). [-]"""
+    behind: tuple[Probe, ...] = ()
+    """The connected ones among them, nearest first (:func:`held_up`): where each is, for :func:`gives_up_green`."""
     stop_behind: bool = False
     """At the next light, whose red no amber announces, the connected cars ahead let this car cross no sooner than that
     red (less the margin where they set its crossing, :func:`behind_s`): it is to stop there, not to follow them."""
@@ -190,8 +192,9 @@ def estimate(
         nearest = min(ahead_cars, key=lambda p: p.ahead_m)
         if _close(obs, nearest.ahead_m, model) and _closing(obs, nearest.speed_mps):  # closing in on a slower car
             follow = nearest.speed_mps
-    n_behind = followers(obs, probes, free_at[0] if free_at else 0.0, model, arrivals_vps, connected_share)
-    return QueueEstimate(tuple(cars), tuple(known), tuple(free_at), in_queue, follow, n_behind, stop_behind and not in_queue)
+    free0 = free_at[0] if free_at else 0.0
+    n_behind = followers(obs, probes, free0, model, arrivals_vps, connected_share)
+    return QueueEstimate(tuple(cars), tuple(known), tuple(free_at), in_queue, follow, n_behind, held_up(obs, probes, free0, model), stop_behind and not in_queue)
 
 
 def _close(obs: Observation, ahead_m: float, model: QueueModel) -> bool:
@@ -257,11 +260,11 @@ def followers(
     line behind it before it can cross there (``free_at_s`` from now, where the queue in front holds it) plus
     ``follow_gap_s`` (a car closer than that behind a slower one is slowed with it; one lane, no overtaking).
 
-    The connected cars are known (``probes`` behind it: ``ahead_m < 0``): each counts whose unimpeded arrival at the
-    line (speeding up to the limit at ``drive_accel_mps2`` from its speed now, as the regular driver) falls within that window after
-    this car's own. The others are expected from the flow: ``(1 - connected_share) x arrivals_vps x`` the window
-    (Poisson arrivals; at 600 veh/h and half of them connected, 0.25 cars within 3 s: one or more with probability
-    1 - exp(-0.25) = 22 %). The advisor prices the time a plan gives up ``1 + followers`` times
+    The connected cars are known (``probes`` behind it: ``ahead_m < 0``, :func:`held_up`): each counts whose unimpeded
+    arrival at the line (speeding up to the limit at ``drive_accel_mps2`` from its speed now, as the regular driver)
+    falls within that window after this car's own. The others are expected from the flow: ``(1 - connected_share) x
+    arrivals_vps x`` the window (Poisson arrivals; at 600 veh/h and half of them connected, 0.25 cars within 3 s: one or
+    more with probability 1 - exp(-0.25) = 22 %). The advisor prices the time a plan gives up ``1 + followers`` times
     (:func:`advisory.advice.advisor.time_price`). [-]
 
     Examples
@@ -276,12 +279,30 @@ def followers(
     model = model or QueueModel()
     if not obs.lights:
         return 0.0
+    known, window = _held_up(obs, probes, free_at_s, model)
+    unseen = (1.0 - connected_share) * arrivals_vps * window if arrivals_vps else 0.0
+    return float(len(known) + unseen)
+
+
+def held_up(obs: Observation, probes: Sequence[Probe], free_at_s: float = 0.0, model: QueueModel | None = None) -> tuple[Probe, ...]:
+    """The connected cars among ``probes`` that :func:`followers` counts, nearest first.
+
+    Examples
+    --------
+    >>> from advisory.advice.advisor import LightView
+    >>> held_up(Observation(20.0, 20.0, (LightView(1, 200.0),)), [Probe(-100.0, 20.0), Probe(-30.0, 20.0), Probe(10.0, 20.0)])
+    (Probe(ahead_m=-30.0, speed_mps=20.0),)
+    """
+    return _held_up(obs, probes, free_at_s, model or QueueModel())[0] if obs.lights else ()
+
+
+def _held_up(obs: Observation, probes: Sequence[Probe], free_at_s: float, model: QueueModel) -> tuple[tuple[Probe, ...], float]:
+    """:func:`held_up`, and the window [s] after this car's normal arrival at the next line that it counts them in."""
     d, lim = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
     mine = normal_drive_s(d, obs.speed_mps, lim, model.drive_accel_mps2)
     window = max(free_at_s - mine, 0.0) + model.follow_gap_s
-    known = sum(1 for p in probes if p.ahead_m < 0.0 and normal_drive_s(d - p.ahead_m, p.speed_mps, lim, model.drive_accel_mps2) - mine < window)
-    unseen = (1.0 - connected_share) * arrivals_vps * window if arrivals_vps else 0.0
-    return float(known + unseen)
+    known = (p for p in probes if p.ahead_m < 0.0 and normal_drive_s(d - p.ahead_m, p.speed_mps, lim, model.drive_accel_mps2) - mine < window)
+    return tuple(sorted(known, key=lambda p: (-p.ahead_m, p.speed_mps))), window
 
 
 def _held_until(windows, until_s: float):
@@ -336,7 +357,8 @@ def normal_drive_s(distance_m: float, v_mps: float, limit_mps: float, accel_mps2
     return (lim - v) / accel_mps2 + (distance_m - d_acc) / lim
 
 
-def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S, model: QueueModel | None = None) -> bool:
+def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S, model: QueueModel | None = None,
+                   behind: Sequence[Probe] = ()) -> bool:  # fmt: skip
     """The advised plan gives up green time that a normal drive (speeding up to the limit at the regular driver's
     ``normal_accel_mps2``, no advice to react to) uses: at a light that the normal drive crosses outside its reds (the
     queue's included, :func:`apply`), as every light before it, the plan arrives ``late`` after it, and the time lost
@@ -345,31 +367,82 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
     * ``late`` for the car itself, at the last light ahead where the normal drive makes every light (before that, a red
       further on takes the time back: the car waits there either way);
     * ``late`` for each follower it holds up (``Observation.followers``), at every such light, and the red each one
-      pushed past the end of that light's green waits out (:func:`cut_off`); where a red further on stops the normal
-      drive, only while the plan has still to slow the car (its target below the car's speed): a car already slowed
-      is not sent back up to the limit towards that red (traced in SUMO: such cars met it or a queue's tail braking
-      harder than 3.5 m/s², or entered it), and the followers' time is already lost.
+      pushed past the end of that light's green waits out: the connected ones among them (``behind``, nearest first,
+      :attr:`QueueEstimate.behind`) where they are (:func:`pushed_past`), the others as expected from the flow
+      (:func:`cut_off`); where a red further on stops the normal drive, only while the plan has still to slow the car
+      (its target below the car's speed): a car already slowed is not sent back up to the limit towards that red
+      (traced in SUMO: such cars met it or a queue's tail braking harder than 3.5 m/s², or entered it), and the
+      followers' time is already lost.
 
     The plan is not credited with a stop it avoids at a red further on: a car that drives normally through this light
     is advised again after it, with the distance to the next one to slow down in. Traced in SUMO (docs/TRAFFIC.md): a car
     launching from a queue at the first light, told to crawl 400 m to the second light's green after next (the advisor
     plans with comfortable accelerations, and its own ``tight_green`` rule looks at the next light); seven connected
     cars told to crawl through the first light towards the second one's queue having cleared, the cars behind them cut
-    off at the first light (35 s each). On an empty road (no followers) only the first case is checked, as before."""
+    off at the first light (35 s each); a car told to slow down for the second light's green 124 m before a first light
+    that turned red without amber 8 s later, over that line 0.7 s later than a normal drive, a connected car 2.5 s
+    behind it (over the line 0.4 s before the red at its speed) pushed into that red (counted as half a car arriving
+    at random, 2 s behind, it was not pushed). On an empty road (no followers) only the first case is checked, as
+    before."""
     if advice.target_speed_mps is None or advice.action not in KEEP_MODES or not obs.lights:
         return False
     model = model or QueueModel()
-    normal = [normal_drive_s(lv.distance_m, obs.speed_mps, obs.speed_limit_mps, params.normal_accel_mps2) for lv in obs.lights]
+    v, limit, mode = obs.speed_mps, obs.speed_limit_mps, KEEP_MODES[advice.action]
+    normal = [normal_drive_s(lv.distance_m, v, limit, params.normal_accel_mps2) for lv in obs.lights]
     made = next((j for j, (lv, t) in enumerate(zip(obs.lights, normal)) if lv.is_red_at(t)), len(obs.lights))
+    known = tuple(behind)
     for j in range(made):
-        late = crossing_time_s(obs.lights[j].distance_m, obs.speed_mps, advice.target_speed_mps, params, KEEP_MODES[advice.action]) - normal[j]
+        line_m = obs.lights[j].distance_m
+        late = crossing_time_s(line_m, v, advice.target_speed_mps, params, mode) - normal[j]
         if late <= 0.0:
             continue
         own = 1.0 if made == len(obs.lights) and j == made - 1 else 0.0
-        behind = max(obs.followers, 0.0) if made == len(obs.lights) or advice.target_speed_mps < obs.speed_mps - params.hysteresis_mps else 0.0
-        if (own + behind) * late + cut_off(obs.lights[j], normal[j], normal[j] + late, behind, model.headway_s) > slack_s:
+        held = made == len(obs.lights) or advice.target_speed_mps < v - params.hysteresis_mps
+        n_behind = max(obs.followers, 0.0) if held else 0.0
+        lost = (own + n_behind) * late + cut_off(obs.lights[j], normal[j], normal[j] + late, n_behind - len(known), model.headway_s)
+        if held and known:  # the car's front a jam spacing past the line (Newell's shift: the one behind follows it from there)
+            past_m = line_m + model.jam_spacing_m
+            normal_past = normal_drive_s(past_m, v, limit, params.normal_accel_mps2)
+            planned_past = crossing_time_s(past_m, v, advice.target_speed_mps, params, mode)
+            lost += pushed_past(obs.lights[j], normal_past, planned_past, known, max(limit, 1.0), model)
+        if lost > slack_s:
             return True
     return False
+
+
+def pushed_past(light: LightView, normal_s: float, planned_s: float, behind: Sequence[Probe], limit_mps: float, model: QueueModel | None = None) -> float:
+    """The wait [s] that the connected cars ``behind`` this one (nearest first, each where it is now) lose at ``light``
+    when this car's front is a jam spacing past its line at ``planned_s`` instead of ``normal_s``: each crosses the
+    line at its own normal drive (speeding up to the limit at ``drive_accel_mps2``) or, where the car in front of it
+    holds it, as it follows now (Newell's shift, as in :func:`behind_s`, with the driver's own lag: its gap less the
+    jam spacing over its speed, after that car is a jam spacing past the line; these cars are the ones :func:`held_up`
+    finds within ``follow_gap_s``, which a slower car ahead slows with it: a driver 2.5 s behind kept its 2.5 s in
+    SUMO, where :func:`behind_s`'s ``headway_s`` would have it close up to 2 s); one pushed from before the red it meets
+    to after that red's start waits it out (:data:`advisory.advice.choice.WAIT_CAP_S` where its end is unknown).
+
+    Examples
+    --------
+    A car 61.4 m (2.5 s at 24.6 m/s) behind one over the line of a light turning red in 8 s, itself there 0.44 s before
+    that red: 53.9 m beyond the jam spacing, 2.19 s, it crosses at 7.56 s (its own drive) behind a car 7.5 m past the
+    line at 5.37 s; behind the same car slowed to be there at 6.2 s, at 8.39 s: the red's 30 s lost.
+
+    >>> lv = LightView(1, 124.5, red_windows_s=((8.0, 38.0),))
+    >>> pushed_past(lv, 5.37, 6.2, [Probe(-61.4, 24.6)], 24.6), pushed_past(lv, 5.37, 5.5, [Probe(-61.4, 24.6)], 24.6)
+    (30.0, 0.0)
+    """
+    model = model or QueueModel()
+    lost, line_m = 0.0, light.distance_m
+    normal_at, planned_at, ahead_m = normal_s, planned_s, 0.0
+    for p in behind:
+        v = max(p.speed_mps, model.queued_mps)
+        own = normal_drive_s(line_m - p.ahead_m, p.speed_mps, limit_mps, model.drive_accel_mps2)
+        lag = max(ahead_m - p.ahead_m - model.jam_spacing_m, 0.0) / v
+        normal_x, planned_x = max(own, normal_at + lag), max(own, planned_at + lag)
+        start, end = next(((a, b) for a, b in light.red_windows_s if b > normal_x), (math.inf, math.inf))  # the red it meets, or the next
+        if normal_x < start <= planned_x:
+            lost += min(end - start, WAIT_CAP_S)
+        normal_at, planned_at, ahead_m = normal_x + model.jam_spacing_m / v, planned_x + model.jam_spacing_m / v, p.ahead_m
+    return lost
 
 
 def cut_off(light: LightView, normal_s: float, planned_s: float, followers: float, headway_s: float) -> float:
@@ -403,7 +476,22 @@ def cut_off(light: LightView, normal_s: float, planned_s: float, followers: floa
             lost += p_at_least * min(end - start, WAIT_CAP_S)
 
 
-def drive_normally(advice: Advice, units: str) -> Advice:
-    """``advice`` turned into "drive normally" (reason ``tight_green``), its countdown kept."""
+def drive_normally(advice: Advice, units: str, light: LightView | None = None) -> Advice:
+    """``advice`` turned into "drive normally" (reason ``tight_green``) through ``light``, the next one: the countdown
+    to its red where it is green now (the countdown of the plan given up can be another light's: "Red in 50 seconds.
+    Drive normally." was said 124 m before a light turning red in 8 s, its 50 s the second light's green), none where it
+    is red or not known; without ``light``, the advice's countdown kept.
+
+    Examples
+    --------
+    >>> plan = Advice("coast", "green_wave", 9.4, light_red=True, seconds_to_change_s=50.0, light_id=2)
+    >>> drive_normally(plan, "metric", LightView(1, 124.5, red_windows_s=((8.0, 38.0),))).message
+    'Red in 8 seconds. Drive normally.'
+    """
     out = replace(advice, action="none", reason="tight_green", target_speed_mps=None)
+    if light is not None:
+        to_red = light.seconds_to_red()
+        counted = to_red is not None and not light.red_now
+        out = replace(out, light_red=False if counted else None, seconds_to_change_s=to_red if counted else None, light_ahead=1,
+                      light_id=light.intersection_id if counted else None)
     return replace(out, message=phrase(out, units), speak=True)

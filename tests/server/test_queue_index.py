@@ -66,7 +66,8 @@ def observation_at(station_m: float, speed_mps: float, t_unix_s: float, rng: ran
 def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, share, shared):
     """300 cars on four lights, 6,000 fixes in random order (fix times out of order across trips, cars standing, ties
     at whole metres, fixes off the route, trips ended; with ``shared`` the table replaced now and then as the shared
-    board's sync does): every fix gets the same observation or "follow" advice from both boards."""
+    board's sync does): every fix gets the same observation or "follow" advice from both boards, and the same connected
+    cars behind it that a slower plan holds up."""
     rng = random.Random(7)
     tables = types.SimpleNamespace(cars=Corridors(c=Noted(newer=True)), red_since=Noted(newer=False)) if shared else None
     board = QueueBoard(arrivals_vph=arrivals_vph, connected_share=share, shared=tables)  # type: ignore[arg-type]
@@ -74,7 +75,7 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
     where = {f"t{i}": rng.uniform(-150.0, 1500.0) for i in range(300)}
     last: dict[str, str | None] = {}
     clock = 1000.0
-    held = 0
+    held = behind = 0
     for n in range(6000):
         trip = rng.choice(list(where))
         clock += 0.01
@@ -92,6 +93,9 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
         got = board.see("c", trip, t, obs, last.get(trip))
         want = loop.see("c", trip, t, obs, last.get(trip))
         assert got == want, (n, trip)
+        if obs.on_route and obs.lights:  # and the same connected cars held up, for the check of the advisor's plan
+            assert board._behind[trip] == loop._behind[trip], (n, trip)
+            behind += len(board._behind[trip])
         held += got[1] is not None
         last[trip] = got[1].reason if got[1] is not None else None
         if shared and n % 500 == 499:  # the sync: the table replaced by what Redis holds (here: what it held a while ago)
@@ -102,6 +106,7 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
             tables.red_since.load(dict(loop._red_since))
             loop.cars = dict(snapshot)
     assert board.held == loop.held == held > 100
+    assert behind > 100
     assert dict(board._cars["c"]) == loop.cars
     lane = board.lane("c")
     assert lane.order == sorted(lane.entry.values()) and {tid for _, _, tid, _ in lane.order} == set(loop.cars)
