@@ -165,6 +165,44 @@ def test_prepare_to_stop_is_a_plan_priced_with_the_stop_it_makes():
     assert (p_go, p_halt) == (0.0, 1.0) and halt > go
 
 
+
+@pytest.mark.parametrize("red_2", [(45.0, 100.0), (80.0, 150.0)])
+def test_a_stop_at_the_first_light_is_priced_through_the_next(red_2):
+    """Recourse over both lights, hand answer: at the limit towards a red on now at light 1 (300 m) that ends at 40 s, the
+    car stops there and launches at 40 s; light 2 (600 m) is red from 45 to 100 s. The car launched from light 1 gets
+    there at 65 s, in that red: it stops again (braked comfortably from the limit), waits until 100 s and launches. Its
+    price is the one-light price plus that second stop as the scoring prices it (paper Eq. 4 and time, against the
+    same drive with light 2 green). A red at light 2 the launched car is past before it begins (80 s) adds nothing."""
+    d = np.array([LINE_M, 2 * LINE_M])
+    end_m = d[-1] + V_LIM**2 / 4.0
+
+    def price(light_2):
+        windows = np.full((2, 1, 1, 2), np.inf)
+        windows[0, 0, 0], windows[1, 0, 0] = (0.0, 40.0), light_2
+        cross = np.array([[crossing_time_s(x, V_LIM, V_LIM, PARAMS, "auto", 0.0) for x in d]])
+        cost, p_stop, _ = choice.expected_costs(np.array([V_LIM]), np.array([0]), np.array([0.0]), np.array([choice.ACCEL_NORMAL]), np.array([2.0]),
+                                                V_LIM, d, windows, 1, end_m, V_LIM, PARAMS.green_margin_s, LAM, cross, RATES, COAST, IDLE, 1.5,
+                                                3.0, 2.0, PARAMS.reaction_s, PARAMS.min_cruise_speed_mps, np.zeros(2), np.ones(1),
+                                                np.zeros(1, dtype=np.bool_), np.zeros(2))  # fmt: skip
+        return float(cost[0]), float(p_stop[0])
+
+    alone, p_alone = price((np.inf, np.inf))
+    both, p_both = price(red_2)
+    assert p_alone == p_both == 1.0
+    launch_s, launch_m = V_LIM / 2.0, V_LIM**2 / 4.0
+    t_2 = 40.0 + launch_s + (LINE_M - launch_m) / V_LIM  # at light 2 as the regular driver would get there from a stop
+    if t_2 >= red_2[0]:
+        brake_s, brake_m = V_LIM / 1.5, V_LIM**2 / 3.0
+        t_b = t_2 - brake_m / V_LIM  # where a comfortable stop must begin
+        stopped, dist = _scored([(0.0, 0.0), (launch_s, V_LIM), (launch_s + (LINE_M - launch_m - brake_m) / V_LIM, V_LIM), (t_b - 40.0 + brake_s, 0.0),
+                                 (red_2[1] - 40.0, 0.0), (red_2[1] - 40.0 + launch_s, V_LIM), (red_2[1] - 40.0 + launch_s + 0.001, V_LIM)])  # fmt: skip
+        free, dist_free = _scored([(0.0, 0.0), (launch_s, V_LIM), (launch_s + (LINE_M + launch_m - launch_m) / V_LIM, V_LIM)])
+        assert dist == pytest.approx(dist_free, abs=1.0)
+        assert both - alone == pytest.approx(stopped - free, rel=0.03)
+    else:
+        assert both == pytest.approx(alone)
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.tuples(st.floats(0.0, 60.0), st.floats(0.5, 40.0)), min_size=1, max_size=8), st.floats(30.0, 600.0), st.floats(4.5, V_LIM))
 def test_a_plan_is_through_a_red_only_when_it_meets_the_red_of_every_timing(reds, line_m, vt):

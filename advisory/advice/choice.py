@@ -251,6 +251,40 @@ def _go_usd(x_m, v0, reaction_s, x_end_m, v_lim, rates, up, normal, lam):
 
 
 @njit(cache=True, inline="always")
+def _later_usd(x_m, t_s, v_mps, reaction_s, j, s, lines):
+    """What the lines after line ``j`` add [$] (time priced at ``lam``) to the recourse of timing ``s`` of a car at
+    ``x_m`` [m] at ``t_s`` [s] and ``v_mps`` that drives on as the regular driver would (a reaction ``reaction_s``, then
+    speeding up to ``v_lim`` at ``normal``; :func:`_go_usd` prices that as free of reds): at the first of them where it
+    meets a red (or its amber) of the timing, a stop (braked comfortably from the speed it has there, a wait until the
+    red ends, a launch), weighted by the chance of meeting it (:func:`_met`). A car stopped at one light, or glided
+    to its green, meets the next light later than the plan did: where the greens of the two are offset for a car at
+    the limit, it often waits there too (2019-05-01 groups 8-9: a lift-off for light 1's amber priced as waiting at
+    light 1 alone, where the regular driver waited at light 2; the car waited at both, 65 s lost). ``lines``: the
+    lines and their timings as :func:`expected_costs` has them (``d_m``, ``windows``, ``n_windows``, ``after_red_s``,
+    ``clear_s``, ``v_lim``, ``rates``, ``up``, ``down``, ``idle_usd_per_s``, ``comfort``, ``normal``, ``lam``)."""
+    d_m, windows, n_windows, after_red_s, clear_s, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam = lines
+    for i in range(j + 1, d_m.size):
+        dist = d_m[i] - x_m
+        if dist <= 0.0:
+            continue
+        ti = t_s + _go_s(dist, v_mps, reaction_s, v_lim, normal)
+        k, w = _met(ti, windows, i, s, n_windows, after_red_s, -1, clear_s[i])
+        if k < 0:
+            continue
+        vi = min(np.sqrt(v_mps * v_mps + 2.0 * normal * max(dist - v_mps * reaction_s, 0.0)), v_lim)
+        if vi <= 0.0:
+            return 0.0
+        b = windows[i, s, k, 1]
+        if not np.isfinite(b):
+            b = max(windows[i, s, k, 0], 0.0) + WAIT_CAP_S
+        wait = max(b - ti - vi / (2.0 * comfort), 0.0)
+        ramps_m = vi * vi / (2.0 * comfort) + vi * vi / (2.0 * normal)
+        return w * (_at(down, vi) + _at(up, vi) - _at(rates[CRUISE], vi) * ramps_m / vi + idle_usd_per_s * wait
+                    + lam * (vi / (2.0 * comfort) + wait + vi / (2.0 * normal)))  # fmt: skip
+    return 0.0
+
+
+@njit(cache=True, inline="always")
 def _met(tc, windows, j, s, n_windows, after_red_s, skip, amber_s):
     """Window index (and the chance [-] of meeting it) of timing ``s`` at line ``j`` that a crossing at ``tc`` meets:
     inside a red, the margin after it or the amber (``amber_s``) before a red still to come, or within :data:`EDGE_S`
@@ -339,6 +373,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 through[c] = True
         total, stops = 0.0, 0.0
         plan = usd + lam_usd_per_s * t_end
+        tail = (d_m, windows, n_windows, after_red_s, clear_s, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam_usd_per_s)
         for s in range(n_sc):
             blocked, kb, w = -1, -1, 0.0
             for j in range(n_lines):
@@ -360,8 +395,10 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 # told to stop, the car stops at the line however the light shows (braked from where a comfortable stop
                 # must begin), then pulls away: dear wherever the light is likely green
                 j = max(blocked, 0)
-                total += weights[s] * (1.0 - w) * _stop_usd(brake[j, 0], brake[j, 1], brake[j, 2], brake[j, 3], usd, cross_s[c, j], 0.0, d_m[j], x_end_m,
-                                                            v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam_usd_per_s)  # fmt: skip
+                t_go = brake[j, 0] + brake[j, 2] / comfort if np.isfinite(brake[j, 0]) else cross_s[c, j]
+                total += weights[s] * (1.0 - w) * (_stop_usd(brake[j, 0], brake[j, 1], brake[j, 2], brake[j, 3], usd, cross_s[c, j], 0.0, d_m[j], x_end_m,
+                                                             v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam_usd_per_s)
+                                                   + _later_usd(d_m[j], t_go, 0.0, 0.0, j, s, tail))  # fmt: skip
                 stops += weights[s] * (1.0 - w)
                 if blocked < 0:
                     continue
@@ -410,31 +447,34 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 vg = min(v, d / max(b + after_red_s - shown, 1e-6))
                 if vg >= min_speed_mps:
                     g, tg = _go_usd(d_line, vg, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
-                    c_usd = u + _at(rates[CRUISE], vg) * d / vg + g + lam_usd_per_s * (shown + d / vg)
+                    c_usd = u + _at(rates[CRUISE], vg) * d / vg + g + lam_usd_per_s * (shown + d / vg) + _later_usd(d_line, shown + d / vg, vg, 0.0, blocked, s, tail)
                     stopped = False
                 else:  # a stop at the line: hold the speed to where it must begin, brake, wait, launch
                     hold_m = max(d - v * v / (2.0 * comfort), 0.0)
                     t_stop = shown + hold_m / v + v / comfort
                     wait = max(b - t_stop, 0.0)
                     g, tg = _go_usd(d_line, 0.0, 0.0, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
-                    c_usd = u + _at(rates[CRUISE], v) * hold_m / v + _at(down, v) + idle_usd_per_s * wait + g + lam_usd_per_s * (t_stop + wait)
+                    c_usd = (u + _at(rates[CRUISE], v) * hold_m / v + _at(down, v) + idle_usd_per_s * wait + g + lam_usd_per_s * (t_stop + wait)
+                             + _later_usd(d_line, t_stop + wait, 0.0, 0.0, blocked, s, tail))  # fmt: skip
             elif a <= 0.0 and b <= tb:
                 # red now, over before a stop must begin: on with the plan until then, then speed up
                 x, v, u = _state_at(path, n_knots, b)
                 g, tg = _go_usd(x, v, reaction_s, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
-                c_usd = u + g + lam_usd_per_s * b
+                c_usd = u + g + lam_usd_per_s * b + _later_usd(x, b, v, reaction_s, blocked, s, tail)
                 stopped = False
             elif a <= 0.0 and np.isfinite(tb) and b < tb + vb / comfort:
                 # red now, over while the car brakes for it: roll on from the speed then
                 vr = vb - comfort * (b - tb)
                 xr = xb + (vb * vb - vr * vr) / (2.0 * comfort)
                 g, tg = _go_usd(xr, vr, reaction_s, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
-                c_usd = ub + _at(down, vb) - _at(down, vr) + g + lam_usd_per_s * b
+                c_usd = ub + _at(down, vb) - _at(down, vr) + g + lam_usd_per_s * b + _later_usd(xr, b, vr, reaction_s, blocked, s, tail)
                 stopped = vr < min_speed_mps
             else:
                 # a stop at the line (braked from where it must begin; too close for that: as costly as one can be)
-                c_usd = _stop_usd(tb, xb, vb, ub, usd, cross_s[c, blocked], b, d_line, x_end_m, v_lim, rates, up, down, idle_usd_per_s, comfort, normal,
-                                  lam_usd_per_s)  # fmt: skip
+                t_go = max(tb + vb / comfort if np.isfinite(tb) else cross_s[c, blocked], b)
+                c_usd = (_stop_usd(tb, xb, vb, ub, usd, cross_s[c, blocked], b, d_line, x_end_m, v_lim, rates, up, down, idle_usd_per_s, comfort, normal,
+                                   lam_usd_per_s)
+                         + _later_usd(d_line, t_go, 0.0, 0.0, blocked, s, tail))  # fmt: skip
             total += weights[s] * w * c_usd
             if stopped:
                 stops += weights[s] * w
