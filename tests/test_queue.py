@@ -93,6 +93,24 @@ def test_the_advisor_aims_at_the_queue_having_cleared():
     assert aware.target_speed_mps < blind.target_speed_mps - 2.0
 
 
+def test_the_choice_under_uncertain_timing_aims_at_the_queue_having_cleared():
+    """The same on a light of uncertain timing (the choice prices the forecast's timings): every timing's red is held
+    until the queue has crossed, and the advice aims there, not at the green (traced in SUMO, paper_s400 actuated 600
+    veh/h: "Green in 5 seconds. Hold 80 km/h" 73 m behind a queue still standing, a hard brake at 3.6 m/s2)."""
+    params = AdvisorParams(units="kmh")
+    timings = tuple(((0.0, 18.0 + k), (80.0 + k, 110.0)) for k in range(4))  # the red ends in 18-21 s
+    light = LightView(1, 300.0, red_windows_s=((0.0, 21.0), (80.0, 113.0)), likely_red_windows_s=((0.0, 19.5), (81.5, 110.0)),
+                      late_red_windows_s=((0.0, 21.0), (83.0, 110.0)), scenario_red_windows_s=timings)  # fmt: skip
+    obs = Observation(13.0, 13.4, (light,), position_m=100.0)
+    est = estimate(obs, [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(6)])
+    held = apply(obs, est)
+    assert [w[0] for w in held.lights[0].scenario_red_windows_s] == [(0.0, est.free_at_s[0])] * 4
+    blind, _ = advise(obs, None, params)
+    aware, _ = advise(held, None, params)
+    assert blind.target_speed_mps is not None and aware.target_speed_mps is not None
+    assert aware.target_speed_mps < blind.target_speed_mps - 2.0
+
+
 def test_normal_drive_and_given_up_greens():
     assert normal_drive_s(100.0, 0.0, 20.0, 2.0) == pytest.approx(10.0)
     params = AdvisorParams()

@@ -326,10 +326,12 @@ def _held_until(windows, until_s: float):
 
 def apply(obs: Observation, est: QueueEstimate) -> Observation:
     """``obs`` as the car meets the lights in traffic: each line closed to this car until ``est.free_at_s`` (the red it
-    faces ends no earlier; on a green, a window from now), in every view: conservative, likely, late."""
+    faces ends no earlier; on a green, a window from now), in every view: conservative, likely, late, and each of the
+    forecast's timings (what the choice under uncertain timing prices: without them it planned through the queue)."""
     lights = tuple(
         replace(lv, red_windows_s=_held_until(lv.red_windows_s, t), likely_red_windows_s=_held_until(lv.likely_red_windows_s, t),
-                late_red_windows_s=_held_until(lv.late_red_windows_s, t))  # fmt: skip
+                late_red_windows_s=_held_until(lv.late_red_windows_s, t),
+                scenario_red_windows_s=None if lv.scenario_red_windows_s is None else tuple(_held_until(w, t) for w in lv.scenario_red_windows_s))  # fmt: skip
         if t > 0.0 else lv
         for lv, t in zip(obs.lights, est.free_at_s + (0.0,) * len(obs.lights))
     )
