@@ -101,7 +101,13 @@ MIN_RESUMED_SEEN = 20
 one ends. [-]"""
 
 RESUMED_KEEP = 300
-"""The readings of resumed phases kept per class. [-]"""
+"""The readings of resumed phases kept per class (and the exact ends, :meth:`PhaseHistory.exact_lags_s`). [-]"""
+
+EXACT_NEAREST = 20
+"""Past exact ends, the nearest in how far ahead they were first published, whose lags to the change a new one
+reads (:meth:`PhaseHistory.exact_lags_s`). [-]"""
+EXACT_NEAR_S = 1.0
+"""... and only those first published no more than this nearer or farther ahead: a feed's period. [s]"""
 
 BLOCKING_CLASSES = frozenset({PhaseClass.RED, PhaseClass.UNKNOWN})
 
@@ -130,6 +136,10 @@ class CycleStats:
     state_spans_s: tuple | None = None
     state_entered_s: float | None = None  # how long after the current phase began the intersection entered its state now
     stage_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # the stage's law's share in ``state``, per class (:meth:`PhaseHistory.stage_weight`)
+    # the current phase's exact published end (minEndTime = maxEndTime) and how long after such ends its class changed
+    # in the past, for ends first published as far ahead (:meth:`PhaseHistory.exact_lags_s`); () until enough are seen
+    exact_end_unix_s: float | None = None
+    exact_lags_s: tuple[float, ...] = ()
 
     def ends(self, cls: PhaseClass) -> tuple[float, ...]:
         """The instants phases of ``cls`` ended at, if enough are seen, else ()."""
@@ -199,7 +209,8 @@ class PhaseHistory:
     """
 
     __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
-                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score", "_stage_score")  # fmt: skip
+                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score", "_stage_score",
+                 "_exact_first", "_after_exact")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
         self.keep, self.max_gap_s = keep, max_gap_s
@@ -223,6 +234,8 @@ class PhaseHistory:
         self._laws: dict[PhaseClass, tuple] = {}  # ... and those readings (:meth:`window_law`)
         self._window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, window law's mean squared error, durations'] (:meth:`_score_window`)
         self._stage_score: dict[PhaseClass, list[float]] = {}  # class -> [n, the stage's law's mean squared error, by the phase's start] (:meth:`_given_before`)
+        self._exact_first: list[list[float]] = []  # the phase in progress: [exact end, first reading that published it], in order
+        self._after_exact: dict[PhaseClass, deque[tuple[float, float]]] = {}  # class -> (how far ahead an exact end was first published, change - it)
 
     def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
         """Take one reading at ``t_unix_s`` (:meth:`record`) and return the :meth:`stats` after it."""
@@ -261,11 +274,14 @@ class PhaseHistory:
                 self._ends.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s)
                 excess = self._excess.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
                 excess.extend(t_unix_s - m for m in self._resumed_min_ends)
+                # the change came after the last reading that did not show it: no earlier than that after each exact end
+                lags = self._after_exact.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
+                lags.extend((end - first, max(0.0, self._last_t - end)) for end, first in self._exact_first)
                 self._sorted = None
             # first seen now: it began now or before (a start dated late makes its end late: the safe side for a red)
             self._since, self._exact = t_unix_s, changed and not gap and self._current is not None
             self._current = cls
-            self._path, self._window = [], []
+            self._path, self._window, self._exact_first = [], [], []
             self._held = self._resumed = False
             self._resumed_min_ends = []
         elif min_end is not None and self._min_end is not None:
@@ -277,9 +293,14 @@ class PhaseHistory:
                 self._resumed_min_ends.append(min_end)
         self._min_end = min_end
         self._last_t = t_unix_s
+        new_exact = False  # a new exact end published (the stats' ``exact_end_unix_s``, ``exact_lags_s`` change)
         if window is not None and math.isfinite(window[1]):
             self._window.append((t_unix_s, *window))
-        return changed or gap or self._resumed != was_resumed
+            seen = self._exact_first and abs(self._exact_first[-1][0] - window[1]) < EXACT_S
+            if window[1] - window[0] < EXACT_S and window[1] >= t_unix_s and not seen:
+                self._exact_first.append([window[1], t_unix_s])
+                new_exact = True
+        return changed or gap or self._resumed != was_resumed or new_exact
 
     def _went_on(self, t_unix_s: float) -> bool:
         """Across a gap in the readings, with the same class on both sides: the phase in progress went on if it
@@ -300,7 +321,30 @@ class PhaseHistory:
         ends = {c: tuple(e) for c, e in self._ends.items()}
         return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess, ends_unix_s=ends, window_law_s=law,
                           window_weight={c: self.window_weight(c) for c in self._window_score},
-                          stage_weight={c: _share(self._stage_score[c]) for c in self._stage_score})  # fmt: skip
+                          stage_weight={c: _share(self._stage_score[c]) for c in self._stage_score},
+                          exact_end_unix_s=self._exact_first[-1][0] if self._exact_first else None, exact_lags_s=self.exact_lags_s())  # fmt: skip
+
+    def exact_lags_s(self) -> tuple[float, ...]:
+        """How long after an exact published end (minEndTime = maxEndTime) the phase in progress changes class, by the
+        phases of its class seen whole: the lags after the :data:`EXACT_NEAREST` ends first published about as far
+        ahead as its latest exact end was (sorted); () without such an end or before :data:`MIN_PHASES_SEEN` are seen.
+
+        Only ends first published within :data:`EXACT_NEAR_S` as far ahead count (none: the end is the change). A red's
+        exact end is its change as published (the lags after them moved greens later: 2019-05-01 -0.04 points).
+        J2735 gives a movement state's own end. A feed that publishes a go phase as one state ("unavailable") states
+        the end of its green and then that of its amber (2019-05-17: the green's exact end about 7 s ahead, then the
+        amber's 3 s), or only the amber's: the red begins when the amber ends, and an end first published more than an
+        amber ahead is, in such a feed, its green's. Read as the change, it put the red an amber early (docs/ADVISOR.md,
+        "the cycles still lost" (c)); a feed whose exact ends are its changes gives lags of 0, the end as before."""
+        past = self._after_exact.get(self._current) if self._exact_first and self._current is not PhaseClass.RED else None
+        if not past or len(past) < MIN_PHASES_SEEN:
+            return ()
+        end, first = self._exact_first[-1]
+        pairs = np.asarray(past)
+        off = np.abs(pairs[:, 0] - (end - first))
+        nearest = np.argsort(off, kind="stable")[:EXACT_NEAREST]
+        nearest = nearest[off[nearest] <= EXACT_NEAR_S]
+        return tuple(np.sort(pairs[nearest, 1]).tolist())
 
     def _score_window(self, end_unix_s: float, before: CycleStats, given: np.ndarray | None) -> None:
         """Score the window law and the durations on the phase in progress, which ends at ``end_unix_s``: the likely
@@ -771,6 +815,8 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
     if got is None or (got[1] == "window" and cls is not PhaseClass.UNKNOWN):  # no history: the published window stands
         return None
     samples = np.sort(got[0])
+    if got[1] == "published":  # an exact end: the samples are when the class changes after it (:func:`current_end`)
+        max_end = inf
     # the likely end is the forecast's median, but no later than the controller's own maxEndTime; the late end its
     # LATE_QUANTILE (maxEndTime is soft: 6-12 % of phases outlast it, some by minutes)
     likely, late = max(min(sample_quantile(samples, 0.5), max_end), after_s), max(sample_quantile(samples, LATE_QUANTILE), after_s)

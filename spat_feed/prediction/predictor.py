@@ -432,8 +432,11 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
     the phase is the one the group is in (its hold and links are known), not a later one of the plan."""
     inf = math.inf
     floor_unix_s = max(now_unix_s, published_min_unix_s)
-    if published_max_unix_s - published_min_unix_s < EXACT_S:  # an exact window: the controller says when
-        return np.array([max(floor_unix_s, published_max_unix_s)]), "published"
+    if published_max_unix_s - published_min_unix_s < EXACT_S:  # an exact window: the controller says when its state ends
+        lags = cycle.exact_lags_s if cycle is not None and current and cycle.exact_end_unix_s is not None \
+            and abs(cycle.exact_end_unix_s - published_max_unix_s) < EXACT_S else ()  # fmt: skip
+        # the class changes that long after it (a go phase published as one state: its green's end, then its amber)
+        return np.maximum(published_max_unix_s + np.asarray(lags or (0.0,)), floor_unix_s), "published"
     given, n_given = None, 0  # the durations of the phases of the class seen in the intersection's state now, this far in
     if cycle is not None and current and since_unix_s is not None:
         given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s)

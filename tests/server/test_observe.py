@@ -671,3 +671,46 @@ def test_a_change_into_the_unknown_that_the_clock_puts_just_behind_us_is_not_no_
     assert view.fresh and view.red_windows_s[0][0] == 0.0
     assert not light_view(ix, PlanReading(plan, clock_uncertainty_s=3.0), 0.0, T0 + 4.5).fresh
     assert not light_view(ix, PlanReading(plan), 0.0, T0 + 2.0).fresh
+
+
+def test_the_exact_end_of_a_go_phase_s_green_is_not_its_red_s_start():
+    """J2735 gives a movement state's own end. 2019-05-17 publishes a go phase (green, then its amber) as one state,
+    "unavailable", and ends it in one of two ways: the amber's exact end alone (minEnd = maxEnd, 3 s ahead: the red's
+    start), or first its green's exact end (7 s ahead) and then the amber's (3 s). Read as the red's start, the
+    green's end put the red an amber early at confidence 1: "Prepare to stop" 64 m out for a green the regular driver
+    cleared in the amber (group 7 at 1558113972.65, 88 s lost). A group that does both, half its cycles each, with
+    an amber of 3 s between a green's end at x.5 s and the red: the red comes 3 s after the green's exact end. The
+    history dates a change no earlier than the last reading that did not show it, 2.5 s after that end here; so the
+    likely red starts 2.5-3 s after it, never before it (the sure view keeps the earliest, the end itself), and an
+    exact end first published no more than an amber ahead stays the red's start."""
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    h, t = PhaseHistory(), T0
+
+    def cycle(both: bool, last: bool = False):
+        nonlocal t
+        start = t
+        green_end, red_at = start + 20.5, start + 23.5
+        while t < red_at:
+            if both and t < green_end:  # the green's window, then its exact end 7 s ahead
+                plan = published(UNAVAILABLE, green_end, green_end) if t >= green_end - 7.0 else published(UNAVAILABLE, start + 10.0, start + 30.0)
+            else:  # the amber's exact end 3 s ahead (published alone on the other cycles)
+                plan = published(UNAVAILABLE, red_at, red_at) if t >= red_at - 3.0 else published(UNAVAILABLE, start + 10.0, start + 30.0)
+            stats = h.update(t, plan)
+            if last and both and t == green_end - 4.5:  # 4.5 s before the green's exact end, 2.5 s after it was first published
+                return stats, plan, green_end
+            if last and not both and t == red_at - 2.5:
+                return stats, plan, red_at
+            t += 1.0
+        t = feed(h, t, [(RED, 40)])
+
+    for k in range(24):
+        cycle(both=k % 2 == 0)
+    stats, plan, green_end = cycle(both=True, last=True)
+    view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t)
+    assert view.fresh and view.red_windows_s[0][0] == pytest.approx(green_end - t)  # never earlier than the green's end
+    assert green_end - t + 2.5 - 1e-6 <= view.likely_red_windows_s[0][0] <= green_end - t + 3.0  # was green_end - t
+    for k in range(2):
+        cycle(both=k % 2 == 0)
+    stats, plan, red_at = cycle(both=False, last=True)  # the amber's end alone: the red's start
+    view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t)
+    assert view.red_windows_s[0][0] == pytest.approx(red_at - t) and view.likely_red_windows_s[0][0] == pytest.approx(red_at - t)
