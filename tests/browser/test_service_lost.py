@@ -26,7 +26,7 @@ from tests.browser.test_app import PHONE_VOICE, advisories, check_rendering, com
 from tests.procs import Proc, RedisServer, redis_server_path
 
 LOST = "Connection to the service lost. Advice paused."
-PACE = 2  # the demo drive at 2x: fixes every 0.5 s, 46 s in all
+PACE = 4  # the demo drive at 4x: fixes every 0.25 s, 23 s in all (at 2x the Redis case took 47 s of the suite)
 
 
 def service(folder, store_url: str | None) -> Proc:
