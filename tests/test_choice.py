@@ -341,3 +341,18 @@ def test_a_red_of_unknown_end_ends_at_one_instant_for_every_plan():
     crawl, p_crawl, _ = _priced(5.0, MODE_CODES["brake"], 1.0, 1.5, (((0.0, np.inf),),) * 4)
     hold, p_hold, _ = _priced(V_LIM, 0, 1.0, 1.5, (((0.0, np.inf),),) * 4)
     assert p_crawl == p_hold == 1.0 and crawl < hold
+
+
+def test_where_every_allowed_plan_stops_short_a_stop_is_advised_not_plan_zero():
+    """The light after the next is red now with no known end, so every plan that reaches its line does so inside a red of
+    every timing (the hard constraint); driving normally stops there surely, so the chance constraint admits every plan,
+    and those left allowed coast to a halt short of the lines (cost inf). A stop comes whatever the plan: "Lift off and
+    coast" for the red ahead. Before, ``argmin`` over all-inf costs fell on plan 0, "Ease off to 10 miles per hour"
+    (green_wave), a plan through the endless red (the bench's 2019-05-01 observations: 296 of 3,400)."""
+    scenarios = tuple(((12.0, 56.0 + 0.7 * k),) for k in range(20))
+    first = LightView(1, 300.0, red_windows_s=((11.8, 70.0),), likely_red_windows_s=scenarios[10], late_red_windows_s=((13.4, 70.0),),
+                      scenario_red_windows_s=scenarios)  # fmt: skip
+    endless = LightView(2, 600.0, confidence_frac=0.9, red_windows_s=((0.0, np.inf),), late_red_windows_s=((0.0, 174.4),))
+    for v_mps in (8.0, 12.0, 13.0):
+        advice, _ = advise(Observation(v_mps, V_LIM, (first, endless)), params=PARAMS)
+        assert (advice.action, advice.reason) in (("coast", "red_ahead"), ("stop", "red_ahead")), advice

@@ -869,7 +869,10 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     allowed = (p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9) & ~through
     if not keep:
         allowed[-1] = False
-    best = int(np.argmin(np.where(allowed, cost, np.inf))) if allowed.any() else stop  # none: a stop comes whatever the plan
+    priced = np.where(allowed, cost, np.inf)
+    # none allowed at a finite cost (those left stop short of the line: coasting to a halt): a stop comes whatever the
+    # plan. (Was ``allowed.any()``: where every allowed plan cost inf, argmin fell on plan 0, through a red of every timing)
+    best = int(np.argmin(priced)) if np.isfinite(priced).any() else stop
     reaction_usd = lam * params.reaction_s
     if keep and allowed[-1] and cost[-1] <= cost[best] + reaction_usd:
         best = vts.size - 1  # the plan followed now, unless another is better by more than a new reaction costs
