@@ -891,6 +891,7 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     # ``stop_risk_frac``) is not priced further. The same choice as pricing every plan (tests/test_choice.py)
     must = np.zeros(vts.size, dtype=np.bool_)
     must[normal] = must[stop] = True
+    must[-1] = keep  # (kept where it costs no more than the best: its cost, even inf, counts)
     skip = crossed & ~must
     skip[-1] |= not keep  # (no plan followed now: its slot is not a candidate)
     cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,

@@ -351,8 +351,8 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     **Pruned** (the advisor's choice, :func:`advisory.advice.advisor._choose`: the same choice as pricing every plan,
     for less): candidates in ``skip`` (m,) are not priced (cost inf, through: the caller found them through a red).
     Given ``must`` (m,), the candidate ``anchor`` (driving normally) is priced first, and every candidate not in
-    ``must`` stops being priced where it cannot be allowed (cost inf): through a red (the hard constraint), or its
-    chance of a stop past ``p_stop[anchor] + risk_frac + 1e-9`` (the advisor's chance constraint; a sum of chances
+    ``must`` stops being priced where it cannot be allowed (cost inf): through a red (the hard constraint: not driven;
+    one whose motion would have stopped short of the lines, cost inf, is never chosen either), or its chance of a stop past ``p_stop[anchor] + risk_frac + 1e-9`` (the advisor's chance constraint; a sum of chances
     never shrinks as timings are added, so a partial sum past it is a whole sum past it; ``p_stop`` holds the partial
     one). A candidate whose motion, crossings and flags are the last priced one's (a lift-off to a speed the car never
     coasts down to before the lines: the same motion whatever the target) gets its results."""
@@ -371,16 +371,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
             cost[c], p_stop[c], through[c] = np.inf, 1.0, True
             continue
         prune = must is not None and not must[c]
-        path = paths[cur]
-        usd, t_end, n_knots, brake = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort,
-                                            firm, normal, path)  # fmt: skip
-        if not np.isfinite(t_end):
-            cost[c], p_stop[c] = np.inf, 1.0
-            continue
-        if prev >= 0 and _same_plan(c, prev, path, n_knots, brake, paths[1 - cur], prev_knots, prev_brake, cross_s, stop_plan, must):
-            cost[c], p_stop[c], through[c] = cost[prev], p_stop[prev], through[prev]
-            continue
-        cur, prev, prev_knots, prev_brake = 1 - cur, c, n_knots, brake
+        sure_through = False
         for j in range(n_lines):  # the hard constraint: a crossing inside a red of every timing
             sure = True
             for s in range(n_sc):
@@ -389,10 +380,21 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                     sure = False
                     break
             if sure:
-                through[c] = True
-        if prune and through[c]:
+                sure_through = True
+        if prune and sure_through:
+            cost[c], p_stop[c], through[c] = np.inf, 1.0, True
+            continue
+        path = paths[cur]
+        usd, t_end, n_knots, brake = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort,
+                                            firm, normal, path)  # fmt: skip
+        if not np.isfinite(t_end):
             cost[c], p_stop[c] = np.inf, 1.0
             continue
+        through[c] = sure_through
+        if prev >= 0 and _same_plan(c, prev, path, n_knots, brake, paths[1 - cur], prev_knots, prev_brake, cross_s, stop_plan, must):
+            cost[c], p_stop[c] = cost[prev], p_stop[prev]
+            continue
+        cur, prev, prev_knots, prev_brake = 1 - cur, c, n_knots, brake
         for j in range(n_lines):
             no_stop[j] = _no_stop_s(path, n_knots, d_m[j], AMBER_STOP_MPS2)
         total, stops = 0.0, 0.0
