@@ -352,9 +352,10 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     for less): candidates in ``skip`` (m,) are not priced (cost inf, through: the caller found them through a red).
     Given ``must`` (m,), the candidate ``anchor`` (driving normally) is priced first, and every candidate not in
     ``must`` stops being priced where it cannot be allowed (cost inf): through a red (the hard constraint: not driven;
-    one whose motion would have stopped short of the lines, cost inf, is never chosen either), or its chance of a stop past ``p_stop[anchor] + risk_frac + 1e-9`` (the advisor's chance constraint; a sum of chances
-    never shrinks as timings are added, so a partial sum past it is a whole sum past it; ``p_stop`` holds the partial
-    one). A candidate whose motion, crossings and flags are the last priced one's (a lift-off to a speed the car never
+    one whose motion would have stopped short of the lines costs inf, and the advisor never chooses a plan of cost
+    inf), or its chance of a stop past ``p_stop[anchor] + risk_frac + 1e-9`` (the advisor's chance constraint; a sum
+    of chances never shrinks as timings are added, so a partial sum past it is a whole sum past it; ``p_stop`` holds
+    the partial one). A candidate whose motion, crossings and flags are the last priced one's (a lift-off to a speed the car never
     coasts down to before the lines: the same motion whatever the target) gets its results."""
     m, n_lines, n_sc = vts.size, d_m.size, windows.shape[1]
     cost = np.empty(m)
