@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from advisory.advice import choice
-from advisory.advice.advisor import KEEP_MODES, MODE_CODES, AdvisorParams, LightView, Observation, advise, crossing_time_s
+from advisory.advice.advisor import KEEP_MODES, MODE_CODES, Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise, crossing_time_s
 from advisory.evaluation.scoring import score_trace
 from advisory.physics.params import model_params
 
@@ -341,3 +341,84 @@ def test_a_red_of_unknown_end_ends_at_one_instant_for_every_plan():
     crawl, p_crawl, _ = _priced(5.0, MODE_CODES["brake"], 1.0, 1.5, (((0.0, np.inf),),) * 4)
     hold, p_hold, _ = _priced(V_LIM, 0, 1.0, 1.5, (((0.0, np.inf),),) * 4)
     assert p_crawl == p_hold == 1.0 and crawl < hold
+
+
+def test_where_every_allowed_plan_stops_short_a_stop_is_advised_not_plan_zero():
+    """The light after the next is red now with no known end, so every plan that reaches its line does so inside a red of
+    every timing (the hard constraint); driving normally stops there surely, so the chance constraint admits every plan,
+    and those left allowed coast to a halt short of the lines (cost inf). A stop comes whatever the plan: "Lift off and
+    coast" for the red ahead. Before, ``argmin`` over all-inf costs fell on plan 0, "Ease off to 10 miles per hour"
+    (green_wave), a plan through the endless red (the bench's 2019-05-01 observations: 296 of 3,400)."""
+    scenarios = tuple(((12.0, 56.0 + 0.7 * k),) for k in range(20))
+    first = LightView(1, 300.0, red_windows_s=((11.8, 70.0),), likely_red_windows_s=scenarios[10], late_red_windows_s=((13.4, 70.0),),
+                      scenario_red_windows_s=scenarios)  # fmt: skip
+    endless = LightView(2, 600.0, confidence_frac=0.9, red_windows_s=((0.0, np.inf),), late_red_windows_s=((0.0, 174.4),))
+    for v_mps in (8.0, 12.0, 13.0):
+        advice, _ = advise(Observation(v_mps, V_LIM, (first, endless)), params=PARAMS)
+        assert (advice.action, advice.reason) in (("coast", "red_ahead"), ("stop", "red_ahead")), advice
+
+
+def _random_light(rng, light_id, distance_m):
+    """A light seen under uncertain timing (or exact, or red with no known end), drawn at random: a red on now or still
+    to come, its end and the next red's start spread over a forecast of 20 equally likely timings, any amber."""
+    kind = rng.choice(["uncertain", "uncertain", "uncertain", "exact", "endless"])
+    if kind == "endless":
+        return LightView(light_id, distance_m, confidence_frac=0.9, red_windows_s=((0.0, np.inf),), late_red_windows_s=((0.0, rng.uniform(60, 180)),))
+    start, red, green, spread = rng.uniform(-20.0, 40.0), rng.uniform(10.0, 60.0), rng.uniform(8.0, 50.0), rng.uniform(0.0, 15.0) * (kind != "exact")
+    timings = []
+    for k in range(20):
+        q = (k + 0.5) / 20 - 0.5
+        a = start + spread * q
+        b = start + red + 1.5 * spread * q
+        timings.append(((min(a, 0.0) if start <= 0 else a, b), (b + green + spread * q, b + green + spread * q + red)))
+    timings = tuple(tuple((max(a, 0.0) if a > 0 else 0.0, b) if b > 0 else (0.0, 0.0) for a, b in t if b > 0) or ((200.0, 260.0),) for t in timings)
+    sure = tuple((min(t[w][0] for t in timings), max(t[w][1] for t in timings)) for w in range(min(len(t) for t in timings)))
+    amber = rng.choice([None, 0.0, 4.0])
+    if kind == "exact":
+        return LightView(light_id, distance_m, red_windows_s=timings[10], amber_s=amber)
+    late = tuple((max(t[w][0] for t in timings), s1) for w, (_, s1) in enumerate(sure))
+    return LightView(light_id, distance_m, confidence_frac=float(rng.choice([1.0, 0.9, 0.7])), red_windows_s=sure, likely_red_windows_s=timings[10][: len(sure)],
+                     late_red_windows_s=late, scenario_red_windows_s=timings, amber_s=amber)  # fmt: skip
+
+
+def test_the_pruned_choice_is_the_choice_of_pricing_every_plan_alone(monkeypatch):
+    """``advise()`` prices the candidates as its choice needs them (``choice.expected_costs`` given ``skip`` / ``must``:
+    plans that cannot be allowed are not priced further, a plan of the same motion as the last one gets its results):
+    on 300 observations drawn at random (seeded: one or two lights, forecasts, distances, speeds, the plan followed
+    now), the advice is the one of pricing every candidate plan on its own, in full. The pruning is not vacuous: it
+    left plans unpriced in most of them, and every plan it priced in full has the same cost to the last bit."""
+    rng = np.random.default_rng(31)
+    kernel = choice.expected_costs
+    seen = {"pruned": 0, "choices": 0}
+
+    def each_alone(*args):
+        m = args[0].size
+        alone = [kernel(*(a[c : c + 1] if isinstance(a, np.ndarray) and i in PER_PLAN_ARGS else a for i, a in enumerate(args[:26]))) for c in range(m)]
+        cost, p_stop, through = (np.array([r[i][0] for r in alone]) for i in range(3))
+        fast = kernel(*args)
+        priced = np.isfinite(fast[0])
+        assert np.array_equal(fast[0][priced], cost[priced]) and np.array_equal(fast[1][priced], p_stop[priced])
+        seen["pruned"] += bool((~priced & np.isfinite(cost)).any())
+        seen["choices"] += 1
+        return cost, p_stop, through
+
+    cases = []
+    for _ in range(300):
+        v_lim = float(rng.choice([V_LIM, 45 * 0.44704]))
+        d1 = rng.uniform(40.0, 500.0)
+        lights = (_random_light(rng, 1, d1),) + ((_random_light(rng, 2, d1 + rng.uniform(120.0, 400.0)),) if rng.random() < 0.6 else ())
+        last = None
+        if rng.random() < 0.4:
+            action = str(rng.choice(list(KEEP_MODES)))
+            last = Advice(action, str(rng.choice(["green_wave", "red_ahead"])), float(rng.uniform(PARAMS.min_cruise_speed_mps, v_lim)))
+        cases.append((Observation(float(rng.uniform(0.0, v_lim)), v_lim, lights), AdvisorMemory(last=last)))
+    fast = [advise(obs, memory, PARAMS)[0] for obs, memory in cases]
+    monkeypatch.setattr(choice, "expected_costs", each_alone)
+    slow = [advise(obs, memory, PARAMS)[0] for obs, memory in cases]
+    assert fast == slow
+    assert seen["choices"] > 150 and seen["pruned"] > seen["choices"] // 2, seen
+
+
+PER_PLAN_ARGS = (0, 1, 2, 3, 4, 13, 24)
+"""The arguments of :func:`choice.expected_costs` given per candidate plan (vts, modes, reactions, accel_rows, accels,
+cross_s, stop_plan)."""

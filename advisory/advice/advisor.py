@@ -819,12 +819,37 @@ def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
         per_light, weights = forecast, np.full(n_fc, 1.0 / n_fc)
     n_sc = weights.size
     k = max(max((len(w) for sc in per_light for w in sc), default=0), 1)
-    out = np.full((len(lights), n_sc, k, 2), np.inf)
-    for j, scenarios in enumerate(per_light):
-        for i, windows in enumerate(scenarios):
-            if windows:
-                out[j, i, : len(windows)] = windows
-    return out, weights
+    flat: list[float] = []  # one flat list, one np.array call (as _Lines.of): a slice assignment per timing cost 30 us a fix
+    for scenarios in per_light:
+        for windows in scenarios:
+            for window in windows:
+                flat += window
+            flat += (np.inf,) * (2 * (k - len(windows)))
+        flat += (np.inf,) * (2 * k * (n_sc - len(scenarios)))
+    return np.array(flat, dtype=float).reshape(len(lights), n_sc, k, 2), weights
+
+
+@lru_cache(maxsize=64)
+def _candidate_plans(low_mps: float, limit_mps: float, step_mps: float, reaction_s: float, accel_mps2: float, normal_accel_mps2: float) -> tuple:
+    """The candidate plans of :func:`_choose`, made once per road and driver (not per fix): targets, modes, reactions,
+    accelerations and rate rows (m,) of every advised speed in each mode, then driving normally (the limit, no reaction,
+    the regular driver's rate), "prepare to stop" (a lift-off: its target, the car's speed, is set per fix) and the
+    plan followed now (set per fix). Shared: copy before writing (targets and modes are)."""
+    speeds = _candidates_mps(low_mps, limit_mps, step_mps)
+    m, n_modes = speeds.size, len(MODE_CODES)
+    vts = np.concatenate((np.tile(speeds, n_modes), [limit_mps, limit_mps, limit_mps]))
+    modes = np.concatenate((np.repeat(np.arange(n_modes), m), [0, MODE_CODES["brake_coast"], 0])).astype(np.int64)
+    reactions = np.concatenate((np.full(n_modes * m, reaction_s), [0.0, reaction_s, 0.0]))
+    accels = np.concatenate((np.full(n_modes * m, accel_mps2), [normal_accel_mps2, accel_mps2, accel_mps2]))
+    rows = np.where(accels == accel_mps2, choice.ACCEL_COMFORT, choice.ACCEL_NORMAL).astype(np.int64)
+    return vts, modes, reactions, accels, rows
+
+
+@lru_cache(maxsize=64)
+def _road_time_value_usd_per_s(params: AdvisorParams, v_lim_mps: float) -> float:
+    """The road's price on time (:func:`advisory.advice.choice.steady_time_value_usd_per_s`), once per road."""
+    rates, _, _ = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
+    return choice.steady_time_value_usd_per_s(rates, v_lim_mps)
 
 
 def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None, params: AdvisorParams, red: bool, to_change: float | None) -> Advice:
@@ -841,35 +866,47 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     m, n_modes = speeds.size, len(MODE_CODES)
     # (a lift-off for a likely red is a plan followed too: coasting on, it is kept as any other while it is as good)
     keep = last is not None and last.reason in ("green_wave", "red_ahead") and last.target_speed_mps is not None and last.action in KEEP_MODES
-    vts = np.concatenate((np.tile(speeds, n_modes), [v_lim, v], [last.target_speed_mps if keep else v_lim]))
-    modes = np.concatenate((np.repeat(np.arange(n_modes), m), [0, MODE_CODES["brake_coast"]], [MODE_CODES[KEEP_MODES[last.action]] if keep else 0])).astype(np.int64)
-    reactions = np.concatenate((np.full(n_modes * m, reaction), [0.0, reaction, 0.0]))
-    accels = np.concatenate((np.full(n_modes * m, accel), [params.normal_accel_mps2, accel, accel]))
+    vts, modes, reactions, accels, rows = _candidate_plans(params.min_cruise_speed_mps, v_lim, params.speed_step_mps, reaction, accel, params.normal_accel_mps2)
+    vts, modes = vts.copy(), modes.copy()
+    vts[-2], vts[-1] = v, last.target_speed_mps if keep else v_lim
+    modes[-1] = MODE_CODES[KEEP_MODES[last.action]] if keep else 0
     normal, stop = n_modes * m, n_modes * m + 1
     stop_plan = np.zeros(vts.size, dtype=np.bool_)
     stop_plan[stop] = True
     stop_plan[-1] = keep and last.reason == "red_ahead"  # a lift-off for a red, followed now: the same plan
-    rows = np.where(accels == accel, choice.ACCEL_COMFORT, choice.ACCEL_NORMAL).astype(np.int64)
     d_m = np.array([light.distance_m for light in usable], dtype=float)
     cross = _cross_matrix(vts, modes, reactions, accels, d_m, v0, brake, firm, *coast_tables)
     rates, coast, idle = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
     x_end = float(d_m[-1]) + v_lim * v_lim / (2.0 * params.normal_accel_mps2)
     windows, weights = _timings(usable)
-    lam_road = choice.steady_time_value_usd_per_s(rates, v_lim) if params.time_value_usd_per_s is None else params.time_value_usd_per_s
+    lam_road = _road_time_value_usd_per_s(params, v_lim) if params.time_value_usd_per_s is None else params.time_value_usd_per_s
     lam = lam_road * time_price(obs)  # the car's time and its followers' (Observation.followers)
     clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
-    cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,
-                                                  params.green_margin_s, lam, cross, rates, coast, idle, brake, firm,
-                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan,
-                                                  np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S for light in usable]))  # fmt: skip
     # no amber warns of a light's reds: no plan reaches the line where one may be on (the sure windows), nor, slowing the
     # car, within the margin before one may begin (the feasibility of the rules, :func:`_green_mask`)
     lines = _Lines.of(usable)
-    through |= _red_crossings(cross, lines.windows_s, (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9), lines.no_amber, params.green_margin_s)
+    crossed = _red_crossings(cross, lines.windows_s, (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9), lines.no_amber, params.green_margin_s)
+    # priced as the choice needs them (choice.expected_costs, "pruned"): driving normally first and in full, and the
+    # stop plan; a plan that cannot be allowed (through a red, or a stop likelier than driving normally's by more than
+    # ``stop_risk_frac``) is not priced further. The same choice as pricing every plan (tests/test_choice.py)
+    must = np.zeros(vts.size, dtype=np.bool_)
+    must[normal] = must[stop] = True
+    must[-1] = keep  # (kept where it costs no more than the best: its cost, even inf, counts)
+    skip = crossed & ~must
+    skip[-1] |= not keep  # (no plan followed now: its slot is not a candidate)
+    cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,
+                                                  params.green_margin_s, lam, cross, rates, coast, idle, brake, firm,
+                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan,
+                                                  np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S for light in usable]),
+                                                  skip, must, normal, params.stop_risk_frac)  # fmt: skip
+    through |= crossed
     allowed = (p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9) & ~through
     if not keep:
         allowed[-1] = False
-    best = int(np.argmin(np.where(allowed, cost, np.inf))) if allowed.any() else stop  # none: a stop comes whatever the plan
+    priced = np.where(allowed, cost, np.inf)
+    # none allowed at a finite cost (those left stop short of the line: coasting to a halt): a stop comes whatever the
+    # plan. (Was ``allowed.any()``: where every allowed plan cost inf, argmin fell on plan 0, through a red of every timing)
+    best = int(np.argmin(priced)) if np.isfinite(priced).any() else stop
     reaction_usd = lam * params.reaction_s
     if keep and allowed[-1] and cost[-1] <= cost[best] + reaction_usd:
         best = vts.size - 1  # the plan followed now, unless another is better by more than a new reaction costs

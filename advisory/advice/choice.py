@@ -318,7 +318,7 @@ def _stop_usd(tb, xb, vb, ub, usd, tc, green_s, d_line, x_end_m, v_lim, rates, u
 @njit(cache=True)
 def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s,
                    cross_s, rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan,
-                   amber_max_s):  # fmt: skip
+                   amber_max_s, skip=None, must=None, anchor=-1, risk_frac=np.inf):  # fmt: skip
     """Expected cost [$] (motion plus ``lam_usd_per_s`` per second to ``x_end_m``), chance of a stop [-], and whether
     the plan crosses a red of every timing (the hard constraint) of each candidate plan (m,), over the timings
     ``windows`` (lines, timings, k, 2: red windows, padded with +inf), of probability ``weights`` (timings,: summing to
@@ -346,22 +346,33 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
 
     A stop (or a roll below ``min_speed_mps``) counts in the chance of a stop. The hard constraint is about the light
     as published now: a plan is through a red when it reaches the line inside a red (or amber) on now in every timing,
-    or, where the light shows no amber, inside any red of every timing."""
+    or, where the light shows no amber, inside any red of every timing.
+
+    **Pruned** (the advisor's choice, :func:`advisory.advice.advisor._choose`: the same choice as pricing every plan,
+    for less): candidates in ``skip`` (m,) are not priced (cost inf, through: the caller found them through a red).
+    Given ``must`` (m,), the candidate ``anchor`` (driving normally) is priced first, and every candidate not in
+    ``must`` stops being priced where it cannot be allowed (cost inf): through a red (the hard constraint: not driven;
+    one whose motion would have stopped short of the lines costs inf, and the advisor never chooses a plan of cost
+    inf), or its chance of a stop past ``p_stop[anchor] + risk_frac + 1e-9`` (the advisor's chance constraint; a sum
+    of chances never shrinks as timings are added, so a partial sum past it is a whole sum past it; ``p_stop`` holds
+    the partial one). A candidate whose motion, crossings and flags are the last priced one's (a lift-off to a speed the car never
+    coasts down to before the lines: the same motion whatever the target) gets its results."""
     m, n_lines, n_sc = vts.size, d_m.size, windows.shape[1]
     cost = np.empty(m)
     p_stop = np.empty(m)
     through = np.zeros(m, dtype=np.bool_)
     up, down = _ramps(rates, comfort, normal)
-    path = np.empty((4, MAX_KNOTS + 1))
+    paths = np.empty((2, 4, MAX_KNOTS + 1))  # this candidate's motion, and the last priced one's
+    cur, prev, prev_knots, prev_brake = 0, -1, 0, np.empty((n_lines, 4))
     no_stop = np.empty(n_lines)
-    for c in range(m):
-        usd, t_end, n_knots, brake = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort,
-                                            firm, normal, path)  # fmt: skip
-        if not np.isfinite(t_end):
-            cost[c], p_stop[c] = np.inf, 1.0
+    stop_cap = np.inf
+    for cc in range(m):
+        c = cc if anchor < 0 else anchor if cc == 0 else cc - 1 if cc <= anchor else cc  # the anchor first
+        if skip is not None and skip[c]:
+            cost[c], p_stop[c], through[c] = np.inf, 1.0, True
             continue
-        for j in range(n_lines):
-            no_stop[j] = _no_stop_s(path, n_knots, d_m[j], AMBER_STOP_MPS2)
+        prune = must is not None and not must[c]
+        sure_through = False
         for j in range(n_lines):  # the hard constraint: a crossing inside a red of every timing
             sure = True
             for s in range(n_sc):
@@ -370,11 +381,30 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                     sure = False
                     break
             if sure:
-                through[c] = True
+                sure_through = True
+        if prune and sure_through:
+            cost[c], p_stop[c], through[c] = np.inf, 1.0, True
+            continue
+        path = paths[cur]
+        usd, t_end, n_knots, brake = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast, comfort,
+                                            firm, normal, path)  # fmt: skip
+        if not np.isfinite(t_end):
+            cost[c], p_stop[c] = np.inf, 1.0
+            continue
+        through[c] = sure_through
+        if prev >= 0 and _same_plan(c, prev, path, n_knots, brake, paths[1 - cur], prev_knots, prev_brake, cross_s, stop_plan, must):
+            cost[c], p_stop[c] = cost[prev], p_stop[prev]
+            continue
+        cur, prev, prev_knots, prev_brake = 1 - cur, c, n_knots, brake
+        for j in range(n_lines):
+            no_stop[j] = _no_stop_s(path, n_knots, d_m[j], AMBER_STOP_MPS2)
         total, stops = 0.0, 0.0
         plan = usd + lam_usd_per_s * t_end
         tail = (d_m, windows, n_windows, after_red_s, clear_s, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam_usd_per_s)
         for s in range(n_sc):
+            if prune and stops > stop_cap:
+                total = np.inf  # not to be allowed: not priced further
+                break
             blocked, kb, w = -1, -1, 0.0
             for j in range(n_lines):
                 kb, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, clear_s[j])
@@ -480,7 +510,28 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 stops += weights[s] * w
         cost[c] = total
         p_stop[c] = stops
+        if c == anchor:
+            stop_cap = stops + risk_frac + 1e-9
     return cost, p_stop, through
+
+
+@njit(cache=True, inline="always")
+def _same_plan(c, last, path, n_knots, brake, last_path, last_knots, last_brake, cross_s, stop_plan, must):
+    """Candidate ``c`` is priced as candidate ``last`` would be (:func:`expected_costs`): the same knots of motion
+    (``path``, ``n_knots``), the same states where stops must begin (``brake``), crossings and flags."""
+    if n_knots != last_knots or stop_plan[c] != stop_plan[last] or (must is not None and must[c] != must[last]):
+        return False
+    for j in range(cross_s.shape[1]):
+        if cross_s[c, j] != cross_s[last, j]:
+            return False
+        for i in range(4):
+            if brake[j, i] != last_brake[j, i]:  # (inf == inf; a NaN, never written, would differ)
+                return False
+    for i in range(4):
+        for k in range(n_knots):
+            if path[i, k] != last_path[i, k]:
+                return False
+    return True
 
 
 def steady_time_value_usd_per_s(rates: np.ndarray, speed_mps: float) -> float:
