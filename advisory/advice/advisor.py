@@ -802,6 +802,7 @@ GOLDEN_FRAC = (math.sqrt(5.0) - 1.0) / 2.0
 :func:`_paired` orders a light's timings. [-]"""
 
 
+@lru_cache(maxsize=16)
 def _paired(n: int, j: int) -> np.ndarray:
     """The order in which light ``j``'s ``n`` equally likely timings (sorted by level) meet the first light's k-th:
     the first light's own order, and for the next lights a fixed permutation at no rank correlation with it, so each
@@ -814,9 +815,9 @@ def _paired(n: int, j: int) -> np.ndarray:
     >>> _paired(5, 0).tolist(), sorted(_paired(5, 1).tolist())
     ([0, 1, 2, 3, 4], [0, 1, 2, 3, 4])
     """
-    if j == 0:
-        return np.arange(n)
-    return np.argsort(((np.arange(n) + 0.5) * GOLDEN_FRAC * j) % 1.0, kind="stable")
+    order = np.arange(n) if j == 0 else np.argsort(((np.arange(n) + 0.5) * GOLDEN_FRAC * j) % 1.0, kind="stable")
+    order.setflags(write=False)  # (cached: shared by every call)
+    return order
 
 
 def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
