@@ -422,3 +422,22 @@ def test_the_pruned_choice_is_the_choice_of_pricing_every_plan_alone(monkeypatch
 PER_PLAN_ARGS = (0, 1, 2, 3, 4, 13, 24)
 """The arguments of :func:`choice.expected_costs` given per candidate plan (vts, modes, reactions, accel_rows, accels,
 cross_s, stop_plan)."""
+
+
+def test_two_lights_timings_are_all_kept_and_paired_at_no_rank_correlation():
+    """Within a light the timings are comonotone; across two lights each keeps all its timings, each once (its own
+    law), and they are paired at no rank correlation (a Latin hypercube pairing): a green that comes early at the first
+    light does not come with a red that comes early at the second."""
+    from advisory.advice.advisor import _timings as advisor_timings
+
+    first, second = _timings(10.0, 30.0, spread_s=10.0), _timings(40.0, 30.0, spread_s=20.0)
+    lights = (LightView(1, 150.0, True, 1.0, ((10.0, 60.0),), ((15.0, 45.0),), scenario_red_windows_s=first),
+              LightView(2, 450.0, True, 1.0, ((40.0, 90.0),), ((50.0, 80.0),), scenario_red_windows_s=second))  # fmt: skip
+    windows, weights = advisor_timings(lights)
+    n = len(first)
+    starts_1, starts_2 = windows[0, :n, 0, 0], windows[1, :n, 0, 0]
+    assert starts_1.tolist() == pytest.approx([w[0][0] for w in first])  # the first light's order: its levels
+    assert sorted(starts_2.tolist()) == pytest.approx(sorted(w[0][0] for w in second))  # the second's law, each once
+    rank_corr = np.corrcoef(np.argsort(np.argsort(starts_1)), np.argsort(np.argsort(starts_2)))[0, 1]
+    assert abs(rank_corr) < 0.1
+    assert weights[:n] == pytest.approx(np.full(n, weights[0]))

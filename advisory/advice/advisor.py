@@ -797,6 +797,29 @@ def _resampled(timings: tuple, n: int) -> tuple:
     return timings if len(timings) == n else tuple(timings[k * len(timings) // n] for k in range(n))
 
 
+GOLDEN_FRAC = (math.sqrt(5.0) - 1.0) / 2.0
+"""The golden ratio's fraction: the most evenly spread sequence ``k * GOLDEN_FRAC mod 1`` (Weyl), by which
+:func:`_paired` orders a light's timings. [-]"""
+
+
+@lru_cache(maxsize=16)
+def _paired(n: int, j: int) -> np.ndarray:
+    """The order in which light ``j``'s ``n`` equally likely timings (sorted by level) meet the first light's k-th:
+    the first light's own order, and for the next lights a fixed permutation at no rank correlation with it, so each
+    light's timings are all there, each once, as in a Latin hypercube pairing (M. D. McKay, R. J. Beckman and W. J.
+    Conover, Technometrics 21, 1979, doi:10.2307/1268522), with no chance drawn (the advice is the same on the same
+    readings).
+
+    Examples
+    --------
+    >>> _paired(5, 0).tolist(), sorted(_paired(5, 1).tolist())
+    ([0, 1, 2, 3, 4], [0, 1, 2, 3, 4])
+    """
+    order = np.arange(n) if j == 0 else np.argsort(((np.arange(n) + 0.5) * GOLDEN_FRAC * j) % 1.0, kind="stable")
+    order.setflags(write=False)  # (cached: shared by every call)
+    return order
+
+
 def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The lights' timings packed for :func:`advisory.advice.choice.expected_costs`: red windows (lines, timings, k, 2),
     padded with +inf, and each timing's weight (timings,), summing to 1. An exact light has one timing in all of them.
@@ -804,14 +827,18 @@ def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
     The mixture of each uncertain light: its forecast (equally likely timings, ``LightView.scenario_red_windows_s`` or
     read off its windows, :func:`_implied_timings`), and the wide component (:func:`_widened_timings`) weighted by the
     chance that a change comes outside the window the light states: ``1 - confidence_frac`` (J2735: the probability
-    that the change comes within it; the lowest of the lights planned for). Timings are comonotone across the lights (the
-    k-th of each, as the forecast's are within one)."""
+    that the change comes within it; the lowest of the lights planned for). Within a light the timings are comonotone
+    (every change at one level of its forecast: a red that comes late ends late); across lights they are paired at no
+    rank correlation (:func:`_paired`): two lights' changes are not one forecast's (the k-th of each, comonotone, made a
+    green that comes early at the first light always come with a red that comes early at the second: docs/ADVISOR.md,
+    session p3). The wide components pair up as they are."""
     uncertain = [light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in lights]
     forecast = [light.scenario_red_windows_s or _implied_timings(light) if u else _implied_timings(light) for light, u in zip(lights, uncertain)]
     n_fc = max(len(timings) for timings in forecast)
     forecast = [_resampled(timings, n_fc) for timings in forecast]
     if any(uncertain):
-        per_light = [fc + (_widened_timings(fc) if u else fc[:1] * len(WIDE_LEVELS)) for fc, u in zip(forecast, uncertain)]
+        per_light = [tuple(fc[i] for i in _paired(n_fc, j)) + (_widened_timings(fc) if u else fc[:1] * len(WIDE_LEVELS))
+                     for j, (fc, u) in enumerate(zip(forecast, uncertain))]
         stated = min(light.confidence_frac for light, u in zip(lights, uncertain) if u)
         outside = min(max(1.0 - stated, 1.0 / n_fc), 1.0)
         weights = np.concatenate((np.full(n_fc, (1.0 - outside) / n_fc), np.full(len(WIDE_LEVELS), outside / len(WIDE_LEVELS))))
