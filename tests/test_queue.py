@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, time_price
-from advisory.advice.queue import Probe, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s, pushed_past
+from advisory.advice.queue import Probe, QueueEstimate, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s, pushed_past
 from server.queue import QueueBoard
 
 M = QueueModel()
@@ -152,6 +152,22 @@ def test_a_red_whose_end_only_the_timings_know_is_held_in_each_timing_from_its_o
     held = apply(obs, est).lights[0]
     assert np.allclose([w[0][1] for w in held.scenario_red_windows_s], [18.0 + k + 9.0 + 4.0 * (k + 0.5) / 4 for k in range(4)])
     assert held.red_windows_s == ((0.0, math.inf),) and held.likely_red_windows_s == ((0.0, 19.5 + 11.0),)
+
+
+def test_a_stop_is_named_after_the_light_the_stop_plan_meets_in_a_red():
+    """At the limit 235 m before a light that turns red in 10 s with no amber (0.4 s to spare at its speed, inside the
+    advisor's 2 s margin before such a red for a slowing plan), a queue at the second light: no plan is allowed and the
+    car is to stop at the first light. Said so ("Red in 10 seconds. Prepare to stop.", the first light's), not named
+    after the second light's green with a lift-off (traced in SUMO, paper_s400 fixed 600 veh/h, every car connected,
+    seed 2: "Red light ahead. Green in 45 seconds. Lift off and coast.", never "stop", so the driver's eye went on
+    for the first light and a slower car ahead took it 0.5 s into the red)."""
+    lim = 24.5872
+    reds = ((10.0, 40.0), (70.0, 100.0))
+    obs = Observation(24.59, lim, (LightView(1, 235.1, red_windows_s=reds, amber_s=0.0), LightView(2, 635.1, red_windows_s=reds, amber_s=0.0)), position_m=100.0)
+    # the traced fix's estimate: the second light closed until 44.8-47 s (four cars arriving in its red), the first free
+    est = QueueEstimate((0.0, 4.0), (0, 4), (0.0, 49.0), clear_s=((0.0, 0.0), (44.8, 47.0)), after_red_s=(None, (4.8, 7.0)))
+    advice, _ = advise(apply(obs, est), None, AdvisorParams())
+    assert (advice.action, advice.light_ahead, advice.seconds_to_change_s) == ("stop", 1, 10.0)
 
 
 def test_normal_drive_and_given_up_greens():
