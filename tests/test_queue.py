@@ -3,13 +3,14 @@ queue-blind target stop while the queue-aware one glides."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from advisory.advice.advisor import Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, time_price
-from advisory.advice.queue import Probe, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s, pushed_past
+from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, time_price
+from advisory.advice.queue import Probe, QueueEstimate, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s, pushed_past
 from server.queue import QueueBoard
 
 M = QueueModel()
@@ -28,14 +29,20 @@ def test_no_cars_ahead_no_change():
 
 
 def test_standing_cars_hold_the_line_until_they_have_crossed():
-    """Four cars standing at a red ending in 20 s: the first crosses 2 s after it, the rest 2 s apart, this car 2 s
-    after the fourth: the line is closed to it for 20 + 2 + 3 x 2 + 2 = 30 s."""
+    """Four cars standing at a red ending in 20 s: discharging slowly the first crosses 3 s after it, the rest 2 s
+    apart (the fourth at 20 + 3 + 3 x 2 = 29 s, this car 2 s later), fast 2 s after it and 1.4 s apart (the fourth at
+    20 + 2 + 3 x 1.4 = 26.2 s). The line is closed to this car until the fourth has crossed (the advisor's margin after
+    it is this car's headway): surely until 26.2 s, and in the equally likely timings until 26.2-29 s, evenly."""
     probes = [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(4)]
     est = estimate(_obs(), probes)
     assert est.cars == (4.0,) and est.known == (4,)
-    assert est.free_at_s[0] == pytest.approx(20.0 + M.startup_s + 3 * M.headway_s + M.headway_s)
+    assert est.free_at_s[0] == pytest.approx(20.0 + 3.0 + 3 * 2.0 + 2.0)
+    assert est.clear_s[0] == pytest.approx((26.2, 29.0)) and est.after_red_s[0] == pytest.approx((6.2, 9.0))
     out = apply(_obs(), est)
-    assert out.lights[0].red_windows_s == ((0.0, 30.0), (60.0, 90.0))
+    assert np.allclose(out.lights[0].red_windows_s, ((0.0, 26.2), (60.0, 90.0)))
+    held = [w[0][1] for w in out.lights[0].scenario_red_windows_s]
+    assert len(held) == 20 and held == pytest.approx([26.2 + 2.8 * (k + 0.5) / 20 for k in range(20)])
+    assert all(w[1:] == ((60.0, 90.0),) for w in out.lights[0].scenario_red_windows_s)
 
 
 def test_a_car_arriving_after_the_queue_has_gone_holds_nobody_up():
@@ -93,6 +100,24 @@ def test_the_advisor_aims_at_the_queue_having_cleared():
     assert aware.target_speed_mps < blind.target_speed_mps - 2.0
 
 
+def test_the_queue_clears_as_a_distribution_and_the_plan_aims_within_it():
+    """An exact light, red for 20 s more, six cars standing at it, this car 300 m out at 13 m/s: the queue's last car
+    crosses 20 + 2 + 5 x 1.4 = 29 s from now discharging fast, 20 + 3 + 5 x 2 = 33 s slowly; with the advisor's 2 s
+    margin (this car's headway behind it) this car can cross from 31 s (fast) to 35 s (slow). The plan never reaches
+    the line before 31 s (the queue surely stands until then), and, priced over the clearing's distribution, does
+    not wait for the slowest discharge (one conservative instant had it cross at 36 s or later: the slow clearing
+    plus a headway, plus the margin); queue-blind it aims at the green, 23 s."""
+    params = AdvisorParams(units="kmh")
+    obs = _obs(reds=((0.0, 20.0), (80.0, 110.0)))
+    est = estimate(obs, [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(6)])
+    assert est.clear_s[0] == pytest.approx((29.0, 33.0))
+    aware, _ = advise(apply(obs, est), None, params)
+    blind, _ = advise(obs, None, params)
+    crossing = crossing_time_s(300.0, 13.0, aware.target_speed_mps, params, KEEP_MODES[aware.action])
+    assert 29.0 + params.green_margin_s <= crossing < 33.0 + params.green_margin_s
+    assert crossing_time_s(300.0, 13.0, blind.target_speed_mps, params, KEEP_MODES[blind.action]) < 20.0 + 2 * params.green_margin_s
+
+
 def test_the_choice_under_uncertain_timing_aims_at_the_queue_having_cleared():
     """The same on a light of uncertain timing (the choice prices the forecast's timings): every timing's red is held
     until the queue has crossed, and the advice aims there, not at the green (traced in SUMO, paper_s400 actuated 600
@@ -104,11 +129,45 @@ def test_the_choice_under_uncertain_timing_aims_at_the_queue_having_cleared():
     obs = Observation(13.0, 13.4, (light,), position_m=100.0)
     est = estimate(obs, [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(6)])
     held = apply(obs, est)
-    assert [w[0] for w in held.lights[0].scenario_red_windows_s] == [(0.0, est.free_at_s[0])] * 4
+    # each timing held from its own red's end (18-21 s) by the discharge at its level, fast to slow, in their order
+    fast, slow = 2.0 + 5 * 1.4, 3.0 + 5 * 2.0
+    assert est.clear_s[0] == pytest.approx((21.0 + fast, 21.0 + slow))
+    assert np.allclose([w[0] for w in held.lights[0].scenario_red_windows_s], [(0.0, 18.0 + k + fast + (slow - fast) * (k + 0.5) / 4) for k in range(4)])
+    assert np.allclose(held.lights[0].red_windows_s[0], (0.0, 21.0 + fast))  # surely standing until then
     blind, _ = advise(obs, None, params)
     aware, _ = advise(held, None, params)
     assert blind.target_speed_mps is not None and aware.target_speed_mps is not None
     assert aware.target_speed_mps < blind.target_speed_mps - 2.0
+
+
+def test_a_red_whose_end_only_the_timings_know_is_held_in_each_timing_from_its_own_end():
+    """An actuated red on now with no stated latest end (the sure view: red until further notice), its forecast ending
+    it in 18-21 s; six cars standing: each timing is closed until its own end plus the discharge at its level (fast
+    2 + 5 x 1.4 = 9 s, slow 3 + 5 x 2 = 13 s after it), not until further notice in every timing."""
+    timings = tuple(((0.0, 18.0 + k),) for k in range(4))
+    light = LightView(1, 300.0, red_windows_s=((0.0, math.inf),), likely_red_windows_s=((0.0, 19.5),), scenario_red_windows_s=timings)
+    obs = Observation(13.0, 13.4, (light,), position_m=100.0)
+    est = estimate(obs, [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(6)])
+    assert est.after_red_s[0] == pytest.approx((9.0, 13.0)) and est.clear_s[0] == (math.inf, math.inf)
+    held = apply(obs, est).lights[0]
+    assert np.allclose([w[0][1] for w in held.scenario_red_windows_s], [18.0 + k + 9.0 + 4.0 * (k + 0.5) / 4 for k in range(4)])
+    assert held.red_windows_s == ((0.0, math.inf),) and held.likely_red_windows_s == ((0.0, 19.5 + 11.0),)
+
+
+def test_a_stop_is_named_after_the_light_the_stop_plan_meets_in_a_red():
+    """At the limit 235 m before a light that turns red in 10 s with no amber (0.4 s to spare at its speed, inside the
+    advisor's 2 s margin before such a red for a slowing plan), a queue at the second light: no plan is allowed and the
+    car is to stop at the first light. Said so ("Red in 10 seconds. Prepare to stop.", the first light's), not named
+    after the second light's green with a lift-off (traced in SUMO, paper_s400 fixed 600 veh/h, every car connected,
+    seed 2: "Red light ahead. Green in 45 seconds. Lift off and coast.", never "stop", so the driver's eye went on
+    for the first light and a slower car ahead took it 0.5 s into the red)."""
+    lim = 24.5872
+    reds = ((10.0, 40.0), (70.0, 100.0))
+    obs = Observation(24.59, lim, (LightView(1, 235.1, red_windows_s=reds, amber_s=0.0), LightView(2, 635.1, red_windows_s=reds, amber_s=0.0)), position_m=100.0)
+    # the traced fix's estimate: the second light closed until 44.8-47 s (four cars arriving in its red), the first free
+    est = QueueEstimate((0.0, 4.0), (0, 4), (0.0, 49.0), clear_s=((0.0, 0.0), (44.8, 47.0)), after_red_s=(None, (4.8, 7.0)))
+    advice, _ = advise(apply(obs, est), None, AdvisorParams())
+    assert (advice.action, advice.light_ahead, advice.seconds_to_change_s) == ("stop", 1, 10.0)
 
 
 def test_normal_drive_and_given_up_greens():
@@ -263,7 +322,9 @@ def test_in_sumo_a_queue_published_in_the_spat_makes_the_unconnected_queue_known
         v, x = np.array(car.v), np.array(car.x)
         out[spat_queue] = (count_stops(v), float(v[(x > 0.0) & (x < line)].min()), car.crossings[0])
     assert out[False][0] == 1 and out[False][1] < 0.5
-    assert out[True][0] == 0 and out[True][1] > 3.0 and out[True][2][2] == "green"
+    # (never standing: the published jam ends when its first car moves, SUMO's halting threshold, so from the green on
+    # the car is told to drive normally and meets the discharging queue's tail, slowing to 2.9 m/s at the firm 3 m/s²)
+    assert out[True][0] == 0 and out[True][1] > M.queued_mps and out[True][2][2] == "green"
 
 
 def test_followers_known_behind_and_expected_from_the_flow():
@@ -281,7 +342,7 @@ def test_followers_known_behind_and_expected_from_the_flow():
     # the estimate carries it, and the advisor's view of the lights gets it
     standing = [Probe(300.0 - 1.0 - 7.5 * k, 0.0) for k in range(4)]
     est = estimate(obs, standing + behind, M)
-    assert est.free_at_s[0] == pytest.approx(30.0) and est.followers == 1.0
+    assert est.free_at_s[0] == pytest.approx(20.0 + M.startup_s + 4 * M.headway_s) and est.followers == 1.0
     assert apply(obs, est).followers == 1.0
 
 

@@ -309,6 +309,31 @@ def test_a_driver_held_back_after_deciding_to_go_stops_while_it_still_can():
     assert (v - cmd) / STEP_S <= 3.5  # and can do so gently: no hard brake
 
 
+@pytest.mark.parametrize("shows_amber", [False, True])
+def test_a_driver_told_to_stop_at_a_light_without_amber_stops_where_it_can(shows_amber):
+    """At the limit (24.6 m/s) at its decision point, 110 m out, told "Red light ahead. Prepare to stop." for a light
+    the display shows green for 4.57 s more (at its speed it is over the line 0.1 s before the red): where the light
+    shows no amber the eye cannot see that red coming, and the driver stops as told, at 2.8 m/s² (the closed loop's
+    driver, the same person; traced in SUMO, paper_s400 fixed 600 veh/h, seed 3: its eye went on and car following
+    behind a slower car took it 0.5 s into the red); where the light shows an amber, its eye decides: it goes."""
+    from advisory.advice.advisor import Advice, LightView
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line, x = 24.5872, 1000.0, 1000.0 - 110.0
+    driver = AdvisedDriver((line,), vid="main.0")
+    to_red_s = 110.0 / lim + 0.1
+    view = LightView(1, line - x + lim, red_windows_s=((to_red_s + 1.0, 60.0),), amber_s=None if shows_amber else 0.0)
+    driver.heard(-1.0, x - lim, Advice("stop", "red_ahead", 0.0, False, to_red_s + 1.0), {0: view})  # acted on from now
+    light = lambda t, x: LightNow(0, line, t >= to_red_s, False, np.inf, shows_amber) if x <= line else None  # noqa: E731
+    xs, vs = _drive(driver, x, lim, lim, light, seconds=20.0)
+    crossed = np.flatnonzero(xs > line)
+    assert np.diff(vs).min() / STEP_S >= -3.5 - 1e-9
+    if shows_amber:
+        assert crossed.size and crossed[0] * STEP_S < to_red_s  # the eye's go: over the line on green
+    else:
+        assert not crossed.size and vs[-1] == 0.0
+
+
 def _drive(driver, x, v, lim, light, leader_at=None, seconds=40.0, eyes=True):
     """Euler steps as SUMO's: the driver's command, else SUMO's driver (2 m/s² up to the limit), never above the safe
     speed behind ``leader_at`` (the station of a standing car's back; Krauss's, with the car's 4 m/s²), the gap beyond

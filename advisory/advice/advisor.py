@@ -547,6 +547,12 @@ def _green_crossing(light: LightView, t_s: float, after_red_s: float) -> bool:
     return bool(np.isfinite(t_s)) and not any(start <= t_s < end + after_red_s for start, end in light.red_windows_s)
 
 
+def _slowed_into_red(light: LightView, t_s: float, margin_s: float) -> bool:
+    """A slowing plan reaches a light that shows no amber within ``margin_s`` before a red begins (the margin
+    :func:`_green_mask` keeps before such a red)."""
+    return light.amber_s == 0.0 and any(0.0 < start and start - margin_s <= t_s < start for start, _ in light.red_windows_s)
+
+
 def _normal_drive_s(distance_m: float, obs: Observation, params: AdvisorParams) -> float:
     """Time to a line ``distance_m`` ahead driving normally: speeding up to the limit at ``normal_accel_mps2`` at once
     (no advice to react to), the kernel's "auto" motion. [s]"""
@@ -951,7 +957,11 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
         # "prepare to stop" is the plan: said when a stop must begin soon; farther out lift off (its motion until then:
         # arriving later only helps, the red may end first), or nothing while the car pulls away at a crawl (the light
         # it is about: the first the car as it goes would not cross on green; a stop only at the next one)
-        i = _binding(usable, obs, params)
+        # the light it is about: the first that the stop plan's own motion (a lift-off) meets in a red, where it stops
+        # (by the car's speed held, a light made 0.4 s before a red no amber announces named the next light's green:
+        # "Red light ahead. Green in 45 seconds. Lift off and coast." for a stop at this one, never said "stop")
+        i = next((j for j in range(len(usable)) if not _green_crossing(usable[j], float(cross[stop, j]), params.green_margin_s)
+                  or _slowed_into_red(usable[j], float(cross[stop, j]), params.green_margin_s)), _binding(usable, obs, params))  # fmt: skip
         if i == 0 and red and v > 0.0 and nxt.seconds_to_green() - crossing_time_s(nxt.distance_m, v, v, params) < params.short_wait_s:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)  # a stop to wait a moment: none
         if v < params.min_cruise_speed_mps:  # pulling away at a crawl: what is ahead, said

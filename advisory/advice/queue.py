@@ -20,7 +20,10 @@ Where the count comes from, in order of trust (issue 28):
    and stands), only at the next light (at the one after it, arrivals are platoons released by the first), never more
    than fit between the car and the line.
 
-The queue then crosses the line ``startup_s + n x headway_s`` after the red ends (:class:`QueueModel`). A car that is
+The queue's last car then crosses the line ``startup_s + (n - 1) x headway_s`` after the red ends, somewhere between
+the fast and the slow end of the measured discharge (:class:`QueueModel`): :func:`apply` closes the line until then as
+a distribution over the light's equally likely timings, which the advisor's choice prices (never a plan into a queue
+surely standing, no waiting for the slowest discharge in every timing). A car that is
 itself in a queue (slower than ``queued_mps`` and not first at the line: ``in_queue``) or right behind a slower
 connected car (within ``follow_gap_s`` plus a jam spacing: ``follow_mps``) is given no speed by the service: it
 follows the car in front, and the advice resumes, planned afresh, once it is free (never a target above what the
@@ -51,7 +54,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, crossing_time_s, phrase
+from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, _implied_timings, crossing_time_s, phrase
 from advisory.advice.choice import WAIT_CAP_S
 
 
@@ -60,15 +63,24 @@ class QueueModel:
     """How a queue discharges and what a queued car is. Units in names.
 
     Sources: start-up lost time 2 s and a saturation headway of 1.9 s (1,900 veh/h per lane) are the Highway Capacity
-    Manual's (6th ed., ch. 19) base values; field measurements cited in issue 28 give about 2.0 s between cars at the
-    stop line falling to about 1.4 s further back, after a 2-3 s start-up. 2.0 s is the headway of the first cars, the
-    ones a car arriving on the green meets; the jam spacing is a passenger car's 5 m plus a 2.5 m gap (SUMO's
-    passenger type; 7-8 m in field counts of stopped queues). Field values, not the simulator's: SUMO's queue of this
-    project's cars lets the next car go about 1 s + 1.72 s a car after the green (docs/TRAFFIC.md), 3 s + 0.28 s a car
-    earlier than ``startup_s + n x headway_s`` plus the advisor's 2 s margin."""
+    Manual's (6th ed., ch. 19) base values (its first car over the line ~3.9 s after the green); field measurements
+    cited in issue 28 give about 2.0 s between cars at the stop line falling to about 1.4 s further back, after a 2-3 s
+    start-up. The discharge is a range, not one instant: slow (``startup_s`` 3 s, ``headway_s`` 2.0 s a car: the
+    field's longest start-up and its headway at the line, HCM's 1.9-2 s) to fast (``fast_startup_s`` 2 s,
+    ``fast_headway_s`` 1.4 s a car); the jam spacing is a passenger car's 5 m plus a 2.5 m gap (SUMO's passenger type;
+    7-8 m in field counts of stopped queues). Field values, not the simulator's: SUMO's queue of this project's cars
+    lets the next car go about 1 s + 1.72 s a car after the green (docs/TRAFFIC.md), about the fast end's
+    ``fast_startup_s + (n - 1) x fast_headway_s`` plus the advisor's 2 s margin (1.3 s earlier for one car, 1.6 s later
+    for ten)."""
 
-    startup_s: float = 2.0
+    startup_s: float = 3.0
     headway_s: float = 2.0
+    fast_startup_s: float = 2.0
+    fast_headway_s: float = 1.4
+    """The fast end of the measured discharge (``startup_s``, ``headway_s``: the slow end): the queue's first car over
+    the line 2 s after the red ends, each next one 1.4 s after the one before (the field's shortest headway, reached
+    further back in a queue). The queue clears somewhere between the two (:attr:`QueueEstimate.clear_s`, priced as a
+    distribution: :func:`apply`). [s]"""
     jam_spacing_m: float = 7.5
     queued_mps: float = 2.0  # a car slower than this short of a line stands in a queue
     drive_accel_mps2: float = 2.0  # another car (ahead or behind) speeds up to the limit at this, as the regular driver does (paper Sec. 2)
@@ -106,11 +118,20 @@ class QueueEstimate:
     stop_behind: bool = False
     """At the next light, whose red no amber announces, the connected cars ahead let this car cross no sooner than that
     red (less the margin where they set its crossing, :func:`behind_s`): it is to stop there, not to follow them."""
+    clear_s: tuple[tuple[float, float], ...] = ()
+    """Per light: until when the line is closed to this car (from now; 0: it is not) if the queue discharges fast, and
+    if it discharges slowly (:class:`QueueModel`): until the queue's last car has crossed (this car crosses a headway
+    later: the advisor's margin after a window's end, ``green_margin_s``), or until :func:`behind_s` lets it cross.
+    :func:`apply` closes the line between the two as a distribution. [s]"""
+    after_red_s: tuple[tuple[float, float] | None, ...] = ()
+    """Per light, where the queue waits for the red's end: the same two instants counted from that end (fast, slow), so
+    that a timing whose red ends earlier clears earlier (and one whose end only the timings know, not the sure view,
+    clears at all); None where the queue does not wait for it (cars discharging on a green, the cars ahead's bound). [s]"""
 
 
 def _first_red(light: LightView) -> tuple[float, float] | None:
     """The red the car faces: the first window still to end."""
-    return next(((a, b) for a, b in light.red_windows_s if b > 0.0), None)
+    return _first_red_of(light.red_windows_s)
 
 
 def estimate(
@@ -133,7 +154,7 @@ def estimate(
     ``red_elapsed_s``: how long the next light's current red has been on (None: unknown, counted from now)."""
     model = model or QueueModel()
     v_free = max(obs.speed_limit_mps, 1.0)
-    cars, known, free_at = [], [], []
+    cars, known, free_at, clears, after_reds = [], [], [], [], []
     before, stop_behind = 0.0, False
     for i, light in enumerate(obs.lights):
         red = _first_red(light)
@@ -152,18 +173,16 @@ def estimate(
             n_unseen = (1.0 - connected_share) * arrivals_vps * max(0.0, min(end, mine) - began)
             n_unseen = min(n_unseen, max(light.distance_m / model.jam_spacing_m - 1.0 - len(ahead), 0.0))
             arrivals = [max(start, 0.0)] * int(round(n_unseen)) + arrivals  # they arrived first: ahead in the queue
-        crossed, holding = -math.inf, 0  # the queue's last car to cross, and how many cars it holds
-        for a in arrivals:
-            if start <= a < end:  # waits for the red's end
-                crossed = max(end + (model.startup_s if holding == 0 else 0.0), crossed + model.headway_s)
-            elif a == 0.0 and start > 0.0:  # standing on a green: a queue already discharging, one car a headway
-                crossed = max(0.0, crossed + model.headway_s)
-            elif a < crossed + model.headway_s:  # arrives while the queue discharges: joins it
-                crossed += model.headway_s
-            else:  # arrives after the queue has gone: holds nobody up (car following keeps the gap)
-                continue
-            holding += 1
+        # the discharge, slow and fast, counted from the red's end (one whose end is unknown: from after every arrival)
+        ref = end if math.isfinite(end) else max([max(start, 0.0), *arrivals]) + 1.0
+        crossed, holding = _discharge(arrivals, start, ref, model.startup_s, model.headway_s)
+        crossed_fast, holding_fast = _discharge(arrivals, start, ref, model.fast_startup_s, model.fast_headway_s)
+        waits = holding > 0 and any(start <= a < ref for a in arrivals)  # the queue waits for the red's end
+        after_red = (crossed_fast - ref, crossed - ref) if waits else None
+        if waits:
+            crossed, crossed_fast = crossed - ref + end, crossed_fast - ref + end
         free = max(crossed + model.headway_s, 0.0) if holding else 0.0
+        clear = (max(crossed_fast, 0.0) if holding_fast else 0.0, max(crossed, 0.0) if holding else 0.0)
         # behind the cars ahead (:func:`behind_s`): where they leave this car no time to cross before a red that no
         # amber announces, one it could make alone, the line is closed to it until that red's end (an amber warns the
         # driver behind a car as any other). Decided within the distance the car needs to stop at the others' rate plus a headway's travel: farther out
@@ -180,8 +199,11 @@ def estimate(
             margin = model.no_amber_margin_s if held or (nearest is not None and _close(obs, nearest[0], model) and _closing(obs, nearest[1])) else 0.0
             if lead + margin > start:
                 free = max(free, lead, start)
+                clear, after_red = (max(clear[0], lead, start), max(clear[1], lead, start)), None
                 stop_behind = stop_behind or i == 0
         cars.append(float(holding))
+        clears.append(clear)
+        after_reds.append(after_red)
         known.append(len(ahead))
         free_at.append(free)
         before = light.distance_m
@@ -194,7 +216,36 @@ def estimate(
             follow = nearest.speed_mps
     free0 = free_at[0] if free_at else 0.0
     n_behind = followers(obs, probes, free0, model, arrivals_vps, connected_share)
-    return QueueEstimate(tuple(cars), tuple(known), tuple(free_at), in_queue, follow, n_behind, held_up(obs, probes, free0, model), stop_behind and not in_queue)
+    return QueueEstimate(tuple(cars), tuple(known), tuple(free_at), in_queue, follow, n_behind, held_up(obs, probes, free0, model), stop_behind and not in_queue,
+                         tuple(clears), tuple(after_reds))  # fmt: skip
+
+
+def _discharge(arrivals: Sequence[float], start: float, end: float, startup_s: float, headway_s: float) -> tuple[float, int]:
+    """When the last of the cars arriving at a line at ``arrivals`` (from now, in their order) that form a queue there
+    crosses it [s], and how many they are, for a red from ``start`` to ``end``: one arriving during the red waits for
+    its end, the first crossing ``startup_s`` after it and each next one ``headway_s`` after the one before; one
+    standing on a green (arrival 0) is a queue already discharging, one car a headway; one arriving while the queue
+    discharges joins it; one arriving after it has gone holds nobody up (car following keeps the gap).
+
+    Examples
+    --------
+    >>> _discharge([0.0, 0.0, 0.0], 0.0, 20.0, 3.0, 2.0), _discharge([0.0, 0.0, 0.0], 0.0, 20.0, 2.0, 1.5)
+    ((27.0, 3), (25.0, 3))
+    >>> _discharge([30.0], 0.0, 20.0, 3.0, 2.0)  # after the red, nobody in front: no queue
+    (-inf, 0)
+    """
+    crossed, holding = -math.inf, 0
+    for a in arrivals:
+        if start <= a < end:  # waits for the red's end
+            crossed = max(end + (startup_s if holding == 0 else 0.0), crossed + headway_s)
+        elif a == 0.0 and start > 0.0:  # standing on a green: a queue already discharging, one car a headway
+            crossed = max(0.0, crossed + headway_s)
+        elif a < crossed + headway_s:  # arrives while the queue discharges: joins it
+            crossed += headway_s
+        else:  # arrives after the queue has gone: holds nobody up
+            continue
+        holding += 1
+    return crossed, holding
 
 
 def _close(obs: Observation, ahead_m: float, model: QueueModel) -> bool:
@@ -325,17 +376,50 @@ def _held_until(windows, until_s: float):
 
 
 def apply(obs: Observation, est: QueueEstimate) -> Observation:
-    """``obs`` as the car meets the lights in traffic: each line closed to this car until ``est.free_at_s`` (the red it
-    faces ends no earlier; on a green, a window from now), in every view: conservative, likely, late, and each of the
-    forecast's timings (what the choice under uncertain timing prices: without them it planned through the queue)."""
-    lights = tuple(
-        replace(lv, red_windows_s=_held_until(lv.red_windows_s, t), likely_red_windows_s=_held_until(lv.likely_red_windows_s, t),
-                late_red_windows_s=_held_until(lv.late_red_windows_s, t),
-                scenario_red_windows_s=None if lv.scenario_red_windows_s is None else tuple(_held_until(w, t) for w in lv.scenario_red_windows_s))  # fmt: skip
-        if t > 0.0 else lv
-        for lv, t in zip(obs.lights, est.free_at_s + (0.0,) * len(obs.lights))
-    )
+    """``obs`` as the car meets the lights in traffic: each line closed to this car until the queue in front of it has
+    crossed, a distribution between the fast and the slow discharge (``est.clear_s``), not one instant:
+
+    * each of the light's equally likely timings (``LightView.scenario_red_windows_s``; an exact light's windows in
+      each, :data:`~advisory.advice.advisor.IMPLIED_TIMINGS` of them) is closed until the clearing at its own level,
+      uniform from fast to slow, in the timings' order (a timing whose red ends early meets the fast discharge too),
+      counted from that timing's own red end where the queue waits for the red (``est.after_red_s``): the choice
+      under uncertain timing (:mod:`advisory.advice.choice`) prices a plan on each, so it neither plans into a queue
+      still standing nor hangs back for one already gone (traced in SUMO: one conservative instant, the latest red end
+      plus the slow discharge, in every timing, held advised cars and the lane behind them seconds after the line was
+      free);
+    * the sure view (``red_windows_s``) until the fast clearing: before it the queue surely stands, and no plan reaches
+      it there (the hard constraint, in every timing); the likely view until the middle one, the late view until the
+      slow one.
+
+    The advisor adds its margin after each window's end (``green_margin_s``): this car's own headway behind the queue's
+    last car. An exact light with a queue ahead is thus planned by the choice (its timings are the queue's)."""
+    lights = tuple(_held(lv, clear, after) for lv, clear, after in zip(obs.lights, est.clear_s or ((0.0, 0.0),) * len(obs.lights),
+                                                                       est.after_red_s or (None,) * len(obs.lights)))  # fmt: skip
     return replace(obs, lights=lights, followers=est.followers)
+
+
+def _held(light: LightView, clear_s: tuple[float, float], after_red_s: tuple[float, float] | None) -> LightView:
+    """``light`` closed until the queue has crossed, at each level of its discharge (:func:`apply`)."""
+    fast, slow = clear_s
+    if slow <= 0.0 and fast <= 0.0:
+        return light
+
+    def until(windows, level):
+        red = _first_red_of(windows)
+        if after_red_s is not None and red is not None and math.isfinite(red[1]):  # counted from this view's own red end
+            return _held_until(windows, red[1] + after_red_s[0] + (after_red_s[1] - after_red_s[0]) * level)
+        return _held_until(windows, fast + (slow - fast) * level if math.isfinite(slow) else (fast if level == 0.0 else slow))
+
+    timings = light.scenario_red_windows_s or _implied_timings(light)
+    n = len(timings)
+    return replace(light, red_windows_s=until(light.red_windows_s, 0.0), likely_red_windows_s=until(light.likely_red_windows_s, 0.5),
+                   late_red_windows_s=until(light.late_red_windows_s, 1.0),
+                   scenario_red_windows_s=tuple(until(w, (k + 0.5) / n) for k, w in enumerate(timings)))  # fmt: skip
+
+
+def _first_red_of(windows) -> tuple[float, float] | None:
+    """The red of ``windows`` (relative, sorted; None: no view) still to end first."""
+    return None if windows is None else next(((a, b) for a, b in windows if b > 0.0), None)
 
 
 GIVE_UP_SLACK_S = 5.0

@@ -177,6 +177,7 @@ class _Sim:
         self.classes: list[PhaseClass] = [PhaseClass.GREEN] * len(self.lights)
         self.states = ["G"] * len(self.lights)
         self.coming: list[tuple[PhaseClass, float]] = [(PhaseClass.GREEN, math.inf)] * len(self.lights)
+        self.shows_amber = [True] * len(self.lights)  # each light's program shows an amber before each red (its source's)
         self.collisions: list[tuple] = []  # (time, collider, victim, type, their speeds)
         self.teleports = 0
 
@@ -189,6 +190,7 @@ class _Sim:
             self.classes[i] = phase_class(link_state(self.states[i]))  # what the step that just ended used
             state, ends = self.source.coming_state(lt)
             self.coming[i] = (phase_class(state), ends)  # what the next step uses: what a driver sees now
+            self.shows_amber[i] = self.source.amber_s(lt) != 0.0
         self.source.observe()
         for vid in conn.simulation.getDepartedIDList():
             if not vid.startswith(MAIN_FLOW + "."):
@@ -232,7 +234,7 @@ class _Sim:
         for i, line in enumerate(self.stop_lines):
             if line + LINE_TOL_M >= x_m:  # (a car whose front stands at the line has not crossed it)
                 cls, ends = self.coming[i]
-                return LightNow(i, line, cls is PhaseClass.RED, cls is PhaseClass.AMBER, ends if cls is PhaseClass.AMBER else math.inf)
+                return LightNow(i, line, cls is PhaseClass.RED, cls is PhaseClass.AMBER, ends if cls is PhaseClass.AMBER else math.inf, self.shows_amber[i])
         return None
 
 
