@@ -152,7 +152,9 @@ class QueueBoard:
         self._red_ended: dict[int, tuple[float, float, float]] = shared.red_ended if shared is not None else {}
         """intersection -> its last red that has ended: ``(start, end, jam)``, times [s], ``jam`` the queue [m] this worker
         last saw published in it (NaN: none), for :meth:`past_red`."""
-        self._jam: dict[int, float] = {}  # intersection -> the queue [m] last published during its current red
+        self._in_red: dict[int, tuple[float, float, float]] = {}
+        """intersection -> this worker's last fix in its current red: its time, when the red then surely ended (inf:
+        not known) [s], the queue [m] last published in it (NaN: none)."""
         self._queued: dict[str, int] = {}  # trip -> the light whose queue it stands in
         self._behind: dict[str, tuple[Probe, ...]] = {}  # trip -> the connected cars its last fix found it holds up (:meth:`check`)
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
@@ -176,17 +178,19 @@ class QueueBoard:
 
     def red_elapsed(self, obs: Observation, t_unix_s: float) -> float | None:
         """How long the next light's current red has been on at ``t_unix_s`` (from the first fix that saw it on, on any
-        trip), None when it is not red: the red then ends at the first fix that sees it off, kept with its start and the
-        queue last published in it (:meth:`past_red`)."""
+        trip), None when it is not red. At the first fix that sees it off the red is kept (:meth:`past_red`) with its
+        start, its end (when the last fix in it had it surely end, between that fix and this one: with few connected
+        cars the first fix on the green can come long after it) and the queue last published in it."""
         nxt = obs.lights[0]
         key = nxt.intersection_id
         if not nxt.red_now:
             began = self._red_since.pop(key, None)
+            last_t, last_end, jam = self._in_red.pop(key, (began, t_unix_s, math.nan))
             if began is not None:
-                self._red_ended[key] = (began, max(t_unix_s, began), self._jam.pop(key, math.nan))
+                self._red_ended[key] = (began, max(min(last_end, t_unix_s), last_t, began), jam)
             return None
-        if nxt.fresh and nxt.queue_m is not None:
-            self._jam[key] = nxt.queue_m
+        jam = nxt.queue_m if nxt.fresh and nxt.queue_m is not None else self._in_red.get(key, (0.0, 0.0, math.nan))[2]
+        self._in_red[key] = (t_unix_s, t_unix_s + nxt.seconds_to_green(), jam)
         return t_unix_s - self._red_since.setdefault(key, t_unix_s)
 
     def past_red(self, obs: Observation, t_unix_s: float) -> PastRed | None:

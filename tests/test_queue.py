@@ -237,8 +237,8 @@ def test_a_plan_slowing_for_the_last_reds_queue_is_not_turned_into_drive_normall
 
 
 def test_board_keeps_the_last_red_and_its_queue_after_the_green():
-    """The board keeps a light's last red (its start, the first fix that saw it off, the jam last published in it),
-    so a car that never saw the red meets its queue: a fix at the red's start, another 30 s later on the green,
+    """The board keeps a light's last red (its start, its end as the last fix in it had it, the jam last published
+    in it), so a car that never saw the red meets its queue: a fix at the red's start, another 30 s later on the green,
     the car 4 s after that (the queue of ``test_the_last_reds_queue_goes_on_discharging_after_its_end``)."""
     t = 1000.0
     for jam_m, want in ((None, (0.8, 3.0)), (40.0, (3.6, 7.0))):
@@ -252,6 +252,10 @@ def test_board_keeps_the_last_red_and_its_queue_after_the_green():
         assert held is None and np.allclose(obs.lights[0].red_windows_s, ((0.0, want[0]), (40.0, 70.0)))
         ends = [w[0][1] for w in obs.lights[0].scenario_red_windows_s]
         assert want[0] < min(ends) < max(ends) < want[1]
+    late = QueueBoard(arrivals_vph=720.0, connected_share=0.5)  # the first fix on the green 8 s after it began
+    late.see("c", "watcher", t, Observation(13.4, 13.4, (LightView(1, 500.0, red_windows_s=((0.0, 30.0),)),), position_m=-300.0))
+    late.see("c", "watcher", t + 38.0, Observation(13.4, 13.4, (LightView(1, 200.0, red_windows_s=((32.0, 62.0),)),), position_m=0.0))
+    assert late._red_ended[1][:2] == (t, t + 30.0)  # when the last fix in the red had it end, not 8 s later
 
 
 def test_board_holds_a_queued_car_until_it_is_over_the_line_then_plans_afresh():
