@@ -1,8 +1,9 @@
 """Queue-aware advice in the service: every trip's position is a probe of the traffic on its corridor.
 
 :class:`QueueBoard` keeps, per corridor, where each trip was at its last fix (station, speed, time; this worker's
-trips: a fix older than ``MAX_AGE_S`` is forgotten, so an ended or silent trip drops out by itself) and when each
-light's current red was first seen on. For a fix on the route it hands the advisor the observation as the car meets
+trips: a fix older than ``MAX_AGE_S`` is forgotten, so an ended or silent trip drops out by itself), when each
+light's current red was first seen on, and each light's last red that has ended (its queue goes on discharging after
+the green: :meth:`QueueBoard.past_red`). For a fix on the route it hands the advisor the observation as the car meets
 the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~advisory.advice.queue.apply`: each red the car
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.

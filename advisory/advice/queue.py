@@ -20,6 +20,9 @@ Where the count comes from, in order of trust (issue 28):
    and stands), only at the next light (at the one after it, arrivals are platoons released by the first), never more
    than fit between the car and the line.
 
+After a red has ended its queue goes on discharging (:func:`past_queue`: the jam last published in it, else the
+cars not connected arriving over it), the connected cars ahead behind it: it is not forgotten at the green.
+
 The queue's last car then crosses the line ``startup_s + (n - 1) x headway_s`` after the red ends, somewhere between
 the fast and the slow end of the measured discharge (:class:`QueueModel`): :func:`apply` closes the line until then as
 a distribution over the light's equally likely timings, which the advisor's choice prices (never a plan into a queue
