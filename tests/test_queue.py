@@ -220,22 +220,6 @@ def test_the_advisor_slows_a_car_at_the_limit_for_the_last_reds_queue():
     assert after.target_speed_mps is not None and after.target_speed_mps < 13.4 - 5.0
 
 
-def test_a_plan_slowing_for_the_last_reds_queue_is_not_turned_into_drive_normally():
-    """Traced in SUMO (paper_s400, fixed, 300 veh/h, half connected, seed 2, main.6): at the green's first second, 113 m
-    before light 1 at 23.1 m/s, the last red's two unconnected cars clearing 3.4-5 s from now (40 s red, 300 veh/h x
-    0.5 x 40 s = 1.7 cars): the advisor slows the car for them, and the check let that plan stand only where a normal
-    drive (there in 4.6 s, after the fast clearing, before the slow one) does not surely make the light."""
-    lights = tuple(LightView(k, d, red_windows_s=((30.0, math.inf),)) for k, d in ((1, 112.8), (2, 512.8)))
-    obs, params = Observation(23.12, 24.59, lights, position_m=0.0), AdvisorParams()
-    est = estimate(obs, [], arrivals_vps=300 / 3600, connected_share=0.5, past_red=PastRed(-40.0, 0.0))
-    assert est.clear_s[0] == pytest.approx((3.4, 5.0))
-    held = apply(obs, est)
-    plan, _ = advise(held, None, params)
-    assert plan.target_speed_mps is not None and plan.target_speed_mps < 23.12 - 2.0
-    assert est.clear_s[0][0] < normal_drive_s(112.8, 23.12, 24.59, params.normal_accel_mps2) < est.clear_s[0][1]
-    assert not gives_up_green(held, plan, params)
-
-
 def test_board_keeps_the_last_red_and_its_queue_after_the_green():
     """The board keeps a light's last red (its start, its end as the last fix in it had it, the jam last published
     in it), so a car that never saw the red meets its queue: a fix at the red's start, another 30 s later on the green,

@@ -514,8 +514,8 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
                    behind: Sequence[Probe] = ()) -> bool:  # fmt: skip
     """The advised plan gives up green time that a normal drive (speeding up to the limit at the regular driver's
     ``normal_accel_mps2``, no advice to react to) uses: at a light that the normal drive crosses outside its reds (the
-    queue's included, :func:`apply`, in every timing: :func:`_held_at`), as every light before it, the plan arrives
-    ``late`` after it, and the time lost is more than ``slack_s``:
+    queue's included, :func:`apply`), as every light before it, the plan arrives ``late`` after it, and the time lost
+    is more than ``slack_s``:
 
     * ``late`` for the car itself, at the last light ahead where the normal drive makes every light (before that, a red
       further on takes the time back: the car waits there either way);
@@ -542,7 +542,7 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
     model = model or QueueModel()
     v, limit, mode = obs.speed_mps, obs.speed_limit_mps, KEEP_MODES[advice.action]
     normal = [normal_drive_s(lv.distance_m, v, limit, params.normal_accel_mps2) for lv in obs.lights]
-    made = next((j for j, (lv, t) in enumerate(zip(obs.lights, normal)) if lv.is_red_at(t) or _held_at(lv, t)), len(obs.lights))
+    made = next((j for j, (lv, t) in enumerate(zip(obs.lights, normal)) if lv.is_red_at(t)), len(obs.lights))
     known = tuple(behind)
     for j in range(made):
         line_m = obs.lights[j].distance_m
@@ -561,22 +561,6 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
         if lost > slack_s:
             return True
     return False
-
-
-def _held_at(light: LightView, t_s: float) -> bool:
-    """In some of the light's timings (``scenario_red_windows_s``) the line is still closed ``t_s`` from now by the red
-    on now or the queue in front (:func:`apply` holds the sure view only until the queue's fast clearing, each timing
-    until the clearing at its level): a normal drive there may meet the queue, so it does not surely make the light.
-    (Traced in SUMO: a car at the limit 113 m before a light turned green, the last red's queue clearing 3.4-5 s
-    later, told to brake to 69 km/h for it, then "drive normally", its normal drive at 4.9 s past the fast clearing.)
-
-    Examples
-    --------
-    >>> lv = LightView(1, 100.0, red_windows_s=((0.0, 3.4), (30.0, 60.0)), scenario_red_windows_s=(((0.0, 3.8),), ((0.0, 4.6),)))
-    >>> _held_at(lv, 4.0), _held_at(lv, 4.9), _held_at(lv, 35.0)
-    (True, False, False)
-    """
-    return any(w and w[0][0] <= 0.0 <= t_s < w[0][1] for w in light.scenario_red_windows_s or ())
 
 
 def pushed_past(light: LightView, normal_s: float, planned_s: float, behind: Sequence[Probe], limit_mps: float, model: QueueModel | None = None) -> float:
