@@ -1,8 +1,9 @@
 """Queue-aware advice in the service: every trip's position is a probe of the traffic on its corridor.
 
 :class:`QueueBoard` keeps, per corridor, where each trip was at its last fix (station, speed, time; this worker's
-trips: a fix older than ``MAX_AGE_S`` is forgotten, so an ended or silent trip drops out by itself) and when each
-light's current red was first seen on. For a fix on the route it hands the advisor the observation as the car meets
+trips: a fix older than ``MAX_AGE_S`` is forgotten, so an ended or silent trip drops out by itself), when each
+light's current red was first seen on, and each light's last red that has ended (its queue goes on discharging after
+the green: :meth:`QueueBoard.past_red`). For a fix on the route it hands the advisor the observation as the car meets
 the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~advisory.advice.queue.apply`: each red the car
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.
@@ -31,11 +32,12 @@ Redis unreachable: this worker's own probes, said in ``/health`` and ``/metrics`
 from __future__ import annotations
 
 import heapq
+import math
 from bisect import bisect_left, insort
 from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, Observation
-from advisory.advice.queue import Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, held_up, normal_drive_s
+from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, held_up, normal_drive_s
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -148,6 +150,12 @@ class QueueBoard:
         """Every worker's probes and red starts (the Redis store), or None: this worker's dicts."""
         self._cars: dict[str, dict[str, tuple[float, float, float]]] = shared.cars if shared is not None else {}
         self._red_since: dict[int, float] = shared.red_since if shared is not None else {}
+        self._red_ended: dict[int, tuple[float, float, float]] = shared.red_ended if shared is not None else {}
+        """intersection -> its last red that has ended: ``(start, end, jam)``, times [s], ``jam`` the queue [m] this worker
+        last saw published in it (NaN: none), for :meth:`past_red`."""
+        self._in_red: dict[int, tuple[float, float, float]] = {}
+        """intersection -> this worker's last fix in its current red: its time, when the red then surely ended (inf:
+        not known) [s], the queue [m] last published in it (NaN: none)."""
         self._queued: dict[str, int] = {}  # trip -> the light whose queue it stands in
         self._behind: dict[str, tuple[Probe, ...]] = {}  # trip -> the connected cars its last fix found it holds up (:meth:`check`)
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
@@ -171,12 +179,30 @@ class QueueBoard:
 
     def red_elapsed(self, obs: Observation, t_unix_s: float) -> float | None:
         """How long the next light's current red has been on at ``t_unix_s`` (from the first fix that saw it on, on any
-        trip), None when it is not red (the red's start is forgotten)."""
+        trip), None when it is not red. At the first fix that sees it off the red is kept (:meth:`past_red`) with its
+        start, its end (when the last fix in it had it surely end, between that fix and this one: with few connected
+        cars the first fix on the green can come long after it) and the queue last published in it."""
         nxt = obs.lights[0]
+        key = nxt.intersection_id
         if not nxt.red_now:
-            self._red_since.pop(nxt.intersection_id, None)
+            began = self._red_since.pop(key, None)
+            last_t, last_end, jam = self._in_red.pop(key, (began, t_unix_s, math.nan))
+            if began is not None:
+                self._red_ended[key] = (began, max(min(last_end, t_unix_s), last_t, began), jam)
             return None
-        return t_unix_s - self._red_since.setdefault(nxt.intersection_id, t_unix_s)
+        jam = nxt.queue_m if nxt.fresh and nxt.queue_m is not None else self._in_red.get(key, (0.0, 0.0, math.nan))[2]
+        self._in_red[key] = (t_unix_s, t_unix_s + nxt.seconds_to_green(), jam)
+        return t_unix_s - self._red_since.setdefault(key, t_unix_s)
+
+    def past_red(self, obs: Observation, t_unix_s: float) -> PastRed | None:
+        """The next light's last red, from ``t_unix_s`` (its queue goes on discharging after its end:
+        :func:`advisory.advice.queue.past_queue`), None while it is red or where no red of it was seen end."""
+        nxt = obs.lights[0]
+        ended = None if nxt.red_now else self._red_ended.get(nxt.intersection_id)
+        if ended is None:
+            return None
+        began, end, jam = ended
+        return PastRed(began - t_unix_s, end - t_unix_s, None if math.isnan(jam) else jam)
 
     def answer(self, trip_id: str, obs: Observation, est: QueueEstimate, last_reason: str | None) -> tuple[Observation, Advice | None]:
         """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
@@ -219,7 +245,7 @@ class QueueBoard:
         far_m = max(light.distance_m for light in obs.lights) + m.jam_spacing_m + m.headway_s * lane.top_mps
         reach_m = max(far_m, obs.speed_mps * m.follow_gap_s + m.jam_spacing_m)
         ahead = [p for p in lane.near(here_m, t_unix_s, 0.0, reach_m) if p.ahead_m > 0.0]
-        est = estimate(obs, ahead, m, self.arrivals_vps, self.connected_share, red_elapsed_s)
+        est = estimate(obs, ahead, m, self.arrivals_vps, self.connected_share, red_elapsed_s, self.past_red(obs, t_unix_s))
         line_m, limit_mps = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
         mine_s = normal_drive_s(line_m, obs.speed_mps, limit_mps, m.drive_accel_mps2)
         window_m = (max(est.free_at_s[0], mine_s) + m.follow_gap_s) * max(lane.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6

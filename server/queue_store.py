@@ -1,8 +1,9 @@
-"""Where the queue board (:class:`server.queue.QueueBoard`) keeps its probes and red starts when the trips are in Redis:
-every worker's, shared through the trip store's Redis, with no Redis call on a fix's path.
+"""Where the queue board (:class:`server.queue.QueueBoard`) keeps its probes and red starts and ends when the trips are
+in Redis: every worker's, shared through the trip store's Redis, with no Redis call on a fix's path.
 
-The board reads and writes two kinds of table as plain dicts: per corridor, trip -> ``(t_unix_s, station_m,
-speed_mps)`` of its last fix (a *probe*), and intersection -> when its current red was first seen. With the in-process
+The board reads and writes three kinds of table as plain dicts: per corridor, trip -> ``(t_unix_s, station_m,
+speed_mps)`` of its last fix (a *probe*), intersection -> when its current red was first seen, and intersection -> its
+last red that has ended, ``(start, end, jam_m)`` (its queue goes on discharging after the end). With the in-process
 store they are dicts of this worker. With the Redis store they are :class:`Noted` dicts: a write by this worker is
 also appended to a log of its changes (a dict's cost, no I/O), and :class:`SharedBoard` runs beside the service, every
 ``ECO_QUEUE_SYNC_S`` (default 0.25 s), one Lua script over the worker's one pipelined connection (``server.redispipe``)
@@ -19,10 +20,15 @@ sees a car that worker B serves from at most two intervals after B's fix, as it 
   fix it advises (``server.queue``): a stale probe never counts.
 * ``eco:q:red``, a hash: intersection id -> when its current red was first seen (a double): the earliest of the
   workers' first sightings; removed when a worker sees the light not red.
+* ``eco:q:end``, a hash: intersection id -> its last red that has ended, three little-endian doubles (start, end, the
+  queue in metres that the worker ending it last saw published in it, NaN: none), written by the worker that first saw
+  the light off after the red (its start the shared one); a later red (a later start) replaces it, another worker's
+  record of the same red does not. Kept until the key expires (the board counts the red's queue only while it is still
+  discharging: ``advisory.advice.queue.past_queue``).
 
 **Redis unreachable** (down, silent for ``ECO_STORE_TIMEOUT_S``, refusing the script): the call fails in the
 background, nothing on a fix's path waits for it or fails because of it; the board goes on with this worker's own
-probes (the other workers' copies age out within ``MAX_AGE_S``) and its own red starts; the changes kept for the next
+probes (the other workers' copies age out within ``MAX_AGE_S``) and its own red starts and ends; the changes kept for the next
 call (the last per trip and per light). ``/health`` (``queue_board``) and ``/metrics`` (``ecodrive_queue_board_shared``,
 ``ecodrive_queue_board_sync_failures_total``) say so; the first successful call brings the shared tables back.
 """
@@ -49,8 +55,9 @@ KEY_TTL_S = 60.0
 
 _PROBE = struct.Struct("<3d")
 _RED = struct.Struct("<d")
+_ENDED = struct.Struct("<3d")
 
-# KEYS: red starts, then each corridor's probes. ARGV: oldest probe stamp kept, keys' TTL [ms], then per change
+# KEYS: red starts, red ends, then each corridor's probes (only these are pruned by age). ARGV: oldest probe stamp kept, keys' TTL [ms], then per change
 # (in the order made): key index, field, rule ('n' the newer stamp wins, 'e' the earlier wins, 'w' withdraw unless a
 # newer one is stored), value (its first double is its stamp). -> each key's fields and values, flat.
 _SYNC = Script("""
@@ -69,7 +76,7 @@ end
 local out = {}
 for k = 1, #KEYS do
   local all = redis.call('HGETALL', KEYS[k])
-  if k > 1 then
+  if k > 2 then
     local kept = {}
     for j = 1, #all, 2 do
       if struct.unpack('<d', all[j + 1]) < oldest then
@@ -89,14 +96,14 @@ return out
 
 
 def _stamp(value: Any) -> float:
-    """A table value's stamp: a probe's fix time, or a red start itself. [s]"""
+    """A table value's stamp: a probe's fix time, an ended red's start, or a red start itself. [s]"""
     return value[0] if isinstance(value, tuple) else value
 
 
 class Noted(dict):
     """A dict of the board that logs this worker's changes (``ops``: ``(key, value, kept)`` in order; ``kept`` False: a
     withdrawal) for :class:`SharedBoard`. ``newer``: of two values of one key the one with the later stamp wins
-    (probes), else the earlier (red starts). A deletion with ``del`` (the board forgetting a stale probe) is not
+    (probes, ended reds), else the earlier (red starts). A deletion with ``del`` (the board forgetting a stale probe) is not
     logged: Redis drops stale probes itself."""
 
     __slots__ = ("newer", "ops", "loads")
@@ -164,7 +171,7 @@ class Corridors(dict):
 
 
 class SharedBoard:
-    """The board's tables shared through Redis (see the module docstring): ``cars`` and ``red_since`` for
+    """The board's tables shared through Redis (see the module docstring): ``cars``, ``red_since`` and ``red_ended`` for
     :class:`server.queue.QueueBoard`, :meth:`run` in the background (:meth:`sync` once)."""
 
     def __init__(self, pipe: RedisPipe, prefix: str, corridors: Iterable[str], every_s: float, clock: Callable[[], float]) -> None:
@@ -173,12 +180,14 @@ class SharedBoard:
         self.every_s = every_s
         self.clock = clock
         self.red_since = Noted(newer=False)
+        self.red_ended = Noted(newer=True)
         self.cars = Corridors((name, Noted(newer=True)) for name in names)
         self._tables: list[tuple[Noted, Callable, Callable, Callable]] = [  # the table, its field's type, value packed, unpacked
             (self.red_since, int, _RED.pack, lambda b: _RED.unpack(b)[0]),
+            (self.red_ended, int, lambda v: _ENDED.pack(*v), _ENDED.unpack),
             *((self.cars[name], bytes.decode, lambda v: _PROBE.pack(*v), _PROBE.unpack) for name in names),
         ]
-        self.keys = [f"{prefix}:q:red", *(f"{prefix}:q:p:{name}" for name in names)]
+        self.keys = [f"{prefix}:q:red", f"{prefix}:q:end", *(f"{prefix}:q:p:{name}" for name in names)]
         self.down: str | None = "not synced yet"
         """Why the last call failed; None while the tables are shared."""
         self.failures = 0

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, time_price
-from advisory.advice.queue import Probe, QueueEstimate, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s, pushed_past
+from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s, pushed_past
 from server.queue import QueueBoard
 
 M = QueueModel()
@@ -179,6 +179,67 @@ def test_normal_drive_and_given_up_greens():
     assert gives_up_green(obs, crawl, params)
     assert not gives_up_green(obs, Advice("accelerate", "green_wave", 24.6), params)
     assert not gives_up_green(_obs(distance_m=200.0, speed=5.0, reds=((5.0, 50.0),), limit=24.6), crawl, params)
+
+
+def _green_obs(distance_m=60.0, position_m=140.0):
+    """A car at the limit (13.4 m/s) ``distance_m`` before light 1, green now, its next red in 40 s."""
+    return Observation(13.4, 13.4, (LightView(1, distance_m, red_windows_s=((40.0, 70.0),)),), position_m=position_m)
+
+
+def test_the_last_reds_queue_goes_on_discharging_after_its_end():
+    """The queue forgotten at the green (traced in SUMO: a car at the limit told to drive normally into a queue still
+    discharging, 3.5 m/s² behind its tail). A 30 s red ended 4 s ago; 720 veh/h, half connected: (1 - 0.5) x 0.2 x 30
+    = 3 cars not connected stood in it, the last over the line at -4 + 2 + 2 x 1.4 = 0.8 s from now (fast) or
+    -4 + 3 + 2 x 2 = 3 s (slow); a connected car standing in front of this one joins behind them (2.2 s, 5 s), this
+    car crosses a headway later. A 40 m jam published in the red: 5 cars (3.6 s, 7 s), the connected car standing
+    10 m from the line one of them. Gone once they have all crossed; nothing to wait for without a flow or a jam."""
+    obs, kw = _green_obs(), {"arrivals_vps": 0.2, "connected_share": 0.5}
+    est = estimate(obs, [], **kw, past_red=PastRed(-34.0, -4.0))
+    assert est.clear_s[0] == pytest.approx((0.8, 3.0)) and est.free_at_s[0] == pytest.approx(5.0) and est.after_red_s == (None,)
+    standing = [Probe(50.0, 0.0)]
+    assert estimate(obs, standing, **kw).clear_s[0] == (0.0, 0.0)  # before: the standing car a headway from now, no more
+    est = estimate(obs, standing, **kw, past_red=PastRed(-34.0, -4.0))
+    assert est.clear_s[0] == pytest.approx((2.2, 5.0)) and est.free_at_s[0] == pytest.approx(7.0) and est.cars == (3.0,)
+    for probes in ([], standing):
+        est = estimate(obs, probes, **kw, past_red=PastRed(-34.0, -4.0, queue_m=40.0))
+        assert est.clear_s[0] == pytest.approx((3.6, 7.0)) and est.cars == (4.0,)
+    held = apply(obs, estimate(obs, standing, **kw, past_red=PastRed(-34.0, -4.0))).lights[0]
+    ends = [w[0][1] for w in held.scenario_red_windows_s]  # each timing until the clearing at its level, fast to slow
+    assert np.allclose(held.red_windows_s, ((0.0, 2.2), (40.0, 70.0))) and 2.2 < min(ends) < max(ends) < 5.0
+    assert estimate(obs, [], **kw, past_red=PastRed(-60.0, -30.0)) == estimate(obs, [], **kw)  # long gone
+    assert estimate(obs, [], past_red=PastRed(-34.0, -4.0)) == estimate(obs, [])  # no flow, no jam: the probes alone
+
+
+def test_the_advisor_slows_a_car_at_the_limit_for_the_last_reds_queue():
+    """60 m out at the limit (there in 4.5 s), the red's 3 cars and a connected one standing: the line is closed until
+    2.2-5 s, plus the advisor's margin; the car is slowed for it, where it held the limit before."""
+    obs, kw = _green_obs(), {"arrivals_vps": 0.2, "connected_share": 0.5}
+    before, _ = advise(apply(obs, estimate(obs, [Probe(50.0, 0.0)], **kw)), None, AdvisorParams())
+    after, _ = advise(apply(obs, estimate(obs, [Probe(50.0, 0.0)], **kw, past_red=PastRed(-34.0, -4.0))), None, AdvisorParams())
+    assert before.target_speed_mps == pytest.approx(13.4)
+    assert after.target_speed_mps is not None and after.target_speed_mps < 13.4 - 5.0
+
+
+def test_board_keeps_the_last_red_and_its_queue_after_the_green():
+    """The board keeps a light's last red (its start, its end as the last fix in it had it, the jam last published
+    in it), so a car that never saw the red meets its queue: a fix at the red's start, another 30 s later on the green,
+    the car 4 s after that (the queue of ``test_the_last_reds_queue_goes_on_discharging_after_its_end``)."""
+    t = 1000.0
+    for jam_m, want in ((None, (0.8, 3.0)), (40.0, (3.6, 7.0))):
+        board = QueueBoard(arrivals_vph=720.0, connected_share=0.5)
+        red = LightView(1, 500.0, red_windows_s=((0.0, 30.0), (70.0, 100.0)), queue_m=jam_m)
+        board.see("c", "watcher", t, Observation(13.4, 13.4, (red,), position_m=-300.0))
+        green = LightView(1, 300.0, red_windows_s=((40.0, 70.0),))
+        board.see("c", "watcher", t + 30.0, Observation(13.4, 13.4, (green,), position_m=-100.0))
+        assert board._red_ended[1][:2] == (t, t + 30.0) and board._red_since == {}
+        obs, held = board.see("c", "car", t + 34.0, _green_obs())
+        assert held is None and np.allclose(obs.lights[0].red_windows_s, ((0.0, want[0]), (40.0, 70.0)))
+        ends = [w[0][1] for w in obs.lights[0].scenario_red_windows_s]
+        assert want[0] < min(ends) < max(ends) < want[1]
+    late = QueueBoard(arrivals_vph=720.0, connected_share=0.5)  # the first fix on the green 8 s after it began
+    late.see("c", "watcher", t, Observation(13.4, 13.4, (LightView(1, 500.0, red_windows_s=((0.0, 30.0),)),), position_m=-300.0))
+    late.see("c", "watcher", t + 38.0, Observation(13.4, 13.4, (LightView(1, 200.0, red_windows_s=((32.0, 62.0),)),), position_m=0.0))
+    assert late._red_ended[1][:2] == (t, t + 30.0)  # when the last fix in the red had it end, not 8 s later
 
 
 def test_board_holds_a_queued_car_until_it_is_over_the_line_then_plans_afresh():

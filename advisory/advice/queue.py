@@ -20,6 +20,9 @@ Where the count comes from, in order of trust (issue 28):
    and stands), only at the next light (at the one after it, arrivals are platoons released by the first), never more
    than fit between the car and the line.
 
+After a red has ended its queue goes on discharging (:func:`past_queue`: the jam last published in it, else the
+cars not connected arriving over it), the connected cars ahead behind it: it is not forgotten at the green.
+
 The queue's last car then crosses the line ``startup_s + (n - 1) x headway_s`` after the red ends, somewhere between
 the fast and the slow end of the measured discharge (:class:`QueueModel`): :func:`apply` closes the line until then as
 a distribution over the light's equally likely timings, which the advisor's choice prices (never a plan into a queue
@@ -141,6 +144,7 @@ def estimate(
     arrivals_vps: float | None = None,
     connected_share: float = 1.0,
     red_elapsed_s: float | None = None,
+    past_red: PastRed | None = None,
 ) -> QueueEstimate:
     """The cars in front of the car of ``obs`` at each light and when it can cross behind them (module docstring).
 
@@ -151,7 +155,9 @@ def estimate(
     the gap); this car can cross ``headway_s`` after the queue's last car. On a green the standing cars are a queue already
     discharging (one a headway from now). ``arrivals_vps``: the flow arriving at the next light, per
     lane [veh/s] (None: the connected cars alone); ``connected_share``: the share of those cars that are connected;
-    ``red_elapsed_s``: how long the next light's current red has been on (None: unknown, counted from now)."""
+    ``red_elapsed_s``: how long the next light's current red has been on (None: unknown, counted from now);
+    ``past_red``: the next light's last red, where it is not red now: the queue that formed in it goes on
+    discharging after its end (:func:`past_queue`), and the cars ahead join it."""
     model = model or QueueModel()
     v_free = max(obs.speed_limit_mps, 1.0)
     cars, known, free_at, clears, after_reds = [], [], [], [], []
@@ -161,6 +167,10 @@ def estimate(
         start, end = red if red is not None else (math.inf, math.inf)
         ahead = sorted((light.distance_m - p.ahead_m, p.speed_mps) for p in probes if before < p.ahead_m < light.distance_m)
         queue_m = light.queue_m if light.fresh else None
+        past = past_red if i == 0 and past_red is not None and start > 0.0 and past_red.end_s <= 0.0 else None
+        if past is not None and past.queue_m is not None:  # the jam published in the red: the cars in it (connected
+            ahead = [(to_line, v) for to_line, v in ahead if to_line > max(past.queue_m, queue_m or 0.0)]  # ones too) discharge
+            queue_m = None  # from its end; the one published now is its tail, still standing
         if queue_m is not None:  # the detectors' count: connected cars standing inside the published queue are in it
             ahead = [(to_line, v) for to_line, v in ahead if to_line > queue_m or v >= model.queued_mps]
         arrivals = [0.0 if v < model.queued_mps else normal_drive_s(to_line, v, obs.speed_limit_mps, model.drive_accel_mps2) for to_line, v in ahead]
@@ -173,16 +183,19 @@ def estimate(
             n_unseen = (1.0 - connected_share) * arrivals_vps * max(0.0, min(end, mine) - began)
             n_unseen = min(n_unseen, max(light.distance_m / model.jam_spacing_m - 1.0 - len(ahead), 0.0))
             arrivals = [max(start, 0.0)] * int(round(n_unseen)) + arrivals  # they arrived first: ahead in the queue
+        # the past red's queue still discharging (fast, slow: its last car's crossing), the cars ahead behind it
+        (prev_fast, prev), n_prev = past_queue(past, model, arrivals_vps, connected_share, light.distance_m, len(ahead)) if past else ((-math.inf,) * 2, 0)
         # the discharge, slow and fast, counted from the red's end (one whose end is unknown: from after every arrival)
         ref = end if math.isfinite(end) else max([max(start, 0.0), *arrivals]) + 1.0
-        crossed, holding = _discharge(arrivals, start, ref, model.startup_s, model.headway_s)
-        crossed_fast, holding_fast = _discharge(arrivals, start, ref, model.fast_startup_s, model.fast_headway_s)
+        crossed, holding = _discharge(arrivals, start, ref, model.startup_s, model.headway_s, prev)
+        crossed_fast, holding_fast = _discharge(arrivals, start, ref, model.fast_startup_s, model.fast_headway_s, prev_fast)
         waits = holding > 0 and any(start <= a < ref for a in arrivals)  # the queue waits for the red's end
         after_red = (crossed_fast - ref, crossed - ref) if waits else None
         if waits:
             crossed, crossed_fast = crossed - ref + end, crossed_fast - ref + end
+        holding += n_prev
         free = max(crossed + model.headway_s, 0.0) if holding else 0.0
-        clear = (max(crossed_fast, 0.0) if holding_fast else 0.0, max(crossed, 0.0) if holding else 0.0)
+        clear = (max(crossed_fast, 0.0) if holding_fast or prev_fast > 0.0 else 0.0, max(crossed, 0.0) if holding else 0.0)
         # behind the cars ahead (:func:`behind_s`): where they leave this car no time to cross before a red that no
         # amber announces, one it could make alone, the line is closed to it until that red's end (an amber warns the
         # driver behind a car as any other). Decided within the distance the car needs to stop at the others' rate plus a headway's travel: farther out
@@ -220,12 +233,14 @@ def estimate(
                          tuple(clears), tuple(after_reds))  # fmt: skip
 
 
-def _discharge(arrivals: Sequence[float], start: float, end: float, startup_s: float, headway_s: float) -> tuple[float, int]:
+def _discharge(arrivals: Sequence[float], start: float, end: float, startup_s: float, headway_s: float,
+               crossed: float = -math.inf) -> tuple[float, int]:  # fmt: skip
     """When the last of the cars arriving at a line at ``arrivals`` (from now, in their order) that form a queue there
     crosses it [s], and how many they are, for a red from ``start`` to ``end``: one arriving during the red waits for
     its end, the first crossing ``startup_s`` after it and each next one ``headway_s`` after the one before; one
     standing on a green (arrival 0) is a queue already discharging, one car a headway; one arriving while the queue
-    discharges joins it; one arriving after it has gone holds nobody up (car following keeps the gap).
+    discharges joins it; one arriving after it has gone holds nobody up (car following keeps the gap). ``crossed``:
+    when the last car of a queue already there (an earlier red's, :func:`past_queue`) crosses, the cars behind it.
 
     Examples
     --------
@@ -233,8 +248,10 @@ def _discharge(arrivals: Sequence[float], start: float, end: float, startup_s: f
     ((27.0, 3), (25.0, 3))
     >>> _discharge([30.0], 0.0, 20.0, 3.0, 2.0)  # after the red, nobody in front: no queue
     (-inf, 0)
+    >>> _discharge([0.0, 3.0, 12.0], 40.0, 70.0, 3.0, 2.0, 5.0)  # behind an earlier red's queue crossing until 5 s
+    (9.0, 2)
     """
-    crossed, holding = -math.inf, 0
+    holding = 0
     for a in arrivals:
         if start <= a < end:  # waits for the red's end
             crossed = max(end + (startup_s if holding == 0 else 0.0), crossed + headway_s)
@@ -246,6 +263,56 @@ def _discharge(arrivals: Sequence[float], start: float, end: float, startup_s: f
             continue
         holding += 1
     return crossed, holding
+
+
+@dataclass(frozen=True, slots=True)
+class PastRed:
+    """A light's last red, where it is not red now (the service keeps it: ``server.queue.QueueBoard``): its start and
+    end from now (both <= 0) [s], and the queue standing back from the stop line that the controller last published
+    during it (None: none published) [m]."""
+
+    start_s: float
+    end_s: float
+    queue_m: float | None = None
+
+
+def past_queue(past: PastRed, model: QueueModel, arrivals_vps: float | None, connected_share: float, line_m: float,
+               n_ahead: int) -> tuple[tuple[float, float], int]:  # fmt: skip
+    """The queue that formed in the last red of a light green now, discharging since its end: when its last car
+    crosses the line (fast, slow: :class:`QueueModel`, from now) [s], and how many of its cars are still to cross [-].
+
+    Its cars: the jam the controller last published in the red (one car per jam spacing; the connected cars in it are
+    among them), else the cars that are not connected arriving over the red, ``(1 - connected_share) x arrivals_vps x``
+    its length (the connected ones are probes: :func:`estimate` has them join it where they are). The first crosses
+    ``startup_s`` after the red's end, each next one ``headway_s`` later; no more are still to cross than fit between
+    this car (``line_m`` from the line, ``n_ahead`` connected cars in front of it) and the line. Before, the queue was
+    forgotten at the green (the red's start dropped, the published jam gone when its first car moves): a car at the
+    limit was told to drive normally into it (traced in SUMO, paper_s400, docs/TRAFFIC.md).
+
+    Examples
+    --------
+    A 30 s red that ended 4 s ago, 300 veh/h of which half connected: 1.25 cars (one), over the line 2-3 s after the
+    end: gone. At 720 veh/h, 3 cars: the last crosses 0.8 s from now at the fast end (2 s + 2 x 1.4 s after the end),
+    3 s at the slow end (3 s + 2 x 2 s), two still to cross. A 40 m jam published in the red: 5 cars, 3.6 s and 7 s.
+
+    >>> past_queue(PastRed(-34.0, -4.0), QueueModel(), 300 / 3600, 0.5, 200.0, 0)
+    ((-2.0, -1.0), 0)
+    >>> [(round(fast, 2), slow, n) for (fast, slow), n in (past_queue(PastRed(-34.0, -4.0, q), QueueModel(), 720 / 3600, 0.5, 200.0, 0)
+    ...                                                   for q in (None, 40.0))]
+    [(0.8, 3.0, 2), (3.6, 7.0, 4)]
+    """
+    if past.queue_m is not None:
+        n = round(max(min(past.queue_m, line_m - model.jam_spacing_m), 0.0) / model.jam_spacing_m)
+    elif arrivals_vps and connected_share < 1.0:
+        n = round((1.0 - connected_share) * arrivals_vps * max(past.end_s - past.start_s, 0.0))
+    else:
+        n = 0
+    if n == 0:
+        return (-math.inf, -math.inf), 0
+    fit = max(line_m / model.jam_spacing_m - 1.0 - n_ahead, 0.0)  # cars still to cross: between this car and the line
+    fast = min(past.end_s + model.fast_startup_s + (n - 1) * model.fast_headway_s, fit * model.fast_headway_s)
+    slow = min(past.end_s + model.startup_s + (n - 1) * model.headway_s, fit * model.headway_s)
+    return (fast, slow), max(math.ceil(slow / model.headway_s - 1e-9), 0) if slow > 0.0 else 0
 
 
 def _close(obs: Observation, ahead_m: float, model: QueueModel) -> bool:

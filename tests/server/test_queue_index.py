@@ -36,7 +36,7 @@ class LoopBoard(QueueBoard):
         for tid in [tid for tid, (t, _, _) in cars.items() if t_unix_s - t > MAX_AGE_S]:
             del cars[tid]
         probes = [probe_at(p, here, t_unix_s) for tid, p in cars.items() if tid != trip_id and p[1] != here]
-        est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, self.red_elapsed(obs, t_unix_s))
+        est = estimate(obs, probes, self.model, self.arrivals_vps, self.connected_share, self.red_elapsed(obs, t_unix_s), self.past_red(obs, t_unix_s))
         return self.answer(trip_id, obs, est, last_reason)
 
     def forget(self, corridor: str, trip_id: str) -> None:
@@ -69,7 +69,7 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
     board's sync does): every fix gets the same observation or "follow" advice from both boards, and the same connected
     cars behind it that a slower plan holds up."""
     rng = random.Random(7)
-    tables = types.SimpleNamespace(cars=Corridors(c=Noted(newer=True)), red_since=Noted(newer=False)) if shared else None
+    tables = types.SimpleNamespace(cars=Corridors(c=Noted(newer=True)), red_since=Noted(newer=False), red_ended=Noted(newer=True)) if shared else None
     board = QueueBoard(arrivals_vph=arrivals_vph, connected_share=share, shared=tables)  # type: ignore[arg-type]
     loop = LoopBoard(arrivals_vph, share)
     where = {f"t{i}": rng.uniform(-150.0, 1500.0) for i in range(300)}
@@ -100,10 +100,11 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
         last[trip] = got[1].reason if got[1] is not None else None
         if shared and n % 500 == 499:  # the sync: the table replaced by what Redis holds (here: what it held a while ago)
             snapshot = dict(loop.cars)
-            for table in (tables.cars["c"], tables.red_since):
+            for table in (tables.cars["c"], tables.red_since, tables.red_ended):
                 table.take()
             tables.cars["c"].load(snapshot)
             tables.red_since.load(dict(loop._red_since))
+            tables.red_ended.load(dict(loop._red_ended))
             loop.cars = dict(snapshot)
     assert board.held == loop.held == held > 100
     assert behind > 100

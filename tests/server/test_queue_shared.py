@@ -43,13 +43,17 @@ class Service:
 
     def __init__(self, corridor, url: str | None, now: list[float], **settings) -> None:
         s = Settings(spat_simulate=False, tables=False, speech=False, queue_aware=True, store_url=url, **settings)
-        hub = SpatHub(s, {corridor.name: corridor}, lambda: now[0])
-        for ix in spat_message_at(make_scenario(corridor, "15_15", 0.0), T0).intersections:
-            hub.store.offer(ix)
-        self.engine = Engine(s, {corridor.name: corridor}, spat=hub, clock=lambda: now[0])
+        self.hub = SpatHub(s, {corridor.name: corridor}, lambda: now[0])
         self.corridor = corridor
+        self.spat(T0)
+        self.engine = Engine(s, {corridor.name: corridor}, spat=self.hub, clock=lambda: now[0])
         self.now = now
         self.trips: dict[str, object] = {}
+
+    def spat(self, t_unix_s: float) -> None:
+        """The lights' SPaT as published at ``t_unix_s`` (plan 15_15), offered to this worker's SPaT store."""
+        for ix in spat_message_at(make_scenario(self.corridor, "15_15", 0.0), t_unix_s).intersections:
+            self.hub.store.offer(ix)
 
     async def add(self, name: str) -> None:
         self.trips[name] = await self.engine.create_trip(TripCreate(corridor=self.corridor.name), client=name)
@@ -110,6 +114,42 @@ def test_a_car_queued_on_worker_a_holds_the_target_of_a_car_approaching_on_worke
     assert got["car"] == want["car"]
     assert blind["target_speed_mps"] is not None and got["car"]["target_speed_mps"] is not None
     assert got["car"]["target_speed_mps"] < blind["target_speed_mps"] - 1.0  # aims at the queue having crossed, later
+
+
+def test_a_red_ended_on_worker_a_holds_a_car_on_worker_b_while_its_queue_discharges(store, corridor):
+    """A's trip sees light 1's red on (from T0) and off (at its end, :45 of the minute, T0 + 15 s); B's car, 60 m before
+    the line at the limit (24.6 m/s, there in 3.3 s) 1.5 s later, never saw that red: B's advice is the one-worker
+    service's (the red's start and end shared: 720 veh/h, half connected, (1 - 0.5) x 0.2 x 15 = 1.5, two cars not
+    connected stood in it, the last over the line 1.9-3.5 s from now), not that of a service that never saw that red
+    (hold the limit into the queue)."""
+    now = [T0]
+    flow = {"queue_arrivals_vph": 720.0, "queue_connected_share": 0.5}
+    a, b, ref, blind = (Service(corridor, url, now, **flow) for url in (store.url, store.url, None, None))
+    limit = corridor.speed_limit_mps
+
+    async def go():
+        await a.add("watcher")
+        await ref.add("watcher")
+        for w in (b, ref, blind):
+            await w.add("car")
+        out = []
+        for t, fixes in ((T0, [("watcher", -120.0, 13.0)]), (T0 + 15.0, [("watcher", -100.0, 13.0)]), (T0 + 16.5, [("car", 20.0, limit)])):
+            now[0] = t
+            for w in (a, b, ref, blind):
+                w.spat(t)
+            got, want = await _drive({"watcher": a, "car": b}, ref, [None, *((name, s, v, t) for name, s, v in fixes)])
+            out.append((got, want))
+        ended = (dict(a.engine.queue._red_ended), dict(b.engine.queue._red_ended))
+        await _close(a, b)
+        return out, ended, blind.fix("car", 20.0, limit, T0 + 16.5)
+
+    out, (on_a, on_b), alone = asyncio.run(go())
+    got, want = out[-1]
+    assert on_a[1][:2] == on_b[1][:2] == ref.engine.queue._red_ended[1][:2] == (T0, T0 + 15.0)  # no jam published: NaN
+    assert got["car"] == want["car"]
+    assert alone["target_speed_mps"] == pytest.approx(limit, abs=0.5)
+    assert alone["reason"] == "green_wave"  # told to hold the limit into the queue
+    assert got["car"]["reason"] != "green_wave" and (got["car"]["target_speed_mps"] or 0.0) < limit - 3.0
 
 
 def test_a_car_closing_in_on_a_car_of_the_other_worker_is_told_to_follow_until_that_trip_ends_or_goes_silent(store, corridor):
