@@ -2,11 +2,30 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 
 from tests.procs import REPO, Proc, free_port  # noqa: F401  (re-exported for the test modules)
+
+
+@pytest.fixture(scope="package")
+def recorded_snapshots() -> Iterator[Callable[[Path], tuple]]:
+    """``recorded_snapshots(path)``: every snapshot of a shared recording, as ``read_spat_csv`` returns them, parsed once
+    for this package's tests (~3 s and ~160 MB a day; let go when the package's tests end). A tuple of frozen models:
+    nothing a test does to it reaches another test."""
+    from spat_feed.transport.recorded import read_spat_csv
+
+    parsed: dict[Path, tuple] = {}
+
+    def read(path: Path) -> tuple:
+        if path not in parsed:
+            parsed[path] = tuple(read_spat_csv(path))
+        return parsed[path]
+
+    yield read
+    parsed.clear()
 
 
 

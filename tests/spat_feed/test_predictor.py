@@ -295,7 +295,7 @@ def test_the_phases_after_the_current_one_chain_on_the_history():
 
 
 @pytest.mark.parametrize("path", sorted((SHARED_DATA / "spat").glob("*.csv.gz")), ids=lambda p: p.name)
-def test_predict_eval_on_every_recording(path, monkeypatch):
+def test_predict_eval_on_every_recording(path, monkeypatch, recorded_snapshots):
     """``ecodrive predict-eval``'s keys on the first 40 minutes of each recording, its errors recomputed here from the
     log itself (the first snapshot of another phase class is the change) for a sample of its predictions. The log is
     parsed once (``read_spat_csv``, 3 s a day): ``evaluate_log`` is handed the same snapshots the check reads."""
@@ -303,11 +303,11 @@ def test_predict_eval_on_every_recording(path, monkeypatch):
     from ecodrive.predict_eval import evaluate_log
     from spat_feed.timing.plans import phase_class
 
-    snapshots = recorded.read_spat_csv(path)
+    snapshots = recorded_snapshots(path)
 
     def parsed(log: str) -> list:
         assert log == str(path)
-        return snapshots
+        return list(snapshots)
 
     monkeypatch.setattr(recorded, "read_spat_csv", parsed)
     summary, rows = evaluate_log(str(path), limit_s=2400.0)
