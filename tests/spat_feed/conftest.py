@@ -28,6 +28,25 @@ def recorded_snapshots() -> Iterator[Callable[[Path], tuple]]:
     parsed.clear()
 
 
+@pytest.fixture
+def shared_recordings_parsed_once(monkeypatch, recorded_snapshots) -> None:
+    """``spat_feed.transport.recorded.read_spat_csv`` of a whole shared recording answers from
+    :func:`recorded_snapshots` (a list of its own each call), for code that reads the file itself (predict-eval, the
+    switch fit); any other call reads as it does."""
+    import spat_feed.transport.recorded as recorded
+
+    from tests.conftest import SPAT_RECORDINGS
+
+    real = recorded.read_spat_csv
+
+    def read(path, *args, **kwargs):
+        if Path(path) in SPAT_RECORDINGS and not args and not kwargs:
+            return list(recorded_snapshots(Path(path)))
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(recorded, "read_spat_csv", read)
+
+
 
 @pytest.fixture
 def start_feed(tmp_path) -> Iterator:
