@@ -20,9 +20,9 @@ STATE_ONLY = [p for p in RECORDINGS if not publishes_windows(p)]
 
 
 @pytest.mark.parametrize("path", WINDOWED, ids=lambda p: p.name)
-def test_fit_on_a_real_recording(path):
+def test_fit_on_a_real_recording(path, shared_recordings_parsed_once):
     """README (Antwerp): windows red 80-97 s / green 18 s wide, never ended before minEnd, after maxEnd 6-12 % of the
-    time; on each recording whose controller publishes windows."""
+    time; on each recording whose controller publishes windows (parsed once for the package's tests)."""
     fits = fit_switches([path])
     red, green = fits["red"], fits["green"]
     assert red.n > 300 and green.n > 1000
@@ -36,7 +36,7 @@ def test_fit_on_a_real_recording(path):
 
 
 @pytest.mark.parametrize("path", STATE_ONLY, ids=lambda p: p.name)
-def test_a_recording_without_windows_has_nothing_to_fit(path):
+def test_a_recording_without_windows_has_nothing_to_fit(path, shared_recordings_parsed_once):
     """A controller that publishes its state only (the US one): no phase has a bounded window, and the fit says so."""
     with pytest.raises(ValueError, match="no phase with a bounded window"):
         fit_switches([path])

@@ -253,9 +253,11 @@ def test_8_mb_payloads_once_a_second_are_dropped_unparsed_and_never_slow_the_ser
     parsed) while the service answers ``/health``, quiet and flood windows alternated in the same run (the machine's
     other load falls on both). Measured: p99 flooding / quiet x1.2-1.5 on 2 shared cores, x2.04 once on a clean clone
     beside other jobs; parsed, each payload held the GIL ~0.5 s: x10.6. The test asks for under x5, a margin no
-    loaded machine closes and a parsed payload cannot meet (the issue's x2 is the bench figure it prints)."""
+    loaded machine closes and a parsed payload cannot meet (the issue's x2 is the bench figure it prints). Three rounds
+    (were five): p99 over ~1,250 requests in each state (was ~2,100), x0.89-1.11 measured with three."""
     import threading
 
+    rounds = 3
     svc = start_proc(Proc(["-m", "server", "--log-level", "warning", "--no-access-log"], tmp_path / "service.log", {
         "ECO_CORRIDORS": "paper_s200", "ECO_CORRIDOR_DIR": str(LIVE_DIR), "ECO_DEFAULT_CORRIDOR": "antwerp_k648",
         "ECO_SPAT_MQTT_URL": broker.url, "ECO_TABLES": "false", "ECO_SPEECH": "false", "ECO_METRICS_ACCESS": "public"}))  # fmt: skip
@@ -286,7 +288,7 @@ def test_8_mb_payloads_once_a_second_are_dropped_unparsed_and_never_slow_the_ser
     quiet, loud = [], []
     try:
         with httpx.Client(base_url=svc.base_url, timeout=10.0) as client:
-            for _ in range(5):  # rounds of 2.5 s quiet, 2.5 s flooding (the first payload at once)
+            for _ in range(rounds):  # rounds of 2.5 s quiet, 2.5 s flooding (the first payload at once)
                 for on, bucket in ((False, quiet), (True, loud)):
                     (flooding.set if on else flooding.clear)()
                     end = time.monotonic() + 2.5
@@ -302,7 +304,7 @@ def test_8_mb_payloads_once_a_second_are_dropped_unparsed_and_never_slow_the_ser
         stop.set()
         flooder.join(5)
         pub.stop()
-    assert sent[0] >= 10 and counted >= sent[0] - 1
+    assert sent[0] >= 2 * rounds and counted >= sent[0] - 1
     ratio = _p99(loud) / _p99(quiet)
     print(f"/health p99 quiet {_p99(quiet) * 1e3:.2f} ms ({len(quiet)}), flooding {_p99(loud) * 1e3:.2f} ms ({len(loud)}): x{ratio:.2f}; {sent[0]} x 8 MiB")
     assert ratio <= 5.0

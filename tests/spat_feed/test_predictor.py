@@ -295,19 +295,19 @@ def test_the_phases_after_the_current_one_chain_on_the_history():
 
 
 @pytest.mark.parametrize("path", sorted((SHARED_DATA / "spat").glob("*.csv.gz")), ids=lambda p: p.name)
-def test_predict_eval_on_every_recording(path):
+def test_predict_eval_on_every_recording(path, recorded_snapshots, shared_recordings_parsed_once):
     """``ecodrive predict-eval``'s keys on the first 40 minutes of each recording, its errors recomputed here from the
-    log itself (the first snapshot of another phase class is the change) for a sample of its predictions."""
+    log itself (the first snapshot of another phase class is the change) for a sample of its predictions. The log is
+    parsed once (``read_spat_csv``, 3 s a day): ``evaluate_log`` is handed the same snapshots the check reads."""
     from ecodrive.predict_eval import evaluate_log
     from spat_feed.timing.plans import phase_class
-    from spat_feed.transport.recorded import read_spat_csv
 
+    snapshots = recorded_snapshots(path)
     summary, rows = evaluate_log(str(path), limit_s=2400.0)
     assert {"changes", "mae_s", "mae_s_by_horizon", "within_2s_frac", "within_5s_frac", "baseline_mae_s", "interval_coverage", "early_red_frac"} <= set(summary)
     assert set(summary["mae_s_by_horizon"]) == {"0-10", "10-30", "30-60"} and set(summary["interval_coverage"]) == {"50", "80", "90"}
     assert summary["changes"] > 50 and summary["early_red_frac"] == 0.0
     assert summary["mae_s"] < summary["baseline_mae_s"]
-    snapshots = read_spat_csv(path)
     series: dict = {}
     for ix in snapshots:
         for m in ix.states:

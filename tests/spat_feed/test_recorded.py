@@ -97,11 +97,12 @@ def test_missing_columns_are_named(tmp_path):
 
 @pytest.mark.skipif(not RECORDINGS, reason="shared recordings not present")
 @pytest.mark.parametrize("path", RECORDINGS, ids=lambda p: p.name)
-def test_the_shared_recordings_read_whole(path):
+def test_the_shared_recordings_read_whole(path, recorded_snapshots):
     """Every row, from the first snapshot to the last, with the signal groups the file names (whatever its controller:
-    its facts come from its raw rows, :func:`~tests.conftest.recording_facts`)."""
+    its facts come from its raw rows, :func:`~tests.conftest.recording_facts`). ``read_spat_csv``'s snapshots, parsed
+    once for the package (``recorded_snapshots``)."""
     facts = recording_facts(path)
-    snaps = read_spat_csv(path)
+    snaps = recorded_snapshots(path)
     assert sum(len(s.states) for s in snaps) == facts.rows  # lossless: one movement per row
     stamps = [to_unix_s(s.timestamp) for s in snaps]
     assert stamps == sorted(stamps)

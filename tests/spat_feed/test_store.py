@@ -12,7 +12,7 @@ from spat_feed.road.corridors import load_corridor, paper_corridor, preset_names
 from spat_feed.timing.messages import UNKNOWN_MAX_END_S, plan_from_movement, to_unix_s
 from spat_feed.prediction.observe import light_view
 from spat_feed.transport.player import JsonlRecorder, LogPlayer, read_spat_log
-from spat_feed.transport.recorded import RecordedLogError, read_spat_csv
+from spat_feed.transport.recorded import RecordedLogError
 from spat_feed.transport.simulator import IntersectionSimulator, shared_scenario, simulated_plans
 from spat_feed.transport.store import SpatStore, TimeRules
 
@@ -252,14 +252,14 @@ def test_the_store_learns_each_group_and_hands_it_to_the_observation(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def k648_2019_05_01():
+def k648_2019_05_01(recorded_snapshots):
     """The whole 2019-05-01 recording of K648 (its snapshots 4- omit group 3; 1,384 carry 9 of its 10 groups)."""
     from tests.conftest import SHARED_DATA
 
     path = SHARED_DATA / "spat" / "antwerp-2019-05-01.csv.gz"
     if not path.exists():
         pytest.skip(f"{path} not present")
-    return read_spat_csv(path)
+    return recorded_snapshots(path)
 
 
 def _offered(snaps, lag_s: float):
