@@ -836,8 +836,8 @@ def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
     that the change comes within it; the lowest of the lights planned for). Within a light the timings are comonotone
     (every change at one level of its forecast: a red that comes late ends late); across lights they are paired at no
     rank correlation (:func:`_paired`): two lights' changes are not one forecast's (the k-th of each, comonotone, made a
-    green that comes early at the first light always come with a red that comes early at the second: docs/ADVISOR.md,
-    session p3). The wide components pair up as they are."""
+    green that comes early at the first light always come with a red that comes early at the second: docs/ADVISOR.md).
+    The wide components pair up as they are."""
     uncertain = [light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in lights]
     forecast = [light.scenario_red_windows_s or _implied_timings(light) if u else _implied_timings(light) for light, u in zip(lights, uncertain)]
     n_fc = max(len(timings) for timings in forecast)

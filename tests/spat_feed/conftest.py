@@ -47,7 +47,6 @@ def shared_recordings_parsed_once(monkeypatch, recorded_snapshots) -> None:
     monkeypatch.setattr(recorded, "read_spat_csv", read)
 
 
-
 @pytest.fixture
 def start_feed(tmp_path) -> Iterator:
     """``start_feed(*cli_args) -> Proc``; every feed started is killed at the end of the test."""
