@@ -278,7 +278,7 @@ class Engine:
             fresh = self.queue is not None and trip.last is not None and self.queue.fresh(trip.last["reason"])  # out of a queue: plan anew
             advice, memory = (held, trip.memory) if held is not None else advise(obs, None if fresh else trip.memory, trip.params, trip.tables)
             if self.queue is not None and held is None:  # no plan that gives up a green a normal drive makes
-                advice = self.queue.check(obs, advice, trip.params, trip.id)
+                advice = self.queue.check(obs, advice, trip.params, trip.id, trip.last)
             if advice.action == "none" and advice.reason in ("no_spat", "stale_spat") and lights:
                 advice = _spat_reason(advice, trip.spat.status(lights[0].intersection_id))
         trip.memory = memory

@@ -37,7 +37,8 @@ from bisect import bisect_left, insort
 from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, Observation
-from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, held_up, normal_drive_s
+from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, held_up,
+                                   normal_drive_s, said_truly, tail_glide)
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -158,6 +159,7 @@ class QueueBoard:
         not known) [s], the queue [m] last published in it (NaN: none)."""
         self._queued: dict[str, int] = {}  # trip -> the light whose queue it stands in
         self._behind: dict[str, tuple[Probe, ...]] = {}  # trip -> the connected cars its last fix found it holds up (:meth:`check`)
+        self._seen: dict[str, tuple[Observation, QueueEstimate]] = {}  # trip -> its last fix's lights as they are, and its queue estimate (:meth:`check`)
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
         self.held = 0  # fixes answered "follow the car in front"
 
@@ -170,6 +172,7 @@ class QueueBoard:
             lane.drop(trip_id)
             self._queued.pop(trip_id, None)
             self._behind.pop(trip_id, None)
+            self._seen.pop(trip_id, None)
             return obs, None
         here = float(obs.position_m)
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
@@ -210,6 +213,7 @@ class QueueBoard:
         cars it holds up are kept for :meth:`check`."""
         nxt = obs.lights[0]
         self._behind[trip_id] = est.behind
+        self._seen[trip_id] = (obs, est)
         if est.stop_behind:  # the cars ahead take the last of the green: following them would take it into the red
             self._queued.pop(trip_id, None)  # (the advisor plans its stop: the line is closed to it until the red's end)
         elif est.in_queue or est.follow_mps is not None:  # in the queue of the next light, or closing in on a slower car:
@@ -253,13 +257,26 @@ class QueueBoard:
         return replace(est, followers=followers(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share),
                        behind=held_up(obs, behind, est.free_at_s[0], m))
 
-    def check(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None = None) -> Advice:
-        """The advisor's advice, or "drive normally" where it gives up green time that a normal drive uses, priced with
-        the followers it holds up (:func:`advisory.advice.queue.gives_up_green`), the connected ones where the trip's
-        last fix (:meth:`see`) found them."""
-        if gives_up_green(obs, advice, params, model=self.model, behind=self._behind.get(trip_id, ()) if trip_id is not None else ()):
-            return drive_normally(advice, params.units, obs.lights[0])
-        return advice
+    def check(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None = None, last: dict | None = None) -> Advice:
+        """The advisor's advice (planned on ``obs``, the lights as the queue holds them), or:
+
+        * the glide that meets the queue's tail and follows it through where the advisor asks a stop that only the
+          queue asks for (:func:`advisory.advice.queue.tail_glide`; spoken when the trip's ``last`` answer was not it);
+        * "drive normally" where it gives up green time that a normal drive, behind the queue, uses, priced with the
+          followers it holds up (:func:`advisory.advice.queue.gives_up_green`), the connected ones where the trip's last
+          fix (:meth:`see`) found them;
+
+        its countdown, whichever it is, the light's own, and the queue said where the queue holds the car
+        (:func:`advisory.advice.queue.said_truly`): the advisor sees the queue as a red."""
+        real, est = self._seen.get(trip_id, (obs, None)) if trip_id is not None else (obs, None)
+        if est is not None and (glide := tail_glide(real, est, advice, params, self.model)) is not None:
+            was = last is not None and last.get("reason") == "queue" and last.get("target_speed_mps") is not None
+            if was and abs(last["target_speed_mps"] - glide.target_speed_mps) < params.speak_change_mps:
+                glide = replace(glide, speak=False)
+            return glide
+        if gives_up_green(obs, advice, params, model=self.model, behind=self._behind.get(trip_id, ()) if trip_id is not None else (), queue=est):
+            return drive_normally(advice, params.units, real.lights[0])
+        return said_truly(advice, real.lights, obs.lights, params.units)
 
     @staticmethod
     def fresh(last_reason: str | None) -> bool:
@@ -271,6 +288,7 @@ class QueueBoard:
         self.lane(corridor).drop(trip_id)
         self._queued.pop(trip_id, None)
         self._behind.pop(trip_id, None)
+        self._seen.pop(trip_id, None)
 
     def state(self) -> str:
         """Where the probes come from (``/health``): ``local`` (this process, which serves every trip), ``shared``

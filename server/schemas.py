@@ -14,7 +14,8 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 from advisory.advice.advisor import ACTIONS, REASONS
 
 SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew", "queue")
-"""Pauses the service decides itself (``server.advising.SERVER_PHRASES``)."""
+"""Reasons the service decides itself (``server.advising.SERVER_PHRASES``): pauses, and ``queue`` (queue-aware advice:
+"follow the car in front", no speed, or the glide that meets the queue's tail, a speed: ``server.queue.QueueBoard``)."""
 Action = Enum("Action", {a: a for a in ACTIONS}, type=str)
 Action.__doc__ = "What the driver is advised to do; `none`: no speed advice (`reason` says why)."
 Reason = Enum("Reason", {r: r for r in (*REASONS, *SERVER_REASONS)}, type=str)

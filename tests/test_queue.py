@@ -9,8 +9,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, time_price
-from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s, pushed_past
+from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, spoken_speed, time_price
+from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s,
+                                  pushed_past, said_truly, tail_glide)
+from advisory.advice.queue import GIVE_UP_SLACK_S
 from server.queue import QueueBoard
 
 M = QueueModel()
@@ -179,6 +181,110 @@ def test_normal_drive_and_given_up_greens():
     assert gives_up_green(obs, crawl, params)
     assert not gives_up_green(obs, Advice("accelerate", "green_wave", 24.6), params)
     assert not gives_up_green(_obs(distance_m=200.0, speed=5.0, reds=((5.0, 50.0),), limit=24.6), crawl, params)
+
+
+def test_a_plan_slowing_for_a_discharging_queue_is_weighed_against_a_normal_drive_behind_it():
+    """Traced in SUMO (paper_s400 fixed 300 veh/h, 50 %, seed 2, ``main.6`` at 105 s): 112.8 m before light 1 at
+    23.1 m/s, its red over, two cars of it still to cross (3.4 s fast, 5 s slow), light 2 400 m on, red from 30 s; told
+    "Brake to 69 km/h" (19.2 m/s: over light 1 at 5.5 s). The check counted the plan as holding 69 km/h to light 2, 4.5
+    s after a normal drive at the limit: "Drive normally.", and the car slowed at 3.0-3.2 m/s² behind the queue. Past
+    the light it is for the plan's car is advised again (a normal drive on from its speed there): the plan stands.
+
+    And a normal drive into a queue still discharging is held by it, not priced as on an empty road: 250 m before a
+    light whose red ends in 6 s, two cars clearing it 9.4-11 s from now, a normal drive at the limit is over the line
+    at 10.2 s only on an empty road; behind the queue at 10.8 s (the fast end's headway, 1.4 s, after its last car at
+    the fast end: the earliest a driver following it crosses). A plan slowing to 12 m/s, over it at 15.4 s, gives up
+    5.2 s against the first, 4.6 s against the second: it stands; a crawl at 4.5 m/s still gives the green up. A normal drive that would meet the queue surely standing
+    (before its fast clearing) does not make the light: no plan is given up for it."""
+    params = AdvisorParams(units="kmh")
+    lights = (LightView(1, 112.85, red_windows_s=((0.0, 3.4), (30.0, math.inf))), LightView(2, 512.85, red_windows_s=((30.0, math.inf),)))
+    obs = Observation(23.12, 24.59, lights, followers=0.22)
+    queue = QueueEstimate((2.0, 0.0), (0, 0), (7.0, 0.0), clear_s=((3.4, 5.0), (0.0, 0.0)))
+    plan = Advice("brake_to", "green_wave", 19.22, light_red=True, seconds_to_change_s=3.4, light_id=1)
+    assert crossing_time_s(512.85, 23.12, 19.22, params, "firm") - normal_drive_s(512.85, 23.12, 24.59, 2.0) > GIVE_UP_SLACK_S / 1.22
+    assert not gives_up_green(obs, plan, params) and not gives_up_green(obs, plan, params, queue=queue)
+    one = Observation(24.59, 24.59, (LightView(1, 250.0, red_windows_s=((0.0, 9.4), (40.0, math.inf))),))
+    queue = QueueEstimate((2.0,), (0,), (13.0,), clear_s=((9.4, 11.0),))
+    slowing = Advice("slow_down", "green_wave", 12.0, light_id=1)
+    assert crossing_time_s(250.0, 24.59, 12.0, params, "brake") == pytest.approx(15.38, abs=0.01)
+    assert gives_up_green(one, slowing, params) and not gives_up_green(one, slowing, params, queue=queue)
+    assert gives_up_green(one, Advice("slow_down", "green_wave", 4.5, light_id=1), params, queue=queue)
+    standing = replace(queue, clear_s=((12.0, 14.0),))  # surely standing when the normal drive gets there (10.2 s)
+    assert not gives_up_green(replace(one, lights=(LightView(1, 250.0, red_windows_s=((0.0, 12.0), (40.0, math.inf))),)),
+                              Advice("slow_down", "green_wave", 4.5, light_id=1), params, queue=standing)  # fmt: skip
+
+
+def test_a_green_held_by_the_queue_is_said_as_the_queue_not_as_a_green_to_come():
+    """What the driver sees is true: where the light is green and the car waits for its queue, the countdown is the
+    light's own (its red, ``light_red`` false: the schema's meaning), and the words say the queue ("Queue ahead clears
+    in 3 seconds"), never "Green in 3 seconds" under a green light; where the light is red and its queue clears after
+    its green, the countdown is the light's green and the words the queue's. A light the queue does not hold: as
+    advised."""
+    real = (LightView(1, 112.85, red_windows_s=((30.0, 60.0),)),)
+    held = (LightView(1, 112.85, red_windows_s=((0.0, 3.4), (30.0, 60.0))),)
+    plan = Advice("brake_to", "green_wave", 19.22, light_red=True, seconds_to_change_s=3.4, message="Green in 3 seconds. Brake to 69 kilometers per hour.",
+                  light_id=1)  # fmt: skip
+    out = said_truly(plan, real, held, "kmh")
+    assert (out.light_red, out.seconds_to_change_s, out.counts_down_to) == (False, 30.0, "red")
+    assert out.message == "Queue ahead clears in 3 seconds. Brake to 69 kilometers per hour."
+    red = (LightView(1, 200.0, red_windows_s=((0.0, 6.0), (36.0, 66.0))),)
+    stop = Advice("stop", "red_ahead", 0.0, light_red=True, seconds_to_change_s=14.0, light_id=1)
+    out = said_truly(stop, red, (LightView(1, 200.0, red_windows_s=((0.0, 14.0), (36.0, 66.0))),), "mph")
+    assert (out.light_red, out.seconds_to_change_s, out.message) == (True, 6.0, "Queue ahead clears in 14 seconds. Prepare to stop.")
+    assert said_truly(plan, held, held, "kmh") == plan
+    # through the board: a car 60 m before a green light whose last red's queue still discharges (0.8-3 s)
+    board, t = QueueBoard(arrivals_vph=720.0, connected_share=0.5), 1000.0
+    board.see("c", "watcher", t, Observation(13.4, 13.4, (LightView(1, 500.0, red_windows_s=((0.0, 30.0), (70.0, 100.0))),), position_m=-300.0))
+    board.see("c", "watcher", t + 30.0, Observation(13.4, 13.4, (LightView(1, 300.0, red_windows_s=((40.0, 70.0),)),), position_m=-100.0))
+    obs, _ = board.see("c", "car", t + 34.0, _green_obs())
+    advice, _ = advise(obs, None, AdvisorParams())
+    assert advice.light_red and advice.message.startswith("Green in")  # the advisor sees the queue as a red
+    out = board.check(obs, advice, AdvisorParams(), "car")
+    assert (out.light_red, out.seconds_to_change_s, out.target_speed_mps) == (False, 40.0, advice.target_speed_mps)
+    assert out.message.startswith("Queue ahead clears in") and "Green" not in out.message, out.message
+
+
+def test_a_stop_that_only_the_queue_asks_for_is_a_glide_that_meets_its_tail():
+    """Traced in SUMO (paper_s400 fixed 600 veh/h, every car connected, seed 1, ``main.8``): 271.9 m before light 1 at
+    the limit, its red (no amber) ending in 6 s, four cars standing at the line (the line closed to this car until
+    12.2-15 s). The advisor saw a red ending about when the car, holding its speed, would be at the line: a stop to
+    wait a moment, said as nothing; the car ran on at the limit into the queue and braked at 3.5 m/s² behind it. Its
+    place behind the four is 30 m before the line; a car standing there would start 5.5 s before it crosses (30 m at
+    2 m/s²): at 8.1 s (fast) to 9.8 s (middle). The glide slows the car to the fastest speed that gets it there no
+    sooner than such a car had reached that speed, and it crosses the line behind the queue, after its slow clearing
+    plus a headway. None where the queue stands longer than any glide can wait (a red 15 s more, 120 m out at 13 m/s:
+    ``tests/server/test_queue_shared.py``), nor where the light's own red stops the car."""
+    params = AdvisorParams(units="kmh")
+    lights = tuple(LightView(k + 1, 271.9 + 400.0 * k, red_windows_s=((0.0, 6.0), (36.0, math.inf)), amber_s=0.0) for k in range(2))
+    obs = Observation(24.59, 24.59, lights, position_m=0.0)
+    est = estimate(obs, [Probe(270.9 - 7.5 * k, 0.0) for k in range(4)])
+    assert est.cars[0] == 4.0 and est.clear_s[0] == pytest.approx((12.2, 15.0))
+    advice, _ = advise(apply(obs, est), None, params)
+    assert (advice.action, advice.reason) == ("none", "short_wait")  # silence, towards a queue standing
+    glide = tail_glide(obs, est, advice, params)
+    assert (glide.action, glide.reason, glide.light_red, glide.seconds_to_change_s) == ("slow_down", "queue", True, 6.0)
+    assert glide.message == f"Queue ahead clears in 14 seconds. Slow down to {spoken_speed(glide.target_speed_mps, 'kmh')} kilometers per hour."
+    v, a = glide.target_speed_mps, M.drive_accel_mps2
+    start_s = math.sqrt(2.0 * 30.0 / a)  # a car standing at this car's place starts this long before it crosses the line
+    reach = lambda target: crossing_time_s(271.9 - 30.0, 24.59, target, params, "brake")  # noqa: E731
+    assert params.min_cruise_speed_mps <= v < 24.59
+    assert reach(v) >= 13.6 + 1.7 - start_s + v / a  # behind such a car (middle of the discharge) at its speed
+    assert reach(v + params.speed_step_mps) < 13.6 + 1.7 - start_s + (v + params.speed_step_mps) / a  # the fastest such
+    assert crossing_time_s(271.9, 24.59, v, params, "brake") >= 15.0 + M.headway_s  # over the line behind the queue
+    long_red = Observation(13.0, 24.59, (LightView(1, 120.0, red_windows_s=((0.0, 15.0), (45.0, 75.0))),), position_m=0.0)
+    est_long = estimate(long_red, [Probe(119.0 - 7.5 * k, 0.0) for k in range(5)])
+    assert tail_glide(long_red, est_long, Advice("coast", "red_ahead", 13.0, light_id=1), params) is None
+    own_red = replace(obs, lights=(replace(lights[0], red_windows_s=((0.0, 6.0), (14.0, 44.0))),))
+    assert tail_glide(own_red, estimate(own_red, [Probe(270.9 - 7.5 * k, 0.0) for k in range(4)]), advice, params) is None
+    # through the board: the service's check answers it, spoken once
+    board = QueueBoard()
+    for k in range(4):
+        board.see("c", f"q{k}", 1000.0, Observation(0.0, 24.59, (replace(lights[0], distance_m=1.0 + 7.5 * k),), position_m=270.9 - 7.5 * k))
+    held, _ = board.see("c", "car", 1000.0, obs)
+    said = board.check(held, advise(held, None, params)[0], params, "car")
+    assert (said.action, said.reason, said.speak) == ("slow_down", "queue", True) and said.target_speed_mps == pytest.approx(v)
+    again = board.check(held, advise(held, None, params)[0], params, "car", {"reason": "queue", "target_speed_mps": said.target_speed_mps})
+    assert again.speak is False
 
 
 def _green_obs(distance_m=60.0, position_m=140.0):

@@ -57,7 +57,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, _implied_timings, crossing_time_s, phrase
+from advisory.advice.advisor import (KEEP_MODES, Advice, AdvisorParams, LightView, Observation, _implied_timings, _light_timing, _say_seconds,
+                                     crossing_time_s, phrase)
 from advisory.advice.choice import WAIT_CAP_S
 
 
@@ -510,8 +511,70 @@ def normal_drive_s(distance_m: float, v_mps: float, limit_mps: float, accel_mps2
     return (lim - v) / accel_mps2 + (distance_m - d_acc) / lim
 
 
+def behind_queues_s(crossings_s: Sequence[float], obs: Observation, queue: QueueEstimate | None, accel_mps2: float, model: QueueModel) -> list[float]:
+    """A drive's crossing of each line ahead of ``obs`` (``crossings_s``, as it would cross on an empty road, from now)
+    behind the queues in front of the car (``queue``, its :class:`QueueEstimate`: per line the cars in front and when the
+    last of them crosses it, :func:`cleared_s`; None: no queue): no earlier than a headway after the queue's last car at the fast end of the discharge (``fast_headway_s``
+    after its fast clearing: the earliest a driver following it crosses; the check it serves guards the traffic behind,
+    so the normal drive it weighs a plan against is not taken later than it may be), then at that car's speed there (speeding up at ``accel_mps2`` from its place in the queue, ``n`` jam spacings back), and on from that
+    line as a normal drive (speeding up to the limit at ``accel_mps2``): two drives the queue holds at a line leave it
+    alike, whatever each would have done alone. A queue whose clearing is unknown holds the car for ever (inf). [s]
+
+    Examples
+    --------
+    A normal drive at the limit (24.6 m/s) reaching a line 113 m ahead in 4.6 s, two cars clearing it 3.4-5 s from now,
+    the next line 400 m further on: it crosses the first 1.4 s after the queue's last car at the fast end, at 4.8 s, at
+    7.7 m/s (two jam spacings at 2 m/s²), and the next one 19.1 s later (8.4 s and 136 m to the limit, 264 m at it); no
+    queue: its own times.
+
+    >>> obs = Observation(23.1, 24.6, (LightView(1, 113.0), LightView(2, 513.0)))
+    >>> two = QueueEstimate((2.0, 0.0), (0, 0), (7.0, 0.0), clear_s=((3.4, 5.0), (0.0, 0.0)))
+    >>> [round(t, 1) for t in behind_queues_s([4.6, 20.9], obs, two, 2.0, QueueModel())]
+    [4.8, 23.9]
+    >>> behind_queues_s([4.6, 20.9], obs, None, 2.0, QueueModel()), behind_queues_s([9.0, 25.0], obs, two, 2.0, QueueModel())
+    ([4.6, 20.9], [9.0, 25.0])
+    """
+    out: list[float] = []
+    held = None  # (time, speed, distance) where a queue last held the drive: it drives on normally from there
+    for j, t_s in enumerate(crossings_s):
+        line_m = obs.lights[j].distance_m
+        if held is not None:
+            t_s = held[0] + normal_drive_s(line_m - held[2], held[1], obs.speed_limit_mps, accel_mps2)
+        fast, slow = cleared_s(obs.lights[j], queue, j)
+        if slow > 0.0:
+            held_s = fast + model.fast_headway_s if math.isfinite(slow) else math.inf
+            if held_s > t_s:
+                n = queue.cars[j] if queue is not None and j < len(queue.cars) else 0.0
+                t_s, held = held_s, (held_s, min(math.sqrt(2.0 * accel_mps2 * n * model.jam_spacing_m), obs.speed_limit_mps), line_m)
+        out.append(t_s)
+    return out
+
+
+def cleared_s(light: LightView, queue: QueueEstimate | None, j: int) -> tuple[float, float]:
+    """When the last car of the queue in front crosses line ``j`` (``light``, as the observation has it, before
+    :func:`apply`), at the fast and at the slow end of the discharge, from now (0, 0: no queue) [s]: the estimate's
+    ``clear_s``, counted from the red's likely end where the queue waits for it (``after_red_s``): the sure view's end
+    is the latest an actuated red may end, and counted from it a queue held every drive for a green that came earlier
+    (traced in SUMO, paper_s400 actuated 600 veh/h, 50 %: the check let slow plans stand, advised time +12.5 -> +15.3 %).
+
+    Examples
+    --------
+    >>> lv = LightView(1, 200.0, red_windows_s=((0.0, 30.0),), likely_red_windows_s=((0.0, 20.0),))
+    >>> cleared_s(lv, QueueEstimate((3.0,), (0,), (37.0,), clear_s=((34.8, 37.0),), after_red_s=((4.8, 7.0),)), 0), cleared_s(lv, None, 0)
+    ((24.8, 27.0), (0.0, 0.0))
+    """
+    if queue is None or j >= len(queue.clear_s):
+        return 0.0, 0.0
+    fast, slow = queue.clear_s[j]
+    after = queue.after_red_s[j] if j < len(queue.after_red_s) else None
+    red = _first_red_of(light.red_windows_s if light.likely_red_windows_s is None else light.likely_red_windows_s)
+    if after is not None and red is not None and math.isfinite(red[1]):
+        return red[1] + after[0], red[1] + after[1]
+    return fast, slow
+
+
 def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S, model: QueueModel | None = None,
-                   behind: Sequence[Probe] = ()) -> bool:  # fmt: skip
+                   behind: Sequence[Probe] = (), queue: QueueEstimate | None = None) -> bool:  # fmt: skip
     """The advised plan gives up green time that a normal drive (speeding up to the limit at the regular driver's
     ``normal_accel_mps2``, no advice to react to) uses: at a light that the normal drive crosses outside its reds (the
     queue's included, :func:`apply`), as every light before it, the plan arrives ``late`` after it, and the time lost
@@ -527,8 +590,18 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
       (traced in SUMO: such cars met it or a queue's tail braking harder than 3.5 m/s², or entered it), and the
       followers' time is already lost.
 
+    Both drives cross each line behind the queue in front of the car (``queue``, the car's :class:`QueueEstimate`;
+    :func:`behind_queues_s`): a normal drive into a queue still discharging is held by it, not as on an empty road
+    (one that would reach it while it surely stands, before its fast clearing, does not make the light: it stops there)
+    (traced in SUMO, paper_s400 fixed 300 veh/h, 50 %, seed 2, ``main.6``: 113 m out at 23 m/s with two cars clearing
+    3.4-5 s from now, a plan slowing to 69 km/h was turned back because its normal drive at the limit crossed at 4.6 s;
+    told to drive normally the car slowed at 3.0-3.2 m/s² behind the queue).
+
     The plan is not credited with a stop it avoids at a red further on: a car that drives normally through this light
-    is advised again after it, with the distance to the next one to slow down in. Traced in SUMO (docs/TRAFFIC.md): a car
+    is advised again after it, with the distance to the next one to slow down in. Alike, past the light the plan is for
+    (``advice.light_ahead``) the car is advised again: it drives on from that line as a normal drive from the plan's
+    speed, not at the plan's speed to the last light (a plan slowing for the first light's queue was counted 4.5 s
+    late at the second light, 400 m on at 69 km/h). Traced in SUMO (docs/TRAFFIC.md): a car
     launching from a queue at the first light, told to crawl 400 m to the second light's green after next (the advisor
     plans with comfortable accelerations, and its own ``tight_green`` rule looks at the next light); seven connected
     cars told to crawl through the first light towards the second one's queue having cleared, the cars behind them cut
@@ -541,12 +614,21 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
         return False
     model = model or QueueModel()
     v, limit, mode = obs.speed_mps, obs.speed_limit_mps, KEEP_MODES[advice.action]
-    normal = [normal_drive_s(lv.distance_m, v, limit, params.normal_accel_mps2) for lv in obs.lights]
-    made = next((j for j, (lv, t) in enumerate(zip(obs.lights, normal)) if lv.is_red_at(t)), len(obs.lights))
+    alone = [normal_drive_s(lv.distance_m, v, limit, params.normal_accel_mps2) for lv in obs.lights]
+    normal = behind_queues_s(alone, obs, queue, params.normal_accel_mps2, model)
+    plan_alone = [crossing_time_s(lv.distance_m, v, advice.target_speed_mps, params, mode) for lv in obs.lights]
+    aim = min(max(advice.light_ahead - 1, 0), len(obs.lights) - 1)  # the light the plan is for: past it, the car is advised again
+    for j in range(aim + 1, len(obs.lights)):
+        gap_m = obs.lights[j].distance_m - obs.lights[aim].distance_m
+        plan_alone[j] = plan_alone[aim] + normal_drive_s(gap_m, advice.target_speed_mps, limit, params.normal_accel_mps2)
+    planned = behind_queues_s(plan_alone, obs, queue, params.normal_accel_mps2, model)
+    # made: crossed outside the light's reds by the normal drive on its own, so not into a queue surely standing (before its
+    # fast clearing: the sure view of :func:`apply`), where it would stop too; its time there is the one behind the queue
+    made = next((j for j, (lv, t) in enumerate(zip(obs.lights, alone)) if lv.is_red_at(t) or lv.is_red_at(normal[j])), len(obs.lights))
     known = tuple(behind)
     for j in range(made):
         line_m = obs.lights[j].distance_m
-        late = crossing_time_s(line_m, v, advice.target_speed_mps, params, mode) - normal[j]
+        late = planned[j] - normal[j]
         if late <= 0.0:
             continue
         own = 1.0 if made == len(obs.lights) and j == made - 1 else 0.0
@@ -555,8 +637,8 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
         lost = (own + n_behind) * late + cut_off(obs.lights[j], normal[j], normal[j] + late, n_behind - len(known), model.headway_s)
         if held and known:  # the car's front a jam spacing past the line (Newell's shift: the one behind follows it from there)
             past_m = line_m + model.jam_spacing_m
-            normal_past = normal_drive_s(past_m, v, limit, params.normal_accel_mps2)
-            planned_past = crossing_time_s(past_m, v, advice.target_speed_mps, params, mode)
+            normal_past = normal_drive_s(past_m, v, limit, params.normal_accel_mps2) + normal[j] - alone[j]  # (held as at the line)
+            planned_past = crossing_time_s(past_m, v, advice.target_speed_mps, params, mode) + planned[j] - plan_alone[j]
             lost += pushed_past(obs.lights[j], normal_past, planned_past, known, max(limit, 1.0), model)
         if lost > slack_s:
             return True
@@ -648,3 +730,141 @@ def drive_normally(advice: Advice, units: str, light: LightView | None = None) -
         out = replace(out, light_red=False if counted else None, seconds_to_change_s=to_red if counted else None, light_ahead=1,
                       light_id=light.intersection_id if counted else None)
     return replace(out, message=phrase(out, units), speak=True)
+
+
+def queue_phrase(advice: Advice, queue_s: float | None, units: str) -> str:
+    """The words for ``advice`` where the queue in front, not the light, holds the car: the queue's clearing said
+    ("Queue ahead clears in 4 seconds."), then what to do, with no countdown of the light's (the display shows the
+    light's own: ``light_red``, ``seconds_to_change_s``). A countdown to a green that already came would be untrue.
+
+    Examples
+    --------
+    >>> queue_phrase(Advice("brake_to", "green_wave", 19.2), 4.2, "kmh")
+    'Queue ahead clears in 4 seconds. Brake to 69 kilometers per hour.'
+    >>> queue_phrase(Advice("stop", "red_ahead", 0.0, light_ahead=2), 12.0, "mph"), queue_phrase(Advice("none", "red_ahead"), None, "mph")
+    ('Second light: queue ahead clears in 12 seconds. Prepare to stop.', 'Queue ahead.')
+    """
+    when = _say_seconds(queue_s)
+    head = f"Queue ahead clears in {when}." if when else "Queue ahead."
+    if advice.light_ahead == 2:
+        head = f"Second light: q{head[1:]}"
+    if advice.action == "stop":
+        rest = "Prepare to stop."
+    elif advice.action == "coast" and advice.reason == "red_ahead":
+        rest = "Lift off and coast."
+    elif advice.action == "none":
+        rest = ""
+    else:  # the action's own words, without a countdown
+        rest = phrase(replace(advice, seconds_to_change_s=None, light_ahead=1), units)
+    return f"{head} {rest}".strip()
+
+
+def said_truly(advice: Advice, real: Sequence[LightView], held: Sequence[LightView], units: str) -> Advice:
+    """``advice``, planned on the lights as the queue holds them (``held``, :func:`apply`: a green held by the queue is
+    a red to the advisor), with the countdown of the light it names as that light really is (``real``: the
+    observation before :func:`apply`): ``light_red`` its state now and ``seconds_to_change_s`` its next change, as the
+    service's schema says; where the advisor's countdown was to a green later than the light's (the queue's
+    clearing), the words say the queue (:func:`queue_phrase`), not "Green in 3 seconds" under a green light (traced in
+    SUMO, paper_s400 fixed 300 veh/h: "Green in 9 seconds. Brake to 69 km/h." with the red ending in 6 s, and "Green in 3
+    seconds" on a green held by the queue, ``light_red`` true). Unchanged where the queue holds no light it names.
+
+    Examples
+    --------
+    >>> real = (LightView(1, 113.0, red_windows_s=((30.0, 60.0),)),)
+    >>> held = (LightView(1, 113.0, red_windows_s=((0.0, 3.4), (30.0, 60.0))),)
+    >>> plan = Advice("brake_to", "green_wave", 19.2, light_red=True, seconds_to_change_s=3.4, message="Green in 3 seconds. Brake to 69 kilometers per hour.", light_id=1)
+    >>> out = said_truly(plan, real, held, "kmh")
+    >>> out.light_red, out.seconds_to_change_s, out.message
+    (False, 30.0, 'Queue ahead clears in 3 seconds. Brake to 69 kilometers per hour.')
+    """
+    if advice.light_red is None or advice.light_id is None:
+        return advice
+    i = next((k for k, light in enumerate(held) if light.intersection_id == advice.light_id), None)
+    if i is None or i >= len(real) or real[i] == held[i]:
+        return advice
+    red, to_change = _light_timing(real[i])
+    counted = advice.seconds_to_change_s
+    queue_s = counted if advice.light_red and counted is not None and (not red or to_change is None or counted > to_change + 0.5) else None
+    out = replace(advice, light_red=red, seconds_to_change_s=to_change)
+    if queue_s is None and (red, to_change) == (advice.light_red, counted):
+        return advice
+    keep_words = advice.action == "none" and advice.reason != "red_ahead"
+    return replace(out, message=phrase(out, units) if queue_s is None or keep_words else queue_phrase(out, queue_s, units))
+
+
+def tail_glide(obs: Observation, est: QueueEstimate, advice: Advice, params: AdvisorParams, model: QueueModel | None = None) -> Advice | None:
+    r"""The glide that meets the queue's tail and follows it through, where the advisor's answer (``advice``, on the
+    lights as the queue holds them) is a stop at the next light, a lift-off for one, or no advice for a stop to wait a
+    moment at the line (``short_wait``: the line is held by the queue, and the car meets its tail before the line; traced
+    in SUMO, paper_s400 fixed 600 veh/h, every car connected, seed 1, ``main.8``: silent at the limit from 272 m out
+    towards four cars standing, then told to follow 81 m out, braking at 3.5 m/s²), that only the queue in front
+    asks for: the light itself (``obs``, as it is: before :func:`apply`) is green from the queue's fast clearing until
+    this car is over the line behind its slow one. None where it is not such a stop, or where no glide meets the tail
+    moving.
+
+    The queue's ``n`` cars (``est.cars``) stand back from the line, one jam spacing each; this car's place behind them is
+    ``n`` jam spacings back. A car standing there would cross the line a headway after the queue's last car
+    (``est.clear_s``, between the fast and the slow discharge), having started ``\sqrt{2 n \delta / a}`` earlier
+    (speeding up at ``drive_accel_mps2`` over the ``n`` jam spacings): this car, slowing gently (``comfort_decel_mps2``)
+    to a speed ``v`` and holding it, reaches that place no earlier than such a standing car would have reached ``v``
+    there (``v / a`` after its start), so it never closes in on a tail still standing, and crosses the line as the
+    stop would have, behind the queue, without stopping: of the same crossing, the glide brakes less, and costs less
+    than the stop. The fastest such speed at the middle of the discharge range, else the slowest advised speed where
+    it meets the tail moving at the fast end (the hard constraint of :func:`apply`: the queue surely stands until then).
+    At a light of exact timing only: under uncertain timing (an actuated light) when the queue starts to move is as
+    uncertain as the green, which the advisor's choice prices over the light's timings (:func:`apply`); the glide, one
+    instant, cost the one-seed matrix's actuated 900 veh/h 50 % +12.4 -> +20.5 % of advised time, counted from the
+    sure view's red end as from its likely one (cars slowed on a green approach leave gaps at the controller's loops).
+
+    (The advisor plans a glide to the line, not to the tail: where the queue holds the line longer than its slowest
+    advised speed, 10 mph, can wait, every glide crossed it before the queue had gone and the car was told to stop
+    behind it; traced in SUMO, paper_s400 fixed 300 veh/h, 50 %: advised time +8.4 -> +17.5 % when that stop
+    replaced the slowest glide, which the car had followed until its car following held it behind the queue.)
+
+    Examples
+    --------
+    A car at 13 m/s 120 m from a green light, four cars in front clearing 8-11 s from now: its place is 90 m ahead; a
+    car standing there would cross the line 9.4-13 s from now, having started 5.5 s earlier (30 m at 2 m/s²): at
+    3.9-7.5 s, 5.7 s at the middle. Slowing to 7.6 m/s (27 km/h) the car gets there at 9.9 s, after such a car had
+    reached that speed (5.7 + 3.8 = 9.5 s); at 8.0 m/s it would be there at 9.6 s, before 9.7 s.
+
+    >>> obs = Observation(13.0, 13.4, (LightView(1, 120.0, red_windows_s=((40.0, 70.0),)),))
+    >>> est = QueueEstimate((4.0,), (0,), (13.0,), clear_s=((8.0, 11.0),))
+    >>> glide = tail_glide(obs, est, Advice("coast", "red_ahead", 13.0), AdvisorParams(units="kmh"))
+    >>> glide.action, glide.reason, round(glide.target_speed_mps, 2), glide.light_red, glide.message
+    ('slow_down', 'queue', 7.6, False, 'Queue ahead clears in 10 seconds. Slow down to 27 kilometers per hour.')
+    >>> tail_glide(obs, est, Advice("cruise", "green_wave", 13.0), AdvisorParams()) is None  # not a stop
+    True
+    """
+    model = model or QueueModel()
+    stop = (advice.action in ("stop", "coast") and advice.reason == "red_ahead") or (advice.action == "none" and advice.reason == "short_wait")
+    if not stop or not obs.lights or est.stop_behind or not est.clear_s:
+        return None
+    light, (fast, slow), v = obs.lights[0], est.clear_s[0], obs.speed_mps
+    exact = light.likely_red_windows_s is None and light.scenario_red_windows_s is None
+    if not exact or advice.light_id not in (None, light.intersection_id) or not (0.0 < fast <= slow < math.inf) or not est.cars:
+        return None
+    over_s = slow + model.headway_s + (params.green_margin_s if light.amber_s == 0.0 else 0.0)
+    if any(a < over_s and b > fast for a, b in light.red_windows_s):  # the light's own red, not the queue, stops it
+        return None
+    place_m = light.distance_m - est.cars[0] * model.jam_spacing_m
+    if place_m <= model.jam_spacing_m or v < params.min_cruise_speed_mps:
+        return None
+    start_s = math.sqrt(2.0 * est.cars[0] * model.jam_spacing_m / model.drive_accel_mps2)
+    go_fast = fast + model.fast_headway_s - start_s
+    go_mid = 0.5 * (fast + slow) + 0.5 * (model.fast_headway_s + model.headway_s) - start_s
+    best = None
+    target = params.min_cruise_speed_mps
+    while target <= v + 1e-9:
+        reach_s = crossing_time_s(place_m, v, target, params, "brake")
+        if reach_s >= go_mid + target / model.drive_accel_mps2:
+            best = target
+        elif best is None and target == params.min_cruise_speed_mps and reach_s >= go_fast + target / model.drive_accel_mps2:
+            best = target
+        target += params.speed_step_mps
+    if best is None or light.is_red_at(crossing_time_s(light.distance_m, v, best, params, "brake")):  # never planned into a red
+        return None
+    red, to_change = _light_timing(light)
+    action = "slow_down" if best < v - params.hysteresis_mps else "cruise"
+    out = Advice(action, "queue", best, light_red=red, seconds_to_change_s=to_change, light_id=light.intersection_id, current_speed_mps=v)
+    return replace(out, message=queue_phrase(out, 0.5 * (fast + slow), params.units), speak=True)
