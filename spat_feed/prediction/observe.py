@@ -1037,8 +1037,8 @@ def no_amber(phases: list[tuple[PhaseClass, Bound, Bound]]) -> list[tuple[PhaseC
 def _held(windows: tuple[tuple[float, float], ...], hold_s: float, red_now: bool) -> tuple[tuple[float, float], ...]:
     """Windows with the first red (the published one, or the one after a published amber) lasting at least ``hold_s``
     from now; a red now that the windows lost is put back."""
-    if hold_s <= 0.0:
-        return windows
+    if hold_s <= 0.0 or not (red_now or (windows and 0.0 < windows[0][0] < hold_s)):
+        return windows  # (windows apart, as made: nothing to lengthen, nothing to merge)
     out = [list(w) for w in windows]
     if out and out[0][0] < hold_s and (red_now or out[0][0] > 0.0):
         out[0][1] = max(out[0][1], hold_s)
