@@ -141,6 +141,9 @@ class CycleStats:
     # in the past, for ends first published as far ahead (:meth:`PhaseHistory.exact_lags_s`); () until enough are seen
     exact_end_unix_s: float | None = None
     exact_lags_s: tuple[float, ...] = ()
+    # the forecast chained after the phase in progress, as views of this snapshot made it (:func:`_chain`); not an init
+    # field: each snapshot has its own (``replace`` makes a new one), and it goes with the snapshot
+    chains: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def ends(self, cls: PhaseClass) -> tuple[float, ...]:
         """The instants phases of ``cls`` ended at, if enough are seen, else ()."""
@@ -833,7 +836,7 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
     start: Bound = (after_s, likely, max(late, likely), _levels(samples, after_s))
     unknown_as = _unknown_as(cycle)  # the group's amber or go phase published as "unavailable"
     out: list[tuple[PhaseClass, Bound, Bound]] = [(unknown_as if cls is PhaseClass.UNKNOWN else cls, begun, start)]
-    for cls, shortest, median, late, levels in _chain(_ChainKey(cycle, cls, samples, horizon_s)):
+    for cls, shortest, median, late, levels in _chain(cycle, cls, samples, horizon_s):
         if not start[0] < after_s + horizon_s:
             break
         end = (start[0] + shortest, min(max(median, start[1] + shortest), late), late, np.maximum(levels, start[3] + shortest))
@@ -843,45 +846,30 @@ def _continued(cls: PhaseClass, since_unix_s: float | None, begun: Bound, now_s:
     return out
 
 
-class _ChainKey:
-    """What :func:`_chain` is asked: a group's history (``cycle``, by identity: a :class:`CycleStats` is a frozen
-    snapshot, replaced when the history changes), the class of the phase in progress, the samples of its end (by
-    value) and the horizon."""
-
-    __slots__ = ("cycle", "cls", "samples", "horizon_s", "_bytes", "_hash")
-
-    def __init__(self, cycle: CycleStats, cls: PhaseClass, samples: np.ndarray, horizon_s: float) -> None:
-        self.cycle, self.cls, self.samples, self.horizon_s = cycle, cls, samples, horizon_s
-        self._bytes = samples.tobytes()
-        self._hash = hash((id(cycle), cls, self._bytes, horizon_s))
-
-    def __hash__(self) -> int:
-        return self._hash
-
-    def __eq__(self, other: object) -> bool:
-        return (isinstance(other, _ChainKey) and self.cycle is other.cycle and self.cls is other.cls and self.horizon_s == other.horizon_s
-                and self._bytes == other._bytes)  # fmt: skip
-
-
 CHAIN_MARGIN_S = 1.0
 """:func:`_chain` goes this far past the horizon (the caller stops at it, adding the shortest durations to its own
 instant: rounding apart, the same phases). [s]"""
 
+CHAINS_KEPT = 64
+"""Chains a snapshot keeps (:func:`_chain`; then it starts afresh). [-]"""
 
-@lru_cache(maxsize=512)
-def _chain(key: _ChainKey) -> tuple[tuple[PhaseClass, float, float, float, np.ndarray], ...]:
-    """The phases that follow a phase of class ``key.cls`` ending at ``key.samples`` (sorted), as the history says, while
-    their shortest durations add up to less than the horizon: each one's class, shortest duration, the median and
-    :data:`LATE_QUANTILE` of its end (:func:`~spat_feed.prediction.predictor.next_end`) and its :func:`_levels`.
 
-    What :func:`_continued` chains after the phase in progress; cached (the cache keeps the history it was asked of,
-    so an identity is never reused while cached): between two changes of a group's history the end of its phase in
-    progress is often the same set of samples from reading to reading (on the bench's observations the chain came
-    from the cache in about 3 of 4 views), and the forecast after it depends on nothing else. [s]"""
-    cycle, cls, samples = key.cycle, key.cls, key.samples
+def _chain(cycle: CycleStats, cls: PhaseClass, samples: np.ndarray, horizon_s: float) -> tuple[tuple[PhaseClass, float, float, float, np.ndarray], ...]:
+    """The phases that follow a phase of class ``cls`` ending at ``samples`` (sorted), as the history ``cycle`` says,
+    while their shortest durations add up to less than the horizon: each one's class, shortest duration, the median
+    and :data:`LATE_QUANTILE` of its end (:func:`~spat_feed.prediction.predictor.next_end`) and its :func:`_levels`.
+
+    What :func:`_continued` chains after the phase in progress; kept in the snapshot (``CycleStats.chains``, by class,
+    samples and horizon): between two changes of a group's history the end of its phase in progress is often the same
+    set of samples from reading to reading (on the bench's observations the chain was kept in 1 of 4 views of 2019-05-17
+    and 2 of 3 of US 1136), every car at the light reads the same, and the forecast after it depends on nothing else. [s]"""
+    key = (cls, samples.tobytes(), horizon_s)
+    kept = cycle.chains.get(key)
+    if kept is not None:
+        return kept
     out = []
     total_s = 0.0
-    while total_s < key.horizon_s + CHAIN_MARGIN_S:
+    while total_s < horizon_s + CHAIN_MARGIN_S:
         nxt = cycle.following.get(cls)
         d = cycle.durations(nxt) if nxt is not None else ()
         if not d:
@@ -889,10 +877,13 @@ def _chain(key: _ChainKey) -> tuple[tuple[PhaseClass, float, float, float, np.nd
         cls = nxt
         samples = next_end(cycle, cls, samples)
         levels = samples[_level_ranks(len(samples))]
-        levels.setflags(write=False)  # (cached: shared by every call)
+        levels.setflags(write=False)  # (kept: shared by every view)
         out.append((cls, d[0], sample_quantile(samples, 0.5), sample_quantile(samples, LATE_QUANTILE), levels))
         total_s += d[0]
-    return tuple(out)
+    if len(cycle.chains) >= CHAINS_KEPT:
+        cycle.chains.clear()
+    cycle.chains[key] = kept = tuple(out)
+    return kept
 
 
 def _windows(phases, t_unix_s: float, horizon_s: float, lo, hi, classes=BLOCKING_CLASSES) -> tuple[tuple[float, float], ...]:
