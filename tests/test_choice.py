@@ -467,6 +467,7 @@ def test_a_steady_hold_is_one_segment_of_the_same_motion():
         for tau in dense[0, :n_d]:
             assert np.allclose(choice._state_at(sparse, n, tau), choice._state_at(dense, n_d, tau), rtol=1e-12, atol=1e-9)
         for line in d:
-            assert choice._no_stop_s(sparse, n, line, choice.AMBER_STOP_MPS2) == pytest.approx(choice._no_stop_s(dense, n_d, line, choice.AMBER_STOP_MPS2), abs=1e-9)
+            no_stop_s = choice._no_stop_s(dense, n_d, line, choice.AMBER_STOP_MPS2)
+            assert choice._no_stop_s(sparse, n, line, choice.AMBER_STOP_MPS2) == pytest.approx(no_stop_s, abs=1e-9)
         kept, every = kept + n, every + n_d
     assert kept < 2 * every / 3, (kept, every)
