@@ -8,10 +8,14 @@ For each recording, the same snapshots in the same process:
 * update: the intersection's history fed with those plans (``IntersectionHistory.record``: durations, links, the
   cycle and the scores of its methods), per reading per group (target <= 50 us), and its ratio to parsing;
 * view: one light's view with the whole forecast chain over 150 s (``light_view``), p50 / p99;
-* advise: ``advise()`` on an observation of two such lights, p50 / p99 (target p99 <= 0.5 ms), in wall time and in
-  the thread's CPU time (``time.thread_time``): on a shared machine the wall time's p99 is the scheduler's (a call
-  that loses the CPU waits out another process's time slice, 2-6 ms: at load 4.5 on 2 cores, 0.42 ms calls measured
-  p99 6.1 ms wall, 0.69 ms CPU), the CPU time is the advisor's own cost, and the load is printed with them.
+* advise: ``advise()`` on an observation of two such lights, p50 / p99 (target p99 <= 0.5 ms);
+* a fix: the two views and ``advise()`` together, what the service spends on a fix with the predictor in the path
+  (the target's "advise() with the predictor in the path").
+
+Each in wall time and in the thread's CPU time (``time.thread_time``): on a shared machine the wall time's p99 is the
+scheduler's (a call that loses the CPU waits out another process's time slice, 2-6 ms: at load 4.5 on 2 cores, 0.42
+ms calls measured p99 6.1 ms wall, 0.69 ms CPU), the CPU time is the advisor's own cost, and the load is printed with
+them.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ def bench(path: Path, limit: int = 4000) -> None:
     snapshots = read_spat_csv(path)[:limit]
     t_parse = t_update = 0.0
     n_readings = 0
-    views, advice, advice_cpu = [], [], []
+    views, views_cpu, advice, advice_cpu, fix, fix_cpu = [], [], [], [], [], []
     history = IntersectionHistory()
     lights = (spec(1, 300.0), spec(2, 600.0))
     memory = AdvisorMemory()
@@ -59,22 +63,28 @@ def bench(path: Path, limit: int = 4000) -> None:
             continue
         groups = sorted(plans)[:2]
         readings = [PlanReading(plans[g], cycle=history.stats(g)) for g in groups]
-        a = time.perf_counter()
+        a, a_cpu = time.perf_counter(), time.thread_time()
         obs_lights = tuple(light_view(spec_, r, 0.0, t, speed_mps=12.0) for spec_, r in zip(lights, readings))
         b, b_cpu = time.perf_counter(), time.thread_time()
         adv, memory = advise(Observation(12.0, 50 / 3.6, obs_lights, position_m=0.0), memory)
         c_cpu, c = time.thread_time(), time.perf_counter()
         views.append((b - a) / len(obs_lights))
+        views_cpu.append((b_cpu - a_cpu) / len(obs_lights))
         advice.append(c - b)
         advice_cpu.append(c_cpu - b_cpu)
+        fix.append(c - a)
+        fix_cpu.append(c_cpu - a_cpu)
     per_parse, per_update = 1e6 * t_parse / n_readings, 1e6 * t_update / n_readings
-    v, a, a_cpu = 1e3 * np.array(views), 1e3 * np.array(advice), 1e3 * np.array(advice_cpu)
+    v, v_cpu, a, a_cpu, f, f_cpu = (1e3 * np.array(x) for x in (views, views_cpu, advice, advice_cpu, fix, fix_cpu))
+
+    def pct(x: np.ndarray) -> str:
+        return f"p50 {np.percentile(x, 50):.3f} p99 {np.percentile(x, 99):.3f} ms"
+
     print(f"{path.name}: {len(snapshots)} snapshots, {n_readings} group readings")
     print(f"   parse {per_parse:.1f} us, history update {per_update:.1f} us per reading per group "
           f"(ratio {per_update / per_parse:.2f}; target <= 50 us)")
-    print(f"   light_view p50 {np.percentile(v, 50):.3f} ms p99 {np.percentile(v, 99):.3f} ms; "
-          f"advise() p50 {np.percentile(a, 50):.3f} ms p99 {np.percentile(a, 99):.3f} ms (target p99 <= 0.5 ms)")
-    print(f"   advise() CPU time p50 {np.percentile(a_cpu, 50):.3f} ms p99 {np.percentile(a_cpu, 99):.3f} ms; load {os.getloadavg()[0]:.1f} "
+    print(f"   light_view {pct(v)}; advise() {pct(a)} (target p99 <= 0.5 ms); a fix, 2 views + advise() {pct(f)}")
+    print(f"   CPU time: light_view {pct(v_cpu)}; advise() {pct(a_cpu)}; a fix {pct(f_cpu)}; load {os.getloadavg()[0]:.1f} "
           f"on {os.cpu_count()} cores")
 
 

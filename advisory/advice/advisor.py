@@ -783,13 +783,16 @@ def _widened_timings(timings: tuple) -> tuple:
         return tuple(timings) * len(WIDE_LEVELS)
     med = timings[n // 2]
     wide = []
+    earliest_end: dict[int, float] = {}  # the earliest end of each red on now over the timings (found once)
     for i in (round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS):
         out = []
         for w, (a, b) in enumerate(timings[i]):
             am, bm = med[w] if w < len(med) else (a, b)
             b2 = bm + WIDE_STRETCH * (b - bm) if math.isfinite(b) and math.isfinite(bm) else b
             if a <= 0.0:  # red on now: its end no earlier than every timing says
-                out.append((a, max(b2, min(t[w][1] for t in timings if len(t) > w))))
+                if w not in earliest_end:
+                    earliest_end[w] = min(t[w][1] for t in timings if len(t) > w)
+                out.append((a, max(b2, earliest_end[w])))
                 continue
             a2 = max(am + WIDE_STRETCH * (a - am), 0.0) if math.isfinite(a) and math.isfinite(am) else a
             out.append((a2, max(b2, a2)))

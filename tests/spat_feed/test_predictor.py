@@ -318,3 +318,35 @@ def test_predict_eval_on_every_recording(path, recorded_snapshots, shared_record
         cls = seen[k][1]
         change = next(ts for ts, c in seen[k:] if c is not cls)
         assert change == pytest.approx(row["change_unix_s"], abs=1e-3)
+
+
+@pytest.mark.parametrize("path", sorted((SHARED_DATA / "spat").glob("*.csv.gz")), ids=lambda p: p.name)
+def test_a_light_view_is_the_same_from_its_shortcuts_as_from_the_plain_path(path, recorded_snapshots):
+    """``light_view``'s shortcuts answer as the plain path does: the forecast chained after the phase in progress,
+    cached per group history (``observe._chain``), gives the views of 200 readings (10 min in, two groups each) that
+    the same readings give with the cache emptied before each; and every equally likely timing's windows, read at once
+    (``observe._scenario_windows``), are the windows read at that level alone (``observe._windows``)."""
+    from spat_feed.prediction import observe as ob
+    from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
+    from spat_feed.timing.messages import plan_from_movement, to_unix_s
+
+    spec = IntersectionSpec(id=1, name="light", stop_line_m=300.0, lat_deg=0.0, lon_deg=0.0, approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))
+    history, readings = ob.IntersectionHistory(), []
+    for k, ix in enumerate(recorded_snapshots(path)[:800]):
+        t = to_unix_s(ix.timestamp)
+        plans = {m.signal_group: plan_from_movement(m, t) for m in ix.states}
+        history.record(t, plans)
+        if k >= 600:
+            readings += [(t, ob.PlanReading(plans[g], cycle=history.stats(g))) for g in sorted(plans)[:2]]
+    warm = [ob.light_view(spec, r, 0.0, t, speed_mps=12.0) for t, r in readings]
+    snapshots = {id(r.cycle): r.cycle for _, r in readings}.values()
+    assert sum(len(c.chains) for c in snapshots) < 0.9 * len(readings)  # (chains were kept and read again: 20-60 % of the views)
+    cold = []
+    for t, r in readings:
+        r.cycle.chains.clear()
+        cold.append(ob.light_view(spec, r, 0.0, t, speed_mps=12.0))
+    assert warm == cold
+    assert sum(v.scenario_red_windows_s is not None for v in warm) > len(readings) // 2
+    for t, r in readings:
+        phases = ob.predicted_phases(r.plan, t, ob.HORIZON_S, r.cycle)
+        assert ob._scenario_windows(phases, t, ob.HORIZON_S) == tuple(ob._windows(phases, t, ob.HORIZON_S, q, q) for q in ob.SCENARIO_LEVELS)
