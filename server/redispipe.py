@@ -34,7 +34,8 @@ class Script:
 
 
 class _Connection(asyncio.Protocol):
-    """The socket: requests queued and written once per loop turn, replies matched in order."""
+    """The socket: requests queued and written once per loop turn (or ``window_s`` after the first one waiting),
+    replies matched in order."""
 
     def __init__(self, window_s: float = 0.0) -> None:
         self.window_s = window_s  # commands wait this long to leave together (0: at the end of the loop turn)
