@@ -10,6 +10,7 @@ from fastapi.testclient import TestClient
 from server.app import create_app
 from server.config import Settings
 from spat_feed.road.corridors import load_corridor
+from tests.server.conftest import FIX_ERROR_STATUSES, fix_errors
 
 NOW = 1_800_000_000.0
 HEADERS = ("content-type", "content-length", "retry-after", "www-authenticate")
@@ -32,17 +33,8 @@ def _answers(store_url: str | None, window_s: float = 0.0) -> list:
 
         requests = [(url, {"json": fix(k)}, auth) for k in range(20)]
         requests[5:5] = [(url, {"json": fix(4)}, auth), (url, {"json": fix(2)}, auth)]  # a duplicate, an older fix
-        requests += [
-            (url, {"json": fix(21, lat_deg=91.0)}, auth),  # 422 validation
-            (url, {"content": b"{not json"}, auth),  # 422 malformed
-            (url, {"json": fix(21)}, {}),  # 401
-            (url, {"json": fix(21)}, {"Authorization": f"Bearer {other['token']}"}),  # 403
-            ("/v1/trips/nosuchtrip/fixes", {"json": fix(21)}, auth),  # 404
-            (url, {"content": b"x" * 2000}, auth),  # 413
-            (url, {"json": fix(21, t_unix_s=NOW + 3600)}, auth),  # 422 time out of range
-            (url, {"json": fix(21)}, auth),
-            (f"/v1/trips/{tid}/advice", None, auth),
-        ]
+        requests += [*fix_errors(url, fix(21), auth, {"Authorization": f"Bearer {other['token']}"}, 1024), (url, {"json": fix(21)}, auth),
+                     (f"/v1/trips/{tid}/advice", None, auth)]  # fmt: skip
         for path, body, headers in requests:
             if body is None:
                 r = c.get(path, headers=headers)
@@ -57,6 +49,6 @@ def test_memory_and_redis_answer_the_same_bytes(store):
     assert _answers(store.url) == ref
     assert _answers(store.url, window_s=0.002) == ref
     statuses = [a[0] for a in ref]
-    assert statuses == [200] * 22 + [422, 422, 401, 403, 404, 413, 422, 200, 200]
+    assert statuses == [200] * 22 + FIX_ERROR_STATUSES + [200, 200]
     assert b'"fix_status":"duplicate"' in ref[5][1] and b'"fix_status":"out_of_order"' in ref[6][1]
     assert any(b'"action":"cruise"' not in a[1] and b'"action":"none"' not in a[1] for a in ref[:22])  # the drive met a light
