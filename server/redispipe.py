@@ -15,6 +15,7 @@ caller decides what a failure means (the trip store answers 503 + ``Retry-After`
 from __future__ import annotations
 
 import asyncio
+import functools
 import hashlib
 from collections import deque
 
@@ -33,9 +34,11 @@ class Script:
 
 
 class _Connection(asyncio.Protocol):
-    """The socket: requests queued and written once per loop turn, replies matched in order."""
+    """The socket: requests queued and written once per loop turn (or ``window_s`` after the first one waiting),
+    replies matched in order."""
 
-    def __init__(self) -> None:
+    def __init__(self, window_s: float = 0.0) -> None:
+        self.window_s = window_s  # commands wait this long to leave together (0: at the end of the loop turn)
         self.transport: asyncio.Transport | None = None
         self.reader = hiredis.Reader()
         self.pending: deque[list] = deque()  # [call, loop time when written (0.0: not yet)], in order
@@ -82,7 +85,7 @@ class _Connection(asyncio.Protocol):
         self.unsent.append(entry)
         self.out.append(packed)
         if self._flush is None:
-            self._flush = loop.call_soon(self.flush)
+            self._flush = loop.call_later(self.window_s, self.flush) if self.window_s else loop.call_soon(self.flush)
         return future
 
     def flush(self) -> None:
@@ -100,10 +103,11 @@ class RedisPipe:
     """A client for ``url`` (``redis://[[user]:password@]host[:port][/db]``, ``rediss://`` with TLS,
     ``unix:///path.sock[?db=N]``): :meth:`call` a command, :meth:`run` a :class:`Script`."""
 
-    def __init__(self, url: str, timeout_s: float) -> None:
+    def __init__(self, url: str, timeout_s: float, write_window_s: float = 0.0) -> None:
         self.options = parse_url(url)
         self.tls = url.startswith("rediss://")
         self.timeout_s = timeout_s
+        self.write_window_s = write_window_s
         self._conn: _Connection | None = None
         self._connecting: asyncio.Task | None = None
         self._watch: asyncio.TimerHandle | None = None
@@ -115,10 +119,11 @@ class RedisPipe:
         conn = None
         try:
             async with asyncio.timeout(self.timeout_s):
+                made = functools.partial(_Connection, self.write_window_s)
                 if "path" in o:
-                    _, conn = await loop.create_unix_connection(_Connection, o["path"])
+                    _, conn = await loop.create_unix_connection(made, o["path"])
                 else:
-                    _, conn = await loop.create_connection(_Connection, o.get("host", "localhost"), o.get("port", 6379), ssl=self.tls or None)
+                    _, conn = await loop.create_connection(made, o.get("host", "localhost"), o.get("port", 6379), ssl=self.tls or None)
                 if o.get("password"):
                     await self._reply(conn.send(loop, hiredis.pack_command(("AUTH", *([o["username"]] if o.get("username") else []), o["password"]))))
                 if o.get("db"):
@@ -165,16 +170,19 @@ class RedisPipe:
 
     async def _call(self, args: tuple):
         conn = self._conn
-        if conn is None or conn.failure is not None:
-            conn = await self._connection()
+        reply = await self._send(conn if conn is not None and conn.failure is None else await self._connection(), args)
+        if isinstance(reply, hiredis.ReplyError):
+            self._raise(reply)
+        return reply
+
+    def _send(self, conn: _Connection, args: tuple) -> asyncio.Future:
+        """``args`` queued on ``conn``: the future of its reply (a plain function, so that a call is one coroutine: a
+        fix's save is the hot path, issue 30)."""
         loop = asyncio.get_running_loop()
         future = conn.send(loop, hiredis.pack_command(args))
         if self._watch is None:
             self._watch = loop.call_later(self.timeout_s, self._check)
-        reply = await future  # (no further coroutine per call: a fix's save is the hot path)
-        if isinstance(reply, hiredis.ReplyError):
-            self._raise(reply)
-        return reply
+        return future
 
     def _check(self) -> None:
         """Drop the connection when its oldest call in flight has waited ``timeout_s`` since it was written to the
@@ -195,8 +203,12 @@ class RedisPipe:
 
     async def run(self, script: Script, keys: list, args: list):
         """``script``'s reply for ``keys`` and ``args`` (``EVALSHA``; ``EVAL`` the first time Redis lacks it)."""
+        conn = self._conn
+        reply = await self._send(conn if conn is not None and conn.failure is None else await self._connection(), ("EVALSHA", script.sha, len(keys), *keys, *args))
+        if not isinstance(reply, hiredis.ReplyError):
+            return reply
         try:
-            return await self._call(("EVALSHA", script.sha, len(keys), *keys, *args))
+            self._raise(reply)
         except NoScriptError:  # the calls of a burst all fail at once: one SCRIPT LOAD serves them all
             loading = self._loading.get(script.sha)
             if loading is None or loading.done():

@@ -530,7 +530,7 @@ class RedisTrips:
         self.release = release
         self.clock = clock
         self.p = settings.store_prefix
-        self.redis = RedisPipe(settings.store_url, settings.store_timeout_s)  # one pipelined connection per worker
+        self.redis = RedisPipe(settings.store_url, settings.store_timeout_s, settings.store_write_window_s)  # one pipelined connection per worker
         self.touch_every_s = min(10.0, settings.trip_idle_ttl_s / 10)
         """A trip's idle clock is reset at most this often (each request did it before: 6 more commands). [s]"""
         self.keep_s = settings.trip_idle_ttl_s + self.touch_every_s
@@ -671,8 +671,8 @@ class RedisTrips:
             with REACH:
                 r = await self.redis.run(
                     _SAVE, keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
-                    args=[str(trip.version), _json(trip.state()), samples, self.keep_s, trip.token_hash, 1 if take else 0,
-                          repr(self.clock()), s.rate_per_s, s.rate_burst, self.p, trip.id, self.touch_every_s],
+                    args=[trip.version, _json(trip.state()), samples, self.keep_s, trip.token_hash, 1 if take else 0,
+                          self.clock(), s.rate_per_s, s.rate_burst, self.p, trip.id, self.touch_every_s],
                 )  # fmt: skip
         except ApiError:
             trip.version = -1  # not known to be written: the copy may be ahead of the store, reload its state

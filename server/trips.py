@@ -129,11 +129,13 @@ class Trip:
                 "client": self.client, "device": self.device, "units": self.units, "observe_spat": self.observed is not None}  # fmt: skip
 
     def state(self) -> dict:
-        """What a fix changes, as plain data of bounded size (the score samples apart)."""
+        """What a fix changes, of bounded size (the score samples apart): plain data and the advisor's memory as its
+        frozen ``Advice`` dataclasses, which ``pydantic_core.to_json`` writes as the dicts of their fields (no dict
+        built per fix); :meth:`restore` reads the JSON back."""
         m = self.memory
         return {
             "track": self.track.state(),
-            "memory": None if m is None else [_advice_dict(m.last), _advice_dict(m.spoken)],
+            "memory": None if m is None else [m.last, m.spoken],  # Advice dataclasses: JSON of their fields, as Advice.as_dict
             "last": self.last, "n_fixes": self.n_fixes, "n_rejected": self.n_rejected, "n_trace": self.n_trace,
             "observed": None if self.observed is None else [[ix, runs] for ix, runs in self.observed.runs.items()],
         }  # fmt: skip
@@ -153,7 +155,3 @@ class Trip:
 def token_hash(token: str) -> bytes:
     """What a store keeps of a trip token: its SHA-256 (a leaked store gives no working token)."""
     return hashlib.sha256(token.encode()).digest()
-
-
-def _advice_dict(advice: Advice | None) -> dict | None:
-    return None if advice is None else advice.as_dict()

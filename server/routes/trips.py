@@ -117,8 +117,21 @@ router.add_api_route("/{trip_id}/fixes", post_fix, methods=["POST"], response_mo
                      openapi_extra={"requestBody": _FIX_BODY}, route_class_override=DirectRoute)  # fmt: skip
 
 
+class _JsonResponse(Response):
+    """A 200 with a JSON body, its headers as ``Response(body, media_type="application/json")`` makes them
+    (content-length, content-type), without ``Response.__init__``'s general header building: an advisory per fix."""
+
+    media_type = "application/json"
+
+    def __init__(self, body: bytes) -> None:
+        self.status_code = 200
+        self.background = None
+        self.body = body
+        self.raw_headers = [(b"content-length", str(len(body)).encode()), (b"content-type", b"application/json")]
+
+
 def _json(out: dict) -> Response:
-    return Response(to_json(out), media_type="application/json")
+    return _JsonResponse(to_json(out))
 
 
 @router.get("/{trip_id}/advice", response_model=AdviceOut, responses=ERRORS)

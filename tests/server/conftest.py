@@ -60,3 +60,23 @@ def new_trip(client: httpx.Client, **body) -> tuple[str, dict[str, str], dict]:
     assert r.status_code == 201, r.text
     data = r.json()
     return data["trip_id"], {"Authorization": f"Bearer {data['token']}"}, data
+
+
+FIX_ERROR_STATUSES = [422, 422, 422, 401, 403, 404, 413, 422]
+"""The statuses of :func:`fix_errors`' requests, in order."""
+
+
+def fix_errors(url: str, fix: dict, auth: dict, other_auth: dict, max_body_bytes: int) -> list[tuple[str, dict, dict]]:
+    """``(path, httpx body arguments, headers)`` of the fix requests every store and route answers with a 4xx, built
+    around ``fix`` (a valid body for ``url``, the trip's fix route): out of range, malformed, a lone surrogate, no token,
+    another trip's token, an unknown trip, a body over ``max_body_bytes``, a time an hour ahead."""
+    return [
+        (url, {"json": {**fix, "lat_deg": 91.0}}, auth),  # 422 validation
+        (url, {"content": b"{not json"}, auth),  # 422 malformed
+        (url, {"content": b'{"t_unix_s": 1, "x": "\\ud800"}'}, auth),  # 422, lone surrogate
+        (url, {"json": fix}, {}),  # 401
+        (url, {"json": fix}, other_auth),  # 403
+        ("/v1/trips/nosuchtrip/fixes", {"json": fix}, auth),  # 404
+        (url, {"content": b"x" * (2 * max_body_bytes)}, auth),  # 413
+        (url, {"json": {**fix, "t_unix_s": fix["t_unix_s"] + 3600}}, auth),  # 422 time out of range
+    ]

@@ -84,6 +84,22 @@ def test_half_sent_requests_are_timed_out_and_capped(start_proc, tmp_path):
     assert log.count("request not received within 2 s") >= len(answers), log[-3000:]
 
 
+def test_the_read_deadline_counts_from_each_request_on_a_kept_alive_connection(start_proc, tmp_path):
+    """The connection keeps one timer across requests (server.protocol): a request begun after the first one's
+    deadline would have passed gets its own full deadline, and a half-sent one is still cut off with a 408."""
+    svc = start_proc(_proc(tmp_path, ECO_READ_TIMEOUT_S="2"))
+    s = _sock(svc.port, "127.0.0.1")
+    s.sendall(b"GET /health HTTP/1.1\r\nHost: x\r\n\r\n")
+    assert s.recv(65536).startswith(b"HTTP/1.1 200")
+    time.sleep(1.2)
+    s.sendall(b'POST /v1/trips HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 200\r\n\r\n{"corridor": ')  # half sent
+    s.settimeout(1.3)  # until past where the first request's deadline was: nothing yet (this one's is 2 s from its start)
+    with pytest.raises(TimeoutError):
+        s.recv(65536)
+    assert _read_all(s).startswith(b"HTTP/1.1 408")
+    s.close()
+
+
 def test_client_disconnects_mid_body_are_not_server_errors(start_proc, tmp_path):
     """Finding: a body cut off mid-request counted as a 500 and wrote ~100 log lines."""
     svc = start_proc(_proc(tmp_path))
