@@ -52,8 +52,9 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
-from advisory.advice.advisor import AdvisorParams, LightView, Observation
+from advisory.advice.advisor import AdvisorParams, LightView, Observation, Timings
 from spat_feed.prediction.predictor import (
     EXACT_S,
     SCORE_AHEAD_S,
@@ -907,15 +908,78 @@ def _merged(spans, horizon_s: float) -> tuple[tuple[float, float], ...]:
     return tuple((float(a), float(b)) for a, b in out)
 
 
-def _scenario_windows(phases, t_unix_s: float, horizon_s: float) -> tuple[tuple[tuple[float, float], ...], ...]:
+def _scenario_windows(phases, t_unix_s: float, horizon_s: float, widen_s: float = 0.0, hold_s: float = 0.0, red_now: bool = False) -> Timings:
     """The blocking phases' windows in each equally likely timing: ``_windows(phases, t, horizon, q, q)`` for each
-    ``q`` of :data:`SCENARIO_LEVELS`, the instants of all of them read at once (:func:`_level_picks`)."""
+    ``q`` of :data:`SCENARIO_LEVELS`, then moved ``widen_s`` earlier and :func:`_widened` by it, then :func:`_held`
+    (``hold_s``, ``red_now``), as the other views; the instants of all of them read at once (:func:`_level_picks`),
+    the windows made in one kernel (:func:`_timing_windows`), which hands them to the advisor packed
+    (:class:`~advisory.advice.advisor.Timings`)."""
     blocking = [(start, end) for cls, start, end in phases if cls in BLOCKING_CLASSES]
-    if not blocking:
-        return ((),) * N_SCENARIOS
-    starts = (np.array([_level_picks(start) for start, _ in blocking]) - t_unix_s).T.tolist()
-    ends = (np.array([_level_picks(end) for _, end in blocking]) - t_unix_s).T.tolist()
-    return tuple(_merged(zip(s, e), horizon_s) for s, e in zip(starts, ends))
+    if blocking:
+        starts = np.array([_level_picks(start) for start, _ in blocking]).T - t_unix_s
+        ends = np.array([_level_picks(end) for _, end in blocking]).T - t_unix_s
+    else:
+        starts = ends = np.empty((N_SCENARIOS, 0))
+    out = np.empty((N_SCENARIOS, starts.shape[1] + 1, 2))
+    counts = np.empty(N_SCENARIOS, dtype=np.int64)
+    _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, counts)
+    k = int(counts.max())
+    rows = out[:, :k].tolist()
+    timings = Timings(tuple(map(tuple, row[:c])) for row, c in zip(rows, counts.tolist()))
+    timings.array_s = out[:, :k]
+    return timings
+
+
+@njit(cache=True, error_model="numpy")
+def _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, counts):
+    """Each timing's windows (row ``i`` of ``starts`` / ``ends``, relative spans in order) as :func:`_merged`, then
+    :func:`_widened` after moving them ``widen_s`` earlier (where ``widen_s > 0``), then :func:`_held`, the same
+    operations in the same order (bit for bit): into ``out[i, :counts[i]]`` (capacity spans + 1), the rest +inf. [s]"""
+    n, m = starts.shape
+    for i in range(n):
+        c = 0
+        for j in range(m):  # _merged
+            a, b = starts[i, j], ends[i, j]
+            if b <= 0.0 or a >= horizon_s:
+                continue
+            if a < 0.0:
+                a = 0.0
+            if c > 0 and a <= out[i, c - 1, 1]:
+                if b > out[i, c - 1, 1]:
+                    out[i, c - 1, 1] = b
+            else:
+                out[i, c, 0], out[i, c, 1] = a, b
+                c += 1
+        if widen_s > 0.0:  # _widened((a - u, b - u) ...)
+            w = 0
+            for j in range(c):
+                a, b = (out[i, j, 0] - widen_s) - widen_s, (out[i, j, 1] - widen_s) + widen_s
+                if a < 0.0:
+                    a = 0.0
+                if w > 0 and a <= out[i, w - 1, 1]:
+                    if b > out[i, w - 1, 1]:
+                        out[i, w - 1, 1] = b
+                else:
+                    out[i, w, 0], out[i, w, 1] = a, b
+                    w += 1
+            c = w
+        if hold_s > 0.0 and (red_now or (c > 0 and 0.0 < out[i, 0, 0] < hold_s)):  # _held
+            if c > 0 and out[i, 0, 0] < hold_s and (red_now or out[i, 0, 0] > 0.0):
+                if hold_s > out[i, 0, 1]:
+                    out[i, 0, 1] = hold_s
+            elif red_now:
+                for j in range(c, 0, -1):
+                    out[i, j, 0], out[i, j, 1] = out[i, j - 1, 0], out[i, j - 1, 1]
+                out[i, 0, 0], out[i, 0, 1] = 0.0, hold_s
+                c += 1
+            while c > 1 and out[i, 1, 0] <= out[i, 0, 1]:
+                if out[i, 1, 1] > out[i, 0, 1]:
+                    out[i, 0, 1] = out[i, 1, 1]
+                for j in range(1, c - 1):
+                    out[i, j, 0], out[i, j, 1] = out[i, j + 1, 0], out[i, j + 1, 1]
+                c -= 1
+        out[i, c:] = np.inf
+        counts[i] = c
 
 
 def _level_picks(bound: Bound) -> np.ndarray:
@@ -1053,7 +1117,10 @@ def light_view(
     # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no
     # chance), a red that ended less than u ago by the feed's clock included: the windows are taken from u before now
     u = reading.clock_uncertainty_s
-    scenarios: tuple = ()
+    scenarios: Timings | None = None
+    # how long a published red holds in every view (the safety rule), fresh or not: the latest reading
+    hold = red_hold_s(plan, t_feed - reading.age_s, speed_mps) if not isinstance(plan, FixedTimePlan) else 0.0
+    red_now = hold > 0.0 and phase_class(published_state(plan, t_feed - reading.age_s)) is PhaseClass.RED
     if isinstance(plan, FixedTimePlan):
         windows = likely = late = red_windows_s(plan, t_feed - u, horizon_s + u)
         unknown = ()
@@ -1071,16 +1138,15 @@ def light_view(
         if unknown_now(plan, read_at) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
         windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
-        if likely != windows:  # uncertain: the equally likely timings too
+        if likely != windows:  # uncertain: the equally likely timings too, widened and held below as the others
             # (the reds: the amber before each, published or not, is the advisor's to weigh, ``LightView.amber_s``)
-            scenarios = _scenario_windows(phases, t_feed - u, horizon_s + u)
+            scenarios = _scenario_windows(phases, t_feed - u, horizon_s + u, u, hold, red_now)
         # the unknown phases that end (between known ones; the open tail past the plan and the history stays a red)
         unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
     if u > 0.0:
-        windows, likely, late, *scenarios = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late, *scenarios))
-    if not isinstance(plan, FixedTimePlan) and (hold := red_hold_s(plan, t_feed - reading.age_s, speed_mps)) > 0.0:  # fresh or not: the latest reading
-        red_now = phase_class(published_state(plan, t_feed - reading.age_s)) is PhaseClass.RED
-        windows, likely, late, *scenarios = (_held(w, hold, red_now) for w in (windows, likely, late, *scenarios))
+        windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
+    if hold > 0.0:
+        windows, likely, late = (_held(w, hold, red_now) for w in (windows, likely, late))
     return LightView(
         intersection.id,
         distance_m,
@@ -1091,7 +1157,7 @@ def light_view(
         late_red_windows_s=None if late == windows else late,
         age_s=float(reading.age_s),
         unknown_windows_s=unknown,
-        scenario_red_windows_s=tuple(scenarios) if scenarios and likely != windows else None,
+        scenario_red_windows_s=scenarios if likely != windows else None,
         queue_m=reading.queue_m if reading.fresh else None,
         amber_s=reading.amber_s,
     )

@@ -714,3 +714,33 @@ def test_the_exact_end_of_a_go_phase_s_green_is_not_its_red_s_start():
     stats, plan, red_at = cycle(both=False, last=True)  # the amber's end alone: the red's start
     view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t)
     assert view.red_windows_s[0][0] == pytest.approx(red_at - t) and view.likely_red_windows_s[0][0] == pytest.approx(red_at - t)
+
+
+def test_the_timings_are_made_as_the_other_views_are():
+    """Each equally likely timing's windows, made for all timings at once in one kernel (``_scenario_windows``), are
+    the ones the views' own steps make of it (``_merged``, then moved by the clock's uncertainty and ``_widened``, then
+    ``_held``), to the last bit, on 400 random sets of spans (seeded: before now, past the horizon, overlapping,
+    touching, open-ended; clock uncertainty and a held red or not); and the packed array they carry is their tuples'."""
+    import numpy as np
+
+    from advisory.advice.advisor import Timings
+    from spat_feed.prediction.observe import N_SCENARIOS, _held, _merged, _scenario_windows, _widened
+
+    rng = np.random.default_rng(11)
+    held = 0
+    for _ in range(400):
+        m, t0, horizon = int(rng.integers(0, 5)), 1000.0, 150.0
+        starts = np.sort(rng.uniform(-30.0, 170.0, size=(m, N_SCENARIOS)), axis=0).round(int(rng.integers(0, 3)))
+        ends = starts + rng.choice([0.0, 2.0, 5.5, 30.0, np.inf], size=(m, N_SCENARIOS), p=[0.1, 0.2, 0.3, 0.3, 0.1])
+        phases = [(PhaseClass.RED, (0.0, 0.0, 0.0, t0 + a), (0.0, 0.0, 0.0, t0 + b)) for a, b in zip(starts, ends)]
+        u, hold, red_now = float(rng.choice([0.0, 0.5, 3.0])), float(rng.choice([0.0, 2.5, 8.0])), bool(rng.integers(0, 2))
+        got = _scenario_windows(phases, t0, horizon, u, hold, red_now)
+        for q in range(N_SCENARIOS):
+            want = _merged(zip((starts[:, q] + t0 - t0).tolist(), (ends[:, q] + t0 - t0).tolist()), horizon)
+            if u > 0.0:
+                want = _widened(tuple((a - u, b - u) for a, b in want), u)
+            want = _held(want, hold, red_now) if hold > 0.0 else want
+            assert repr(got[q]) == repr(want)
+            held += hold > 0.0 and want != _merged(zip((starts[:, q] + t0 - t0).tolist(), (ends[:, q] + t0 - t0).tolist()), horizon)
+        assert isinstance(got, Timings) and got.array_s.tobytes() == Timings.packed(tuple(got)).array_s.tobytes()
+    assert held > 100  # the held red is exercised
