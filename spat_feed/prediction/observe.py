@@ -908,11 +908,22 @@ def _merged(spans, horizon_s: float) -> tuple[tuple[float, float], ...]:
     return tuple((float(a), float(b)) for a, b in out)
 
 
+def _view_windows(phases, t_unix_s: float, horizon_s: float, widen_s: float, hold_s: float, red_now: bool) -> list:
+    """The three views' windows (``red_windows_s``: each red from its start's earliest to its end's latest instant;
+    ``likely``: both at their likely instants; ``late``: both at their latest), each ``_windows(phases, t, horizon, lo,
+    hi)`` moved ``widen_s`` earlier and :func:`_widened` by it, then the published red held (``hold_s``, ``red_now``:
+    :func:`_timing_windows`), made at once (:func:`_made_windows`). [s]"""
+    blocking = [(start, end) for cls, start, end in phases if cls in BLOCKING_CLASSES]
+    starts = np.array([[start[0], start[1], start[2]] for start, _ in blocking], dtype=float).reshape(-1, 3).T - t_unix_s
+    ends = np.array([[end[2], end[1], end[2]] for _, end in blocking], dtype=float).reshape(-1, 3).T - t_unix_s
+    return _made_windows(starts, ends, horizon_s, widen_s, hold_s, red_now)[0]
+
+
 def _scenario_windows(phases, t_unix_s: float, horizon_s: float, widen_s: float = 0.0, hold_s: float = 0.0, red_now: bool = False) -> Timings:
     """The blocking phases' windows in each equally likely timing: ``_windows(phases, t, horizon, q, q)`` for each
-    ``q`` of :data:`SCENARIO_LEVELS`, then moved ``widen_s`` earlier and :func:`_widened` by it, then :func:`_held`
-    (``hold_s``, ``red_now``), as the other views; the instants of all of them read at once (:func:`_level_picks`),
-    the windows made in one kernel (:func:`_timing_windows`), which hands them to the advisor packed
+    ``q`` of :data:`SCENARIO_LEVELS`, then moved ``widen_s`` earlier and :func:`_widened` by it, then the published red
+    held (``hold_s``, ``red_now``), as the other views (:func:`_view_windows`); the instants of all of them read at once
+    (:func:`_level_picks`), the windows made at once (:func:`_made_windows`) and handed to the advisor packed
     (:class:`~advisory.advice.advisor.Timings`)."""
     blocking = [(start, end) for cls, start, end in phases if cls in BLOCKING_CLASSES]
     if blocking:
@@ -920,21 +931,31 @@ def _scenario_windows(phases, t_unix_s: float, horizon_s: float, widen_s: float 
         ends = np.array([_level_picks(end) for _, end in blocking]).T - t_unix_s
     else:
         starts = ends = np.empty((N_SCENARIOS, 0))
-    out = np.empty((N_SCENARIOS, starts.shape[1] + 1, 2))
-    counts = np.empty(N_SCENARIOS, dtype=np.int64)
+    rows, packed = _made_windows(starts, ends, horizon_s, widen_s, hold_s, red_now)
+    timings = Timings(rows)
+    timings.array_s = packed
+    return timings
+
+
+def _made_windows(starts: np.ndarray, ends: np.ndarray, horizon_s: float, widen_s: float, hold_s: float, red_now: bool) -> tuple[list, np.ndarray]:
+    """The windows of each row of spans (``starts``, ``ends``: (rows, spans), relative, in order) as tuples, and packed
+    (rows, k, 2), padded with +inf (:func:`_timing_windows`). [s]"""
+    out = np.empty((starts.shape[0], starts.shape[1] + 1, 2))
+    counts = np.empty(starts.shape[0], dtype=np.int64)
     _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, counts)
     k = int(counts.max())
-    rows = out[:, :k].tolist()
-    timings = Timings(tuple(map(tuple, row[:c])) for row, c in zip(rows, counts.tolist()))
-    timings.array_s = out[:, :k]
-    return timings
+    return [tuple(map(tuple, row[:c])) for row, c in zip(out[:, :k].tolist(), counts.tolist())], out[:, :k]
 
 
 @njit(cache=True, error_model="numpy")
 def _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, counts):
-    """Each timing's windows (row ``i`` of ``starts`` / ``ends``, relative spans in order) as :func:`_merged`, then
-    :func:`_widened` after moving them ``widen_s`` earlier (where ``widen_s > 0``), then :func:`_held`, the same
-    operations in the same order (bit for bit): into ``out[i, :counts[i]]`` (capacity spans + 1), the rest +inf. [s]"""
+    """Each row's windows (row ``i`` of ``starts`` / ``ends``: relative spans in order) as :func:`_merged` makes them,
+    then :func:`_widened` after moving them ``widen_s`` earlier (where ``widen_s > 0``), then held: where ``hold_s >
+    0`` (:func:`red_hold_s`), the first red (the published one, ``red_now``, or the one after a published amber, which
+    begins before ``hold_s``) lasts at least ``hold_s`` from now, a red now that the windows lost is put back, and the
+    windows it then runs into are merged with it. The same operations in the same order as those functions (bit for
+    bit; ``tests/server/test_observe.py`` holds the plain reading of the hold): into ``out[i, :counts[i]]``
+    (capacity spans + 1), the rest +inf. [s]"""
     n, m = starts.shape
     for i in range(n):
         c = 0
@@ -963,7 +984,7 @@ def _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, coun
                     out[i, w, 0], out[i, w, 1] = a, b
                     w += 1
             c = w
-        if hold_s > 0.0 and (red_now or (c > 0 and 0.0 < out[i, 0, 0] < hold_s)):  # _held
+        if hold_s > 0.0 and (red_now or (c > 0 and 0.0 < out[i, 0, 0] < hold_s)):  # the red held
             if c > 0 and out[i, 0, 0] < hold_s and (red_now or out[i, 0, 0] > 0.0):
                 if hold_s > out[i, 0, 1]:
                     out[i, 0, 1] = hold_s
@@ -1089,21 +1110,6 @@ def no_amber(phases: list[tuple[PhaseClass, Bound, Bound]]) -> list[tuple[PhaseC
     return out
 
 
-def _held(windows: tuple[tuple[float, float], ...], hold_s: float, red_now: bool) -> tuple[tuple[float, float], ...]:
-    """Windows with the first red (the published one, or the one after a published amber) lasting at least ``hold_s``
-    from now; a red now that the windows lost is put back."""
-    if hold_s <= 0.0 or not (red_now or (windows and 0.0 < windows[0][0] < hold_s)):
-        return windows  # (windows apart, as made: nothing to lengthen, nothing to merge)
-    out = [list(w) for w in windows]
-    if out and out[0][0] < hold_s and (red_now or out[0][0] > 0.0):
-        out[0][1] = max(out[0][1], hold_s)
-    elif red_now:
-        out.insert(0, [0.0, hold_s])
-    while len(out) > 1 and out[1][0] <= out[0][1]:
-        out[0][1] = max(out[0][1], out.pop(1)[1])
-    return tuple((a, b) for a, b in out)
-
-
 def light_view(
     intersection: IntersectionSpec, reading: PlanReading | None, station_m: float, t_unix_s: float, horizon_s: float = HORIZON_S,
     speed_mps: float = 0.0,
@@ -1123,6 +1129,8 @@ def light_view(
     red_now = hold > 0.0 and phase_class(published_state(plan, t_feed - reading.age_s)) is PhaseClass.RED
     if isinstance(plan, FixedTimePlan):
         windows = likely = late = red_windows_s(plan, t_feed - u, horizon_s + u)
+        if u > 0.0:
+            windows = likely = late = _widened(tuple((a - u, b - u) for a, b in windows), u)
         unknown = ()
     else:
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
@@ -1137,16 +1145,13 @@ def light_view(
             read_at -= u
         if unknown_now(plan, read_at) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
-        windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
-        if likely != windows:  # uncertain: the equally likely timings too, widened and held below as the others
+        # (widened by the clock, a published red held: where the windows then differ, so did they before)
+        windows, likely, late = _view_windows(phases, t_feed - u, horizon_s + u, u, hold, red_now)
+        if likely != windows:  # uncertain: the equally likely timings too, widened and held as the others
             # (the reds: the amber before each, published or not, is the advisor's to weigh, ``LightView.amber_s``)
             scenarios = _scenario_windows(phases, t_feed - u, horizon_s + u, u, hold, red_now)
         # the unknown phases that end (between known ones; the open tail past the plan and the history stays a red)
         unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
-    if u > 0.0:
-        windows, likely, late = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late))
-    if hold > 0.0:
-        windows, likely, late = (_held(w, hold, red_now) for w in (windows, likely, late))
     return LightView(
         intersection.id,
         distance_m,
