@@ -947,6 +947,20 @@ def _made_windows(starts: np.ndarray, ends: np.ndarray, horizon_s: float, widen_
     return [tuple(map(tuple, row[:c])) for row, c in zip(out[:, :k].tolist(), counts.tolist())], out[:, :k]
 
 
+@njit(cache=True, inline="always")
+def _put(out, i, c, a, b):
+    """The window ``(a, b)`` after the ``c`` windows made in row ``i`` of ``out``: clipped at now, one with the last
+    where it touches or overlaps it (:func:`_merged`); the row's count after it. [s]"""
+    if a < 0.0:
+        a = 0.0
+    if c > 0 and a <= out[i, c - 1, 1]:
+        if b > out[i, c - 1, 1]:
+            out[i, c - 1, 1] = b
+        return c
+    out[i, c, 0], out[i, c, 1] = a, b
+    return c + 1
+
+
 @njit(cache=True, error_model="numpy")
 def _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, counts):
     """Each row's windows (row ``i`` of ``starts`` / ``ends``: relative spans in order) as :func:`_merged` makes them,
@@ -960,29 +974,12 @@ def _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, coun
     for i in range(n):
         c = 0
         for j in range(m):  # _merged
-            a, b = starts[i, j], ends[i, j]
-            if b <= 0.0 or a >= horizon_s:
-                continue
-            if a < 0.0:
-                a = 0.0
-            if c > 0 and a <= out[i, c - 1, 1]:
-                if b > out[i, c - 1, 1]:
-                    out[i, c - 1, 1] = b
-            else:
-                out[i, c, 0], out[i, c, 1] = a, b
-                c += 1
+            if not (ends[i, j] <= 0.0 or starts[i, j] >= horizon_s):
+                c = _put(out, i, c, starts[i, j], ends[i, j])
         if widen_s > 0.0:  # _widened((a - u, b - u) ...)
             w = 0
             for j in range(c):
-                a, b = (out[i, j, 0] - widen_s) - widen_s, (out[i, j, 1] - widen_s) + widen_s
-                if a < 0.0:
-                    a = 0.0
-                if w > 0 and a <= out[i, w - 1, 1]:
-                    if b > out[i, w - 1, 1]:
-                        out[i, w - 1, 1] = b
-                else:
-                    out[i, w, 0], out[i, w, 1] = a, b
-                    w += 1
+                w = _put(out, i, w, (out[i, j, 0] - widen_s) - widen_s, (out[i, j, 1] - widen_s) + widen_s)
             c = w
         if hold_s > 0.0 and (red_now or (c > 0 and 0.0 < out[i, 0, 0] < hold_s)):  # the red held
             if c > 0 and out[i, 0, 0] < hold_s and (red_now or out[i, 0, 0] > 0.0):
