@@ -4,6 +4,8 @@ constraints as invariants over random timings."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -441,6 +443,55 @@ def test_two_lights_timings_are_all_kept_and_paired_at_no_rank_correlation():
     rank_corr = np.corrcoef(np.argsort(np.argsort(starts_1)), np.argsort(np.argsort(starts_2)))[0, 1]
     assert abs(rank_corr) < 0.1
     assert weights[:n] == pytest.approx(np.full(n, weights[0]))
+
+
+def test_timings_handed_over_packed_are_packed_the_same():
+    """A light's timings handed over packed (``advisor.Timings``, as ``light_view`` makes them) give ``_timings`` the
+    same array, to the last bit, as the same timings as plain tuples: two uncertain lights of unequal window counts (an
+    open red, a timing with none), with an exact one, and with a light whose timings are read off its windows."""
+    from advisory.advice.advisor import Timings
+    from advisory.advice.advisor import _timings as advisor_timings
+
+    rng = np.random.default_rng(3)
+    first = tuple(((0.0, 10.0 + k), (50.0 + k, 80.0 + 2 * k)) if k % 3 else ((0.0, 10.0 + k),) for k in range(20))
+    second = tuple(((30.0 + rng.uniform(0, 9), np.inf),) if k else () for k in range(20))
+    exact = LightView(3, 700.0, red_windows_s=((5.0, 40.0),))
+    implied = LightView(4, 800.0, True, 0.8, ((10.0, 60.0),), ((15.0, 45.0),), ((20.0, 60.0),))
+    for rest in ((), (exact,), (implied,), (exact, implied)):
+        plain = (LightView(1, 150.0, True, 0.9, ((0.0, 40.0),), ((0.0, 20.0),), scenario_red_windows_s=first),
+                 LightView(2, 450.0, True, 0.7, ((30.0, np.inf),), ((35.0, np.inf),), scenario_red_windows_s=second), *rest)  # fmt: skip
+        packed = tuple(replace(v, scenario_red_windows_s=Timings.packed(v.scenario_red_windows_s)) if v.scenario_red_windows_s else v for v in plain)
+        (w0, p0), (w1, p1) = advisor_timings(plain), advisor_timings(packed)
+        assert w0.shape == w1.shape and w0.tobytes() == w1.tobytes() and p0.tobytes() == p1.tobytes()
+
+
+def test_the_wide_component_of_packed_timings_is_that_of_their_tuples():
+    """``_widened_packed`` (the wide component of packed timings) is ``_widened_timings`` of their tuples, to the last
+    bit, on 300 random forecasts (seeded: a red on now or not, open reds, timings of unequal window counts, stretched
+    reds that run into each other, which keep their own timing)."""
+    from advisory.advice.advisor import WIDE_STRETCH, Timings, _wide_levels, _widened_packed, _widened_timings
+
+    rng = np.random.default_rng(5)
+    kept_own = 0
+    for _ in range(300):
+        n, timings = int(rng.choice([2, 5, 20])), []
+        now = rng.random() < 0.5
+        for q in range(n):
+            t, windows = 0.0, []
+            for w in range(int(rng.integers(0 if q else 1, 4))):
+                a = 0.0 if now and w == 0 else t + rng.uniform(0.5, 40.0)
+                b = a + rng.uniform(1.0, 40.0) if rng.random() < 0.9 else np.inf
+                windows.append((float(a), float(b)))
+                if not np.isfinite(b):
+                    break
+                t = b
+            timings.append(tuple(windows))
+        timings = Timings.packed(tuple(sorted(timings)))
+        want = Timings.packed(_widened_timings(timings))
+        got = _widened_packed(timings.array_s, _wide_levels(n), WIDE_STRETCH)
+        assert got[:, : want.array_s.shape[1]].tobytes() == want.array_s.tobytes() and np.isinf(got[:, want.array_s.shape[1] :]).all()
+        kept_own += sum(w == timings[i] for w, i in zip(_widened_timings(timings), _wide_levels(n)))
+    assert kept_own > 30  # (levels that keep their own timing are exercised)
 
 
 def test_a_steady_hold_is_one_segment_of_the_same_motion():

@@ -43,6 +43,41 @@ SLOW_FIRST_FRAC = 0.97
 otherwise the braking part is negligible and it is "Lift off and coast". [-]"""
 
 
+class Timings(tuple):
+    """A light's equally likely timings (``LightView.scenario_red_windows_s``: one tuple of red windows ``(start, end)``
+    per timing) that also carries them packed, ``array_s``: shape ``(timings, k, 2)``, each timing's windows in order,
+    padded with +inf (``k`` the most windows of a timing). The observation makes them so
+    (:func:`spat_feed.prediction.observe.light_view`), and :func:`_timings` takes the array as it is instead of packing
+    the tuples again (20 timings' windows: ~25 us a view). As a tuple it is the plain tuple of its timings. [s]
+
+    Examples
+    --------
+    >>> t = Timings.packed((((0.0, 10.0),), ((0.0, 12.0), (50.0, 60.0))))
+    >>> t == (((0.0, 10.0),), ((0.0, 12.0), (50.0, 60.0))), t.array_s.shape, t.array_s[0, 1].tolist()
+    (True, (2, 2, 2), [inf, inf])
+    """
+
+    array_s: np.ndarray
+
+    @classmethod
+    def packed(cls, timings) -> Timings:
+        """The timings (tuples of windows), packed."""
+        out = cls(timings)
+        out.array_s = _packed(out, max((len(w) for w in out), default=0))
+        return out
+
+
+def _packed(timings, k: int) -> np.ndarray:
+    """Timings (tuples of windows) as an array ``(len(timings), k, 2)`` padded with +inf: one flat list, one np.array
+    call (a slice assignment per timing cost 30 us a fix). [s]"""
+    flat: list[float] = []
+    for windows in timings:
+        for window in windows:
+            flat += window
+        flat += (np.inf,) * (2 * (k - len(windows)))
+    return np.array(flat, dtype=float).reshape(len(timings), k, 2)
+
+
 @dataclass(frozen=True, slots=True)
 class LightView:
     """One light ahead, as the advisor sees it. Times are relative to now. [m], [s]
@@ -801,6 +836,52 @@ def _widened_timings(timings: tuple) -> tuple:
     return tuple(wide)
 
 
+@lru_cache(maxsize=16)
+def _wide_levels(n: int) -> np.ndarray:
+    """The indices of :data:`WIDE_LEVELS` among ``n`` timings (:func:`_widened_timings`)."""
+    return np.array([round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS], dtype=np.int64)
+
+
+@njit(cache=True, error_model="numpy")
+def _widened_packed(timings, levels, stretch):
+    """:func:`_widened_timings` of packed timings (``timings`` (n, k, 2), padded with +inf; n >= 2), the same
+    operations in the same order (bit for bit): the wide component (len(levels), k, 2), padded with +inf. [s]"""
+    n, k = timings.shape[0], timings.shape[1]
+    out = np.full((levels.size, k, 2), np.inf)
+    med = n // 2
+    c_med = 0
+    while c_med < k and np.isfinite(timings[med, c_med, 0]):  # (a window's start is finite; a pad's is inf)
+        c_med += 1
+    for li in range(levels.size):
+        i = levels[li]
+        c = 0
+        while c < k and np.isfinite(timings[i, c, 0]):
+            c += 1
+        into_each_other = False
+        for w in range(c):
+            a, b = timings[i, w, 0], timings[i, w, 1]
+            am, bm = (timings[med, w, 0], timings[med, w, 1]) if w < c_med else (a, b)
+            b2 = bm + stretch * (b - bm) if np.isfinite(b) and np.isfinite(bm) else b
+            if a <= 0.0:  # red on now: its end no earlier than every timing says
+                e = np.inf
+                for r in range(n):
+                    if timings[r, w, 1] < e:
+                        e = timings[r, w, 1]
+                a2, b2 = a, (e if e > b2 else b2)
+            else:
+                a2 = am + stretch * (a - am) if np.isfinite(a) and np.isfinite(am) else a
+                if np.isfinite(a) and np.isfinite(am) and 0.0 > a2:
+                    a2 = 0.0
+                if a2 > b2:
+                    b2 = a2
+            out[li, w, 0], out[li, w, 1] = a2, b2
+            if w > 0 and a2 < out[li, w - 1, 1]:
+                into_each_other = True
+        if into_each_other:
+            out[li, :c] = timings[i, :c]
+    return out
+
+
 def _resampled(timings: tuple, n: int) -> tuple:
     """``n`` of the equally likely ``timings``, evenly by level (the same ones where there are ``n``)."""
     return timings if len(timings) == n else tuple(timings[k * len(timings) // n] for k in range(n))
@@ -845,24 +926,37 @@ def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
     forecast = [light.scenario_red_windows_s or _implied_timings(light) if u else _implied_timings(light) for light, u in zip(lights, uncertain)]
     n_fc = max(len(timings) for timings in forecast)
     forecast = [_resampled(timings, n_fc) for timings in forecast]
-    if any(uncertain):
-        per_light = [tuple(fc[i] for i in _paired(n_fc, j)) + (_widened_timings(fc) if u else fc[:1] * len(WIDE_LEVELS))
-                     for j, (fc, u) in enumerate(zip(forecast, uncertain))]
+    if any(uncertain):  # each light's parts: its forecast as paired, then its wide component
+        per_light = [(_paired_timings(fc, n_fc, j) if u else fc,
+                      (_widened_packed(fc.array_s, _wide_levels(n_fc), WIDE_STRETCH) if isinstance(fc, Timings) and n_fc >= 2 else _widened_timings(fc))
+                      if u else fc[:1] * len(WIDE_LEVELS))
+                     for j, (fc, u) in enumerate(zip(forecast, uncertain))]  # fmt: skip
         stated = min(light.confidence_frac for light, u in zip(lights, uncertain) if u)
         outside = min(max(1.0 - stated, 1.0 / n_fc), 1.0)
         weights = np.concatenate((np.full(n_fc, (1.0 - outside) / n_fc), np.full(len(WIDE_LEVELS), outside / len(WIDE_LEVELS))))
     else:
-        per_light, weights = forecast, np.full(n_fc, 1.0 / n_fc)
-    n_sc = weights.size
-    k = max(max((len(w) for sc in per_light for w in sc), default=0), 1)
-    flat: list[float] = []  # one flat list, one np.array call (as _Lines.of): a slice assignment per timing cost 30 us a fix
-    for scenarios in per_light:
-        for windows in scenarios:
-            for window in windows:
-                flat += window
-            flat += (np.inf,) * (2 * (k - len(windows)))
-        flat += (np.inf,) * (2 * k * (n_sc - len(scenarios)))
-    return np.array(flat, dtype=float).reshape(len(lights), n_sc, k, 2), weights
+        per_light, weights = [(fc,) for fc in forecast], np.full(n_fc, 1.0 / n_fc)
+    k = max(max(_most_windows(part) for parts in per_light for part in parts), 1)
+    out = np.full((len(lights), weights.size, k, 2), np.inf)
+    for i, parts in enumerate(per_light):
+        n = 0
+        for part in parts:
+            block = part if isinstance(part, np.ndarray) else _packed(part, k)
+            out[i, n : n + len(block), : block.shape[1]] = block
+            n += len(block)
+    return out, weights
+
+
+def _most_windows(timings) -> int:
+    """The most windows of one of the timings (tuples, or packed: ``(timings, k, 2)``)."""
+    return timings.shape[1] if isinstance(timings, np.ndarray) else max((len(w) for w in timings), default=0)
+
+
+def _paired_timings(timings: tuple, n: int, j: int):
+    """Light ``j``'s ``n`` timings in the order :func:`_paired` gives: packed where they come packed (:class:`Timings`),
+    else as a tuple."""
+    order = _paired(n, j)
+    return timings.array_s[order] if isinstance(timings, Timings) else tuple(timings[i] for i in order)
 
 
 @lru_cache(maxsize=64)

@@ -52,8 +52,9 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
-from advisory.advice.advisor import AdvisorParams, LightView, Observation
+from advisory.advice.advisor import AdvisorParams, LightView, Observation, Timings
 from spat_feed.prediction.predictor import (
     EXACT_S,
     SCORE_AHEAD_S,
@@ -907,15 +908,96 @@ def _merged(spans, horizon_s: float) -> tuple[tuple[float, float], ...]:
     return tuple((float(a), float(b)) for a, b in out)
 
 
-def _scenario_windows(phases, t_unix_s: float, horizon_s: float) -> tuple[tuple[tuple[float, float], ...], ...]:
-    """The blocking phases' windows in each equally likely timing: ``_windows(phases, t, horizon, q, q)`` for each
-    ``q`` of :data:`SCENARIO_LEVELS`, the instants of all of them read at once (:func:`_level_picks`)."""
+def _view_windows(phases, t_unix_s: float, horizon_s: float, widen_s: float, hold_s: float, red_now: bool) -> list:
+    """The three views' windows (``red_windows_s``: each red from its start's earliest to its end's latest instant;
+    ``likely``: both at their likely instants; ``late``: both at their latest), each ``_windows(phases, t, horizon, lo,
+    hi)`` moved ``widen_s`` earlier and :func:`_widened` by it, then the published red held (``hold_s``, ``red_now``:
+    :func:`_timing_windows`), made at once (:func:`_made_windows`). [s]"""
     blocking = [(start, end) for cls, start, end in phases if cls in BLOCKING_CLASSES]
-    if not blocking:
-        return ((),) * N_SCENARIOS
-    starts = (np.array([_level_picks(start) for start, _ in blocking]) - t_unix_s).T.tolist()
-    ends = (np.array([_level_picks(end) for _, end in blocking]) - t_unix_s).T.tolist()
-    return tuple(_merged(zip(s, e), horizon_s) for s, e in zip(starts, ends))
+    starts = np.array([[start[0], start[1], start[2]] for start, _ in blocking], dtype=float).reshape(-1, 3).T - t_unix_s
+    ends = np.array([[end[2], end[1], end[2]] for _, end in blocking], dtype=float).reshape(-1, 3).T - t_unix_s
+    return _made_windows(starts, ends, horizon_s, widen_s, hold_s, red_now)[0]
+
+
+def _scenario_windows(phases, t_unix_s: float, horizon_s: float, widen_s: float = 0.0, hold_s: float = 0.0, red_now: bool = False) -> Timings:
+    """The blocking phases' windows in each equally likely timing: ``_windows(phases, t, horizon, q, q)`` for each
+    ``q`` of :data:`SCENARIO_LEVELS`, then moved ``widen_s`` earlier and :func:`_widened` by it, then the published red
+    held (``hold_s``, ``red_now``), as the other views (:func:`_view_windows`); the instants of all of them read at once
+    (:func:`_level_picks`), the windows made at once (:func:`_made_windows`) and handed to the advisor packed
+    (:class:`~advisory.advice.advisor.Timings`)."""
+    blocking = [(start, end) for cls, start, end in phases if cls in BLOCKING_CLASSES]
+    if blocking:
+        starts = np.array([_level_picks(start) for start, _ in blocking]).T - t_unix_s
+        ends = np.array([_level_picks(end) for _, end in blocking]).T - t_unix_s
+    else:
+        starts = ends = np.empty((N_SCENARIOS, 0))
+    rows, packed = _made_windows(starts, ends, horizon_s, widen_s, hold_s, red_now)
+    timings = Timings(rows)
+    timings.array_s = packed
+    return timings
+
+
+def _made_windows(starts: np.ndarray, ends: np.ndarray, horizon_s: float, widen_s: float, hold_s: float, red_now: bool) -> tuple[list, np.ndarray]:
+    """The windows of each row of spans (``starts``, ``ends``: (rows, spans), relative, in order) as tuples, and packed
+    (rows, k, 2), padded with +inf (:func:`_timing_windows`). [s]"""
+    out = np.empty((starts.shape[0], starts.shape[1] + 1, 2))
+    counts = np.empty(starts.shape[0], dtype=np.int64)
+    _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, counts)
+    k = int(counts.max())
+    return [tuple(map(tuple, row[:c])) for row, c in zip(out[:, :k].tolist(), counts.tolist())], out[:, :k]
+
+
+@njit(cache=True, inline="always")
+def _put(out, i, c, a, b):
+    """The window ``(a, b)`` after the ``c`` windows made in row ``i`` of ``out``: clipped at now, one with the last
+    where it touches or overlaps it (:func:`_merged`); the row's count after it. [s]"""
+    if a < 0.0:
+        a = 0.0
+    if c > 0 and a <= out[i, c - 1, 1]:
+        if b > out[i, c - 1, 1]:
+            out[i, c - 1, 1] = b
+        return c
+    out[i, c, 0], out[i, c, 1] = a, b
+    return c + 1
+
+
+@njit(cache=True, error_model="numpy")
+def _timing_windows(starts, ends, horizon_s, widen_s, hold_s, red_now, out, counts):
+    """Each row's windows (row ``i`` of ``starts`` / ``ends``: relative spans in order) as :func:`_merged` makes them,
+    then :func:`_widened` after moving them ``widen_s`` earlier (where ``widen_s > 0``), then held: where ``hold_s >
+    0`` (:func:`red_hold_s`), the first red (the published one, ``red_now``, or the one after a published amber, which
+    begins before ``hold_s``) lasts at least ``hold_s`` from now, a red now that the windows lost is put back, and the
+    windows it then runs into are merged with it. The same operations in the same order as those functions (bit for
+    bit; ``tests/server/test_observe.py`` holds the plain reading of the hold): into ``out[i, :counts[i]]``
+    (capacity spans + 1), the rest +inf. [s]"""
+    n, m = starts.shape
+    for i in range(n):
+        c = 0
+        for j in range(m):  # _merged
+            if not (ends[i, j] <= 0.0 or starts[i, j] >= horizon_s):
+                c = _put(out, i, c, starts[i, j], ends[i, j])
+        if widen_s > 0.0:  # _widened((a - u, b - u) ...)
+            w = 0
+            for j in range(c):
+                w = _put(out, i, w, (out[i, j, 0] - widen_s) - widen_s, (out[i, j, 1] - widen_s) + widen_s)
+            c = w
+        if hold_s > 0.0 and (red_now or (c > 0 and 0.0 < out[i, 0, 0] < hold_s)):  # the red held
+            if c > 0 and out[i, 0, 0] < hold_s and (red_now or out[i, 0, 0] > 0.0):
+                if hold_s > out[i, 0, 1]:
+                    out[i, 0, 1] = hold_s
+            elif red_now:
+                for j in range(c, 0, -1):
+                    out[i, j, 0], out[i, j, 1] = out[i, j - 1, 0], out[i, j - 1, 1]
+                out[i, 0, 0], out[i, 0, 1] = 0.0, hold_s
+                c += 1
+            while c > 1 and out[i, 1, 0] <= out[i, 0, 1]:
+                if out[i, 1, 1] > out[i, 0, 1]:
+                    out[i, 0, 1] = out[i, 1, 1]
+                for j in range(1, c - 1):
+                    out[i, j, 0], out[i, j, 1] = out[i, j + 1, 0], out[i, j + 1, 1]
+                c -= 1
+        out[i, c:] = np.inf
+        counts[i] = c
 
 
 def _level_picks(bound: Bound) -> np.ndarray:
@@ -1025,21 +1107,6 @@ def no_amber(phases: list[tuple[PhaseClass, Bound, Bound]]) -> list[tuple[PhaseC
     return out
 
 
-def _held(windows: tuple[tuple[float, float], ...], hold_s: float, red_now: bool) -> tuple[tuple[float, float], ...]:
-    """Windows with the first red (the published one, or the one after a published amber) lasting at least ``hold_s``
-    from now; a red now that the windows lost is put back."""
-    if hold_s <= 0.0 or not (red_now or (windows and 0.0 < windows[0][0] < hold_s)):
-        return windows  # (windows apart, as made: nothing to lengthen, nothing to merge)
-    out = [list(w) for w in windows]
-    if out and out[0][0] < hold_s and (red_now or out[0][0] > 0.0):
-        out[0][1] = max(out[0][1], hold_s)
-    elif red_now:
-        out.insert(0, [0.0, hold_s])
-    while len(out) > 1 and out[1][0] <= out[0][1]:
-        out[0][1] = max(out[0][1], out.pop(1)[1])
-    return tuple((a, b) for a, b in out)
-
-
 def light_view(
     intersection: IntersectionSpec, reading: PlanReading | None, station_m: float, t_unix_s: float, horizon_s: float = HORIZON_S,
     speed_mps: float = 0.0,
@@ -1053,9 +1120,14 @@ def light_view(
     # a clock that may be off by u: any red may begin u earlier and end u later (the likely ones too: skew is no
     # chance), a red that ended less than u ago by the feed's clock included: the windows are taken from u before now
     u = reading.clock_uncertainty_s
-    scenarios: tuple = ()
+    scenarios: Timings | None = None
+    # how long a published red holds in every view (the safety rule), fresh or not: the latest reading
+    hold = red_hold_s(plan, t_feed - reading.age_s, speed_mps) if not isinstance(plan, FixedTimePlan) else 0.0
+    red_now = hold > 0.0 and phase_class(published_state(plan, t_feed - reading.age_s)) is PhaseClass.RED
     if isinstance(plan, FixedTimePlan):
         windows = likely = late = red_windows_s(plan, t_feed - u, horizon_s + u)
+        if u > 0.0:
+            windows = likely = late = _widened(tuple((a - u, b - u) for a, b in windows), u)
         unknown = ()
     else:
         phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
@@ -1070,17 +1142,13 @@ def light_view(
             read_at -= u
         if unknown_now(plan, read_at) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
-        windows, likely, late = (_windows(phases, t_feed - u, horizon_s + u, a, b) for a, b in ((0, 2), (1, 1), (2, 2)))
-        if likely != windows:  # uncertain: the equally likely timings too
+        # (widened by the clock, a published red held: where the windows then differ, so did they before)
+        windows, likely, late = _view_windows(phases, t_feed - u, horizon_s + u, u, hold, red_now)
+        if likely != windows:  # uncertain: the equally likely timings too, widened and held as the others
             # (the reds: the amber before each, published or not, is the advisor's to weigh, ``LightView.amber_s``)
-            scenarios = _scenario_windows(phases, t_feed - u, horizon_s + u)
+            scenarios = _scenario_windows(phases, t_feed - u, horizon_s + u, u, hold, red_now)
         # the unknown phases that end (between known ones; the open tail past the plan and the history stays a red)
         unknown = tuple(w for w in _windows(phases, t_feed, horizon_s, 1, 1, {PhaseClass.UNKNOWN}) if math.isfinite(w[1]))
-    if u > 0.0:
-        windows, likely, late, *scenarios = (_widened(tuple((a - u, b - u) for a, b in w), u) for w in (windows, likely, late, *scenarios))
-    if not isinstance(plan, FixedTimePlan) and (hold := red_hold_s(plan, t_feed - reading.age_s, speed_mps)) > 0.0:  # fresh or not: the latest reading
-        red_now = phase_class(published_state(plan, t_feed - reading.age_s)) is PhaseClass.RED
-        windows, likely, late, *scenarios = (_held(w, hold, red_now) for w in (windows, likely, late, *scenarios))
     return LightView(
         intersection.id,
         distance_m,
@@ -1091,7 +1159,7 @@ def light_view(
         late_red_windows_s=None if late == windows else late,
         age_s=float(reading.age_s),
         unknown_windows_s=unknown,
-        scenario_red_windows_s=tuple(scenarios) if scenarios and likely != windows else None,
+        scenario_red_windows_s=scenarios if likely != windows else None,
         queue_m=reading.queue_m if reading.fresh else None,
         amber_s=reading.amber_s,
     )

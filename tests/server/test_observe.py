@@ -714,3 +714,56 @@ def test_the_exact_end_of_a_go_phase_s_green_is_not_its_red_s_start():
     stats, plan, red_at = cycle(both=False, last=True)  # the amber's end alone: the red's start
     view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t)
     assert view.red_windows_s[0][0] == pytest.approx(red_at - t) and view.likely_red_windows_s[0][0] == pytest.approx(red_at - t)
+
+
+def test_the_views_and_timings_are_made_as_the_views_own_steps_make_them():
+    """The three views' windows (``_view_windows``: earliest to latest, likely, latest) and each equally likely
+    timing's (``_scenario_windows``), each made for all at once in one kernel, are the ones the views' own steps make
+    (``_windows``: ``_merged`` of the phases' instants, then moved by the clock's uncertainty and ``_widened``, then
+    held as the safety rule says, ``_held`` below), to the last bit, on 400 random sets of phases (seeded: before now,
+    past the horizon, overlapping, touching, open-ended; clock uncertainty and a held red or not); and the packed
+    array the timings carry is their tuples'."""
+    import numpy as np
+
+    from advisory.advice.advisor import Timings
+    from spat_feed.prediction.observe import N_SCENARIOS, _merged, _scenario_windows, _view_windows, _widened, _windows
+
+    def steps(windows, u, hold, red_now):
+        if u > 0.0:
+            windows = _widened(tuple((a - u, b - u) for a, b in windows), u)
+        return _held(windows, hold, red_now) if hold > 0.0 else windows
+
+    rng = np.random.default_rng(11)
+    held = 0
+    for _ in range(400):
+        m, t0, horizon = int(rng.integers(0, 5)), 1000.0, 150.0
+        starts = np.sort(rng.uniform(-30.0, 170.0, size=(m, N_SCENARIOS)), axis=0).round(int(rng.integers(0, 3)))
+        ends = starts + rng.choice([0.0, 2.0, 5.5, 30.0, np.inf], size=(m, N_SCENARIOS), p=[0.1, 0.2, 0.3, 0.3, 0.1])
+        # each bound: (earliest, likely, latest) three of its levels, and its levels
+        phases = [(PhaseClass.RED, (*(t0 + a[[0, 9, 19]]).tolist(), t0 + a), (*(t0 + b[[0, 9, 19]]).tolist(), t0 + b)) for a, b in zip(starts, ends)]
+        u, hold, red_now = float(rng.choice([0.0, 0.5, 3.0])), float(rng.choice([0.0, 2.5, 8.0])), bool(rng.integers(0, 2))
+        got = _scenario_windows(phases, t0, horizon, u, hold, red_now)
+        for q in range(N_SCENARIOS):
+            made = _merged(zip((starts[:, q] + t0 - t0).tolist(), (ends[:, q] + t0 - t0).tolist()), horizon)
+            want = steps(made, u, hold, red_now)
+            assert repr(got[q]) == repr(want)
+            held += want != made
+        assert isinstance(got, Timings) and got.array_s.tobytes() == Timings.packed(tuple(got)).array_s.tobytes()
+        views = _view_windows(phases, t0, horizon, u, hold, red_now)
+        assert repr(views) == repr([steps(_windows(phases, t0, horizon, lo, hi), u, hold, red_now) for lo, hi in ((0, 2), (1, 1), (2, 2))])
+    assert held > 100  # the clock's widening and the held red are exercised
+
+
+def _held(windows: tuple[tuple[float, float], ...], hold_s: float, red_now: bool) -> tuple[tuple[float, float], ...]:
+    """The reference for the held red (``observe._timing_windows``): windows with the first red (the published one, or
+    the one after a published amber) lasting at least ``hold_s`` from now; a red now that the windows lost is put back."""
+    if hold_s <= 0.0 or not (red_now or (windows and 0.0 < windows[0][0] < hold_s)):
+        return windows  # (windows apart, as made: nothing to lengthen, nothing to merge)
+    out = [list(w) for w in windows]
+    if out and out[0][0] < hold_s and (red_now or out[0][0] > 0.0):
+        out[0][1] = max(out[0][1], hold_s)
+    elif red_now:
+        out.insert(0, [0.0, hold_s])
+    while len(out) > 1 and out[1][0] <= out[0][1]:
+        out[0][1] = max(out[0][1], out.pop(1)[1])
+    return tuple((a, b) for a, b in out)
