@@ -38,12 +38,13 @@ from dataclasses import replace
 
 from advisory.advice.advisor import Advice, AdvisorParams, Observation
 from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, held_up,
-                                   normal_drive_s, said_truly, tail_glide)
+                                   normal_drive_s, said_truly, seen_at_line, tail_glide)
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
 """A trip's position older than this is no longer a probe. [s]"""
 QUEUE_MESSAGE = "Queue ahead. Follow the car in front."
+SILENT = ("too_close", "short_wait", "far_ahead")  # the advisor's silences: the driver goes on with the plan it follows
 
 
 class Lane:
@@ -160,6 +161,7 @@ class QueueBoard:
         self._queued: dict[str, int] = {}  # trip -> the light whose queue it stands in
         self._behind: dict[str, tuple[Probe, ...]] = {}  # trip -> the connected cars its last fix found it holds up (:meth:`check`)
         self._seen: dict[str, tuple[Observation, QueueEstimate]] = {}  # trip -> its last fix's lights as they are, and its queue estimate (:meth:`check`)
+        self._for_queue: dict[str, bool] = {}  # trip -> the plan it follows was made for the queue in front (:meth:`check`)
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
         self.held = 0  # fixes answered "follow the car in front"
 
@@ -173,6 +175,7 @@ class QueueBoard:
             self._queued.pop(trip_id, None)
             self._behind.pop(trip_id, None)
             self._seen.pop(trip_id, None)
+            self._for_queue.pop(trip_id, None)
             return obs, None
         here = float(obs.position_m)
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
@@ -265,16 +268,29 @@ class QueueBoard:
         * "drive normally" where it gives up green time that a normal drive, behind the queue, uses, priced with the
           followers it holds up (:func:`advisory.advice.queue.gives_up_green`), the connected ones where the trip's last
           fix (:meth:`see`) found them;
+        * "drive normally" at the line (the advisor silent there, ``too_close``) where the plan the driver follows was
+          made for the queue and the light itself is green (:func:`advisory.advice.queue.seen_at_line`);
 
         its countdown, whichever it is, the light's own, and the queue said where the queue holds the car
         (:func:`advisory.advice.queue.said_truly`): the advisor sees the queue as a red."""
         real, est = self._seen.get(trip_id, (obs, None)) if trip_id is not None else (obs, None)
+        out = self._checked(obs, real, est, advice, params, trip_id, last)
+        if trip_id is not None and not (out.action == "none" and out.reason in SILENT):  # the plan the driver follows now
+            self._for_queue[trip_id] = out.reason == "queue" or (bool(obs.lights) and obs.lights[0] != real.lights[0])
+        return out
+
+    def _checked(self, obs: Observation, real: Observation, est: QueueEstimate | None, advice: Advice, params: AdvisorParams,
+                 trip_id: str | None, last: dict | None) -> Advice:  # fmt: skip
+        """:meth:`check`'s answer (``real``: the lights as they are, ``est``: the trip's queue estimate at this fix)."""
         if est is not None and (glide := tail_glide(real, est, advice, params, self.model)) is not None:
             was = last is not None and last.get("reason") == "queue" and last.get("target_speed_mps") is not None
             if was and abs(last["target_speed_mps"] - glide.target_speed_mps) < params.speak_change_mps:
                 glide = replace(glide, speak=False)
             return glide
-        if gives_up_green(obs, advice, params, model=self.model, behind=self._behind.get(trip_id, ()) if trip_id is not None else (), queue=est):
+        behind = self._behind.get(trip_id, ()) if trip_id is not None else ()
+        for_queue = self._for_queue.get(trip_id, False) if trip_id is not None else False
+        at_line = bool(real.lights) and seen_at_line(real.lights[0], advice, for_queue, obs.speed_mps, obs.speed_limit_mps, params, self.model)
+        if at_line or gives_up_green(obs, advice, params, model=self.model, behind=behind, queue=est):
             return drive_normally(advice, params.units, real.lights[0])
         return said_truly(advice, real.lights, obs.lights, params.units)
 
@@ -289,6 +305,7 @@ class QueueBoard:
         self._queued.pop(trip_id, None)
         self._behind.pop(trip_id, None)
         self._seen.pop(trip_id, None)
+        self._for_queue.pop(trip_id, None)
 
     def state(self) -> str:
         """Where the probes come from (``/health``): ``local`` (this process, which serves every trip), ``shared``

@@ -602,3 +602,40 @@ def test_a_plan_that_pushes_a_connected_follower_into_a_red_without_amber_gives_
     assert (told.action, told.reason, told.target_speed_mps) == ("none", "tight_green", None)
     assert (told.light_red, told.seconds_to_change_s, told.light_id) == (False, 8.0, 1)  # the countdown of the light it drives through
     assert board.check(seen, plan, params) is plan  # no trip: no follower known where it is
+
+
+def test_a_plan_made_for_the_queue_is_not_held_across_the_line_on_green():
+    """Traced in SUMO (paper_s400 fixed 300 veh/h, 50 % connected, seed 1, ``main.16``): told to slow for the queue
+    the board estimates (the red's unconnected arrivals), then silent within 15 m of the line (``too_close``), the
+    driver went on with that slow plan across the line on green with no car in front, and sped up past it only; the
+    connected cars behind it lost the next light's green. At the line the driver sees the queue itself: the board says
+    "drive normally" there where the light itself is green and a normal drive is over the line before its red (2 s
+    before one that no amber announces). A plan not made for a queue, or a light red itself, keeps the silence."""
+    params = AdvisorParams(units="kmh")
+    board, t = QueueBoard(arrivals_vph=720.0, connected_share=0.5), 1000.0
+
+    def light(distance_m, reds):
+        return LightView(1, distance_m, red_windows_s=reds, amber_s=0.0)
+
+    board.see("c", "watcher", t - 25.0, Observation(24.6, 24.6, (light(600.0, ((0.0, 45.0), (75.0, 105.0))),), position_m=-600.0))
+    far = Observation(6.0, 24.6, (light(120.0, ((-25.0, 20.0), (50.0, 80.0))),), position_m=-120.0)  # red for 25 s
+    held, _ = board.see("c", "car", t, far)
+    assert held.lights[0] != far.lights[0]  # the queue holds the line past the red's end
+    plan = board.check(held, advise(held, None, params)[0], params, "car")
+    assert plan.action != "none" and plan.target_speed_mps is not None and plan.target_speed_mps < 24.6 - params.hysteresis_mps
+    near = Observation(4.0, 24.6, (light(12.0, ((29.0, 59.0),)),), position_m=-12.0)  # the red ended 1 s ago
+    held, _ = board.see("c", "car", t + 21.0, near)
+    silent = advise(held, None, params)[0]
+    assert (silent.action, silent.reason) == ("none", "too_close")
+    out = board.check(held, silent, params, "car")
+    assert (out.action, out.reason, out.light_red, out.seconds_to_change_s) == ("none", "tight_green", False, 29.0)
+    assert out.message == "Red in 29 seconds. Drive normally."
+    # the same silence after a plan made for the light alone (no queue estimated), or at a light red itself: silence
+    alone = QueueBoard()
+    obs, _ = alone.see("c", "car", t, far)
+    alone.check(obs, advise(obs, None, params)[0], params, "car")
+    obs, _ = alone.see("c", "car", t + 21.0, near)
+    assert alone.check(obs, silent, params, "car").reason == "too_close"
+    red = Observation(4.0, 24.6, (light(12.0, ((-20.0, 2.0), (32.0, 62.0))),), position_m=-12.0)
+    obs, _ = board.see("c", "car", t + 21.0, red)
+    assert board.check(obs, advise(obs, None, params)[0], params, "car").reason == "too_close"
