@@ -173,16 +173,19 @@ def protocol_class(read_timeout_s: float, max_connections: int, max_per_client: 
             if self.transport.is_closing():
                 return
             log.info("%s: request not received within %g s: closed", self.client[0] if self.client else "?", read_timeout_s)
-            if self.cycle is None or not self.cycle.response_started:
+            # a cycle whose response is complete is the previous request's on a kept-alive connection: the one being
+            # read has no cycle yet (its headers are not complete) and nothing has answered it
+            cycle = None if self.cycle is None or self.cycle.response_complete else self.cycle
+            if cycle is None or not cycle.response_started:
                 body = {"error": "request_timeout", "message": f"the request was not received within {read_timeout_s:g} s", "detail": None}
                 self.transport.write(_raw_response(408, "Request Timeout", body))
-            if self.cycle is not None:
+            if cycle is not None:
                 # The app, if waiting for the body, hears a disconnect, and what it sends is dropped: the 408 is
                 # the answer (before, its 400 went to the closed transport: a 500 and a traceback per timeout).
                 # The scope says why, so the request is counted as 408 (server.middleware), not as a 499.
-                self.cycle.scope[READ_TIMED_OUT] = True
-                self.cycle.disconnected = True
-                self.cycle.message_event.set()
+                cycle.scope[READ_TIMED_OUT] = True
+                cycle.disconnected = True
+                cycle.message_event.set()
             self.transport.close()
 
     return GuardedHttpToolsProtocol

@@ -100,6 +100,18 @@ def test_the_read_deadline_counts_from_each_request_on_a_kept_alive_connection(s
     s.close()
 
 
+def test_half_sent_headers_after_an_answered_request_get_a_408(start_proc, tmp_path):
+    """On a kept-alive connection whose last request was answered, a next request whose headers never complete is cut
+    off with a 408 too (before, the deadline saw the previous request's response as started and closed in silence)."""
+    svc = start_proc(_proc(tmp_path, ECO_READ_TIMEOUT_S="1"))
+    s = _sock(svc.port, "127.0.0.1")
+    s.sendall(b"GET /health HTTP/1.1\r\nHost: x\r\n\r\n")
+    assert s.recv(65536).startswith(b"HTTP/1.1 200")
+    s.sendall(b"GET /health HTTP/1.1\r\nHost: x\r\n")  # the headers' end never comes
+    assert _read_all(s).startswith(b"HTTP/1.1 408")
+    s.close()
+
+
 def test_client_disconnects_mid_body_are_not_server_errors(start_proc, tmp_path):
     """Finding: a body cut off mid-request counted as a 500 and wrote ~100 log lines."""
     svc = start_proc(_proc(tmp_path))
