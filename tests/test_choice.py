@@ -4,6 +4,7 @@ constraints as invariants over random timings."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -465,16 +466,47 @@ def test_timings_handed_over_packed_are_packed_the_same():
         assert w0.shape == w1.shape and w0.tobytes() == w1.tobytes() and p0.tobytes() == p1.tobytes()
 
 
-def test_the_wide_component_of_packed_timings_is_that_of_their_tuples():
-    """``_widened_packed`` (the wide component of packed timings) is ``_widened_timings`` of their tuples, to the last
-    bit, on 300 random forecasts (seeded: a red on now or not, open reds, timings of unequal window counts, stretched
-    reds that run into each other, which keep their own timing)."""
-    from advisory.advice.advisor import WIDE_STRETCH, Timings, _wide_levels, _widened_packed, _widened_timings
+def _wide_component_plain(timings: tuple) -> tuple:
+    """The plain reading of ``advisor._wide_component`` on tuples (the reference its kernel is checked against): at
+    each of ``WIDE_LEVELS`` the forecast's timing with ``WIDE_STRETCH`` times its spread about the median timing;
+    windows pair up by order; a red on now ends no earlier than in every timing; no change before now; a level whose
+    stretched reds run into each other keeps its own timing."""
+    from advisory.advice.advisor import IMPLIED_TIMINGS, WIDE_LEVELS, WIDE_STRETCH
 
+    n = len(timings)
+    med, wide, earliest_end = timings[n // 2], [], {}
+    for i in (round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS):
+        out = []
+        for w, (a, b) in enumerate(timings[i]):
+            am, bm = med[w] if w < len(med) else (a, b)
+            b2 = bm + WIDE_STRETCH * (b - bm) if math.isfinite(b) and math.isfinite(bm) else b
+            if a <= 0.0:  # red on now
+                if w not in earliest_end:
+                    earliest_end[w] = min(t[w][1] for t in timings if len(t) > w)
+                out.append((a, max(b2, earliest_end[w])))
+                continue
+            a2 = max(am + WIDE_STRETCH * (a - am), 0.0) if math.isfinite(a) and math.isfinite(am) else a
+            out.append((a2, max(b2, a2)))
+        wide.append(timings[i] if any(out[k][0] < out[k - 1][1] for k in range(1, len(out))) else tuple(out))
+    return tuple(wide)
+
+
+def test_the_wide_component_is_the_plain_reading_of_its_steps():
+    """``_wide_component`` (a kernel on packed timings) is the plain reading of its steps on the same timings as tuples,
+    to the last bit, on 300 random forecasts (seeded: one timing or many, a red on now or not, open reds, timings of
+    unequal window counts, stretched reds that run into each other, which keep their own timing); a hand-made case
+    holds the plain reading itself."""
+    from advisory.advice.advisor import WIDE_STRETCH, Timings, _wide_component, _wide_levels
+
+    # by hand: 20 timings of one red starting 10 + q s from now and lasting 20 s; the median (q = 10) starts at 20 s;
+    # stretched twice: level 1 (q = 1) starts at 20 + 2 (11 - 20) = 2 s, its end 40 + 2 (31 - 40) = 22 s; level 18
+    # (q = 18) at 20 + 2 (28 - 20) = 36 s, its end 56 s
+    hand = tuple((((10.0 + q, 30.0 + q),)) for q in range(20))
+    assert _wide_component_plain(hand)[0] == ((2.0, 22.0),) and _wide_component_plain(hand)[3] == ((36.0, 56.0),)
     rng = np.random.default_rng(5)
     kept_own = 0
     for _ in range(300):
-        n, timings = int(rng.choice([2, 5, 20])), []
+        n, timings = int(rng.choice([1, 2, 5, 20])), []
         now = rng.random() < 0.5
         for q in range(n):
             t, windows = 0.0, []
@@ -487,10 +519,10 @@ def test_the_wide_component_of_packed_timings_is_that_of_their_tuples():
                 t = b
             timings.append(tuple(windows))
         timings = Timings.packed(tuple(sorted(timings)))
-        want = Timings.packed(_widened_timings(timings))
-        got = _widened_packed(timings.array_s, _wide_levels(n), WIDE_STRETCH)
+        want = Timings.packed(_wide_component_plain(timings))
+        got = _wide_component(timings.array_s, _wide_levels(n), WIDE_STRETCH)
         assert got[:, : want.array_s.shape[1]].tobytes() == want.array_s.tobytes() and np.isinf(got[:, want.array_s.shape[1] :]).all()
-        kept_own += sum(w == timings[i] for w, i in zip(_widened_timings(timings), _wide_levels(n)))
+        kept_own += sum(w == timings[i] for w, i in zip(_wide_component_plain(timings), _wide_levels(n)))
     assert kept_own > 30  # (levels that keep their own timing are exercised)
 
 

@@ -798,54 +798,30 @@ def _implied_timings(light: LightView) -> tuple:
 
 WIDE_LEVELS = (1, 6, 13, 18)
 """The forecast's timings (of :data:`IMPLIED_TIMINGS`, by index: levels ~0.08, 0.33, 0.68, 0.93) that the wide
-component of the mixture stretches (:func:`_widened_timings`). [-]"""
+component of the mixture stretches (:func:`_wide_component`). [-]"""
 WIDE_STRETCH = 2.0
 """How much farther from the median timing the wide component puts each change: a copy of the forecast with twice its
 spread. [-]"""
 
 
-def _widened_timings(timings: tuple) -> tuple:
-    """The wide component of one light's mixture: a copy of the forecast's equally likely timings with
-    :data:`WIDE_STRETCH` times its spread about its median timing, at the levels :data:`WIDE_LEVELS` (one timing each),
-    so that the outer timings are not the forecast's extremes (a forecast from a few dozen past phases is its sample: a
-    change outside every timing came 7-10 s past the outer ones on the recorded controllers). Its weight is the chance
-    of a change outside the window the light states (:func:`_timings`). Windows pair up by their order (the k-th red of
-    each timing; one past the median's horizon stays as it is). A red on now never ends earlier than in every timing
-    (the published red is held: the safety rule); no change comes before now; a level whose stretched reds run into
-    each other is that level's own timing."""
-    n = len(timings)
-    if n < 2:
-        return tuple(timings) * len(WIDE_LEVELS)
-    med = timings[n // 2]
-    wide = []
-    earliest_end: dict[int, float] = {}  # the earliest end of each red on now over the timings (found once)
-    for i in (round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS):
-        out = []
-        for w, (a, b) in enumerate(timings[i]):
-            am, bm = med[w] if w < len(med) else (a, b)
-            b2 = bm + WIDE_STRETCH * (b - bm) if math.isfinite(b) and math.isfinite(bm) else b
-            if a <= 0.0:  # red on now: its end no earlier than every timing says
-                if w not in earliest_end:
-                    earliest_end[w] = min(t[w][1] for t in timings if len(t) > w)
-                out.append((a, max(b2, earliest_end[w])))
-                continue
-            a2 = max(am + WIDE_STRETCH * (a - am), 0.0) if math.isfinite(a) and math.isfinite(am) else a
-            out.append((a2, max(b2, a2)))
-        stretched_into_each_other = any(out[k][0] < out[k - 1][1] for k in range(1, len(out)))
-        wide.append(timings[i] if stretched_into_each_other else tuple(out))
-    return tuple(wide)
-
-
 @lru_cache(maxsize=16)
 def _wide_levels(n: int) -> np.ndarray:
-    """The indices of :data:`WIDE_LEVELS` among ``n`` timings (:func:`_widened_timings`)."""
+    """The indices of :data:`WIDE_LEVELS` among ``n`` timings (:func:`_wide_component`)."""
     return np.array([round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS], dtype=np.int64)
 
 
 @njit(cache=True, error_model="numpy")
-def _widened_packed(timings, levels, stretch):
-    """:func:`_widened_timings` of packed timings (``timings`` (n, k, 2), padded with +inf; n >= 2), the same
-    operations in the same order (bit for bit): the wide component (len(levels), k, 2), padded with +inf. [s]"""
+def _wide_component(timings, levels, stretch):
+    """The wide component of one light's mixture: a copy of the forecast's equally likely timings (packed: ``timings``
+    (n, k, 2), each timing's windows in order, padded with +inf) with ``stretch`` (:data:`WIDE_STRETCH`) times its
+    spread about its median timing, at the ``levels`` (:func:`_wide_levels`, one timing each), so that the outer timings
+    are not the forecast's extremes (a forecast from a few dozen past phases is its sample: a change outside every
+    timing came 7-10 s past the outer ones on the recorded controllers). Its weight is the chance of a change outside
+    the window the light states (:func:`_timings`). Windows pair up by their order (the k-th red of each timing; one
+    past the median's horizon stays as it is). A red on now never ends earlier than in every timing (the published red
+    is held: the safety rule); no change comes before now; a level whose stretched reds run into each other is that
+    level's own timing. Returns (len(levels), k, 2), padded with +inf (``tests/test_choice.py`` holds the plain
+    reading of these steps, on tuples). [s]"""
     n, k = timings.shape[0], timings.shape[1]
     out = np.full((levels.size, k, 2), np.inf)
     med = n // 2
@@ -915,7 +891,7 @@ def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
     padded with +inf, and each timing's weight (timings,), summing to 1. An exact light has one timing in all of them.
 
     The mixture of each uncertain light: its forecast (equally likely timings, ``LightView.scenario_red_windows_s`` or
-    read off its windows, :func:`_implied_timings`), and the wide component (:func:`_widened_timings`) weighted by the
+    read off its windows, :func:`_implied_timings`), and the wide component (:func:`_wide_component`) weighted by the
     chance that a change comes outside the window the light states: ``1 - confidence_frac`` (J2735: the probability
     that the change comes within it; the lowest of the lights planned for). Within a light the timings are comonotone
     (every change at one level of its forecast: a red that comes late ends late); across lights they are paired at no
@@ -928,7 +904,7 @@ def _timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
     forecast = [_resampled(timings, n_fc) for timings in forecast]
     if any(uncertain):  # each light's parts: its forecast as paired, then its wide component
         per_light = [(_paired_timings(fc, n_fc, j) if u else fc,
-                      (_widened_packed(fc.array_s, _wide_levels(n_fc), WIDE_STRETCH) if isinstance(fc, Timings) and n_fc >= 2 else _widened_timings(fc))
+                      _wide_component(fc.array_s if isinstance(fc, Timings) else _packed(fc, _most_windows(fc)), _wide_levels(n_fc), WIDE_STRETCH)
                       if u else fc[:1] * len(WIDE_LEVELS))
                      for j, (fc, u) in enumerate(zip(forecast, uncertain))]  # fmt: skip
         stated = min(light.confidence_frac for light, u in zip(lights, uncertain) if u)
