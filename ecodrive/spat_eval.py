@@ -40,8 +40,9 @@ approaches ``costlier_than_regular_by_10pct_frac`` (advised cost > 1.1 x the reg
 truth), ``advice_availability_frac`` (share of approach seconds with speed advice), ``time_lost_s`` (mean,
 against the regular driver; each approach's time includes getting back to the limit past the zone end),
 ``worst_time_lost_s``, ``time_lost_over_60s`` and ``time_lost_over_60s_all`` (below), the same per kind
-(single / pair) under ``by_kind``, and ``store_verdicts`` (what the store said to each message: ``ok``,
-``duplicate``, ...).
+(single / pair) under ``by_kind``, ``worst`` (the approaches behind the two counts above, one by one: groups,
+entry time, time lost, cost against the regular driver, the regular driver's own delay; :func:`worst`) and
+``store_verdicts`` (what the store said to each message: ``ok``, ``duplicate``, ...).
 
 ``time_lost_over_60s``: the approaches whose advised car took more than 60 s longer than the regular driver on
 the same truth, counted only where the regular driver did not itself lose the cycle, i.e. where its own delay
@@ -420,6 +421,16 @@ def summarize(rows: list[dict]) -> dict:
     }
 
 
+def worst(rows: list[dict]) -> list[dict]:
+    """The approaches behind ``time_lost_over_60s_all`` and ``costlier_than_regular_by_10pct``, to trace one by one:
+    groups, entry time [Unix s], time lost [s], cost against the regular driver [-] (``cost_frac``, +0.1 = 10 %
+    costlier) and the regular driver's own delay [s]; the longest time lost first."""
+    bad = [r for r in rows if r["time_lost_s"] > LOST_S or r["saving_frac"] < -0.10]
+    return [{"groups": r["groups"], "entry_unix_s": r["entry_unix_s"], "time_lost_s": round(r["time_lost_s"], 2),
+             "cost_frac": round(-r["saving_frac"], 4), "regular_delay_s": round(r["regular_delay_s"], 2)}
+            for r in sorted(bad, key=lambda r: -r["time_lost_s"])]  # fmt: skip
+
+
 def _read_head(path: str, limit_s: float) -> list:
     """The snapshots of the log's first ``limit_s`` seconds (a CSV is read no further; JSON lines whole)."""
     import csv
@@ -478,6 +489,7 @@ def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_
         rows_out.extend(rows)
     out = {"log": path, "driver": setup.driver, **summarize(rows)}
     out["by_kind"] = {k: summarize([r for r in rows if r["kind"] == k]) for k in ("single", "pair")}
+    out["worst"] = worst(rows)
     out["store_verdicts"] = dict(_REPLAY.verdicts)
     out["setup"] = {k: getattr(setup, k) for k in Setup.__slots__}
     return out

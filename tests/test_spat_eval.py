@@ -198,6 +198,25 @@ def test_the_new_keys_count_the_rows(short, monkeypatch):
         assert out["time_lost_over_60s"] == len([r for r in lost if r["regular_delay_s"] <= 60.0]) <= len(lost)
         assert sum(out["by_kind"][k]["time_lost_over_60s"] for k in ("single", "pair")) == out["time_lost_over_60s"]
         assert out["store_verdicts"].get("ok", 0) > 0
+        bad = [r for r in rows if r["time_lost_s"] > 60.0 or r["cost_usd"] > 1.1 * r["regular_cost_usd"]]
+        assert sorted((w["groups"], w["entry_unix_s"]) for w in out["worst"]) == sorted((r["groups"], r["entry_unix_s"]) for r in bad)
+
+
+def test_worst_lists_the_approaches_behind_the_counts_longest_loss_first():
+    """``worst``: every approach losing more than 60 s or costing more than 1.1 times the regular driver, one entry
+    each (groups, entry, time lost, cost against the regular driver, its own delay), the longest time lost first."""
+    def row(groups, entry_s, lost_s, cost_usd, delay_s):
+        return {"groups": groups, "entry_unix_s": entry_s, "time_lost_s": lost_s, "saving_frac": 1.0 - cost_usd / 10.0,
+                "regular_delay_s": delay_s}  # fmt: skip
+
+    rows = [row([1], 100.0, 61.0, 9.0, 0.0),  # a cycle lost, cheaper: listed
+            row([2, 3], 200.0, 5.0, 11.5, 2.0),  # +15 %: listed
+            row([4], 300.0, 59.9, 10.9, 0.0),  # neither: +9 %, 59.9 s
+            row([5], 400.0, 90.0, 12.0, 75.0)]  # both (and the regular driver waited too: still listed)  # fmt: skip
+    out = spat_eval.worst(rows)
+    assert [(w["groups"], w["entry_unix_s"]) for w in out] == [([5], 400.0), ([1], 100.0), ([2, 3], 200.0)]
+    assert [w["cost_frac"] for w in out] == pytest.approx([0.2, -0.1, 0.15])
+    assert [w["regular_delay_s"] for w in out] == [75.0, 0.0, 2.0]
 
 
 def test_spat_eval_reads_our_json_lines_logs_as_the_csv(short, tmp_path, monkeypatch):
