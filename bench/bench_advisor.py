@@ -35,7 +35,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from advisory.advice.advisor import AdvisorMemory, AdvisorParams, advise  # noqa: E402
+from advisory.advice.advisor import advise  # noqa: E402
+from advisory.advice.views import AdvisorMemory, AdvisorParams  # noqa: E402
 from advisory.drivers.closed_loop import DriverModel, evaluate, hindsight_optimum, observe, red_light_violations, simulate  # noqa: E402
 from advisory.optimizer.dp import GridSpec  # noqa: E402
 from spat_feed.transport.actuated import ActuatedFeed, actuated_scenario, random_case  # noqa: E402

@@ -33,7 +33,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from advisory.advice.advisor import AdvisorParams  # noqa: E402
+from advisory.advice.views import AdvisorParams  # noqa: E402
 from advisory.drivers.closed_loop import DRIVERS, red_light_violations, simulate  # noqa: E402
 from advisory.signals import PAPER_SPACINGS_M, PAPER_TIMINGS_S, paper_scenario  # noqa: E402
 from spat_feed.transport.actuated import random_case, safety_events  # noqa: E402

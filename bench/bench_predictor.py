@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from advisory.advice.advisor import AdvisorMemory, Observation, advise
+from advisory.advice.advisor import advise
+from advisory.advice.views import AdvisorMemory, Observation
 from spat_feed.prediction.observe import IntersectionHistory, PlanReading, light_view
 from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.timing.messages import plan_from_movement, to_unix_s

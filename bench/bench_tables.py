@@ -25,7 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from advisory.advice.advisor import AdvisorMemory, advise  # noqa: E402
+from advisory.advice.advisor import advise  # noqa: E402
+from advisory.advice.views import AdvisorMemory  # noqa: E402
 from advisory.advice.tables import AdviceTables, TableGrid, paper_offsets_s  # noqa: E402
 from advisory.drivers.closed_loop import observe, red_light_violations, simulate  # noqa: E402
 from advisory.physics.params import model_params  # noqa: E402

@@ -88,7 +88,7 @@ from pathlib import Path
 
 import numpy as np
 
-from advisory.advice.advisor import AdvisorParams, LightView, Observation
+from advisory.advice.views import AdvisorParams, LightView, Observation
 from advisory.drivers.closed_loop import DRIVERS, hindsight_optimum, red_light_violations, simulate
 from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import score_in_end_state

@@ -23,7 +23,9 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
-from advisory.advice.advisor import Advice, AdvisorParams, advise, published_speed_mps
+from advisory.advice.advisor import advise
+from advisory.advice.views import Advice, AdvisorParams
+from advisory.advice.wording import published_speed_mps
 from advisory.evaluation.track import RED_TOLERANCE_M
 from advisory.physics.params import VEHICLE_PRESETS
 from spat_feed.road.corridors import Corridor

@@ -21,7 +21,8 @@ import numpy as np
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
-from advisory.advice.advisor import AdvisorParams, LightView, Observation, advise
+from advisory.advice.advisor import advise
+from advisory.advice.views import AdvisorParams, LightView, Observation
 from advisory.physics.params import model_params
 from spat_feed.road.corridors import Corridor, load_corridor, load_corridor_dir
 

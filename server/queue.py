@@ -36,7 +36,7 @@ import math
 from bisect import bisect_left, insort
 from dataclasses import replace
 
-from advisory.advice.advisor import Advice, AdvisorParams, Observation
+from advisory.advice.views import Advice, AdvisorParams, Observation
 from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, held_up,
                                    normal_drive_s, said_truly, seen_at_line, tail_glide)
 from server.queue_store import SharedBoard

@@ -11,7 +11,7 @@ from typing import Literal
 
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
-from advisory.advice.advisor import ACTIONS, REASONS
+from advisory.advice.views import ACTIONS, REASONS
 
 SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew", "queue")
 """Reasons the service decides itself (``server.advising.SERVER_PHRASES``): pauses, and ``queue`` (queue-aware advice:

@@ -18,7 +18,7 @@ import uuid
 from array import array
 from typing import TYPE_CHECKING
 
-from advisory.advice.advisor import Advice, AdvisorMemory
+from advisory.advice.views import Advice, AdvisorMemory
 from spat_feed.road.corridors import Corridor
 from spat_feed.transport.scenarios import FeedScenario
 

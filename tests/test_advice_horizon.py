@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from advisory.advice.advisor import AdvisorMemory, AdvisorParams, LightView, Observation, REASONS, advise
+from advisory.advice.advisor import advise
+from advisory.advice.views import REASONS, AdvisorMemory, AdvisorParams, LightView, Observation
 
 V = 50 / 3.6
 P = AdvisorParams(units="kmh")

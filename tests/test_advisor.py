@@ -8,20 +8,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from advisory.advice.advisor import (
-    KEEP_MODES,
-    MODE_CODES,
-    Advice,
-    AdvisorMemory,
-    AdvisorParams,
-    LightView,
-    Observation,
-    advise,
-    coast_profile,
-    crossing_time_s,
-    phrase,
-)
-from advisory.advice.advisor import _coast_arrays, _line_speeds_mps, _normal_drive_s
+from advisory.advice.advisor import advise
+from advisory.advice.kinematics import KEEP_MODES, MODE_CODES, coast_arrays, coast_profile, crossing_time_s, line_speeds_mps, normal_crossing_s
+from advisory.advice.views import Advice, AdvisorMemory, AdvisorParams, LightView, Observation
+from advisory.advice.wording import phrase
 from advisory.drivers.closed_loop import DriverModel, evaluate, observe, red_light_violations, simulate
 from advisory.physics.params import PAPER_54KWH, SPEED_LIMIT_MPS, model_params
 from advisory.signals import paper_scenario
@@ -212,7 +202,7 @@ def test_randomized_closed_loop_never_runs_a_red_nor_advises_above_the_limit(x, 
 def _simulated_crossing(d_m, v0, vt, mode, params=P, dt=1e-3):
     """Brute force: step the motion crossing_time_s assumes (reaction, then the speed change, then hold or
     coast). Returns (time, speed) at the line; (inf, 0) if the car stops short."""
-    from advisory.advice.advisor import coast_decel_mps2
+    from advisory.advice.kinematics import coast_decel_mps2
 
     x, v, t = 0.0, v0, 0.0
     while x < d_m:
@@ -249,8 +239,8 @@ def test_crossing_time_matches_a_brute_force_simulation(mode, d_m, v0, vt):
         assert np.isinf(got)
     else:
         assert got == pytest.approx(want, abs=0.02)
-    args = (P.reaction_s, P.comfort_decel_mps2, P.firm_decel_mps2, P.comfort_accel_mps2, *_coast_arrays(P.vehicle))
-    assert _line_speeds_mps(d_m, v0, np.array([vt]), MODE_CODES[mode], *args)[0] == pytest.approx(v_line, abs=0.02)
+    args = (P.reaction_s, P.comfort_decel_mps2, P.firm_decel_mps2, P.comfort_accel_mps2, *coast_arrays(P.vehicle))
+    assert line_speeds_mps(d_m, v0, np.array([vt]), MODE_CODES[mode], *args)[0] == pytest.approx(v_line, abs=0.02)
 
 
 def test_virtual_driver_goes_on_against_a_red_that_ends_before_it_arrives():
@@ -524,7 +514,7 @@ def test_under_uncertain_timing_no_time_is_given_up_before_a_green_ends():
     coasting = AdvisorMemory(last=Advice("coast", "green_wave", 38 / 3.6, True, 13.0), spoken=None)
     adv = advise(Observation(v, limit, (green,)), coasting, AdvisorParams(units="kmh"))[0]
     assert (adv.action, adv.reason, adv.message) == ("none", "tight_green", "Red in 19 seconds. Drive normally.")
-    assert _normal_drive_s(145.0, Observation(v, limit, (green,)), P) < 19.4 - P.reaction_s
+    assert normal_crossing_s(145.0, Observation(v, limit, (green,)), P) < 19.4 - P.reaction_s
     at_limit = advise(Observation(limit, limit, (replace(green, distance_m=200.0),)), coasting, AdvisorParams(units="kmh"))[0]
     assert (at_limit.action, at_limit.target_speed_mps) == ("cruise", limit)  # at the limit: holding it is the normal drive
     lifted = AdvisorMemory(last=Advice("coast", "red_ahead", limit, True, None), spoken=None)

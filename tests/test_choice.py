@@ -13,7 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from advisory.advice import choice
-from advisory.advice.advisor import KEEP_MODES, MODE_CODES, Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise, crossing_time_s
+from advisory.advice.advisor import advise
+from advisory.advice.kinematics import KEEP_MODES, MODE_CODES, crossing_time_s
+from advisory.advice.views import Advice, AdvisorMemory, AdvisorParams, LightView, Observation
 from advisory.evaluation.scoring import score_trace
 from advisory.physics.params import model_params
 
@@ -234,17 +236,17 @@ def _view(distance_m, scenarios, amber_s=0.0):
 def _stop_share(advice, obs):
     """The chance of a stop (with recourse, :func:`choice.expected_costs`) of the advised plan, or of driving normally
     for no speed advice, over the timings the advisor weighs (the forecast's and its wide component)."""
-    from advisory.advice.advisor import _normal_drive_s
-    from advisory.advice.advisor import _timings as advisor_timings
+    from advisory.advice.kinematics import normal_crossing_s
+    from advisory.advice.mixture import mixture_timings
 
     light = obs.lights[0]
     if advice.target_speed_mps is None:
         vt, mode, reaction, accel = obs.speed_limit_mps, "auto", 0.0, PARAMS.normal_accel_mps2
     else:
         vt, mode, reaction, accel = advice.target_speed_mps, KEEP_MODES[advice.action], PARAMS.reaction_s, PARAMS.comfort_accel_mps2
-    windows, weights = advisor_timings(obs.lights[:1])
+    windows, weights = mixture_timings(obs.lights[:1])
     row = choice.ACCEL_COMFORT if accel == PARAMS.comfort_accel_mps2 else choice.ACCEL_NORMAL
-    cross = crossing_time_s(light.distance_m, obs.speed_mps, vt, PARAMS, mode, reaction) if advice.target_speed_mps else _normal_drive_s(light.distance_m, obs, PARAMS)
+    cross = crossing_time_s(light.distance_m, obs.speed_mps, vt, PARAMS, mode, reaction) if advice.target_speed_mps else normal_crossing_s(light.distance_m, obs, PARAMS)
     _, p_stop, _ = choice.expected_costs(np.array([vt]), np.array([MODE_CODES[mode]]), np.array([reaction]), np.array([row]), np.array([accel]),
                                          obs.speed_mps, np.array([light.distance_m]), windows, windows.shape[2], light.distance_m + 100.0, V_LIM,
                                          PARAMS.green_margin_s, LAM, np.array([[cross]]), RATES, COAST, IDLE, 1.5, 3.0, 2.0, PARAMS.reaction_s,
@@ -431,12 +433,12 @@ def test_two_lights_timings_are_all_kept_and_paired_at_no_rank_correlation():
     """Within a light the timings are comonotone; across two lights each keeps all its timings, each once (its own
     law), and they are paired at no rank correlation (a Latin hypercube pairing): a green that comes early at the first
     light does not come with a red that comes early at the second."""
-    from advisory.advice.advisor import _timings as advisor_timings
+    from advisory.advice.mixture import mixture_timings
 
     first, second = _timings(10.0, 30.0, spread_s=10.0), _timings(40.0, 30.0, spread_s=20.0)
     lights = (LightView(1, 150.0, True, 1.0, ((10.0, 60.0),), ((15.0, 45.0),), scenario_red_windows_s=first),
               LightView(2, 450.0, True, 1.0, ((40.0, 90.0),), ((50.0, 80.0),), scenario_red_windows_s=second))  # fmt: skip
-    windows, weights = advisor_timings(lights)
+    windows, weights = mixture_timings(lights)
     n = len(first)
     starts_1, starts_2 = windows[0, :n, 0, 0], windows[1, :n, 0, 0]
     assert starts_1.tolist() == pytest.approx([w[0][0] for w in first])  # the first light's order: its levels
@@ -447,11 +449,11 @@ def test_two_lights_timings_are_all_kept_and_paired_at_no_rank_correlation():
 
 
 def test_timings_handed_over_packed_are_packed_the_same():
-    """A light's timings handed over packed (``advisor.Timings``, as ``light_view`` makes them) give ``_timings`` the
+    """A light's timings handed over packed (``views.Timings``, as ``light_view`` makes them) give ``mixture_timings`` the
     same array, to the last bit, as the same timings as plain tuples: two uncertain lights of unequal window counts (an
     open red, a timing with none), with an exact one, and with a light whose timings are read off its windows."""
-    from advisory.advice.advisor import Timings
-    from advisory.advice.advisor import _timings as advisor_timings
+    from advisory.advice.mixture import mixture_timings
+    from advisory.advice.views import Timings
 
     rng = np.random.default_rng(3)
     first = tuple(((0.0, 10.0 + k), (50.0 + k, 80.0 + 2 * k)) if k % 3 else ((0.0, 10.0 + k),) for k in range(20))
@@ -462,16 +464,16 @@ def test_timings_handed_over_packed_are_packed_the_same():
         plain = (LightView(1, 150.0, True, 0.9, ((0.0, 40.0),), ((0.0, 20.0),), scenario_red_windows_s=first),
                  LightView(2, 450.0, True, 0.7, ((30.0, np.inf),), ((35.0, np.inf),), scenario_red_windows_s=second), *rest)  # fmt: skip
         packed = tuple(replace(v, scenario_red_windows_s=Timings.packed(v.scenario_red_windows_s)) if v.scenario_red_windows_s else v for v in plain)
-        (w0, p0), (w1, p1) = advisor_timings(plain), advisor_timings(packed)
+        (w0, p0), (w1, p1) = mixture_timings(plain), mixture_timings(packed)
         assert w0.shape == w1.shape and w0.tobytes() == w1.tobytes() and p0.tobytes() == p1.tobytes()
 
 
 def _wide_component_plain(timings: tuple) -> tuple:
-    """The plain reading of ``advisor._wide_component`` on tuples (the reference its kernel is checked against): at
+    """The plain reading of ``mixture.wide_component`` on tuples (the reference its kernel is checked against): at
     each of ``WIDE_LEVELS`` the forecast's timing with ``WIDE_STRETCH`` times its spread about the median timing;
     windows pair up by order; a red on now ends no earlier than in every timing; no change before now; a level whose
     stretched reds run into each other keeps its own timing."""
-    from advisory.advice.advisor import IMPLIED_TIMINGS, WIDE_LEVELS, WIDE_STRETCH
+    from advisory.advice.mixture import IMPLIED_TIMINGS, WIDE_LEVELS, WIDE_STRETCH
 
     n = len(timings)
     med, wide, earliest_end = timings[n // 2], [], {}
@@ -492,11 +494,12 @@ def _wide_component_plain(timings: tuple) -> tuple:
 
 
 def test_the_wide_component_is_the_plain_reading_of_its_steps():
-    """``_wide_component`` (a kernel on packed timings) is the plain reading of its steps on the same timings as tuples,
+    """``wide_component`` (a kernel on packed timings) is the plain reading of its steps on the same timings as tuples,
     to the last bit, on 300 random forecasts (seeded: one timing or many, a red on now or not, open reds, timings of
     unequal window counts, stretched reds that run into each other, which keep their own timing); a hand-made case
     holds the plain reading itself."""
-    from advisory.advice.advisor import WIDE_STRETCH, Timings, _wide_component, _wide_levels
+    from advisory.advice.mixture import WIDE_STRETCH, wide_component, wide_levels
+    from advisory.advice.views import Timings
 
     # by hand: 20 timings of one red starting 10 + q s from now and lasting 20 s; the median (q = 10) starts at 20 s;
     # stretched twice: level 1 (q = 1) starts at 20 + 2 (11 - 20) = 2 s, its end 40 + 2 (31 - 40) = 22 s; level 18
@@ -520,9 +523,9 @@ def test_the_wide_component_is_the_plain_reading_of_its_steps():
             timings.append(tuple(windows))
         timings = Timings.packed(tuple(sorted(timings)))
         want = Timings.packed(_wide_component_plain(timings))
-        got = _wide_component(timings.array_s, _wide_levels(n), WIDE_STRETCH)
+        got = wide_component(timings.array_s, wide_levels(n), WIDE_STRETCH)
         assert got[:, : want.array_s.shape[1]].tobytes() == want.array_s.tobytes() and np.isinf(got[:, want.array_s.shape[1] :]).all()
-        kept_own += sum(w == timings[i] for w, i in zip(_wide_component_plain(timings), _wide_levels(n)))
+        kept_own += sum(w == timings[i] for w, i in zip(_wide_component_plain(timings), wide_levels(n)))
     assert kept_own > 30  # (levels that keep their own timing are exercised)
 
 

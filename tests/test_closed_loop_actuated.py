@@ -12,7 +12,7 @@ from advisory.drivers.regular import regular_driver
 from advisory.evaluation.endstate import score_in_end_state
 from advisory.physics.params import model_params
 from advisory.signals import Scenario, paper_scenario
-from advisory.advice.advisor import AdvisorParams
+from advisory.advice.views import AdvisorParams
 from spat_feed.transport.actuated import ActuatedFeed, actuated_scenario, random_case, safety_events
 
 HARD_BRAKE_MPS2 = 4.0
@@ -84,7 +84,7 @@ def test_through_a_dropout_the_driver_keeps_its_plan_and_never_speeds_up_towards
     its plan ("Signal data delayed. Keep to X." or just "Signal data delayed."): the driver goes on with what it was
     told, and never climbs back towards the limit while the red lasts (it did, on "Signal data delayed.": the saving
     was gone and the red met at speed)."""
-    from advisory.advice.advisor import LightView, Observation
+    from advisory.advice.views import LightView, Observation
     from advisory.signals import FixedTimeSignal
 
     v_lim = 50 / 3.6
@@ -126,7 +126,7 @@ def test_a_committed_driver_stops_for_a_red_extended_on_the_display():
     arrived); the controller then held the red 4 s longer, the display said so, the advisor was silent (a short
     wait) and the committed driver rolled over the line 2 s into the red. A driver still facing a red where a stop at
     the line needs 3 m/s² stops (a surprise, as a red outlasting its countdown is), not harder than 4 m/s²."""
-    from advisory.advice.advisor import LightView, Observation
+    from advisory.advice.views import LightView, Observation
     from advisory.signals import TimelineSignal
 
     v_lim, line_m = 50 / 3.6, 60.0

@@ -9,7 +9,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from advisory.advice.advisor import KEEP_MODES, Advice, AdvisorParams, LightView, Observation, advise, crossing_time_s, spoken_speed, time_price
+from advisory.advice.advisor import advise
+from advisory.advice.kinematics import KEEP_MODES, crossing_time_s
+from advisory.advice.views import Advice, AdvisorParams, LightView, Observation, time_price
+from advisory.advice.wording import spoken_speed
 from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s,
                                   pushed_past, said_truly, tail_glide)
 from advisory.advice.queue import GIVE_UP_SLACK_S

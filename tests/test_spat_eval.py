@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import ecodrive.spat_eval as spat_eval
-from advisory.advice.advisor import LightView, Observation
+from advisory.advice.views import LightView, Observation
 from advisory.drivers.closed_loop import DRIVERS, red_light_violations, simulate
 from advisory.drivers.regular import DriverParams, regular_driver
 from advisory.signals import Scenario, TimelineSignal

@@ -8,7 +8,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from advisory.advice.advisor import LightView, Observation
+from advisory.advice.views import LightView, Observation
 from advisory.advice.tables import AdviceTables, TableGrid, _transitions
 from advisory.drivers.closed_loop import observe, red_light_violations, simulate
 from advisory.evaluation.endstate import reacceleration_penalty, score_in_end_state

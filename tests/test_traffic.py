@@ -295,7 +295,7 @@ def test_a_driver_held_back_after_deciding_to_go_stops_while_it_still_can():
     half second): once its arrival at its speed falls less than a second before the red it was shown, it brakes for
     the line, gently, instead of driving on (SUMO then stopped such a car at the line at 22 m/s², paper_s400 at
     600 veh/h; another crossed as the red began)."""
-    from advisory.advice.advisor import Advice, LightView
+    from advisory.advice.views import Advice, LightView
     from ecodrive.traffic.driver import AdvisedDriver, LightNow
 
     driver = AdvisedDriver((100.0,), vid="main.0")
@@ -316,7 +316,7 @@ def test_a_driver_told_to_stop_at_a_light_without_amber_stops_where_it_can(shows
     shows no amber the eye cannot see that red coming, and the driver stops as told, at 2.8 m/s² (the closed loop's
     driver, the same person; traced in SUMO, paper_s400 fixed 600 veh/h, seed 3: its eye went on and car following
     behind a slower car took it 0.5 s into the red); where the light shows an amber, its eye decides: it goes."""
-    from advisory.advice.advisor import Advice, LightView
+    from advisory.advice.views import Advice, LightView
     from ecodrive.traffic.driver import AdvisedDriver, LightNow
 
     lim, line, x = 24.5872, 1000.0, 1000.0 - 110.0

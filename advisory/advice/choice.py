@@ -15,7 +15,7 @@ forecast) and chooses the cheapest in expectation (docs/ADVISOR.md, "Under uncer
   speed), or stopped for when it shows within a comfortable stop, or cleared in its amber when it shows where the car
   can no longer stop for it. "Prepare to stop" is a plan too: the car stops at the line whatever the light shows,
   rolling on only where a red on now ends while it brakes. The timings are the predictor's (quantiles of its
-  forecast) and a wider component of the mixture (:func:`advisory.advice.advisor._wide_component`), each with its
+  forecast) and a wider component of the mixture (:func:`advisory.advice.mixture.wide_component`), each with its
   probability: the outer timings are not the forecast's extremes, and the wide ones weigh the chance of a change
   outside the window the light states.
 * **Cost**: paper Eq. 4 (electricity plus battery wear, :mod:`advisory.physics.model`) of that motion, plus a price

@@ -57,9 +57,11 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from advisory.advice.advisor import (KEEP_MODES, Advice, AdvisorParams, LightView, Observation, _implied_timings, _light_timing, _say_seconds,
-                                     crossing_time_s, phrase)
 from advisory.advice.choice import WAIT_CAP_S
+from advisory.advice.kinematics import KEEP_MODES, crossing_time_s
+from advisory.advice.mixture import implied_timings
+from advisory.advice.views import Advice, AdvisorParams, LightView, Observation, light_timing
+from advisory.advice.wording import phrase, say_seconds
 
 
 @dataclass(frozen=True, slots=True)
@@ -388,7 +390,7 @@ def followers(
 
     Examples
     --------
-    >>> from advisory.advice.advisor import LightView
+    >>> from advisory.advice.views import LightView
     >>> obs = Observation(20.0, 20.0, (LightView(1, 200.0),))
     >>> round(followers(obs, [], arrivals_vps=600 / 3600, connected_share=0.5), 2)
     0.25
@@ -408,7 +410,7 @@ def held_up(obs: Observation, probes: Sequence[Probe], free_at_s: float = 0.0, m
 
     Examples
     --------
-    >>> from advisory.advice.advisor import LightView
+    >>> from advisory.advice.views import LightView
     >>> held_up(Observation(20.0, 20.0, (LightView(1, 200.0),)), [Probe(-100.0, 20.0), Probe(-30.0, 20.0), Probe(10.0, 20.0)])
     (Probe(ahead_m=-30.0, speed_mps=20.0),)
     """
@@ -478,7 +480,7 @@ def _held(light: LightView, clear_s: tuple[float, float], after_red_s: tuple[flo
             return _held_until(windows, red[1] + after_red_s[0] + (after_red_s[1] - after_red_s[0]) * level)
         return _held_until(windows, fast + (slow - fast) * level if math.isfinite(slow) else (fast if level == 0.0 else slow))
 
-    timings = light.scenario_red_windows_s or _implied_timings(light)
+    timings = light.scenario_red_windows_s or implied_timings(light)
     n = len(timings)
     return replace(light, red_windows_s=until(light.red_windows_s, 0.0), likely_red_windows_s=until(light.likely_red_windows_s, 0.5),
                    late_red_windows_s=until(light.late_red_windows_s, 1.0),
@@ -787,7 +789,7 @@ def queue_phrase(advice: Advice, queue_s: float | None, units: str) -> str:
     >>> queue_phrase(Advice("stop", "red_ahead", 0.0, light_ahead=2), 12.0, "mph"), queue_phrase(Advice("none", "red_ahead"), None, "mph")
     ('Second light: queue ahead clears in 12 seconds. Prepare to stop.', 'Queue ahead.')
     """
-    when = _say_seconds(queue_s)
+    when = say_seconds(queue_s)
     head = f"Queue ahead clears in {when}." if when else "Queue ahead."
     if advice.light_ahead == 2:
         head = f"Second light: q{head[1:]}"
@@ -825,7 +827,7 @@ def said_truly(advice: Advice, real: Sequence[LightView], held: Sequence[LightVi
     i = next((k for k, light in enumerate(held) if light.intersection_id == advice.light_id), None)
     if i is None or i >= len(real) or real[i] == held[i]:
         return advice
-    red, to_change = _light_timing(real[i])
+    red, to_change = light_timing(real[i])
     counted = advice.seconds_to_change_s
     queue_s = counted if advice.light_red and counted is not None and (not red or to_change is None or counted > to_change + 0.5) else None
     out = replace(advice, light_red=red, seconds_to_change_s=to_change)
@@ -907,7 +909,7 @@ def tail_glide(obs: Observation, est: QueueEstimate, advice: Advice, params: Adv
         target += params.speed_step_mps
     if best is None or light.is_red_at(crossing_time_s(light.distance_m, v, best, params, "brake")):  # never planned into a red
         return None
-    red, to_change = _light_timing(light)
+    red, to_change = light_timing(light)
     action = "slow_down" if best < v - params.hysteresis_mps else "cruise"
     out = Advice(action, "queue", best, light_red=red, seconds_to_change_s=to_change, light_id=light.intersection_id, current_speed_mps=v)
     return replace(out, message=queue_phrase(out, 0.5 * (fast + slow), params.units), speak=True)

@@ -31,7 +31,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from advisory.advice.advisor import Advice, AdvisorMemory, AdvisorParams, LightView, Observation, advise, coast_decel_mps2
+from advisory.advice.advisor import advise
+from advisory.advice.kinematics import coast_decel_mps2
+from advisory.advice.views import Advice, AdvisorMemory, AdvisorParams, LightView, Observation
 from advisory.drivers.regular import DriverParams
 from advisory.signals import FixedTimeSignal, Scenario, Signal, TimelineSignal
 from advisory.trajectory import Trajectory

@@ -28,7 +28,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from advisory.advice.advisor import Advice, AdvisorParams, LightView, coast_decel_mps2
+from advisory.advice.kinematics import coast_decel_mps2
+from advisory.advice.views import Advice, AdvisorParams, LightView
 from advisory.advice.queue import QueueModel
 from advisory.drivers.closed_loop import DriverModel, _silent, _time_to_cover_s, belief
 from advisory.drivers.regular import time_to_cover_s

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from advisory.advice.advisor import AdvisorParams
+from advisory.advice.views import AdvisorParams
 from server.advising import approach_m
 from spat_feed.road.corridors import Corridor
 from spat_feed.timing.plans import FixedTimePlan

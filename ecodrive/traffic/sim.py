@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from advisory.advice.advisor import Advice, AdvisorParams
+from advisory.advice.views import Advice, AdvisorParams
 from ecodrive.traffic.driver import AdvisedDriver, LightNow
 from ecodrive.traffic.network import DRIVEN_VTYPE, TrafficNetwork, write_routes
 from spat_feed.timing.plans import PhaseClass, phase_class

@@ -1,4 +1,4 @@
-"""From a matched GPS fix and SPaT plans to the advisor's :class:`~advisory.advice.advisor.Observation`.
+"""From a matched GPS fix and SPaT plans to the advisor's :class:`~advisory.advice.views.Observation`.
 
 Pure: the bridge between ``spat_feed`` (plans on the Unix time axis) and ``advisory`` (lights ahead, times
 relative to the fix). No clock, no I/O.
@@ -54,7 +54,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from advisory.advice.advisor import AdvisorParams, LightView, Observation, Timings
+from advisory.advice.views import AdvisorParams, LightView, Observation, Timings
 from spat_feed.prediction.predictor import (
     EXACT_S,
     SCORE_AHEAD_S,
@@ -924,7 +924,7 @@ def _scenario_windows(phases, t_unix_s: float, horizon_s: float, widen_s: float 
     ``q`` of :data:`SCENARIO_LEVELS`, then moved ``widen_s`` earlier and :func:`_widened` by it, then the published red
     held (``hold_s``, ``red_now``), as the other views (:func:`_view_windows`); the instants of all of them read at once
     (:func:`_level_picks`), the windows made at once (:func:`_made_windows`) and handed to the advisor packed
-    (:class:`~advisory.advice.advisor.Timings`)."""
+    (:class:`~advisory.advice.views.Timings`)."""
     blocking = [(start, end) for cls, start, end in phases if cls in BLOCKING_CLASSES]
     if blocking:
         starts = np.array([_level_picks(start) for start, _ in blocking]).T - t_unix_s

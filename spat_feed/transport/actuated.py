@@ -18,7 +18,7 @@ Pure (no clock, no I/O except :func:`fit_switches`, which reads recordings). Thr
   ``maxEnd`` is pushed ``late_push_s`` ahead, as the recorded controller does. :class:`ActuatedFeed` turns
   that into J2735 events (:func:`spat_feed.timing.messages.movement_events`), reads them back as a receiver does
   (:func:`spat_feed.timing.messages.plan_from_movement`) and gives the advisor its
-  :class:`~advisory.advice.advisor.Observation` through :func:`spat_feed.prediction.observe.light_view`, with dropouts
+  :class:`~advisory.advice.views.Observation` through :func:`spat_feed.prediction.observe.light_view`, with dropouts
   (no message: the last one ages and goes stale), a skewed feed clock (the receiver is told only a bound,
   ``clock_uncertainty_s``) and what the receiver learnt of each intersection beforehand (``IntersectionHistory``:
   the light's phases, and with a :func:`conflicting_light` the changes of that stage its phases follow).
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from advisory.advice.advisor import LightView, Observation
+from advisory.advice.views import LightView, Observation
 from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
 from advisory.trajectory import Trajectory
 from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec

@@ -22,7 +22,7 @@ import httpx
 import numpy as np
 import pytest
 
-from advisory.advice.advisor import spoken_speed
+from advisory.advice.wording import spoken_speed
 from replay.trace_io import read_gps_csv
 from server.routes.webapp import DEMO_TRACE, STATIC_DIR
 from spat_feed.road.corridors import load_corridor

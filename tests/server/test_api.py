@@ -15,8 +15,9 @@ from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 from hypothesis import given, settings as hsettings, strategies as st
 
-from advisory.advice import advisor
-from advisory.advice.advisor import AdvisorMemory, LightView, Observation, advise
+from advisory.advice import advisor, views
+from advisory.advice.advisor import advise
+from advisory.advice.views import AdvisorMemory, LightView, Observation
 from server.app import create_app
 from server.config import Settings
 from server.schemas import AdviceOut
@@ -84,7 +85,7 @@ def test_every_action_and_reason_the_advisor_writes_is_in_the_schema():
     assert {"coast", "slow_down", "brake_to", "stop", "none"} <= actions  # the scan finds them
     assert actions <= {a.value for a in Action} and reasons - {"last"} <= {r.value for r in Reason}, (actions, reasons)
     schema = AdviceOut.model_json_schema()
-    assert set(schema["$defs"]["Action"]["enum"]) == set(advisor.ACTIONS)
+    assert set(schema["$defs"]["Action"]["enum"]) == set(views.ACTIONS)
 
 
 @hsettings(max_examples=150, deadline=None)

@@ -7,7 +7,7 @@ import asyncio
 
 import pytest
 
-from advisory.advice.advisor import AdvisorParams
+from advisory.advice.views import AdvisorParams
 from server.advising import Engine, approach_m
 from server.config import Settings
 from server.gps import Fix

@@ -22,7 +22,8 @@ import re
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings as hsettings, strategies as st
 
-from advisory.advice.advisor import AdvisorMemory, AdvisorParams, LightView, Observation, advise
+from advisory.advice.advisor import advise
+from advisory.advice.views import AdvisorMemory, AdvisorParams, LightView, Observation
 from server.advising import lights_station
 from server.app import create_app
 from server.config import Settings

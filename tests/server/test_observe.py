@@ -144,7 +144,8 @@ from spat_feed.prediction.observe import LATE_QUANTILE, PhaseHistory  # noqa: E4
 from spat_feed.timing.plans import PhaseClass  # noqa: E402
 from spat_feed.timing.messages import MovementEvent, MovementState, TimeChangeDetails, UNSTATED_CONFIDENCE_FRAC  # noqa: E402
 from spat_feed.timing.messages import from_unix_s  # noqa: E402
-from advisory.advice.advisor import LightView, Observation, advise  # noqa: E402
+from advisory.advice.advisor import advise  # noqa: E402
+from advisory.advice.views import LightView, Observation  # noqa: E402
 
 RED, GREEN = S.STOP_AND_REMAIN, S.PROTECTED_MOVEMENT_ALLOWED
 
@@ -725,7 +726,7 @@ def test_the_views_and_timings_are_made_as_the_views_own_steps_make_them():
     array the timings carry is their tuples'."""
     import numpy as np
 
-    from advisory.advice.advisor import Timings
+    from advisory.advice.views import Timings
     from spat_feed.prediction.observe import N_SCENARIOS, _merged, _scenario_windows, _view_windows, _widened, _windows
 
     def steps(windows, u, hold, red_now):

@@ -8,7 +8,7 @@ import types
 
 import pytest
 
-from advisory.advice.advisor import LightView, Observation
+from advisory.advice.views import LightView, Observation
 from advisory.advice.queue import Probe, estimate
 from server.queue import MAX_AGE_S, QueueBoard, probe_at
 from server.queue_store import Corridors, Noted

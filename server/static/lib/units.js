@@ -63,7 +63,7 @@ export function unitsParameter(schema, units) {
 }
 
 /**
- * A speed in whole units, as the service speaks it (`advisory.advice.advisor.spoken_speed`, the same
+ * A speed in whole units, as the service speaks it (`advisory.advice.wording.spoken_speed`, the same
  * operations): down to 0.01 m/s as the API publishes it (a no-op on its numbers), converted, halves up.
  */
 export function speedIn(speed_mps, units) {

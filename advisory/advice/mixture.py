@@ -1,0 +1,178 @@
+"""The lights' timings as the choice under uncertainty prices them (:func:`mixture_timings`): each uncertain light's
+forecast (its equally likely timings, stated or read off its windows: :func:`implied_timings`) and a wide component
+(:func:`wide_component`) weighted by the chance of a change outside the window the light states, the lights' timings
+paired at no rank correlation. Packed for :func:`advisory.advice.choice.expected_costs` (docs/ADVISOR.md, "The choice
+on the distribution").
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from advisory.advice.views import LightView, Timings, packed_windows_s
+
+
+IMPLIED_TIMINGS = 20
+"""Timings read off a view that states none (:func:`implied_timings`). [-]"""
+
+
+def implied_timings(light: LightView) -> tuple:
+    """Equally likely timings of a light whose view gives its (earliest, likely, latest) windows but no timings: each
+    change read as uniform on each side of its likely instant (half the chance either side), as the observation reads a
+    published window without a forecast (``spat_feed.prediction.observe._pick``); the likely windows alone when the
+    views do not pair up. An exact light: its windows, in every timing."""
+    likely, sure = light.likely_red_windows_s, light.red_windows_s
+    if likely is None:
+        return (sure,) * IMPLIED_TIMINGS
+    late = light.late_red_windows_s or tuple((a, b) for (a, _), (_, b) in zip(likely, sure))  # no latest start stated: the likely one
+    if not len(likely) == len(sure) == len(late):
+        return (likely,) * IMPLIED_TIMINGS
+    out = []
+    for k in range(IMPLIED_TIMINGS):
+        q = (k + 0.5) / IMPLIED_TIMINGS
+        side = (lambda lo, mid, hi: lo + (mid - lo) * q / 0.5) if q <= 0.5 else (lambda lo, mid, hi: mid + (hi - mid) * (q - 0.5) / 0.5 if math.isfinite(hi) else hi)
+        out.append(tuple((side(s0, l0, t0), max(side(l1, l1, s1), side(s0, l0, t0))) for (s0, s1), (l0, l1), (t0, _) in zip(sure, likely, late)))
+    return tuple(out)
+
+
+WIDE_LEVELS = (1, 6, 13, 18)
+"""The forecast's timings (of :data:`IMPLIED_TIMINGS`, by index: levels ~0.08, 0.33, 0.68, 0.93) that the wide
+component of the mixture stretches (:func:`wide_component`). [-]"""
+WIDE_STRETCH = 2.0
+"""How much farther from the median timing the wide component puts each change: a copy of the forecast with twice its
+spread. [-]"""
+
+
+@lru_cache(maxsize=16)
+def wide_levels(n: int) -> np.ndarray:
+    """The indices of :data:`WIDE_LEVELS` among ``n`` timings (:func:`wide_component`)."""
+    return np.array([round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS], dtype=np.int64)
+
+
+@njit(cache=True, error_model="numpy")
+def wide_component(timings, levels, stretch):
+    """The wide component of one light's mixture: a copy of the forecast's equally likely timings (packed: ``timings``
+    (n, k, 2), each timing's windows in order, padded with +inf) with ``stretch`` (:data:`WIDE_STRETCH`) times its
+    spread about its median timing, at the ``levels`` (:func:`wide_levels`, one timing each), so that the outer timings
+    are not the forecast's extremes (a forecast from a few dozen past phases is its sample: a change outside every
+    timing came 7-10 s past the outer ones on the recorded controllers). Its weight is the chance of a change outside
+    the window the light states (:func:`mixture_timings`). Windows pair up by their order (the k-th red of each timing; one
+    past the median's horizon stays as it is). A red on now never ends earlier than in every timing (the published red
+    is held: the safety rule); no change comes before now; a level whose stretched reds run into each other is that
+    level's own timing. Returns (len(levels), k, 2), padded with +inf (``tests/test_choice.py`` holds the plain
+    reading of these steps, on tuples). [s]"""
+    n, k = timings.shape[0], timings.shape[1]
+    out = np.full((levels.size, k, 2), np.inf)
+    med = n // 2
+    c_med = 0
+    while c_med < k and np.isfinite(timings[med, c_med, 0]):  # (a window's start is finite; a pad's is inf)
+        c_med += 1
+    for li in range(levels.size):
+        i = levels[li]
+        c = 0
+        while c < k and np.isfinite(timings[i, c, 0]):
+            c += 1
+        into_each_other = False
+        for w in range(c):
+            a, b = timings[i, w, 0], timings[i, w, 1]
+            am, bm = (timings[med, w, 0], timings[med, w, 1]) if w < c_med else (a, b)
+            b2 = bm + stretch * (b - bm) if np.isfinite(b) and np.isfinite(bm) else b
+            if a <= 0.0:  # red on now: its end no earlier than every timing says
+                e = np.inf
+                for r in range(n):
+                    if timings[r, w, 1] < e:
+                        e = timings[r, w, 1]
+                a2, b2 = a, (e if e > b2 else b2)
+            else:
+                a2 = am + stretch * (a - am) if np.isfinite(a) and np.isfinite(am) else a
+                if np.isfinite(a) and np.isfinite(am) and 0.0 > a2:
+                    a2 = 0.0
+                if a2 > b2:
+                    b2 = a2
+            out[li, w, 0], out[li, w, 1] = a2, b2
+            if w > 0 and a2 < out[li, w - 1, 1]:
+                into_each_other = True
+        if into_each_other:
+            out[li, :c] = timings[i, :c]
+    return out
+
+
+def _resampled(timings: tuple, n: int) -> tuple:
+    """``n`` of the equally likely ``timings``, evenly by level (the same ones where there are ``n``)."""
+    return timings if len(timings) == n else tuple(timings[k * len(timings) // n] for k in range(n))
+
+
+GOLDEN_FRAC = (math.sqrt(5.0) - 1.0) / 2.0
+"""The golden ratio's fraction: the most evenly spread sequence ``k * GOLDEN_FRAC mod 1`` (Weyl), by which
+:func:`_paired` orders a light's timings. [-]"""
+
+
+@lru_cache(maxsize=16)
+def _paired(n: int, j: int) -> np.ndarray:
+    """The order in which light ``j``'s ``n`` equally likely timings (sorted by level) meet the first light's k-th:
+    the first light's own order, and for the next lights a fixed permutation at no rank correlation with it, so each
+    light's timings are all there, each once, as in a Latin hypercube pairing (M. D. McKay, R. J. Beckman and W. J.
+    Conover, Technometrics 21, 1979, doi:10.2307/1268522), with no chance drawn (the advice is the same on the same
+    readings).
+
+    Examples
+    --------
+    >>> _paired(5, 0).tolist(), sorted(_paired(5, 1).tolist())
+    ([0, 1, 2, 3, 4], [0, 1, 2, 3, 4])
+    """
+    order = np.arange(n) if j == 0 else np.argsort(((np.arange(n) + 0.5) * GOLDEN_FRAC * j) % 1.0, kind="stable")
+    order.setflags(write=False)  # (cached: shared by every call)
+    return order
+
+
+def mixture_timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The lights' timings packed for :func:`advisory.advice.choice.expected_costs`: red windows (lines, timings, k, 2),
+    padded with +inf, and each timing's weight (timings,), summing to 1. An exact light has one timing in all of them.
+
+    The mixture of each uncertain light: its forecast (equally likely timings, ``LightView.scenario_red_windows_s`` or
+    read off its windows, :func:`implied_timings`), and the wide component (:func:`wide_component`) weighted by the
+    chance that a change comes outside the window the light states: ``1 - confidence_frac`` (J2735: the probability
+    that the change comes within it; the lowest of the lights planned for). Within a light the timings are comonotone
+    (every change at one level of its forecast: a red that comes late ends late); across lights they are paired at no
+    rank correlation (:func:`_paired`): two lights' changes are not one forecast's (the k-th of each, comonotone, made a
+    green that comes early at the first light always come with a red that comes early at the second: docs/ADVISOR.md).
+    The wide components pair up as they are."""
+    uncertain = [light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in lights]
+    forecast = [light.scenario_red_windows_s or implied_timings(light) if u else implied_timings(light) for light, u in zip(lights, uncertain)]
+    n_fc = max(len(timings) for timings in forecast)
+    forecast = [_resampled(timings, n_fc) for timings in forecast]
+    if any(uncertain):  # each light's parts: its forecast as paired, then its wide component
+        per_light = [(_paired_timings(fc, n_fc, j) if u else fc,
+                      wide_component(fc.array_s if isinstance(fc, Timings) else packed_windows_s(fc, _most_windows(fc)), wide_levels(n_fc), WIDE_STRETCH)
+                      if u else fc[:1] * len(WIDE_LEVELS))
+                     for j, (fc, u) in enumerate(zip(forecast, uncertain))]  # fmt: skip
+        stated = min(light.confidence_frac for light, u in zip(lights, uncertain) if u)
+        outside = min(max(1.0 - stated, 1.0 / n_fc), 1.0)
+        weights = np.concatenate((np.full(n_fc, (1.0 - outside) / n_fc), np.full(len(WIDE_LEVELS), outside / len(WIDE_LEVELS))))
+    else:
+        per_light, weights = [(fc,) for fc in forecast], np.full(n_fc, 1.0 / n_fc)
+    k = max(max(_most_windows(part) for parts in per_light for part in parts), 1)
+    out = np.full((len(lights), weights.size, k, 2), np.inf)
+    for i, parts in enumerate(per_light):
+        n = 0
+        for part in parts:
+            block = part if isinstance(part, np.ndarray) else packed_windows_s(part, k)
+            out[i, n : n + len(block), : block.shape[1]] = block
+            n += len(block)
+    return out, weights
+
+
+def _most_windows(timings) -> int:
+    """The most windows of one of the timings (tuples, or packed: ``(timings, k, 2)``)."""
+    return timings.shape[1] if isinstance(timings, np.ndarray) else max((len(w) for w in timings), default=0)
+
+
+def _paired_timings(timings: tuple, n: int, j: int):
+    """Light ``j``'s ``n`` timings in the order :func:`_paired` gives: packed where they come packed (:class:`Timings`),
+    else as a tuple."""
+    order = _paired(n, j)
+    return timings.array_s[order] if isinstance(timings, Timings) else tuple(timings[i] for i in order)
