@@ -38,6 +38,28 @@ def test_concurrent_calls_share_one_connection_and_get_their_own_replies(store):
     asyncio.run(run())
 
 
+def test_a_call_alone_leaves_at_once_and_a_turns_calls_behind_it_leave_together(store):
+    """A lone call is written before ``call`` first yields (no loop turn, and its poll, before the write); the calls
+    made while it is in flight leave in one write at the end of the turn; the replies keep their order."""
+
+    async def run() -> None:
+        pipe = RedisPipe(store.url, 10.0)
+        assert await pipe.call("PING") == b"PONG"  # connected
+        conn = pipe._conn
+        writes: list[bytes] = []
+        write = conn.transport.write
+        conn.transport.write = lambda data: (writes.append(data), write(data))[1]
+        first = asyncio.ensure_future(pipe.call("INCR", "n"))
+        await asyncio.sleep(0)  # the call runs to its first await: written there, not queued
+        assert len(writes) == 1 and b"INCR" in writes[0] and not conn.out
+        rest = [asyncio.ensure_future(pipe.call("INCR", "n")) for _ in range(40)]
+        assert await asyncio.gather(first, *rest) == list(range(1, 42))
+        assert len(writes) == 2 and writes[1].count(b"INCR") == 40, [w.count(b"INCR") for w in writes]
+        await pipe.close()
+
+    asyncio.run(run())
+
+
 def test_scripts_are_sent_whole_when_redis_does_not_know_them(store):
     script = Script("return {KEYS[1], ARGV[1] + 1}")
 
