@@ -17,15 +17,12 @@ import asyncio
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
-
-import httpx
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from bench._procs import cpu_seconds, free_port  # noqa: E402
+from bench._procs import cpu_seconds, free_port, wait_healthy  # noqa: E402
 from bench.bench_redis_load import run_phones  # noqa: E402
 from bench.bench_scaleout import bench_redis  # noqa: E402
 from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
@@ -48,15 +45,7 @@ def one_row(transport: str, redis_url: str | None, ws: str | None, args, folder:
     cmd = [sys.executable, str(REPO / "bench" / "_floor_app.py"), "--port", str(port), *(["--redis", redis_url] if redis_url else []), *(["--ws", ws] if ws else [])]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=(folder / "floor.log").open("ab"), stderr=subprocess.STDOUT)
     try:
-        deadline = time.monotonic() + 60
-        while True:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError((folder / "floor.log").read_text())
-            try:
-                if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.1)
+        wait_healthy(proc, port, folder / "floor.log", 60.0)
         trips = asyncio.run(create_trips(port, args.phones))
         marks: list[float] = []
         out = run_phones(port, trips, positions, [[3.0, args.phones], [args.seconds, args.phones]], folder / "phones.json", lambda: marks.append(cpu_seconds(proc.pid)), transport)

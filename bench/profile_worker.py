@@ -23,13 +23,12 @@ import time
 from collections import Counter
 from pathlib import Path
 
-import httpx
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from bench._procs import cpu_seconds, free_port  # noqa: E402
+from bench._procs import cpu_seconds, free_port, wait_healthy  # noqa: E402
 from bench.bench_redis_load import TRANSPORTS, run_phones  # noqa: E402
 from bench.bench_scaleout import OPEN, bench_redis  # noqa: E402
 from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
@@ -78,15 +77,7 @@ def sample(store: str, transport: str, redis_url: str, args, folder: Path, posit
     cmd = [sys.executable, str(REPO / "bench" / "_sampled_server.py"), "--port", str(port), "--log-level", "warning", "--no-access-log", "--workers", "1"]
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=(folder / f"service-{store}.log").open("wb"), stderr=subprocess.STDOUT)
     try:
-        deadline = time.monotonic() + 120
-        while True:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError((folder / f"service-{store}.log").read_text())
-            try:
-                if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.2)
+        wait_healthy(proc, port, folder / f"service-{store}.log")
         trips = asyncio.run(create_trips(port, args.phones))
         marks: list[tuple[float, float]] = []
         load = {}
