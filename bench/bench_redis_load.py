@@ -21,7 +21,11 @@ within one run, not across runs.
 corridor's traffic; with Redis every worker's probes shared, ``server/queue_store.py``), ``both`` each service with it
 off, then on, in one run.
 
-    .venv/bin/python bench/bench_redis_load.py [--low 500] [--high 2000] [--seconds 10] [--workers 2] [--queue-aware off|on|both]
+``--transport ws`` sends the same fixes on each trip's WebSocket stream, as the app does (``bench/_phones.py``
+``StreamPhone``: a real ``websockets`` client, every answer checked as a REST one); ``both`` runs REST, then the
+stream, on the same service.
+
+    .venv/bin/python bench/bench_redis_load.py [--low 500] [--high 2000] [--seconds 10] [--workers 2] [--queue-aware off|on|both] [--transport http|ws|both]
 """
 
 from __future__ import annotations
