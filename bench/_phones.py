@@ -159,43 +159,80 @@ class OpenRun(Run):
 
 
 class StreamPhone:
-    """A phone on the WebSocket stream (as the app sends its fixes): a fix per tick, answers in order, several
-    in flight when the service is slow (each one's latency from its own tick)."""
+    """A phone on the WebSocket stream (as the app sends its fixes, ``server/static/lib/api.js``): the same fixes as
+    :class:`Phone`'s, a fix per tick, answers in order, several in flight when the service is slow (each one's
+    latency from its own tick). Every answer is checked as a REST one is: an advisory of this trip is a 200, an
+    error object gives its ``status`` and kind, anything else counts as an error (status 0). A stream the service
+    closes is opened again at the next tick (the fixes then in flight are lost: errors), as the app does."""
 
     def __init__(self, run: StreamRun, i: int, trip_id: str, token: str) -> None:
         self.run, self.trip_id, self.token = run, trip_id, token
-        self.t0 = time.time() - 7.0 * i
+        self.t0 = time.time() - 7.0 * i  # where along its there-and-back this phone is (as Car.t0)
         self.ws = None
+        self.opening = False
+        self.advisory = ('{"trip_id":"%s",' % trip_id).encode()  # how every advisory of this trip begins
         self.pending: deque[float] = deque()  # ticks of the fixes sent, not answered yet
         self.status = 0
         self.sent = 0.0
 
     async def open(self) -> None:
         url = f"ws://127.0.0.1:{self.run.job['port']}/v1/trips/{self.trip_id}/stream"
-        self.ws = await websockets.connect(url, additional_headers={"Authorization": f"Bearer {self.token}"}, compression=None)
-        asyncio.get_running_loop().create_task(self.receive())
+        self.ws = await websockets.connect(url, additional_headers={"Authorization": f"Bearer {self.token}"}, compression=None, max_queue=None)
+        asyncio.get_running_loop().create_task(self.receive(self.ws))
+
+    async def reopen(self) -> None:
+        try:
+            await self.open()
+        except (OSError, websockets.WebSocketException):
+            pass  # tried again at the next tick
+        finally:
+            self.opening = False
 
     def tick(self, due: float) -> None:
         if self.ws is None:
+            if not self.opening and not self.run.stopping:
+                self.opening = True
+                asyncio.get_running_loop().create_task(self.reopen())
             return
         if self.pending:
             self.run.late += 1
         now = time.time()
         lat, lon = self.run.positions[int(SPEED_MPS * (now - self.t0)) % len(self.run.positions)]
         self.pending.append(due)
-        asyncio.get_running_loop().create_task(self.ws.send('{"t_unix_s":%.3f,"lat_deg":%.7f,"lon_deg":%.7f,"speed_mps":%.1f,"accuracy_m":4.0}' % (now, lat, lon, SPEED_MPS)))
+        asyncio.get_running_loop().create_task(self.ws.send(b'{"t_unix_s":%.3f,"lat_deg":%.7f,"lon_deg":%.7f,"speed_mps":%.1f,"accuracy_m":4.0}' % (now, lat, lon, SPEED_MPS), text=True))
 
-    async def receive(self) -> None:
+    async def receive(self, ws) -> None:
         try:
-            async for message in self.ws:
+            while True:
+                message = await ws.recv(decode=False)  # bytes, as a REST body
                 now = time.perf_counter()
+                if not self.pending:  # an answer to no fix: the service said something unasked (a replaced stream's notice)
+                    continue
                 self.sent = self.pending.popleft()
-                error = '"error"' in message[:40]
-                self.status = int(message.rsplit('"status":', 1)[1].strip(" }")) if error else 200
-                self.run.answered(self, message.encode() if error else b"", now)
+                if message.startswith(self.advisory):
+                    self.status, body = 200, b""
+                else:
+                    self.status, body = _error_status(message), message
+                self.run.answered(self, body, now)
         except websockets.ConnectionClosed:
+            pass
+        if self.ws is ws:
+            self.ws = None
             if not self.run.stopping:
                 self.run.lost += 1
+                now = time.perf_counter()
+                while self.pending:  # the fixes in flight are lost: errors
+                    self.sent, self.status = self.pending.popleft(), 0
+                    self.run.answered(self, b"", now)
+
+
+def _error_status(message: bytes) -> int:
+    """The ``status`` of a stream's error object (0: not one)."""
+    try:
+        out = json.loads(message)
+        return int(out["status"]) if isinstance(out, dict) and "error" in out else 0
+    except (ValueError, KeyError, TypeError):
+        return 0
 
 
 class StreamRun(OpenRun):

@@ -45,3 +45,19 @@ def machine_cpu_s() -> dict[str, float]:
     hz = os.sysconf("SC_CLK_TCK")
     user, nice, system, idle, iowait, irq, softirq, steal = ticks
     return {"busy": (user + nice + system + irq + softirq) / hz, "idle": (idle + iowait) / hz, "steal": steal / hz}
+
+
+def wait_healthy(proc, port: int, log_path: Path, limit_s: float = 120.0) -> None:
+    """Wait until the service ``proc`` started answers ``GET /health`` on ``port`` with 200; RuntimeError with its
+    log (``log_path``) if it exits or does not within ``limit_s``."""
+    import httpx
+
+    deadline = time.monotonic() + limit_s
+    while True:
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(log_path.read_text())
+        try:
+            if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).status_code == 200:
+                return
+        except httpx.HTTPError:
+            time.sleep(0.1)

@@ -21,7 +21,11 @@ within one run, not across runs.
 corridor's traffic; with Redis every worker's probes shared, ``server/queue_store.py``), ``both`` each service with it
 off, then on, in one run.
 
-    .venv/bin/python bench/bench_redis_load.py [--low 500] [--high 2000] [--seconds 10] [--workers 2] [--queue-aware off|on|both]
+``--transport ws`` sends the same fixes on each trip's WebSocket stream, as the app does (``bench/_phones.py``
+``StreamPhone``: a real ``websockets`` client, every answer checked as a REST one); ``both`` runs REST, then the
+stream, on the same service.
+
+    .venv/bin/python bench/bench_redis_load.py [--low 500] [--high 2000] [--seconds 10] [--workers 2] [--queue-aware off|on|both] [--transport http|ws|both]
 """
 
 from __future__ import annotations
@@ -51,6 +55,8 @@ TARGET_P99_S = 0.100
 """Latency target at the low load, and what "recovered" means after the high load. [s]"""
 WINDOW_S = 0.5
 """Recovery is judged on windows of this many seconds of ticks. [s]"""
+TRANSPORTS = {"http": ("http",), "ws": ("ws",), "both": ("http", "ws")}
+"""``--transport``: how the phones send their fixes, in the order run (``both``: REST then WebSocket, same service)."""
 
 
 def pct_ms(a, q: float) -> float:
@@ -90,14 +96,21 @@ def recovery_s(t, lat, ok, drop_s: float, end_s: float, before_p99_s: float) -> 
 
 
 def one_service(name: str, env: dict, workers: int, redis: RedisServer, args, folder: Path, positions) -> None:
+    """Start the service, create ``--high`` trips, then run the phases once per transport of ``--transport`` on it."""
     port = free_port()
     with running_service(port, folder / f"service-{workers}-{'ECO_STORE_URL' in env}.log", env, workers) as proc:
         trips = asyncio.run(create_trips(port, args.high))
-        marks = []
-        load_avg = os.getloadavg()[0]
-        phases = [[3.0, args.low], [args.seconds, args.low], [args.seconds, args.high], [args.seconds, args.low]]
-        out = run_phones(port, trips, positions, phases, folder / "phones.json",
-                         lambda: marks.append((tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s(), time.perf_counter())), args.transport)  # fmt: skip
+        for transport in TRANSPORTS[args.transport]:
+            marks = []
+            load_avg = os.getloadavg()[0]
+            phases = [[3.0, args.low], [args.seconds, args.low], [args.seconds, args.high], [args.seconds, args.low]]
+            out = run_phones(port, trips, positions, phases, folder / "phones.json",
+                             lambda: marks.append((tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s(), time.perf_counter())), transport)  # fmt: skip
+            report(f"{name}, {'REST' if transport == 'http' else 'WebSocket'}", out, marks, load_avg, workers, args)
+
+
+def report(name: str, out: dict, marks: list, load_avg: float, workers: int, args) -> None:
+    """Print one run of the phases (``out``: the phones' records; ``marks``: CPU samples at the phases' edges)."""
     if os.environ.get("BENCH_KEEP"):
         Path(os.environ["BENCH_KEEP"]).with_suffix(f".{workers}.json").write_text(json.dumps(out))
     t, lat = np.asarray(out["t"]), np.asarray(out["lat_s"])
@@ -146,7 +159,8 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0, help="length of each measured phase [s]")
     ap.add_argument("--workers", type=int, default=2, help="Redis: worker processes")
     ap.add_argument("--only", choices=["memory", "redis"], help="run one service only")
-    ap.add_argument("--transport", choices=["http", "ws"], default="http", help="fixes as REST POSTs (default) or on each trip's WebSocket stream, as the app sends them")
+    ap.add_argument("--transport", choices=sorted(TRANSPORTS), default="http", help="fixes as REST POSTs (default), on each trip's WebSocket stream "
+                    "as the app sends them, or both, one after the other on the same service")  # fmt: skip
     ap.add_argument("--queue-aware", choices=["off", "on", "both"], help="queue-aware advice (ECO_QUEUE_AWARE) off, on, or each service both ways; "
                     "default: as the environment says (off)")  # fmt: skip
     args = ap.parse_args()

@@ -6,7 +6,7 @@ then samples its CPU over ``--seconds``; each sample is put in the part of a fix
 first rule, from the innermost frame out, that names one of its frames), and the worker's CPU per fix (from /proc) is
 shared out by the samples. Read the two columns against each other: the machine is shared (its load is printed).
 
-    .venv/bin/python bench/profile_worker.py [--phones 500] [--seconds 20] [--queue-aware off|on]
+    .venv/bin/python bench/profile_worker.py [--phones 500] [--seconds 20] [--queue-aware off|on] [--transport http|ws|both]
 """
 
 from __future__ import annotations
@@ -23,14 +23,13 @@ import time
 from collections import Counter
 from pathlib import Path
 
-import httpx
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from bench._procs import cpu_seconds, free_port  # noqa: E402
-from bench.bench_redis_load import run_phones  # noqa: E402
+from bench._procs import cpu_seconds, free_port, wait_healthy  # noqa: E402
+from bench.bench_redis_load import TRANSPORTS, run_phones  # noqa: E402
 from bench.bench_scaleout import OPEN, bench_redis  # noqa: E402
 from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
 from spat_feed.road.corridors import load_corridor  # noqa: E402
@@ -39,8 +38,13 @@ PARTS = (  # (part, frames that put a sample in it): a sample goes to the innerm
     ("HTTP: request parsed (uvicorn, httptools)", ("server/protocol.py:data_received", "server/protocol.py:on_headers_complete", "server/protocol.py:on_message_complete")),
     ("HTTP: response written (starlette Response, uvicorn send, socket)", ("starlette/responses.py:__call__",)),
     ("ASGI layers (uvicorn proxy headers, FastAPI, error and limit middleware, fix lane)", ("uvicorn/protocols/http/httptools_impl.py:run_asgi",)),
+    ("WebSocket: message read (uvicorn websockets-sansio: frame parsed, queued)", ("uvicorn/protocols/websockets/websockets_sansio_impl.py:data_received",
+                                                                                    "uvicorn/protocols/websockets/websockets_sansio_impl.py:receive")),
+    ("WebSocket: answer written (frame built, socket)", ("uvicorn/protocols/websockets/websockets_sansio_impl.py:send",)),
+    ("WebSocket: ASGI layers (starlette WebSocket, FastAPI wrappers)", ("starlette/websockets.py:receive", "starlette/websockets.py:send",
+                                                                         "starlette/_exception_handler.py:sender")),
     ("metrics (requests, fixes, advice)", ("server/middleware.py:_count", "server/metrics.py:observe_advice")),
-    ("fix body parsed (pydantic)", ("server/routes/trips.py:parse",)),
+    ("fix body parsed (pydantic)", ("server/routes/trips.py:parse", "server/routes/stream.py:_parse")),
     ("store: token checked, trip loaded, held", ("server/store.py:for_fix", "server/store.py:authorize", "server/store.py:__aenter__", "server/store.py:__aexit__", "server/store.py:hold")),
     ("store: state encoded, script call, reply (Python)", ("server/store.py:save",)),
     ("Redis: commands written (socket send)", ("server/redispipe.py:flush",)),
@@ -51,7 +55,7 @@ PARTS = (  # (part, frames that put a sample in it): a sample goes to the innerm
     ("queue board (queue-aware advice)", ("server/queue.py:see", "server/queue.py:check")),
     ("advice (advisor)", ("advisory/advice/advisor.py:advise",)),
     ("advisory built (the response's dict, on_fix's own lines)", ("server/advising.py:on_fix",)),
-    ("fix route, apply_fix (the rest)", ("server/routes/trips.py:post_fix", "server/advising.py:apply_fix")),
+    ("fix route or stream loop, apply_fix (the rest)", ("server/routes/trips.py:post_fix", "server/routes/stream.py:stream", "server/advising.py:apply_fix")),
     ("queue board shared through Redis (background sync)", ("server/queue_store.py:sync",)),
 )
 
@@ -64,7 +68,7 @@ def part_of(stack: list[str]) -> str:
     return "event loop, other tasks (outside a request)"
 
 
-def sample(store: str, redis_url: str, args, folder: Path, positions) -> tuple[Counter, float, int, dict]:
+def sample(store: str, transport: str, redis_url: str, args, folder: Path, positions) -> tuple[Counter, float, int, dict]:
     port = free_port()
     out = folder / f"samples-{store}.json"
     env = {**os.environ, "ECO_CORRIDORS": CORRIDOR, "ECO_DEFAULT_CORRIDOR": CORRIDOR, "ECO_SPEECH": "false", "ECO_BENCH_SAMPLES": str(out),
@@ -73,15 +77,7 @@ def sample(store: str, redis_url: str, args, folder: Path, positions) -> tuple[C
     cmd = [sys.executable, str(REPO / "bench" / "_sampled_server.py"), "--port", str(port), "--log-level", "warning", "--no-access-log", "--workers", "1"]
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=(folder / f"service-{store}.log").open("wb"), stderr=subprocess.STDOUT)
     try:
-        deadline = time.monotonic() + 120
-        while True:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError((folder / f"service-{store}.log").read_text())
-            try:
-                if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.2)
+        wait_healthy(proc, port, folder / f"service-{store}.log")
         trips = asyncio.run(create_trips(port, args.phones))
         marks: list[tuple[float, float]] = []
         load = {}
@@ -94,7 +90,7 @@ def sample(store: str, redis_url: str, args, folder: Path, positions) -> tuple[C
             elif len(marks) == 3:
                 os.kill(proc.pid, signal.SIGUSR2)
 
-        res = run_phones(port, trips, positions, [[3.0, args.phones], [args.seconds, args.phones]], folder / "phones.json", mark)
+        res = run_phones(port, trips, positions, [[3.0, args.phones], [args.seconds, args.phones]], folder / "phones.json", mark, transport)
         deadline = time.monotonic() + 10
         while not out.exists() and time.monotonic() < deadline:
             time.sleep(0.1)
@@ -114,25 +110,28 @@ def main() -> int:
     ap.add_argument("--phones", type=int, default=500)
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--queue-aware", choices=["off", "on"], default="off")
+    ap.add_argument("--transport", choices=sorted(TRANSPORTS), default="http", help="fixes as REST POSTs (default), on each trip's WebSocket stream, "
+                    "or both (a worker per store and transport, one after the other)")  # fmt: skip
     args = ap.parse_args()
     corridor = load_corridor(CORRIDOR)
     there = [corridor.position(float(s)) for s in range(int(corridor.length_m))]
     positions = there + there[::-1]
     rows = {}
     with bench_redis() as (folder, redis):
-        for store in ("memory", "redis"):
-            rows[store] = sample(store, redis.url, args, folder, positions)
-    print(f"profile_worker: {args.phones} phones at 1 fix/s, 1 worker, queue-aware {args.queue_aware}, {args.seconds:g} s sampled per store")
-    for store, (counts, cpu_s, n, load) in rows.items():
-        print(f"  {store:6s}: {n} fixes, worker CPU {1e3 * cpu_s:.3f} ms per fix, {sum(counts.values())} samples, load average {load.get('before', float('nan')):.2f}")
-    print(f"  {'us per fix':>10s} {'memory':>7s} {'Redis':>7s}  part")
+        for transport in TRANSPORTS[args.transport]:
+            for store in ("memory", "redis"):
+                rows[store, transport] = sample(store, transport, redis.url, args, folder, positions)
+    print(f"profile_worker: {args.phones} phones at 1 fix/s, 1 worker, queue-aware {args.queue_aware}, {args.seconds:g} s sampled per store and transport")
+    for (store, transport), (counts, cpu_s, n, load) in rows.items():
+        print(f"  {store:6s} {transport:4s}: {n} fixes, worker CPU {1e3 * cpu_s:.3f} ms per fix, {sum(counts.values())} samples, load average {load.get('before', float('nan')):.2f}")
+    columns = list(rows)
+    print(f"  {'us per fix':>10s} " + " ".join(f"{s[:5] + ' ' + ('REST' if t == 'http' else 'WS'):>10s}" for s, t in columns) + "  part")
     names = [name for name, _ in PARTS] + ["event loop, other tasks (outside a request)"]
-    share = {store: {k: 1e6 * cpu_s * v / max(sum(counts.values()), 1) for k, v in counts.items()} for store, (counts, cpu_s, _, _) in rows.items()}
-    for name in sorted(names, key=lambda k: -share["redis"].get(k, 0.0)):
-        a, b = share["memory"].get(name, 0.0), share["redis"].get(name, 0.0)
-        if a or b:
-            print(f"  {'':>10s} {a:7.1f} {b:7.1f}  {name}")
-    print(f"  {'':>10s} {sum(share['memory'].values()):7.1f} {sum(share['redis'].values()):7.1f}  all")
+    share = {key: {k: 1e6 * cpu_s * v / max(sum(counts.values()), 1) for k, v in counts.items()} for key, (counts, cpu_s, _, _) in rows.items()}
+    for name in sorted(names, key=lambda k: -share[columns[-1]].get(k, 0.0)):
+        if any(share[c].get(name) for c in columns):
+            print(f"  {'':>10s} " + " ".join(f"{share[c].get(name, 0.0):10.1f}" for c in columns) + f"  {name}")
+    print(f"  {'':>10s} " + " ".join(f"{sum(share[c].values()):10.1f}" for c in columns) + "  all")
     return 0
 
 

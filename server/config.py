@@ -93,7 +93,7 @@ class Settings(BaseSettings):
     store_prefix: str = Field(default="eco", min_length=1, description="prefix of the store's Redis keys (several services on one Redis)")
     store_timeout_s: float = Field(default=2.0, gt=0, description="a Redis call failing for this long answers 503 + Retry-After [s]")
     store_write_window_s: float = Field(default=0.0, ge=0, le=0.05, description="a worker's Redis commands wait up to this long to be written together "
-                                        "(fewer system calls per fix under load, each answer that much later; 0: at the end of the event loop's turn) [s]")
+                                        "(fewer system calls per fix under load, each answer that much later; 0: at once when none is in flight, else at the end of the event loop's turn) [s]")
 
     # limits
     max_trips: int = Field(default=20_000, ge=1)

@@ -15,6 +15,7 @@ from server.app import create_app
 from server.config import Settings
 from server.protocol import protocol_class
 from server.quotas import anonymous_allowed, key_quotas
+from server.ws import IMPLEMENTATION as WS_IMPLEMENTATION
 
 log = logging.getLogger("server")
 
@@ -115,7 +116,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--port", type=int, default=8000)
     parser.add_argument("--workers", type=int, default=1, help="worker processes (default 1); more need ECO_STORE_URL (trips in Redis, shared by the workers)")
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
-    parser.add_argument("--ws", default="websockets-sansio", choices=["auto", "websockets", "websockets-sansio", "wsproto"], help="uvicorn WebSocket implementation")
+    parser.add_argument("--ws", default="ecodrive", choices=["ecodrive", "auto", "websockets", "websockets-sansio", "wsproto"],
+                        help="WebSocket implementation: ecodrive (default: uvicorn's websockets-sansio reading a few messages ahead, server.ws) or one of uvicorn's")  # fmt: skip
     parser.add_argument("--no-access-log", action="store_true", help="do not log every request")
     parser.add_argument("--ssl-certfile", help="serve HTTPS with this certificate (PEM): phones give a page GPS only over https (docs/APP.md)")
     parser.add_argument("--ssl-keyfile", help="the certificate's private key (PEM)")
@@ -132,7 +134,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         port=args.port,
         log_level=args.log_level,
         access_log=not args.no_access_log,
-        ws=args.ws,
+        ws=WS_IMPLEMENTATION if args.ws == "ecodrive" else args.ws,
         ws_max_size=max(settings.ws_max_frame_bytes, settings.ws_max_message_bytes),  # above ws_max_message_bytes: a 413 message (server.routes.stream)
         ws_per_message_deflate=False,
         timeout_keep_alive=settings.keep_alive_s,

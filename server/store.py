@@ -36,7 +36,7 @@ the trip's last request (up to ``touch_every_s`` later: the idle clock is reset 
   (:class:`server.queue_store.SharedBoard`, over this store's connection).
 
 Each call is one round trip (a Lua script, atomic in Redis; a fix's write is 3 commands in it) over the worker's
-one pipelined connection (:class:`server.redispipe.RedisPipe`: the calls of one event-loop turn in one write). A worker keeps the trips it served in a small
+one pipelined connection (:class:`server.redispipe.RedisPipe`: a call alone written at once, the calls of one event-loop turn behind it in one write). A worker keeps the trips it served in a small
 cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
 version it was computed from (one round trip); a trip not cached, or whose version moved (another worker
 served it), is read first (two). Within a worker, fixes of one trip are serialised (:meth:`RedisTrips.hold`);

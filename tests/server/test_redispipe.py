@@ -38,6 +38,28 @@ def test_concurrent_calls_share_one_connection_and_get_their_own_replies(store):
     asyncio.run(run())
 
 
+def test_a_call_alone_leaves_at_once_and_a_turns_calls_behind_it_leave_together(store):
+    """A lone call is written before ``call`` first yields (no loop turn, and its poll, before the write); the calls
+    made while it is in flight leave in one write at the end of the turn; the replies keep their order."""
+
+    async def run() -> None:
+        pipe = RedisPipe(store.url, 10.0)
+        assert await pipe.call("PING") == b"PONG"  # connected
+        conn = pipe._conn
+        writes: list[bytes] = []
+        write = conn.transport.write
+        conn.transport.write = lambda data: (writes.append(data), write(data))[1]
+        first = asyncio.ensure_future(pipe.call("INCR", "n"))
+        await asyncio.sleep(0)  # the call runs to its first await: written there, not queued
+        assert len(writes) == 1 and b"INCR" in writes[0] and not conn.out
+        rest = [asyncio.ensure_future(pipe.call("INCR", "n")) for _ in range(40)]
+        assert await asyncio.gather(first, *rest) == list(range(1, 42))
+        assert len(writes) == 2 and writes[1].count(b"INCR") == 40, [w.count(b"INCR") for w in writes]
+        await pipe.close()
+
+    asyncio.run(run())
+
+
 def test_scripts_are_sent_whole_when_redis_does_not_know_them(store):
     script = Script("return {KEYS[1], ARGV[1] + 1}")
 
@@ -97,10 +119,11 @@ def test_password_and_database_from_the_url_and_a_wrong_password_is_unreachable(
 
 
 def test_a_busy_worker_is_not_an_unreachable_store(store):
-    """The worker's loop turn lasts longer than the timeout between a call and the end of the turn, when the turn's
-    commands are written (a CPU-bound turn, as under load): Redis has not even been asked yet, so the call must get
-    its reply, not a TimeoutError (issue 30: 526 "store unreachable" at 2,000 phones while Redis sat idle). On uvloop,
-    which runs due timers before the rest of the ready callbacks of the next turn."""
+    """The worker's loop turn lasts longer than the timeout after its calls were made (a CPU-bound turn, as under
+    load): the one written at once is answered in the turn's poll, and the one queued behind it is not written before
+    the turn's end, so Redis has not even been asked yet: both must get their replies, not a TimeoutError (issue 30:
+    526 "store unreachable" at 2,000 phones while Redis sat idle). On uvloop, which runs due timers before the rest of
+    the ready callbacks of the next turn."""
     import time
 
     uvloop = pytest.importorskip("uvloop")
@@ -108,10 +131,10 @@ def test_a_busy_worker_is_not_an_unreachable_store(store):
     async def run() -> None:
         pipe = RedisPipe(store.url, 0.3)
         assert await pipe.call("SET", "k", "v") == b"OK"  # connected
-        call = asyncio.ensure_future(pipe.call("GET", "k"))
-        await asyncio.sleep(0)  # the call's task ran in this turn: its command is queued, to be written at the turn's end
+        calls = [asyncio.ensure_future(pipe.call("GET", "k")) for _ in range(2)]
+        await asyncio.sleep(0)  # both calls' tasks ran in this turn: the first written, the second queued for the turn's end
         time.sleep(1.0)  # the rest of this turn takes 1 s (other requests' work)
-        assert await asyncio.wait_for(call, 30) == b"v"
+        assert await asyncio.wait_for(asyncio.gather(*calls), 30) == [b"v", b"v"]
         await pipe.close()
 
     uvloop.run(run())
