@@ -714,7 +714,7 @@ def cut_off(light: LightView, normal_s: float, planned_s: float, followers: floa
 def platoon_through(line_m: float, red_s: float, lead_s, gap_s: float, jam_m: float, first: int = 1, n_max: int = 60) -> int:
     r"""How many cars following a leader, one lane, can cross a line ``line_m`` ahead of the leader (negative: behind
     it) before a red begins at ``red_s`` (from now) [-]: the ``k``-th car behind the leader (``k`` from ``first``)
-    follows it as in Newell's car following [1]_, its trajectory the leader's shifted by ``k`` jam spacings and ``k``
+    follows it as in Newell's car following (G. F. Newell, 2002: the reference of :func:`behind_s`), its trajectory the leader's shifted by ``k`` jam spacings and ``k``
     time gaps, so it is at the line when the leader is ``k`` jam spacings past it, ``k`` gaps later:
 
     .. math:: T_k = t_L(d + k \delta) + k \tau
@@ -724,11 +724,6 @@ def platoon_through(line_m: float, red_s: float, lead_s, gap_s: float, jam_m: fl
     the gap ``gap_s``. A leader driving slowly past a line thins the platoon crossing it behind it: at the limit
     (24.6 m/s) a jam spacing of 7.5 m and a 1.1 s gap let a car over every 1.4 s, at 8 m/s every 2 s. Counted
     until a car misses the red, at most ``n_max``.
-
-    References
-    ----------
-    .. [1] G. F. Newell, "A simplified car-following theory: a lower order model," *Transp. Res. Part B*, vol. 36,
-       no. 3, pp. 195-205, 2002, doi:10.1016/S0191-2615(00)00044-8.
 
     Examples
     --------
