@@ -324,6 +324,10 @@ class QueueBoard:
         paced = paced_for_behind(lambda plan: self.lost_behind(real, plan, params, trip_id, est), obs, advice, params)
         if paced is None:
             return drive_normally(advice, params.units, real.lights[0])
+        if paced is not advice:  # spoken as the advisor speaks a plan: a new action, or a target moved by speak_change_mps
+            told = None if last is None else last.get("target_speed_mps")
+            said = last is not None and last.get("action") == paced.action and told is not None
+            paced = replace(paced, speak=not (said and abs(told - paced.target_speed_mps) < params.speak_change_mps))
         return said_truly(paced, real.lights, obs.lights, params.units)
 
     def lost_behind(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None, est: QueueEstimate | None = None) -> float:

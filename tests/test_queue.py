@@ -700,7 +700,9 @@ def test_the_board_paces_a_plan_that_would_cut_off_the_cars_behind():
     assert lost(8.04) > GIVE_UP_SLACK_S and lost(16.0) > GIVE_UP_SLACK_S
     assert (out.action, out.target_speed_mps) == ("accelerate", published_speed_mps(39 * 0.44704))
     assert lost(out.target_speed_mps) <= GIVE_UP_SLACK_S < lost(38 * 0.44704)
-    assert out.message == "Green in 40 seconds. Speed up to 63 kilometers per hour."
+    assert out.message == "Green in 40 seconds. Speed up to 63 kilometers per hour." and out.speak
+    again = board.check(seen, slow, params, "car", {"action": "accelerate", "target_speed_mps": out.target_speed_mps, "reason": "green_wave"})
+    assert again.target_speed_mps == out.target_speed_mps and not again.speak  # said once, as the advisor says a plan
     alone = QueueBoard(arrivals_vph=900.0, connected_share=1.0)
     seen, _ = alone.see("c", "car", t, obs, passed=passed)
     assert alone.check(seen, slow, params, "car").target_speed_mps == 8.04
