@@ -11,7 +11,9 @@ Follow the car in front." (reason ``queue``); the advisor then plans afresh. Not
 to cross before the next light's red (``QueueEstimate.stop_behind``, :func:`advisory.advice.queue.behind_s`): that
 car is advised by the advisor, which sees the line closed to it until the red's end, and prepares to stop. The trips behind a car are probes too:
 with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
-:meth:`QueueBoard.check` price (docs/TRAFFIC.md, "Queue-aware advice", item 4).
+:meth:`QueueBoard.check` price (docs/TRAFFIC.md, "Queue-aware advice", item 4), and the platoon behind the car at the
+green line it has just passed (the service hands :meth:`QueueBoard.see` that light) and at the next one, which a slow
+plan is not to cut off before the red (:meth:`QueueBoard.lost_behind`; item 5).
 
 On when ``ECO_QUEUE_AWARE=1``; ``ECO_QUEUE_ARRIVALS_VPH`` (the flow arriving at each light per lane, e.g. from
 detector counts) and ``ECO_QUEUE_CONNECTED_SHARE`` (the share of those cars that are connected) let it count the cars

@@ -46,7 +46,9 @@ The cars behind count too (issue 28, item 2: the traffic behind is not to be slo
 cars a slower plan holds up (the connected ones behind it, the others from the flow), the advisor prices time ``1 +
 followers`` times (:func:`advisory.advice.advisor.time_price`), and :func:`gives_up_green` weighs the green a plan gives
 up at each light a normal drive makes by the cars that lose it, and the red each follower it pushes past the end of that
-green waits out (:func:`cut_off`).
+green waits out (:func:`cut_off`). Past a green line the car sets the pace of the platoon behind it (:func:`platoon_through`):
+:func:`cut_behind` prices the cars a slow plan cuts off there before the red, at the line just passed and the next one,
+and :func:`paced_for_behind` raises such a plan to the slowest speed that does not.
 
 Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 """
