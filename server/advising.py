@@ -37,7 +37,7 @@ from server.gps import Fix, RouteMatcher
 from server.queue import QUEUE_MESSAGE, QueueBoard
 from server.queue_store import SharedBoard
 from server.quotas import Creator, address_quota, key_quotas
-from spat_feed.prediction.observe import observation
+from spat_feed.prediction.observe import light_view, observation
 from server.ratelimit import TokenBucket
 from server.schemas import MS_TIMESTAMP_MIN, TripCreate
 from server.spat import ScenarioSpat, SharedSpat, SpatHub, TripSpat
@@ -270,11 +270,13 @@ class Engine:
             if trip.observed is not None and readings:
                 trip.observed.add(fix.t_unix_s, readings)
             # (a fix just past a stop line, within what GPS can tell, is still at it: lights_station)
-            obs = observation(trip.corridor, lights_station(trip.corridor, station, fix.accuracy_m), speed or 0.0, fix.t_unix_s, readings,
+            at_m = lights_station(trip.corridor, station, fix.accuracy_m)
+            obs = observation(trip.corridor, at_m, speed or 0.0, fix.t_unix_s, readings,
                               trip.corridor.advisory_limit_mps(max(station, 0.0), s.speed_limit_mps), on_route=on_route)
             held = None
             if self.queue is not None:  # the lights as the car meets them in traffic, or "follow the car in front"
-                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, trip.last["reason"] if trip.last else None)
+                passed = light_passed(trip.corridor, at_m, speed or 0.0, fix.t_unix_s, readings) if on_route else None
+                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, trip.last["reason"] if trip.last else None, passed)
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
             fresh = self.queue is not None and trip.last is not None and self.queue.fresh(trip.last["reason"])  # out of a queue: plan anew
@@ -346,6 +348,16 @@ def approach_m(corridor: Corridor, params: AdvisorParams, default_limit_mps: flo
     v = corridor.advisory_limit_mps(0.0, default_limit_mps)
     need = v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)
     return float(max(need - corridor.intersections[0].stop_line_m, 0.0))
+
+
+def light_passed(corridor: Corridor, station_m: float | None, speed_mps: float, t_unix_s: float, readings: dict):
+    """The light whose stop line the car passed last (its view: distance negative), where it has a reading: the cars
+    behind still have to cross it (queue-aware advice prices them, :func:`advisory.advice.queue.cut_behind`); None
+    before the first line or where nothing is read."""
+    if station_m is None:
+        return None
+    ix = next((ix for ix in reversed(corridor.intersections) if ix.stop_line_m <= station_m), None)
+    return light_view(ix, readings[ix.id], station_m, t_unix_s, speed_mps=speed_mps) if ix is not None and ix.id in readings else None
 
 
 def lights_station(corridor: Corridor, station_m: float | None, accuracy_m: float | None) -> float | None:

@@ -11,7 +11,9 @@ Follow the car in front." (reason ``queue``); the advisor then plans afresh. Not
 to cross before the next light's red (``QueueEstimate.stop_behind``, :func:`advisory.advice.queue.behind_s`): that
 car is advised by the advisor, which sees the line closed to it until the red's end, and prepares to stop. The trips behind a car are probes too:
 with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
-:meth:`QueueBoard.check` price (docs/TRAFFIC.md, "Queue-aware advice", item 4).
+:meth:`QueueBoard.check` price (docs/TRAFFIC.md, "Queue-aware advice", item 4), and the platoon behind the car at the
+green line it has just passed (the service hands :meth:`QueueBoard.see` that light) and at the next one, which a slow
+plan is not to cut off before the red (:meth:`QueueBoard.lost_behind`; item 5).
 
 On when ``ECO_QUEUE_AWARE=1``; ``ECO_QUEUE_ARRIVALS_VPH`` (the flow arriving at each light per lane, e.g. from
 detector counts) and ``ECO_QUEUE_CONNECTED_SHARE`` (the share of those cars that are connected) let it count the cars
@@ -36,9 +38,9 @@ import math
 from bisect import bisect_left, insort
 from dataclasses import replace
 
-from advisory.advice.views import Advice, AdvisorParams, Observation
-from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, drive_normally, estimate, followers, gives_up_green, held_up,
-                                   normal_drive_s, said_truly, seen_at_line, tail_glide)
+from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
+from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, cut_behind, drive_normally, estimate, followers, gives_up_green, held_up,
+                                   normal_drive_s, paced_for_behind, said_truly, seen_at_line, tail_glide)
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -162,13 +164,18 @@ class QueueBoard:
         self._behind: dict[str, tuple[Probe, ...]] = {}  # trip -> the connected cars its last fix found it holds up (:meth:`check`)
         self._seen: dict[str, tuple[Observation, QueueEstimate]] = {}  # trip -> its last fix's lights as they are, and its queue estimate (:meth:`check`)
         self._for_queue: dict[str, bool] = {}  # trip -> the plan it follows was made for the queue in front (:meth:`check`)
+        self._passed: dict[str, tuple[tuple[LightView, tuple[Probe, ...], PastRed | None], ...]] = {}
+        """trip -> the light it passed last and the next one, each with the connected cars behind that may still cross it
+        in the green the car crosses it in, and the passed one's last red (:meth:`note_behind`, :meth:`cuts_behind`)."""
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
         self.held = 0  # fixes answered "follow the car in front"
 
-    def see(self, corridor: str, trip_id: str, t_unix_s: float, obs: Observation, last_reason: str | None = None) -> tuple[Observation, Advice | None]:
+    def see(self, corridor: str, trip_id: str, t_unix_s: float, obs: Observation, last_reason: str | None = None,
+            passed: LightView | None = None) -> tuple[Observation, Advice | None]:  # fmt: skip
         """Note the car's fix; the observation the advisor should get, or the service's advice for a car in a queue
         or behind a slower one (spoken when the trip's last advice, ``last_reason``, was another). After such advice
-        the advisor plans afresh (:meth:`fresh`)."""
+        the advisor plans afresh (:meth:`fresh`). ``passed``: the light whose line the car passed last (distance
+        negative), for the cars behind that still have to cross it (:meth:`check`)."""
         lane = self.lane(corridor)
         if not obs.on_route or obs.position_m is None or not obs.lights:
             lane.drop(trip_id)
@@ -176,10 +183,12 @@ class QueueBoard:
             self._behind.pop(trip_id, None)
             self._seen.pop(trip_id, None)
             self._for_queue.pop(trip_id, None)
+            self._passed.pop(trip_id, None)
             return obs, None
         here = float(obs.position_m)
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
         lane.expire(t_unix_s, MAX_AGE_S)
+        self.note_behind(lane, trip_id, here, t_unix_s, obs, passed)
         est = self.estimate(lane, here, t_unix_s, obs, self.red_elapsed(obs, t_unix_s))
         return self.answer(trip_id, obs, est, last_reason)
 
@@ -209,6 +218,27 @@ class QueueBoard:
             return None
         began, end, jam = ended
         return PastRed(began - t_unix_s, end - t_unix_s, None if math.isnan(jam) else jam)
+
+    def note_behind(self, lane: Lane, trip_id: str, here_m: float, t_unix_s: float, obs: Observation, passed: LightView | None) -> None:
+        """Keep, for :meth:`check`, the lights whose green the cars behind this one still have to cross: the one it
+        passed last (``passed``) and the next one, each with the connected cars behind that can reach its line within
+        its next red's start (none farther than that time at the faster of the limit and the fastest car), and the
+        passed one with its last red seen end (its queue may still be crossing)."""
+        noted = []
+        for light in (passed, obs.lights[0]):
+            if light is None:
+                continue
+            windows = light.red_windows_s if light.likely_red_windows_s is None else light.likely_red_windows_s
+            start = max((a for a, b in windows[:2] if math.isfinite(a)), default=math.inf)  # at most the red after the next one
+            if not 0.0 < start < math.inf:
+                continue
+            reach_m = start * max(lane.top_mps, obs.speed_limit_mps, 1.0) * (1.0 + 1e-9) + 1e-6
+            behind = tuple(p for p in lane.near(here_m, t_unix_s, min(light.distance_m, 0.0) - reach_m, 0.0) if p.ahead_m < 0.0)
+            past = None
+            if light is passed and (ended := self._red_ended.get(light.intersection_id)) is not None:
+                past = PastRed(ended[0] - t_unix_s, ended[1] - t_unix_s, None if math.isnan(ended[2]) else ended[2])
+            noted.append((light, behind, past))
+        self._passed[trip_id] = tuple(noted)
 
     def answer(self, trip_id: str, obs: Observation, est: QueueEstimate, last_reason: str | None) -> tuple[Observation, Advice | None]:
         """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
@@ -292,7 +322,22 @@ class QueueBoard:
         at_line = bool(real.lights) and seen_at_line(real.lights[0], advice, for_queue, obs.speed_mps, obs.speed_limit_mps, params, self.model)
         if at_line or gives_up_green(obs, advice, params, model=self.model, behind=behind, queue=est):
             return drive_normally(advice, params.units, real.lights[0])
-        return said_truly(advice, real.lights, obs.lights, params.units)
+        paced = paced_for_behind(lambda plan: self.lost_behind(real, plan, params, trip_id, est), obs, advice, params)
+        if paced is None:
+            return drive_normally(advice, params.units, real.lights[0])
+        if paced is not advice:  # spoken as the advisor speaks a plan: a new action, or a target moved by speak_change_mps
+            told = None if last is None else last.get("target_speed_mps")
+            said = last is not None and last.get("action") == paced.action and told is not None
+            paced = replace(paced, speak=not (said and abs(told - paced.target_speed_mps) < params.speak_change_mps))
+        return said_truly(paced, real.lights, obs.lights, params.units)
+
+    def lost_behind(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None, est: QueueEstimate | None = None) -> float:
+        """The wait [s] that ``advice`` makes the cars behind lose at the light the car passed last and the next one
+        (:func:`advisory.advice.queue.cut_behind`, the next one behind the queue in front, ``est``), as its last fix
+        found them (:meth:`note_behind`)."""
+        noted = self._passed.get(trip_id, ()) if trip_id is not None else ()
+        return sum(cut_behind(light, obs, advice, params, behind, self.arrivals_vps, self.connected_share, past, self.model, est)
+                   for light, behind, past in noted)  # fmt: skip
 
     @staticmethod
     def fresh(last_reason: str | None) -> bool:
@@ -306,6 +351,7 @@ class QueueBoard:
         self._behind.pop(trip_id, None)
         self._seen.pop(trip_id, None)
         self._for_queue.pop(trip_id, None)
+        self._passed.pop(trip_id, None)
 
     def state(self) -> str:
         """Where the probes come from (``/health``): ``local`` (this process, which serves every trip), ``shared``

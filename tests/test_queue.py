@@ -12,9 +12,9 @@ import pytest
 from advisory.advice.advisor import advise
 from advisory.advice.kinematics import KEEP_MODES, crossing_time_s
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation, time_price
-from advisory.advice.wording import spoken_speed
-from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, cut_off, estimate, followers, gives_up_green, normal_drive_s,
-                                  pushed_past, said_truly, tail_glide)
+from advisory.advice.wording import published_speed_mps, spoken_speed
+from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, cut_behind, cut_off, estimate, followers, gives_up_green,
+                                  normal_drive_s, platoon_through, pushed_past, said_truly, tail_glide)
 from advisory.advice.queue import GIVE_UP_SLACK_S
 from server.queue import QueueBoard
 
@@ -642,3 +642,86 @@ def test_a_plan_made_for_the_queue_is_not_held_across_the_line_on_green():
     red = Observation(4.0, 24.6, (light(12.0, ((-20.0, 2.0), (32.0, 62.0))),), position_m=-12.0)
     obs, _ = board.see("c", "car", t + 21.0, red)
     assert board.check(obs, advise(obs, None, params)[0], params, "car").reason == "too_close"
+
+
+@pytest.mark.parametrize("lead_mps", [4.0, 8.0, 16.0, 24.6])
+@pytest.mark.parametrize("line_m", [-30.0, -7.0, 20.0])
+def test_a_platoon_crosses_a_line_behind_a_steady_leader_at_the_congested_flow(lead_mps, line_m):
+    """Behind a leader at a steady speed ``u`` the platoon crosses any line at the flow of the triangular fundamental
+    diagram's congested branch, one car every ``jam / u + gap`` (Newell's car following): before a red ``R`` s from
+    now, the cars whose turn comes earlier, counted from the leader's own crossing ``d / u`` (d: the line's distance)."""
+    gap_s, jam_m, red_s = 1.1, 7.5, 15.3
+    want = math.ceil((red_s - line_m / lead_mps) / (jam_m / lead_mps + gap_s)) - 1
+    assert platoon_through(line_m, red_s, lambda x: x / lead_mps, gap_s, jam_m) == want
+    assert platoon_through(line_m, red_s, lambda x: x / lead_mps, gap_s, jam_m, first=3) == max(want - 2, 0)  # two places taken
+
+
+def test_a_slow_plan_over_a_green_line_prices_the_cars_it_cuts_off_behind_it():
+    """A car 7 m past a line turning red in 15 s (for 30 s), at 9.2 m/s, told to hold 29 km/h (8.04 m/s), four
+    connected cars standing behind the line, 900 veh/h, half connected: behind the plan 8 cars cross before the red,
+    behind a normal drive 9 (:func:`platoon_through`); the four take places 1-4 and the cars not connected, K of them,
+    Poisson with a mean of one per connected car (4, more than the flow's 0.125 x (15 + 0.76) = 2.0), the places from
+    5 on: the ninth is taken when K >= 5, and then waits the red: 30 s x P(K >= 5)."""
+    params = AdvisorParams()
+    passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
+    obs = Observation(9.2, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),))
+    four = [Probe(-7.0 - 7.5 * k, 0.0) for k in (1, 2, 3, 4)]
+    hold = Advice("cruise", "green_wave", 8.04)
+    p_ge_5 = 1.0 - sum(math.exp(-4.0) * 4.0**j / math.factorial(j) for j in range(5))
+    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 0.5) == pytest.approx(30.0 * p_ge_5)
+    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 1.0) == 0.0  # every car connected: nobody beyond the four
+    at_limit = replace(obs, speed_mps=24.58)  # holding the limit: as a normal drive
+    assert cut_behind(passed, at_limit, Advice("cruise", "green_wave", 24.58), params, four, 900 / 3600, 0.5) == 0.0
+    waits = [cut_behind(passed, obs, Advice("cruise", "green_wave", 0.44704 * k), params, four, 900 / 3600, 0.5) for k in range(10, 56)]
+    assert all(a >= b for a, b in zip(waits, waits[1:]))  # the faster the plan, the fewer cut off (what the board's search needs)
+    red = LightView(1, -7.0, red_windows_s=((-1.0, 29.0), (59.0, 89.0)))  # red now: its next green is far off
+    assert cut_behind(red, obs, hold, params, four, 900 / 3600, 0.5) == 0.0
+
+
+def test_the_board_paces_a_plan_that_would_cut_off_the_cars_behind():
+    """The board keeps the light a car passed last with the connected cars behind it (:meth:`QueueBoard.see`'s
+    ``passed``): 7 m past a line turning red in 15 s at 16 m/s, four connected cars standing behind it, 900 veh/h, half
+    connected, told to ease off to 29 km/h for the next light's green: that plan, or holding 16 m/s, cuts the ninth car
+    off (6.4 s expected, more than the 5 s slack); the board raises the plan to the slowest whole mph that does not
+    (39 mph, the wait shrinking as the speed rises), and keeps it as it is where nobody is behind."""
+    params, t = AdvisorParams(units="kmh"), 1000.0
+    passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
+    obs = Observation(16.0, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),), position_m=107.0)
+    board = QueueBoard(arrivals_vph=900.0, connected_share=0.5)
+    for k in range(1, 5):
+        board.see("c", f"q{k}", t, Observation(0.0, 24.6, (LightView(1, 7.5 * k, red_windows_s=((15.0, 45.0),)),), position_m=100.0 - 7.5 * k))
+    seen, _ = board.see("c", "car", t, obs, passed=passed)
+    slow = Advice("ease_off", "green_wave", 8.04, light_red=True, seconds_to_change_s=40.0, light_id=2)
+    out = board.check(seen, slow, params, "car")
+    four = [Probe(-7.0 - 7.5 * k, 0.0) for k in range(1, 5)]
+
+    def lost(v):
+        action = "ease_off" if v < 16.0 - params.hysteresis_mps else ("accelerate" if v > 16.0 + params.hysteresis_mps else "cruise")
+        return cut_behind(passed, obs, replace(slow, action=action, target_speed_mps=v), params, four, 900 / 3600, 0.5)
+
+    assert lost(8.04) > GIVE_UP_SLACK_S and lost(16.0) > GIVE_UP_SLACK_S
+    assert (out.action, out.target_speed_mps) == ("accelerate", published_speed_mps(39 * 0.44704))
+    assert lost(out.target_speed_mps) <= GIVE_UP_SLACK_S < lost(38 * 0.44704)
+    assert out.message == "Green in 40 seconds. Speed up to 63 kilometers per hour." and out.speak
+    again = board.check(seen, slow, params, "car", {"action": "accelerate", "target_speed_mps": out.target_speed_mps, "reason": "green_wave"})
+    assert again.target_speed_mps == out.target_speed_mps and not again.speak  # said once, as the advisor says a plan
+    alone = QueueBoard(arrivals_vph=900.0, connected_share=1.0)
+    seen, _ = alone.see("c", "car", t, obs, passed=passed)
+    assert alone.check(seen, slow, params, "car").target_speed_mps == 8.04
+
+
+def test_in_sumo_a_slow_plan_over_the_first_light_does_not_cut_off_the_cars_behind(tmp_path):
+    """paper_s400 (fixed 30/30, no amber), three cars of the 900 veh/h flow (seed 1's): a connected one reaching the
+    first light 9 s before its red, told to slow for the second light's green, and two behind it (the last connected).
+    Before, the first crossed at 10 m/s and the third was cut off at the first light's red (over it at 106 s against
+    72.5 s unadvised); now every car crosses the first light in the green it crosses it in unadvised."""
+    from ecodrive.traffic.network import build_network
+    from ecodrive.traffic.sim import RunSetup, run
+    from spat_feed.road.corridors import load_corridor
+
+    net = build_network(load_corridor("paper_s400"), tmp_path)
+    setup = RunSetup(900.0, 0.5, 1, 60.0, drain_s=150.0, departures_s=(49.62, 54.41, 54.42), connected=("main.0", "main.2"))
+    first = {mode: {vid: car.crossings[0][1] for vid, car in run(net, setup, mode).cars.items()} for mode in ("advised", "unadvised")}
+    red_s = 76.0  # the first light's red (green 46-76 s)
+    assert all(t < red_s for t in first["unadvised"].values())
+    assert all(t < red_s for t in first["advised"].values()), first

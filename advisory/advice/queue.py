@@ -44,9 +44,11 @@ instead cost the advised cars +49-115 % of time.)
 
 The cars behind count too (issue 28, item 2: the traffic behind is not to be slowed): :func:`followers` expects the
 cars a slower plan holds up (the connected ones behind it, the others from the flow), the advisor prices time ``1 +
-followers`` times (:func:`advisory.advice.advisor.time_price`), and :func:`gives_up_green` weighs the green a plan gives
+followers`` times (:func:`advisory.advice.views.time_price`), and :func:`gives_up_green` weighs the green a plan gives
 up at each light a normal drive makes by the cars that lose it, and the red each follower it pushes past the end of that
-green waits out (:func:`cut_off`).
+green waits out (:func:`cut_off`). Past a green line the car sets the pace of the platoon behind it (:func:`platoon_through`):
+:func:`cut_behind` prices the cars a slow plan cuts off there before the red, at the line just passed and the next one,
+and :func:`paced_for_behind` raises such a plan to the slowest speed that does not.
 
 Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 """
@@ -61,7 +63,7 @@ from advisory.advice.choice import WAIT_CAP_S
 from advisory.advice.kinematics import KEEP_MODES, crossing_time_s
 from advisory.advice.mixture import implied_timings
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation, light_timing
-from advisory.advice.wording import phrase, say_seconds
+from advisory.advice.wording import phrase, published_speed_mps, say_seconds
 
 
 @dataclass(frozen=True, slots=True)
@@ -386,7 +388,7 @@ def followers(
     falls within that window after this car's own. The others are expected from the flow: ``(1 - connected_share) x
     arrivals_vps x`` the window (Poisson arrivals; at 600 veh/h and half of them connected, 0.25 cars within 3 s: one or
     more with probability 1 - exp(-0.25) = 22 %). The advisor prices the time a plan gives up ``1 + followers`` times
-    (:func:`advisory.advice.advisor.time_price`). [-]
+    (:func:`advisory.advice.views.time_price`). [-]
 
     Examples
     --------
@@ -450,7 +452,7 @@ def apply(obs: Observation, est: QueueEstimate) -> Observation:
     crossed, a distribution between the fast and the slow discharge (``est.clear_s``), not one instant:
 
     * each of the light's equally likely timings (``LightView.scenario_red_windows_s``; an exact light's windows in
-      each, :data:`~advisory.advice.advisor.IMPLIED_TIMINGS` of them) is closed until the clearing at its own level,
+      each, :data:`~advisory.advice.mixture.IMPLIED_TIMINGS` of them) is closed until the clearing at its own level,
       uniform from fast to slow, in the timings' order (a timing whose red ends early meets the fast discharge too),
       counted from that timing's own red end where the queue waits for the red (``est.after_red_s``): the choice
       under uncertain timing (:mod:`advisory.advice.choice`) prices a plan on each, so it neither plans into a queue
@@ -711,6 +713,177 @@ def cut_off(light: LightView, normal_s: float, planned_s: float, followers: floa
             return lost
         if planned_s + k * headway_s >= start:
             lost += p_at_least * min(end - start, WAIT_CAP_S)
+
+
+def platoon_through(line_m: float, red_s: float, lead_s, gap_s: float, jam_m: float, first: int = 1, n_max: int = 60) -> int:
+    r"""How many cars following a leader, one lane, can cross a line ``line_m`` ahead of the leader (negative: behind
+    it) before a red begins at ``red_s`` (from now) [-]: the ``k``-th car behind the leader (``k`` from ``first``)
+    follows it as in Newell's car following (G. F. Newell, 2002: the reference of :func:`behind_s`), its trajectory the leader's shifted by ``k`` jam spacings and ``k``
+    time gaps, so it is at the line when the leader is ``k`` jam spacings past it, ``k`` gaps later:
+
+    .. math:: T_k = t_L(d + k \delta) + k \tau
+
+    with :math:`t_L(x)` when the leader's front is :math:`x` ahead of where it is now (``lead_s``, negative for a
+    place it has passed), :math:`d` the line's distance, :math:`\delta` the jam spacing ``jam_m`` and :math:`\tau`
+    the gap ``gap_s``. A leader driving slowly past a line thins the platoon crossing it behind it: at the limit
+    (24.6 m/s) a jam spacing of 7.5 m and a 1.1 s gap let a car over every 1.4 s, at 8 m/s every 2 s. Counted
+    until a car misses the red, at most ``n_max``.
+
+    Examples
+    --------
+    A line 7 m behind a leader, red in 15 s, a 1.1 s gap: behind a leader holding 8 m/s the ``k``-th car is at the line
+    at ``(7.5 k - 7) / 8 + 1.1 k``, 7 cars before the red; behind one at 24.6 m/s, 10.
+
+    >>> platoon_through(-7.0, 15.0, lambda x: x / 8.0, 1.1, 7.5), platoon_through(-7.0, 15.0, lambda x: x / 24.6, 1.1, 7.5)
+    (7, 10)
+    """
+    k = first - 1
+    while k - first + 1 < n_max and lead_s(line_m + (k + 1) * jam_m) + (k + 1) * gap_s < red_s:
+        k += 1
+    return k - first + 1
+
+
+def cut_behind(light: LightView, obs: Observation, advice: Advice, params: AdvisorParams, behind: Sequence[Probe] = (),
+               arrivals_vps: float | None = None, connected_share: float = 1.0, past: PastRed | None = None,
+               model: QueueModel | None = None, queue: QueueEstimate | None = None) -> float:  # fmt: skip
+    """The wait [s] that the cars behind lose at ``light``'s line when the car follows ``advice`` instead of driving
+    normally: the line the car has just passed (``light.distance_m <= 0``: behind it) or the next one ahead (its
+    queue estimate ``queue``), in the green the car crosses it in (issue 28, the traffic behind).
+
+    A car driving slowly over a green line holds the platoon behind it to its pace (:func:`platoon_through`: Newell's
+    shift, the gap that lets a car over every ``fast_headway_s`` behind a leader at the limit, the fast end of the
+    measured discharge: this guards the traffic behind, so the normal drive it is weighed against is not taken
+    slower than it may be), so fewer of them cross before the red than behind the same car driving normally (speeding
+    up to the limit at ``normal_accel_mps2``; both held by the queue in front of the car, :func:`behind_queues_s`, the
+    plan never faster than that drive), and each one cut off waits the red out (its likely timing; at most
+    :data:`advisory.advice.choice.WAIT_CAP_S`). The cars there: the connected ones (``behind``, each where it is now,
+    negative ``ahead_m``) still before the line that reach it before the red by their own normal drive, the ones
+    already past it (they take the first places behind the car), and the cars that are not connected: a Poisson count
+    whose mean is the larger of the flow's, ``(1 - connected_share) x arrivals_vps x`` the time from the car's own
+    crossing to the red, plus, at the line passed, its last red's queue still to cross (``past``, :func:`past_queue`),
+    and the connected cars' own, ``(1 - share) / share`` for each connected car counted (a saturated approach's
+    residual queue is not in the flow's count). The advisor itself prices the time the followers lose at the lights
+    ahead, not the green they lose behind it (:func:`advisory.advice.views.time_price`).
+
+    Traced in SUMO (paper_s400 fixed 900 veh/h, 50 %, seed 1, docs/TRAFFIC.md): cars in the first light's discharging
+    queue, told to hold 26-31 km/h for the second light's queue 400 m on, crossed the first at 8-9 m/s instead of
+    14-18 m/s; the platoon behind them crossed at their pace and the last two to five cars of the green were cut off
+    (a 30 s red each, and the cycle's 30 s green), others' travel time +14 %.
+
+    Examples
+    --------
+    A car 7 m past a line turning red in 15 s (for 30 s), at 9.2 m/s, told to hold 29 km/h; four connected cars
+    standing behind the line (7.5-30 m back), 900 veh/h, half of them connected: the plan lets 8 cars through before
+    the red, a normal drive 9; the ninth place is taken with probability P(K >= 5) = 0.37 (K Poisson, mean 4: a car
+    not connected for each connected one), 11.1 s lost; a tenth of the cars connected, surely taken: the red's 30 s.
+    Nobody behind, every car connected: nothing lost.
+
+    >>> from advisory.advice.views import Advice, AdvisorParams
+    >>> passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
+    >>> obs = Observation(9.2, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),))
+    >>> four, hold = [Probe(-7.0 - 7.5 * k, 0.0) for k in (1, 2, 3, 4)], Advice("cruise", "green_wave", 8.04)
+    >>> [round(cut_behind(passed, obs, hold, AdvisorParams(), four, 900 / 3600, share), 1) for share in (0.5, 0.1)]
+    [11.1, 30.0]
+    >>> cut_behind(passed, obs, hold, AdvisorParams())
+    0.0
+    """
+    target = advice.target_speed_mps
+    if target is None or advice.action not in KEEP_MODES:
+        return 0.0
+    model = model or QueueModel()
+    v, limit, line_m = obs.speed_mps, max(obs.speed_limit_mps, 1.0), light.distance_m
+    mode, pace = KEEP_MODES[advice.action], max(obs.speed_mps, model.queued_mps)
+    gap_s = max(model.fast_headway_s - model.jam_spacing_m / limit, 0.0)
+    held_s, v_held = -math.inf, limit  # the queue in front holds both drives at the line ahead until then, at that speed
+    if line_m > 0.0:
+        fast, slow = cleared_s(light, queue, 0)
+        if slow > 0.0:
+            held_s = fast + model.fast_headway_s if math.isfinite(slow) else math.inf
+            n = queue.cars[0] if queue is not None and queue.cars else 0.0
+            v_held = min(math.sqrt(2.0 * params.normal_accel_mps2 * n * model.jam_spacing_m), limit)
+
+    def normal(x):
+        if x <= 0.0:
+            return x / pace
+        if line_m > 0.0 and x >= line_m and held_s > normal_drive_s(line_m, v, limit, params.normal_accel_mps2):
+            return held_s + normal_drive_s(x - line_m, v_held, limit, params.normal_accel_mps2)
+        return normal_drive_s(x, v, limit, params.normal_accel_mps2)
+
+    def planned(x):
+        return max(float(crossing_time_s(x, v, target, params, mode)), normal(x)) if x > 0.0 else x / pace
+
+    crossed_s = normal(line_m)
+    windows = light.red_windows_s if light.likely_red_windows_s is None else light.likely_red_windows_s
+    start, end = next(((a, b) for a, b in windows if a > max(crossed_s, 0.0)), (math.inf, math.inf))
+    if not math.isfinite(start):
+        return 0.0  # no red known: nobody is cut off by this green's end
+    over = sum(1 for p in behind if line_m < p.ahead_m < 0.0)  # connected, already over the line: the first places
+    there = sum(1 for p in behind if p.ahead_m <= min(line_m, 0.0) and normal_drive_s(line_m - p.ahead_m, p.speed_mps, limit, model.drive_accel_mps2) < start)
+    n_normal = platoon_through(line_m, start, normal, gap_s, model.jam_spacing_m, over + 1)
+    n_plan = platoon_through(line_m, start, planned, gap_s, model.jam_spacing_m, over + 1)
+    if n_plan >= n_normal:
+        return 0.0
+    share = min(max(connected_share, 0.0), 1.0)
+    flow = (1.0 - share) * arrivals_vps * (start - crossed_s) if arrivals_vps else 0.0
+    if flow and past is not None and line_m <= 0.0:
+        flow += past_queue(past, model, arrivals_vps, share, math.inf, 0)[1]
+    unseen = max(flow, (there + over) * (1.0 - share) / share if share > 0.0 else 0.0)
+    # the k-th place behind the line is taken with probability P(there + K >= k), K Poisson with mean ``unseen``
+    cut, p_k, p_at_least = 0.0, math.exp(-unseen), 1.0
+    for k in range(1, n_normal + 1):
+        if k > there:
+            p_at_least -= p_k  # P(K >= j + 1) from P(K >= j), j = k - there - 1
+            p_k *= unseen / (k - there)
+            if p_at_least < 1e-4:
+                break
+        if k > n_plan:
+            cut += 1.0 if k <= there else p_at_least
+    return cut * min(end - start, WAIT_CAP_S)
+
+
+MPH_MPS = 0.44704
+"""One mile per hour, the step of the speeds :func:`paced_for_behind` tries. [m/s]"""
+
+
+def paced_for_behind(lost_s, obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S) -> Advice | None:
+    """``advice`` where the wait it makes the cars behind lose (``lost_s(advice)``, e.g. :func:`cut_behind` summed over
+    the lines they still have to cross) is within ``slack_s``; else the same plan at the slowest speed that keeps it
+    so (whole mph above the plan's, up to the limit; the wait shrinks as the speed rises: the slower the car over a
+    line, the fewer behind it cross): "Hold" it, "Speed up to" it or "Ease off to" it; None where only the limit
+    does (drive normally). The car is advised again at its next fix: once the cars behind are over the line, or
+    its green is over, the advisor's own plan comes back. Before (a plain "drive normally" in its place), the car
+    sped up towards the limit, was told to brake for the plan at its next fix, and so on (traced in SUMO:
+    paper_s400 fixed 900 veh/h, 50 %, the advised cars costlier than unadvised).
+
+    Examples
+    --------
+    >>> from advisory.advice.views import Advice, AdvisorParams
+    >>> obs = Observation(9.0, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),))
+    >>> slow = Advice("ease_off", "green_wave", 6.7, light_red=True, seconds_to_change_s=40.0, light_id=2)
+    >>> out = paced_for_behind(lambda a: 30.0 if a.target_speed_mps < 11.0 else 0.0, obs, slow, AdvisorParams(units="kmh"))
+    >>> out.action, out.target_speed_mps, out.message
+    ('accelerate', 11.17, 'Green in 40 seconds. Speed up to 40 kilometers per hour.')
+    >>> paced_for_behind(lambda a: 0.0, obs, slow, AdvisorParams()) is slow, paced_for_behind(lambda a: 9.0, obs, slow, AdvisorParams())
+    (True, None)
+    """
+    if advice.target_speed_mps is None or advice.action not in KEEP_MODES or lost_s(advice) <= slack_s:
+        return advice
+    v, limit = obs.speed_mps, obs.speed_limit_mps
+
+    def at(target: float) -> Advice:
+        action = "accelerate" if target > v + params.hysteresis_mps else ("ease_off" if target < v - params.hysteresis_mps else "cruise")
+        out = replace(advice, action=action, target_speed_mps=published_speed_mps(target), current_speed_mps=v)
+        return replace(out, message=phrase(out, params.units))
+
+    speeds = [k * MPH_MPS for k in range(math.floor(advice.target_speed_mps / MPH_MPS) + 1, math.ceil(limit / MPH_MPS))]
+    lo, hi = 0, len(speeds)  # the first speed whose wait is within the slack (bisection: it shrinks as the speed rises)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if lost_s(at(speeds[mid])) <= slack_s:
+            hi = mid
+        else:
+            lo = mid + 1
+    return at(speeds[lo]) if lo < len(speeds) and speeds[lo] < limit - params.hysteresis_mps else None
 
 
 def drive_normally(advice: Advice, units: str, light: LightView | None = None) -> Advice:
