@@ -249,6 +249,8 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     last = memory.last
     if any(light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in usable):
         return _choose(obs, usable, last, params, red, to_change)  # uncertain timing: the plan of least expected cost
+    if not _plan_ahead(last, obs):  # the rules keep a plan while it is feasible: not one made for a light now behind
+        last = None
     both = Lines.of(usable)
     if last is not None and last.target_speed_mps is not None and last.action in KEEP_MODES:
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
@@ -325,7 +327,8 @@ def _plan_ahead(last: Advice | None, obs: Observation) -> bool:
     """Whether the plan the driver follows (``last``) is still for a light ahead: the light that set it
     (``Advice.light_id``, the binding light of :func:`_timed`) is one of ``obs.lights``. Over that light's line the
     plan has done its work; kept for the next light ("keep it while it still works"), a speed chosen for the light
-    behind held the car below what the next light asks. Traced in SUMO (7th Street, fixed time, 300 veh/h, 50 %,
+    behind held the car below what the next light asks. (The choice under uncertain timing prices the plan followed
+    against every other, :func:`_choose`: there it stays a candidate.) Traced in SUMO (7th Street, fixed time, 300 veh/h, 50 %,
     seed 1, docs/TRAFFIC.md): "Slow to 25 mph, then coast" for light 1's green, kept 165 m before light 2, whose
     green the limit reaches 4 s after it starts; planned afresh, the advisor says "Hold 30 mph". A plan that names no
     light: kept, as before."""
@@ -358,8 +361,6 @@ def advise(
     """
     memory = memory or AdvisorMemory()
     params = params or AdvisorParams()
-    if not _plan_ahead(memory.last, obs):  # the plan followed was for a light now behind the car: plan afresh
-        memory = AdvisorMemory(spoken=memory.spoken)
     a = _decide(obs, memory, params, tables)
     # (constructor calls, not dataclasses.replace: this runs once a second per car)
     # the light the countdown is about: the next one unless the advice named another (the one after it, ``_timed``)
