@@ -537,3 +537,23 @@ def test_a_plan_is_not_dropped_while_the_driver_still_reacts_to_it():
     kept = advise(later, memory, params)[0]
     assert kept.reason == "green_wave" and kept.target_speed_mps == pytest.approx(limit)  # (was "Red light ahead. Lift off and coast.")
     assert advise(later, AdvisorMemory(), params)[0].reason != "green_wave"  # told nothing before: no racing an uncertain red
+
+
+def test_a_plan_made_for_the_light_behind_is_not_kept_at_the_next():
+    """Over the line of the light a plan was made for, the plan is done: the next light gets its own. Traced in SUMO
+    (docs/TRAFFIC.md, 7th Street fixed time): "Slow to 25 mph, then coast" for light 7001 was kept 165 m before 7002.
+    Independent answer: at the limit (13.41 m/s) the car is over 7002's line 164.5 / 13.41 = 12.3 s from now, 4.3 s
+    after its red ends (8 s), more than the 2 s margin, so the limit is feasible and no slower speed is needed."""
+    v_lim = 13.4112
+    light = LightView(7002, 164.5, red_windows_s=((0.0, 8.0), (66.0, math.inf)), amber_s=4.0)
+    obs = Observation(v_lim, v_lim, (light,))
+    assert 164.5 / v_lim > 8.0 + AdvisorParams().green_margin_s
+    old = Advice("coast", "green_wave", 11.176, True, 1.0, light_ahead=1, light_id=7001)  # for the light behind the car
+    fresh, _ = advise(obs)
+    after, memory = advise(obs, AdvisorMemory(last=old, spoken=old))
+    assert fresh.target_speed_mps == pytest.approx(v_lim) and fresh.action == "cruise"
+    assert (after.action, after.target_speed_mps) == (fresh.action, fresh.target_speed_mps)
+    assert memory.last.light_id == 7002
+    # the same plan made for this light is still the plan followed while it works (no new reaction delay)
+    kept, _ = advise(obs, AdvisorMemory(last=replace(old, light_id=7002), spoken=old))
+    assert (kept.action, kept.target_speed_mps) == ("coast", pytest.approx(11.176))

@@ -105,6 +105,22 @@ def test_fixed_time_spat_is_sumos_state_now_and_every_change_ahead(oakland_fixed
     assert checked > 10_000
 
 
+def test_fixed_time_spat_reaches_the_next_time_the_state_now_begins(oakland_fixed):
+    """A fixed-time light publishes its whole cycle: from a green, its amber, its red and the next green's start, so
+    the red after an amber has an end (three events left it open, and the advisor saw that red as lasting for good:
+    docs/TRAFFIC.md, 7th Street). SUMO's own state agrees at every step to there
+    (``test_fixed_time_spat_is_sumos_state_now_and_every_change_ahead``); here: the last state known is the one now,
+    each of the light's three states is in between, and the plan reaches at least a cycle less the state's own time."""
+    net = oakland_fixed
+    _, plans = _run_source(net, 100.0)
+    for t, ps in plans:
+        for i, plan in enumerate(ps):
+            known = plan.states[: len(plan.changes)]  # (then UNAVAILABLE: nothing is known after the last change)
+            assert known[-1] is known[0] and len(known) == 4 and len(set(known)) == 3, (t, i, known)
+            cycle_s = net.lights[i].plan.cycle_s
+            assert plan.changes[-1].min_end_s - plan.changes[0].min_end_s >= cycle_s - 1e-6
+
+
 def test_actuated_spat_windows_hold_sumos_changes(oakland_actuated):
     """SUMO's actuated controller (cross traffic as its rival demand): every later state SUMO shows lies within the
     published windows (minEnd hard, maxEnd the phase's maxDur); no likely time is invented."""

@@ -27,8 +27,12 @@ What SUMO knows and the message says, per signal group (one SUMO link: the corri
 * ``startTime`` of the current event: when the source saw the state begin (:meth:`SumoSpatSource.observe` each
   step), or for a static program the programmed start.
 
-For a static program the next ``n_events - 1`` events follow the current one (default 3 in all), as the simulator
-sends.
+For a static program the events follow the current one for a whole cycle, up to and including the next time the
+current state begins (green, amber, red, green at a light with amber; green, red, green without): the controller
+runs a fixed program and knows it, as SUMO's GLOSA device reads it (``MSDevice_GLOSA::getTimeToSwitch`` walks the
+program's phases). Three events (the simulator's default) leave a green's red after its amber without an end, so the
+advisor saw that red as lasting for good and could not plan for the green after it (traced: 7th Street, docs/TRAFFIC.md).
+``n_events`` caps them where given.
 
 The amber each group shows before its reds (:meth:`SumoSpatSource.amber_s`) is read from the program too, and
 declared to the store with every publication (:meth:`~spat_feed.transport.store.SpatStore.declare_amber`): 0 where a
@@ -118,8 +122,8 @@ class _Phase:
 class SumoSpatSource:
     """SPaT of SUMO's lights (see the module docstring). ``conn``: ``libsumo`` or a ``traci`` connection."""
 
-    def __init__(self, conn, lights: Sequence[SumoLight], t0_unix_s: float, n_events: int = 3, queues: bool = False) -> None:
-        if n_events < 1:
+    def __init__(self, conn, lights: Sequence[SumoLight], t0_unix_s: float, n_events: int | None = None, queues: bool = False) -> None:
+        if n_events is not None and n_events < 1:
             raise ValueError("n_events must be >= 1")
         self.conn = conn
         self.lights = tuple(lights)
@@ -188,7 +192,9 @@ class SumoSpatSource:
         return link_state(states[cur][light.link_index]), self.t0_unix_s + max(switch, t)
 
     def events(self, light: SumoLight) -> list[MovementEvent]:
-        """The light's current event and the next ``n_events - 1``, with their windows (see the module docstring)."""
+        """The light's current event and those after it, with their windows: a static program's whole cycle, to the
+        next time the current state begins (at most ``n_events`` in all where given), an actuated one's current event
+        alone (see the module docstring)."""
         tl = self.conn.trafficlight
         now = self.now_unix_s()
         _, kind, states, times = self._program(light.tls_id)
@@ -206,7 +212,7 @@ class SumoSpatSource:
         events: list[MovementEvent] = []
         state, j = current, cur
         guard = 0
-        wanted = self.n_events if exact else 1
+        wanted = (self.n_events or 4 * n + 8) if exact else 1
         while len(events) < wanted and lo <= HORIZON_S and guard < 4 * n + 8:
             # phases after j showing the same state belong to this event
             k = (j + 1) % n
@@ -227,6 +233,8 @@ class SumoSpatSource:
                 confidence=15 if exact else None,
             )
             events.append(MovementEvent(event_state=state, timing=timing))
+            if len(events) > 1 and state is current:  # the cycle is round: the current state begins again
+                break
             start = now + lo if exact else math.nan
             state, j = nxt, k
             d, mn, mx = times[k]
