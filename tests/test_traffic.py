@@ -427,3 +427,74 @@ def test_in_sumo_advised_cars_do_not_brake_hard_where_sumos_own_drivers_did(tmp_
     assert hard(advised) == set()
     assert not [cr for c in advised.cars.values() if c.connected for cr in c.crossings if cr[2] == "red"]
     assert sum(c.connected for c in advised.cars.values()) >= 10 and advised.collisions == []
+
+
+def _drive_behind(driver, x, v, lim, light, lead_x, lead_v, lead_a, seconds=20.0):
+    """Euler steps as SUMO's (:func:`_drive`) behind a car in front whose front is at ``lead_x``, at ``lead_v`` and
+    changing speed at ``lead_a`` until it stands (SUMO's 5 m car, 2.5 m standstill gap): the driver sees (gap beyond
+    the standstill gap, speed, acceleration), SUMO keeps Krauss's safe speed with the car's 4 m/s²."""
+    from ecodrive.traffic.driver import follow_mps
+
+    t, xs, vs = 0.0, [x], [v]
+    while t < seconds:
+        gap = lead_x - 5.0 - 2.5 - x
+        cmd = driver.command(t, x, v, STEP_S, lim, light(t, x), (gap, lead_v, lead_a if lead_v > 0.0 else 0.0))
+        v_safe = follow_mps(gap, lead_v, 4.0, 1.0)
+        v = max(min(min(v + 2.0 * STEP_S, lim) if cmd is None else cmd, v_safe, v + 2.0 * STEP_S), v - 4.0 * STEP_S, 0.0)
+        lead_v = min(max(lead_v + lead_a * STEP_S, 0.0), lim)
+        x, lead_x, t = x + v * STEP_S, lead_x + lead_v * STEP_S, t + STEP_S
+        xs.append(x)
+        vs.append(v)
+    return np.array(xs), np.array(vs), lead_x
+
+
+@pytest.mark.parametrize("dist_m, v, lead_to_line_m, lead_v, lead_a", [(58.7, 21.0, 3.2, 14.6, 2.0), (75.5, 24.39, -20.7, 14.48, 0.35)])
+def test_an_amber_is_judged_behind_a_car_over_the_line_by_the_cars_own_drive(dist_m, v, lead_to_line_m, lead_v, lead_a):
+    """An actuated green turns amber (5 s) with the car 58.7 m out at 21 m/s behind a car whose front is 3.2 m before
+    the line, speeding up at 2 m/s² from 14.6 m/s (or 75.5 m out at 24.4 m/s behind one already 20.7 m past it): that
+    car does not hold it back, the car is over the line in 58.7 / 21 = 2.8 s (3.1 s), and a stop needs 21² / (2 x
+    57.7 m) = 3.8 m/s² (4.0), more than the firm 3: it goes (ITE's interval is timed for it). Before, the driver judged
+    its arrival at the slower car's speed all the way (58.7 / 14.6 + 1 = 5.02 s, after the red) and stopped at 3.8-4
+    m/s² (traced: paper_s400 actuated 900 veh/h, 100 %, seed 1, `main.44`; actuated 300 veh/h, 50 %, seed 3,
+    `main.40`)."""
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line = 24.5872, 500.0
+    light = lambda t, x: LightNow(0, line, t >= 5.0, t < 5.0, 5.0) if x <= line else None  # noqa: E731
+    xs, vs, _ = _drive_behind(AdvisedDriver((line,), vid="main.0"), line - dist_m, v, lim, light, line - lead_to_line_m, lead_v, lead_a)
+    crossed = np.flatnonzero(xs > line)
+    assert crossed.size and crossed[0] * STEP_S <= 5.0  # over the line in the amber
+    assert np.diff(vs).min() / STEP_S >= -3.0 - 1e-9  # no braking at all beyond the firm rate
+
+
+def test_a_driver_keeps_behind_a_braking_car_at_the_firm_rate():
+    """Nothing advised, the car in front brakes to a standstill (a queue's tail it joins), 128.6 m ahead (beyond the
+    standstill gap) braking at 2.4 m/s² from 8.7 m/s, the car at the limit. The driver sees its brake lights and keeps
+    Krauss's safe speed at its own firm 3 m/s² (:func:`follow_mps`) from then on: never more than 3 m/s², stopped
+    behind it. Before, it slowed for that car only once it crawled (under 2 m/s), and SUMO's car following braked
+    harder than 3.5 m/s² (traced: paper_s400 fixed 900 veh/h, 50 %, seed 4, `main.11`, told to stop for the queue
+    behind a car not connected, 3.51 m/s²)."""
+    from ecodrive.traffic.driver import AdvisedDriver
+
+    lim = 24.5872
+    xs, vs, lead_x = _drive_behind(AdvisedDriver((5000.0,), vid="main.0"), 0.0, lim, lim, lambda t, x: None, 136.1, 8.7, -2.4, seconds=40.0)
+    assert np.diff(vs).min() / STEP_S >= -3.0 - 1e-9
+    assert vs[-1] == 0.0 and lead_x - 7.5 - 10.0 < xs[-1] <= lead_x - 7.5 + 1e-6  # behind it, not far short
+
+
+def test_a_driver_rolling_into_its_stop_gap_stops_at_the_line_gently():
+    """Told to stop, committed to a red it expected to end first, the car rolls at 1.97 m/s 1.4 m before the red line,
+    inside the 1 m short of the line where the regular driver stops (stopping there takes 4.9 m/s²): it brakes for the
+    line itself, at 1.97² / (2 x 1.35 m) = 1.4 m/s² (then its eyes stop it at the firm rate at most), not to a
+    standstill at 4 m/s² in one step as before (traced: 7th Street actuated 600 veh/h, 100 %, seed 4, `main.128`); it
+    does not cross the line in the red."""
+    from advisory.advice.views import Advice, LightView
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line, x, v = 13.4, 100.0, 98.6, 1.97
+    driver = AdvisedDriver((line,), vid="main.0")
+    driver.heard(-1.0, x, Advice("stop", "red_ahead", 0.0, True, 2.0), {0: LightView(1, line - x, red_windows_s=((0.0, 1.0),))})
+    driver.committed.add(0)
+    xs, vs = _drive(driver, x, v, lim, lambda t, x: LightNow(0, line, t < 4.0) if x <= line else None, seconds=4.0)
+    assert (vs[0] - vs[1]) / STEP_S <= 1.5 + 1e-9 and np.diff(vs).min() / STEP_S >= -3.0 - 1e-9
+    assert vs.min() == 0.0 and xs.max() <= line  # stood before the line through the red

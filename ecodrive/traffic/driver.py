@@ -88,29 +88,34 @@ class AdvisedDriver:
         self.pending.append((t_s + self.model.reaction_s, advice, line))
 
     def command(self, t_s: float, x_m: float, v_mps: float, dt_s: float, v_lim_mps: float, light: LightNow | None,
-                leader: tuple[float, float] | None = None) -> float | None:  # fmt: skip
+                leader: tuple[float, ...] | None = None) -> float | None:  # fmt: skip
         """The speed one step (``dt_s``) later, or None: SUMO's own driver drives (see the module docstring).
 
-        ``leader``: the car in front as the driver sees it, (gap beyond the standstill gap [m], speed [m/s]), or None.
-        Where that car stands or crawls (a queue's tail, slower than :data:`QUEUED_MPS`) and keeping behind it at the
-        advisor's firm braking (3 m/s²; SUMO's car following brakes with the car's 4 m/s², late) asks for less than
-        the speed the driver would drive (:func:`follow_mps`), the driver slows down itself, at most at that rate,
-        before SUMO's car following would brake hard (traced: a queue standing 60 m ahead of a car told to coast at
-        21 m/s, SUMO braked at 3.6 m/s²). Behind a moving car SUMO's car following alone keeps the gap (slowing for
-        every slower car cost 5 points of saving at 600 veh/h, every car connected). Where that car sets the pace
-        (:data:`HELD_MPS`), the driver judges a green by when it reaches the line behind it."""
+        ``leader``: the car in front as the driver sees it, (gap beyond the standstill gap [m], speed [m/s][,
+        acceleration [m/s²]]), or None. Where that car stands or crawls (a queue's tail, slower than
+        :data:`QUEUED_MPS`) or is braking (its speed falling faster than :data:`BRAKING_MPS2`: its brake lights), and
+        keeping behind it at the advisor's firm braking (3 m/s²; SUMO's car following brakes with the car's 4 m/s²,
+        late) asks for less than the speed the driver would drive (:func:`follow_mps`), the driver slows down itself,
+        at most at that rate, before SUMO's car following would brake hard (traced: a queue standing 60 m ahead of a
+        car told to coast at 21 m/s, SUMO braked at 3.6 m/s²; a car 1.2 s behind one braking at 4 m/s² for a queue,
+        SUMO braked at 3.55 m/s²; a car told to stop, 136 m behind one braking from 8.7 m/s into a standing queue,
+        seen only once that one was under 2 m/s: 3.51 m/s²). Behind a car that holds or gains speed SUMO's car
+        following alone keeps the gap (slowing for every slower car cost 5 points of saving at 600 veh/h, every car
+        connected). Where that car sets the pace (:data:`HELD_MPS`), the driver judges a green by when it reaches the
+        line behind it (:func:`_led_arrival_s`)."""
         self.clearing = False
         firm = self.advisor.firm_decel_mps2
         v_follow = np.inf if leader is None else follow_mps(leader[0], leader[1], firm, self.model.reaction_s)
-        cmd = self._command(t_s, x_m, v_mps, dt_s, v_lim_mps, light, leader[1] if v_follow <= v_mps + HELD_MPS else None)
-        if leader is None or leader[1] >= QUEUED_MPS or v_follow >= v_mps - FOLLOW_TOL_MPS or (cmd is not None and cmd <= v_follow):
+        cmd = self._command(t_s, x_m, v_mps, dt_s, v_lim_mps, light, leader[:2] if v_follow <= v_mps + HELD_MPS else None)
+        braking = leader is not None and len(leader) > 2 and leader[2] < -BRAKING_MPS2
+        if leader is None or (leader[1] >= QUEUED_MPS and not braking) or v_follow >= v_mps - FOLLOW_TOL_MPS or (cmd is not None and cmd <= v_follow):
             return cmd
         self.controlling = True
         return max(v_follow, v_mps - firm * dt_s, 0.0)
 
     def _command(self, t_s: float, x_m: float, v_mps: float, dt_s: float, v_lim_mps: float, light: LightNow | None,
-                 led_mps: float | None) -> float | None:  # fmt: skip
-        """:meth:`command` before the car in front is looked at, but for ``led_mps``: its speed where it sets the pace."""
+                 led: tuple[float, float] | None) -> float | None:  # fmt: skip
+        """:meth:`command` before the car in front is looked at, but for ``led``: its (gap, speed) where it sets the pace."""
         adv, drv = self.advisor, self.model
         rules = drv.regular()
         planned = min(adv.firm_decel_mps2, rules.brake_max_mps2)  # the firmest braking the driver plans a stop with
@@ -119,7 +124,7 @@ class AdvisedDriver:
             if not _silent(new):
                 self.active, self.stop_line_m = new, line
         active, x, v, t = self.active, x_m, v_mps, t_s
-        slowing, self.last_v_mps = led_mps is not None and v < self.last_v_mps - 1e-6, v  # held back by the car in front
+        slowing, self.last_v_mps = led is not None and v < self.last_v_mps - 1e-6, v  # held back by the car in front
         free = False  # nothing asked for: SUMO's driver drives unless the eyes below say otherwise
         if active is not None and active.action == "none" and active.reason == "red_ahead":
             v_cmd = min(max(v, adv.min_cruise_speed_mps), v_lim_mps)
@@ -137,8 +142,9 @@ class AdvisedDriver:
         if active is not None and active.action == "brake_to":
             rate_down = adv.firm_decel_mps2
         if active is not None and active.action == "stop" and x < self.stop_line_m:
-            to_line_m = self.stop_line_m - rules.stop_gap_m - x
-            if v * v < 2.0 * drv.decel_mps2 * to_line_m:
+            to_line_m = _stop_room_m(self.stop_line_m - x, v, rules.stop_gap_m, rules.brake_max_mps2)
+            at_gap = to_line_m == self.stop_line_m - rules.stop_gap_m - x  # not already rolling into the gap
+            if at_gap and v * v < 2.0 * drv.decel_mps2 * to_line_m:
                 rate_down = coast_decel_mps2(v, adv.vehicle)
             else:
                 rate_down = max(rate_down, min(v * v / (2.0 * max(to_line_m, 1e-6)), rules.brake_max_mps2))
@@ -157,11 +163,11 @@ class AdvisedDriver:
             else:
                 green_at = display.next_green_start_s(t) if red_now else t
                 next_red = display.next_red_start_s(display.next_green_start_s(green_at)) if red_now or not display.is_red(t) else np.inf
-            # when it reaches the line: at its speed, or, behind a car that sets the pace, at that car's speed and a
+            # when it reaches the line: at its speed, or, behind a car that sets the pace, behind that car and a
             # second later (the amber, the held-back rule and the decision judge alike: judged apart, a car held back
             # braked for one step and went on, to be stopped by SUMO at the line as the red began; a car clearing an
             # amber behind a slower one entered the red)
-            arrival = t + _arrival_s(dist, v if led_mps is None else min(v, led_mps), v_lim_mps, drv) + (0.0 if led_mps is None else drv.red_end_margin_s)
+            arrival = t + (_arrival_s(dist, v, v_lim_mps, drv) if led is None else _led_arrival_s(dist, v, led[0], led[1], v_lim_mps, drv) + drv.red_end_margin_s)
             heeded_m = max(decision_m, v * v / (2.0 * drv.decel_mps2) + rules.stop_gap_m)
             amber = dist <= heeded_m and light.amber
             if amber and self.amber_seen.get(n) != light.red_at_s:
@@ -260,6 +266,31 @@ class AdvisedDriver:
         return max(v + a * dt_s, 0.0)
 
 
+BRAKING_MPS2 = 0.5
+"""The car in front is braking where its speed falls faster than this (its brake lights; a lift-off slows an EV by
+0.07-0.19 m/s² at 5-25 m/s): the driver keeps behind it at its own firm rate (:func:`follow_mps`), as behind a queue's
+tail. (At 0.1 m/s², every coasting car in front counted: paper_s400 actuated 900 veh/h, 50 %, seed 4, advised time
++16.1 -> +36.5 %.) [m/s²]"""
+LINE_GAP_M = 0.05
+"""Where a driver past the point it meant to stop at (the regular driver's ``stop_gap_m`` before the line) stops:
+this far before the line (SUMO's front on the line has not crossed it). [m]"""
+
+
+def _stop_room_m(dist_m: float, v_mps: float, stop_gap_m: float, brake_max_mps2: float) -> float:
+    """The room a driver stopping for a line ``dist_m`` ahead stops in: up to ``stop_gap_m`` before it, or, where that
+    takes more than ``brake_max_mps2`` (the car already rolls into that gap), up to the line itself (:data:`LINE_GAP_M`)
+    rather than braking harder (traced: a car rolling at 2 m/s 1.4 m before a red line, 7th Street actuated, was
+    braked at 4 m/s² to a standstill). [m]
+
+    Examples
+    --------
+    >>> _stop_room_m(50.0, 10.0, 1.0, 4.0), round(_stop_room_m(1.4, 1.97, 1.0, 4.0), 2)
+    (49.0, 1.35)
+    """
+    room = dist_m - stop_gap_m
+    return room if v_mps * v_mps <= 2.0 * brake_max_mps2 * max(room, 0.0) else max(dist_m - LINE_GAP_M, room)
+
+
 TOLD_STOP_MPS2 = 3.5
 """Told to stop at a light that shows no amber, the driver stops where this braking suffices (the issue's hard brake:
 braking harder is one). [m/s²]"""
@@ -308,6 +339,36 @@ def _arrival_s(dist_m: float, v_mps: float, v_lim_mps: float, drv: DriverModel) 
     if v_mps >= drv.min_coast_mps:
         return dist_m / v_mps
     return float(time_to_cover_s(dist_m, v_mps, drv.accel_mps2, v_lim_mps)) + (drv.reaction_s if v_mps <= 0.1 else 0.0)
+
+
+def _led_arrival_s(dist_m: float, v_mps: float, gap_m: float, leader_mps: float, v_lim_mps: float, drv: DriverModel) -> float:
+    r"""When a car held back by the car in front reaches a line ``dist_m`` ahead: no sooner than its own drive
+    (:func:`_arrival_s`) nor than Newell's follower [1]_ of that car at its speed now (the follower is at the line a
+    reaction time after the leader's front is a jam spacing past it, i.e. after the leader has covered
+    ``dist_m - gap_m``: the gap is beyond the standstill gap, and the leader's length plus that gap is the jam spacing),
+    and no later than the whole way at the slower pace of the two (the rule before: a leader already over the line, or
+    about to be, still held the car to its speed for all of it; traced, an advised car 59 m before an amber at
+    21 m/s, its leader 3 m before the line speeding up from 14.6 m/s, judged it would not clear and braked at
+    3.8 m/s²). [s]
+
+    .. math:: t = \min\left(\frac{d}{\min(v, v_l)},\ \max\left(t_{own}, \frac{d - g}{v_l} + \tau\right)\right)
+
+    References
+    ----------
+    .. [1] G. F. Newell, "A simplified car-following theory: a lower order model," Transp. Res. B, vol. 36, no. 3,
+       pp. 195-205, 2002, doi:10.1016/S0191-2615(00)00044-8.
+
+    Examples
+    --------
+    >>> round(_led_arrival_s(58.7, 21.0, 48.0, 14.6, 24.6, DriverModel()), 2)  # the leader 3 m before the line
+    2.8
+    >>> round(_led_arrival_s(100.0, 20.0, 15.0, 15.0, 24.6, DriverModel()), 2)  # following 1 s behind: the pace
+    6.67
+    """
+    paced = _arrival_s(dist_m, min(v_mps, leader_mps), v_lim_mps, drv)
+    if leader_mps <= 0.1:
+        return paced
+    return min(paced, max(_arrival_s(dist_m, v_mps, v_lim_mps, drv), (dist_m - gap_m) / leader_mps + drv.reaction_s))
 
 
 def _to_line_mps(v_mps: float, room_m: float, dt_s: float, hardest_mps2: float, roll_mps: float, decel_mps2: float, accel_mps2: float) -> float:

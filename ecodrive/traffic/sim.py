@@ -221,13 +221,13 @@ class _Sim:
             car.v.append(float(r[0x40]))
         return t
 
-    def leader(self, vid: str) -> tuple[float, float] | None:
+    def leader(self, vid: str) -> tuple[float, float, float] | None:
         """The car in front of ``vid`` within :data:`LOOK_AHEAD_M`, as its driver sees it: (gap beyond the standstill
-        gap, speed), or None."""
+        gap, speed, acceleration in the last step: negative while it brakes), or None."""
         found = self.conn.vehicle.getLeader(vid, LOOK_AHEAD_M)
         if not found or not found[0]:
             return None
-        return float(found[1]), float(self.conn.vehicle.getSpeed(found[0]))
+        return float(found[1]), float(self.conn.vehicle.getSpeed(found[0])), float(self.conn.vehicle.getAcceleration(found[0]))
 
     def light_now(self, x_m: float) -> LightNow | None:
         """The next light ahead of station ``x_m`` as the driver sees it now."""
