@@ -213,7 +213,11 @@ class QueueBoard:
         """The next light's last red, from ``t_unix_s`` (its queue goes on discharging after its end:
         :func:`advisory.advice.queue.past_queue`), None while it is red or where no red of it was seen end."""
         nxt = obs.lights[0]
-        ended = None if nxt.red_now else self._red_ended.get(nxt.intersection_id)
+        return None if nxt.red_now else self._last_red(nxt.intersection_id, t_unix_s)
+
+    def _last_red(self, intersection_id: int, t_unix_s: float) -> PastRed | None:
+        """The last red of a light seen end (:meth:`red_elapsed`), from ``t_unix_s``; None where none was."""
+        ended = self._red_ended.get(intersection_id)
         if ended is None:
             return None
         began, end, jam = ended
@@ -234,10 +238,7 @@ class QueueBoard:
                 continue
             reach_m = start * max(lane.top_mps, obs.speed_limit_mps, 1.0) * (1.0 + 1e-9) + 1e-6
             behind = tuple(p for p in lane.near(here_m, t_unix_s, min(light.distance_m, 0.0) - reach_m, 0.0) if p.ahead_m < 0.0)
-            past = None
-            if light is passed and (ended := self._red_ended.get(light.intersection_id)) is not None:
-                past = PastRed(ended[0] - t_unix_s, ended[1] - t_unix_s, None if math.isnan(ended[2]) else ended[2])
-            noted.append((light, behind, past))
+            noted.append((light, behind, self._last_red(light.intersection_id, t_unix_s) if light is passed else None))
         self._passed[trip_id] = tuple(noted)
 
     def answer(self, trip_id: str, obs: Observation, est: QueueEstimate, last_reason: str | None) -> tuple[Observation, Advice | None]:

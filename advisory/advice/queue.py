@@ -841,14 +841,10 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     return cut * min(end - start, WAIT_CAP_S)
 
 
-MPH_MPS = 0.44704
-"""One mile per hour, the step of the speeds :func:`paced_for_behind` tries. [m/s]"""
-
-
 def paced_for_behind(lost_s, obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S) -> Advice | None:
     """``advice`` where the wait it makes the cars behind lose (``lost_s(advice)``, e.g. :func:`cut_behind` summed over
     the lines they still have to cross) is within ``slack_s``; else the same plan at the slowest speed that keeps it
-    so (whole mph above the plan's, up to the limit; the wait shrinks as the speed rises: the slower the car over a
+    so (the advisor's speed steps, ``speed_step_mps``, above the plan's, up to the limit; the wait shrinks as the speed rises: the slower the car over a
     line, the fewer behind it cross): "Hold" it, "Speed up to" it or "Ease off to" it; None where only the limit
     does (drive normally). The car is advised again at its next fix: once the cars behind are over the line, or
     its green is over, the advisor's own plan comes back. Before (a plain "drive normally" in its place), the car
@@ -875,7 +871,8 @@ def paced_for_behind(lost_s, obs: Observation, advice: Advice, params: AdvisorPa
         out = replace(advice, action=action, target_speed_mps=published_speed_mps(target), current_speed_mps=v)
         return replace(out, message=phrase(out, params.units))
 
-    speeds = [k * MPH_MPS for k in range(math.floor(advice.target_speed_mps / MPH_MPS) + 1, math.ceil(limit / MPH_MPS))]
+    step = params.speed_step_mps  # the advisor's candidates' step (whole mph: the spoken number is the advised one)
+    speeds = [k * step for k in range(math.floor(advice.target_speed_mps / step) + 1, math.ceil(limit / step))]
     lo, hi = 0, len(speeds)  # the first speed whose wait is within the slack (bisection: it shrinks as the speed rises)
     while lo < hi:
         mid = (lo + hi) // 2
