@@ -233,6 +233,33 @@ def test_interval_coverage_of_a_forecast_that_is_the_true_law_is_its_level(level
     assert np.mean([lo <= y <= hi for y in s]) == pytest.approx({0.5: 0.525, 0.8: 0.825, 0.9: 0.925}[level])
 
 
+def test_predict_eval_bins_forecasts_by_their_stated_spread_and_method():
+    """Forty reds whose ends come at every whole second of 10..49 s after they begin, forecast at their first reading
+    by that law (``duration``: calibrated, an 80 % interval 32 s wide), and twenty forecast sure of an instant 5 s
+    before the change (``linked``, one sample: width 0). Over all, the 80 % interval holds 2/3 of 80 %, which says
+    little; by width and by method, the sure ones hold nothing and err 5 s, the calibrated ones hold their levels
+    exactly (the PIT of a discrete law, as above)."""
+    from ecodrive.predict_eval import scored, summarize
+
+    items, t = [], T0
+    law = np.arange(10.0, 50.0)
+    for k in range(60):
+        d = law[k % 40]
+        fc = ChangeForecast(PhaseClass.RED, PhaseClass.GREEN, t, t + law, "duration") if k < 40 else \
+            ChangeForecast(PhaseClass.RED, PhaseClass.GREEN, t, np.array([t + d - 5.0]), "linked")  # fmt: skip
+        items += [(t + s, PhaseClass.RED, fc if s == 0 else None, None) for s in range(int(d))]
+        items += [(t + d + s, PhaseClass.GREEN, None, None) for s in range(10)]
+        t += d + 10.0
+    summary = summarize(scored({(1, 1): items}))
+    assert summary["interval_coverage"]["80"] == pytest.approx(2 / 3 * 0.8)
+    narrow, wide = summary["coverage_by_width"]["0-2"], summary["coverage_by_width"][">10"]
+    assert set(summary["coverage_by_width"]) == {"0-2", ">10"} and narrow["predictions_frac"] == pytest.approx(1 / 3)
+    assert narrow["interval_coverage"] == {"50": 0.0, "80": 0.0, "90": 0.0} and narrow["mae_s"] == pytest.approx(5.0)
+    assert wide["interval_coverage"] == pytest.approx({"50": 0.5, "80": 0.8, "90": 0.9})
+    assert wide["mae_s"] == pytest.approx(np.mean(np.abs(law - 29.0)))  # the median of 10..49 (the 20th of 40) is 29
+    assert summary["coverage_by_method"]["linked"] == narrow and summary["coverage_by_method"]["duration"] == wide
+
+
 def test_a_link_that_failed_no_longer_says_the_phase_ends_now():
     """Group 2's green comes 2 s after group 1's green ends (the stage sequence: a link; 12 s in one cycle of 20, as a
     link allows), unless group 2 has no demand that cycle (one in four, at random): then its red goes on through
