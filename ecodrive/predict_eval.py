@@ -258,6 +258,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"MAE {r['mae_s']:.2f} s (0-10 s: {h['0-10']:.2f}, 10-30 s: {h['10-30']:.2f}, 30-60 s: {h['30-60']:.2f}) "
               f"against {r['baseline_mae_s']:.2f} s for the median of past durations; 80 % interval holds "
               f"{100 * r['interval_coverage']['80']:.0f} %; early reds {100 * r['early_red_frac']:.1f} %")
+        by_width = ", ".join(f"{k} s {100 * v['interval_coverage']['80']:.0f} % ({100 * v['predictions_frac']:.0f} % of them)" for k, v in r["coverage_by_width"].items())
+        print(f"  80 % intervals by their width: {by_width}")
     return 0
 
 

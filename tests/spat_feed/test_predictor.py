@@ -374,6 +374,9 @@ def test_predict_eval_on_every_recording(path, recorded_snapshots, shared_record
     assert set(summary["mae_s_by_horizon"]) == {"0-10", "10-30", "30-60"} and set(summary["interval_coverage"]) == {"50", "80", "90"}
     assert summary["changes"] > 50 and summary["early_red_frac"] == 0.0
     assert summary["mae_s"] < summary["baseline_mae_s"]
+    for by in ("coverage_by_width", "coverage_by_method"):  # every bounded forecast in one bin of each
+        assert sum(b["predictions_frac"] for b in summary[by].values()) == pytest.approx(1.0)
+    assert set(summary["coverage_by_width"]) <= {"0-2", "2-5", "5-10", ">10"} and set(summary["coverage_by_method"]) <= set(summary["method_frac"])
     series: dict = {}
     for ix in snapshots:
         for m in ix.states:
