@@ -21,6 +21,11 @@ counted by its randomized PIT over that span, :func:`pit_coverage`: a forecast s
 ``interval_meets_span_frac`` (the older rule: the closed interval between the two quantiles meets that span; atoms
 and the span's leeway make it read high), ``early_red_frac`` (changes to red that came before the forecast's
 earliest instant, the hard bound the advisor plans against), ``method_frac`` (share of predictions by method).
+
+Calibration where the advisor relies on it: ``coverage_by_width`` (the forecasts binned by their stated spread, the
+width of their central 80 % interval, :data:`WIDTH_BINS_S`) and ``coverage_by_method`` (by ``method``), each bin's
+``predictions_frac`` (its share of ours), ``interval_coverage`` (as above) and ``mae_s`` (of all ours in it). A
+calibrated forecast holds its levels in every bin; a narrow bin that holds much less is a forecast sure and wrong.
 """
 
 from __future__ import annotations
@@ -44,6 +49,10 @@ MAX_GAP_S = 2.0
 
 HORIZONS_S = {"0-10": (0.0, 10.0), "10-30": (10.0, 30.0), "30-60": (30.0, 60.0)}
 LEVELS = (0.5, 0.8, 0.9)
+
+WIDTH_BINS_S = {"0-2": (0.0, 2.0), "2-5": (2.0, 5.0), "5-10": (5.0, 10.0), ">10": (10.0, math.inf)}
+"""Bins of a forecast's stated spread, the width of its central 80 % interval (``coverage_by_width``): the narrow
+ones are the forecasts the advisor takes as sure. [s]"""
 
 
 def predictions(snapshots) -> dict[tuple[int, int], list[tuple]]:
@@ -87,8 +96,9 @@ def scored(rows: dict[tuple[int, int], list[tuple]]) -> list[dict]:
                     row = {"key": key, "t": t, "ahead_s": ahead, "change_unix_s": t_change, "last_before_unix_s": items[k - 1][0], "to": cls_after, "base": base}
                     if fc is not None:
                         s = fc.samples_unix_s
-                        row.update(likely=fc.likely_unix_s, earliest=fc.earliest_unix_s, method=fc.method,
-                                   intervals={lv: fc.interval(lv) for lv in LEVELS},
+                        intervals = {lv: fc.interval(lv) for lv in LEVELS}
+                        row.update(likely=fc.likely_unix_s, earliest=fc.earliest_unix_s, method=fc.method, intervals=intervals,
+                                   width_s=intervals[0.8][1] - intervals[0.8][0],
                                    pit=tuple(np.searchsorted(s, x + 1e-6, side="right") / len(s) for x in (items[k - 1][0], t_change)))  # fmt: skip
                     out.append(row)
             start = k
@@ -123,6 +133,33 @@ def _mae(errors: list[float]) -> float | None:
     return float(np.mean(errors)) if errors else None
 
 
+def _calibration(rows: list[dict]) -> dict:
+    """A bin's share of ``rows`` is the caller's; here its coverage of the central intervals (:func:`pit_coverage`)
+    and the mean absolute error of the likely time (``rows``: ours, finite likely times)."""
+    return {"interval_coverage": {f"{round(100 * lv)}": float(np.mean([pit_coverage(r["pit"], lv) for r in rows])) for lv in LEVELS},
+            "mae_s": _mae([abs(r["likely"] - r["change_unix_s"]) for r in rows])}  # fmt: skip
+
+
+def calibration_by(rows: list[dict], key) -> dict:
+    """``{bin: {"predictions_frac", "interval_coverage", "mae_s"}}`` of ``rows`` (ours) grouped by ``key(row)``; bins
+    with no row are left out."""
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault(key(r), []).append(r)
+    return {k: {"predictions_frac": len(g) / len(rows), **_calibration(g)} for k, g in groups.items()}
+
+
+def width_bin(width_s: float) -> str:
+    """The :data:`WIDTH_BINS_S` name of a stated 80 % interval width.
+
+    Examples
+    --------
+    >>> width_bin(0.0), width_bin(2.0), width_bin(9.9), width_bin(math.inf)
+    ('0-2', '2-5', '5-10', '>10')
+    """
+    return next(name for name, (lo, hi) in WIDTH_BINS_S.items() if lo <= width_s < hi or (hi == math.inf and width_s >= lo))
+
+
 def summarize(rows: list[dict]) -> dict:
     """The keys of the module docstring from :func:`scored` rows."""
     ours = [r for r in rows if math.isfinite(r.get("likely", math.inf))]
@@ -148,6 +185,8 @@ def summarize(rows: list[dict]) -> dict:
                                                                           for r in ours])) if ours else None for lv in LEVELS},  # fmt: skip
         "early_red_frac": float(np.mean([r["change_unix_s"] < r["earliest"] for r in reds])) if reds else 0.0,
         "method_frac": {m: n / len(rows) for m, n in sorted(methods.items())},
+        "coverage_by_width": {k: v for k, v in sorted(calibration_by(ours, lambda r: width_bin(r["width_s"])).items(), key=lambda kv: list(WIDTH_BINS_S).index(kv[0]))},
+        "coverage_by_method": dict(sorted(calibration_by(ours, lambda r: r["method"]).items())),
     }
 
 
@@ -219,6 +258,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"MAE {r['mae_s']:.2f} s (0-10 s: {h['0-10']:.2f}, 10-30 s: {h['10-30']:.2f}, 30-60 s: {h['30-60']:.2f}) "
               f"against {r['baseline_mae_s']:.2f} s for the median of past durations; 80 % interval holds "
               f"{100 * r['interval_coverage']['80']:.0f} %; early reds {100 * r['early_red_frac']:.1f} %")
+        by_width = ", ".join(f"{k} s {100 * v['interval_coverage']['80']:.0f} % ({100 * v['predictions_frac']:.0f} % of them)" for k, v in r["coverage_by_width"].items())
+        print(f"  80 % intervals by their width: {by_width}")
     return 0
 
 

@@ -64,6 +64,7 @@ from spat_feed.prediction.predictor import (
     durations_given_state,
     ends_given_window,
     next_end,
+    period_fit_s,
     sample_quantile,
     scored_errors_s,
 )
@@ -134,6 +135,7 @@ class CycleStats:
     ends_unix_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # when phases of each class ended
     cycle_classes: frozenset = frozenset()  # classes told better by the point of the cycle they end at than by their durations
     period_s: float | None = None  # the controller's fixed cycle, if its changes keep to one (:func:`~spat_feed.prediction.predictor.cycle_period_s`)
+    period_error_s: float = 0.0  # ... and its standard error (:func:`~spat_feed.prediction.predictor.period_fit_s`)
     # (durations, from, to): past phases of the current class while the intersection was in its state now (:meth:`PhaseHistory.spans_in`)
     state_spans_s: tuple | None = None
     state_entered_s: float | None = None  # how long after the current phase began the intersection entered its state now
@@ -567,13 +569,14 @@ class IntersectionHistory:
     :class:`ChangeLinks` between them. ``record`` each message's plans; ``stats(group)`` is the group's
     :class:`CycleStats` (cached until the group's history or a link changes)."""
 
-    __slots__ = ("groups", "links", "_stats", "period_s", "_ends_since_period", "_period_every", "_errors", "_states", "_state")
+    __slots__ = ("groups", "links", "_stats", "period_s", "_ends_since_period", "_period_every", "_errors", "_states", "_state", "period_error_s")
 
     def __init__(self) -> None:
         self.groups: dict[int, PhaseHistory] = {}
         self.links = ChangeLinks()
         self._stats: dict[int, CycleStats] = {}
         self.period_s: float | None = None  # the controller's cycle, if its changes keep to one (cycle_period_s)
+        self.period_error_s = 0.0  # ... its standard error (period_fit_s)
         self._ends_since_period = 0
         self._period_every = PERIOD_EVERY[0]
         self._errors: dict[tuple[int, PhaseClass], list[float]] = {}  # (group, class) -> [n, cycle's mean error, durations']
@@ -603,7 +606,9 @@ class IntersectionHistory:
             if self._ends_since_period >= self._period_every:
                 self._ends_since_period = 0
                 ends = [e for h in self.groups.values() for e in h.stats().ends_unix_s.values()]
-                self.period_s = cycle_period_s(ends)
+                self.period_s, self.period_error_s = None, 0.0
+                if (found := cycle_period_s(ends)) is not None:  # refined by least squares, with its standard error
+                    self.period_s, self.period_error_s = period_fit_s(ends, found)
                 self._period_every = min(2 * self._period_every, PERIOD_EVERY[1])
 
     def _score(self, group: int, ended: tuple) -> None:
@@ -630,7 +635,7 @@ class IntersectionHistory:
         if cycle is None and (history := self.groups.get(group)) is not None:
             ends = self.links.ends_of(group)
             linked = (_quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE)) if ends else None
-            cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=linked, linked_ends_unix_s=ends, period_s=self.period_s,
+            cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=linked, linked_ends_unix_s=ends, period_s=self.period_s, period_error_s=self.period_error_s,
                                                  cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset(),
                                                  state_spans_s=history.spans_in(history.current, self._state), state_id=self._state,
                                                  state_entered_s=history.entered_s)  # fmt: skip

@@ -23,8 +23,9 @@ Where the samples come from, in the order they are trusted (each *method* names 
     (the excess is two-humped, the end at ``minEndTime`` or a stage later, and the other groups tell which).
 ``cycle``
     A coordinated controller (its changes come back at the same point of a fixed cycle, the period found by
-    :func:`cycle_period_s`): each past duration from the phase's start, moved to the nearest point of the cycle
-    where phases of the class ended (every pair of the two), and a cycle later for each one that has passed
+    :func:`cycle_period_s`, refined by :func:`period_fit_s`): each past duration from the phase's start, moved to the
+    nearest point of the cycle where the latest phases of the class ended (every pair of the two), each point spread
+    by the period's standard error times the cycles it was moved over, and a cycle later for each one that has passed
     while the phase goes on (a phase not ended at its force-off ends at a later one).
 ``state``
     The durations of the past phases of the class that, as long after they began as this one now, saw the
@@ -242,6 +243,48 @@ def cycle_period_s(ends_unix_s: Sequence[Sequence[float]], step_s: float = 0.1) 
     return None if best is None else best[0]
 
 
+def period_fit_s(ends_unix_s: Sequence[Sequence[float]], period_s: float) -> tuple[float, float]:
+    """The period found by :func:`cycle_period_s`, refined, and its standard error: each sequence of changes of a
+    (group, class) with :data:`MIN_PERIOD_ENDS` or more gives, by least squares of where its changes fall on the cycle
+    against their cycle's number ``k``, a correction of the period (the slope) and its variance (the residuals'
+    variance over the sum of squared ``k - mean k``); the sequences' corrections are averaged in inverse proportion
+    to their variances, the standard error is that of the average. [s] A class whose changes fall on the same reading
+    of every cycle (residuals 0; 1e-9 s² keeps the division finite) fixes the period to the readings' clock: on US
+    1136 75.000 s, standard error ~1e-6 s. (A reading's quantization, 1/12 s², as the least residual variance put it a
+    few ms off, and forecasts of an instant that the same 1 s readings date then came after the reading that saw
+    the change: US 1136's 80 % intervals 82 -> 79 %, docs/PREDICTION.md.)
+
+    A period is known only as well as the changes that gave it: on US 1136 the search's 0.1 s grid and the changes'
+    jitter (a few seconds) put it at 75.1 s 34 minutes in, 75.0 s later; a change 40 cycles back, moved to now by
+    75.1 s, is 4 s off, and a forecast that moves it so without saying it is sure and wrong (predict-eval's
+    ``coverage_by_width``: the cycle's forecasts 2-5 s wide held 34 % of their changes at 80 %).
+
+    Examples
+    --------
+    >>> jitter = (0.5, -0.5, -0.5, 0.5)  # the changes half a second either side of a 75 s cycle, found as 75.1 s
+    >>> ends = [[1000.0 + 75.0 * k + j + jitter[k % 4] for k in range(MIN_PERIOD_ENDS)] for j in (3.0, 40.0)]
+    >>> p, se = period_fit_s(ends, 75.1)
+    >>> round(p, 6), round(se, 4)
+    (75.0, 0.0145)
+    """
+    info = weighted = 0.0
+    for e in sorted(ends_unix_s, key=tuple):  # (in one order whatever order the groups came in: the same sums)
+        if len(e) < MIN_PERIOD_ENDS:
+            continue
+        e = np.asarray(e, dtype=float)
+        k = np.round((e - e[0]) / period_s)
+        at = _wrap(e - e[0] - k * period_s, period_s)
+        kc = k - k.mean()
+        ss = float(kc @ kc)
+        if ss <= 0.0:
+            continue
+        slope = float(kc @ (at - at.mean())) / ss
+        variance = max(float(np.sum((at - at.mean() - slope * kc) ** 2)) / (len(e) - 2), 1e-9) / ss
+        info += 1.0 / variance
+        weighted += slope / variance
+    return (period_s, 0.0) if info <= 0.0 else (period_s + weighted / info, 1.0 / math.sqrt(info))
+
+
 def _wrap(x: np.ndarray, period_s: float) -> np.ndarray:
     """``x`` moved into ``[-period/2, period/2)``."""
     return (x + 0.5 * period_s) % period_s - 0.5 * period_s
@@ -250,8 +293,10 @@ def _wrap(x: np.ndarray, period_s: float) -> np.ndarray:
 @lru_cache(maxsize=4096)
 def _class_model(durations_s: tuple[float, ...], ends_unix_s: tuple[float, ...], on_cycle: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """A class's durations (:data:`N_PAIRED` quantiles) and, where the class is told by the cycle, the instants its
-    phases ended (as many), else None. Cached: a group's history changes only when a phase ends."""
-    return _reduced(durations_s, N_PAIRED), (_reduced(ends_unix_s, N_PAIRED) if on_cycle and len(ends_unix_s) >= MIN_SEEN else None)
+    latest :data:`N_PAIRED` phases ended (the nearest cycles: the period's error moves them least, and a coordinated
+    controller changes its plan by the time of day), else None. Cached: a group's history changes only when a phase
+    ends."""
+    return _reduced(durations_s, N_PAIRED), (np.sort(np.asarray(ends_unix_s[-N_PAIRED:], dtype=float)) if on_cycle and len(ends_unix_s) >= MIN_SEEN else None)
 
 
 SCORE_AHEAD_S = 20.0
@@ -280,9 +325,21 @@ def scored_errors_s(since_unix_s: float, end_unix_s: float, durations_s: tuple[f
 
 def _on_cycle(raw_unix_s: np.ndarray, ends_unix_s: np.ndarray, period_s: float) -> np.ndarray:
     """Each raw end (a start plus a duration) moved to the nearest point of the cycle where a phase ended, for every
-    pair of the two (``len(raw) * len(ends)`` instants)."""
+    pair of the two (``len(raw) * len(ends)`` instants, raw-major)."""
     raw = _reduced(raw_unix_s, N_PAIRED)
     return (raw[:, None] + _wrap(ends_unix_s[None, :] - raw[:, None], period_s)).ravel()
+
+
+def _spread_on_cycle(moved_unix_s: np.ndarray, ends_unix_s: np.ndarray, period_s: float, period_error_s: float, floor_unix_s: float = -math.inf) -> np.ndarray:
+    """The instants :func:`_on_cycle` moved past changes (``ends_unix_s``) to, each spread by the period's standard
+    error (:func:`period_fit_s`) times the cycles it was moved over (a three-point rule of the normal law: ``0,
+    +-sqrt(3/2) sd``, equally likely: three times the instants), none before ``floor_unix_s``: a change 40 cycles back
+    moved by a period 0.1 s off is 4 s off. [s]"""
+    if period_error_s <= 0.0:
+        return moved_unix_s
+    origin = np.tile(ends_unix_s, len(moved_unix_s) // len(ends_unix_s))
+    sd = math.sqrt(1.5) * period_error_s * np.abs(np.round((moved_unix_s - origin) / period_s))
+    return np.maximum(np.concatenate([moved_unix_s - sd, moved_unix_s, moved_unix_s + sd]), floor_unix_s)
 
 
 def _after(samples: np.ndarray, floor_unix_s: float, period_s: float | None) -> np.ndarray:
@@ -459,7 +516,8 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         period = cycle.period_s
         d, cycle_ends = _class_model(durations, cycle.ends(cls), period is not None and cls in cycle.cycle_classes)
         if cycle_ends is not None:
-            return _after(_on_cycle(since + d, cycle_ends, period), floor_unix_s, period), "cycle"
+            on_cycle = _after(_on_cycle(since + d, cycle_ends, period), floor_unix_s, period)  # (a point passed: a cycle on)
+            return _spread_on_cycle(on_cycle, cycle_ends, period, cycle.period_error_s, floor_unix_s), "cycle"
         own = _by_durations(cycle, cls, since, now_unix_s, floor_unix_s, given, n_given, published_min_unix_s, published_max_unix_s, current)
         if own is not None:
             return own
@@ -481,9 +539,10 @@ def next_end(cycle, cls: PhaseClass, start: np.ndarray) -> np.ndarray | None:
     if cycle_ends is not None:
         finite = np.isfinite(raw)
         if finite.all():
-            raw = _on_cycle(raw, cycle_ends, cycle.period_s)
+            raw = _spread_on_cycle(_on_cycle(raw, cycle_ends, cycle.period_s), cycle_ends, cycle.period_s, cycle.period_error_s)
         elif finite.any():
-            raw = np.concatenate([_on_cycle(raw[finite], cycle_ends, cycle.period_s), raw[~finite]])
+            moved = _spread_on_cycle(_on_cycle(raw[finite], cycle_ends, cycle.period_s), cycle_ends, cycle.period_s, cycle.period_error_s)
+            raw = np.concatenate([moved, raw[~finite]])
     return _reduced(raw)
 
 
