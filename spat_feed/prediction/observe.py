@@ -561,7 +561,7 @@ METHOD_MEMORY = 10
 
 PERIOD_EVERY = (20, 640)
 """Phase ends (of all groups) between two searches for the controller's cycle (~5-10 ms each): the first after 20,
-each next one twice as far off while none is found (an actuated controller), at most 640 apart. [-]"""
+each next one twice as far off, found or not (a period found is re-checked less and less often), at most 640 apart. [-]"""
 
 
 class IntersectionHistory:
