@@ -39,8 +39,8 @@ from bisect import bisect_left, insort
 from dataclasses import replace
 
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
-from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, cut_behind, drive_normally, estimate, followers, gives_up_green, held_up,
-                                   normal_drive_s, paced_for_behind, said_truly, seen_at_line, tail_glide)
+from advisory.advice.queue import (PACED_REASON, PastRed, Probe, QueueEstimate, QueueModel, apply, cut_behind, drive_normally, estimate, followers,
+                                   gives_up_green, held_up, normal_drive_s, paced_for_behind, said_truly, seen_at_line, tail_glide)
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -140,6 +140,14 @@ def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) 
     back for one stamped later) advanced at its speed (a car 2.5 s behind is not read 3.5 s behind)."""
     t, s, v = probe
     return Probe(s + v * max(t_unix_s - t, 0.0) - here_m, v)
+
+
+def _normally(advice: Advice, params: AdvisorParams, real: Observation, last: dict | None) -> Advice:
+    """The service's "drive normally" in place of ``advice`` (:func:`advisory.advice.queue.drive_normally`), spoken
+    where the trip's ``last`` answer was not already "drive normally" (as the advisor speaks its own: on a change)."""
+    out = drive_normally(advice, params.units, real.lights[0])
+    said = last is not None and (last.get("action"), last.get("reason")) == (out.action, out.reason)
+    return replace(out, speak=False) if said else out
 
 
 class QueueBoard:
@@ -322,13 +330,13 @@ class QueueBoard:
         for_queue = self._for_queue.get(trip_id, False) if trip_id is not None else False
         at_line = bool(real.lights) and seen_at_line(real.lights[0], advice, for_queue, obs.speed_mps, obs.speed_limit_mps, params, self.model)
         if at_line or gives_up_green(obs, advice, params, model=self.model, behind=behind, queue=est):
-            return drive_normally(advice, params.units, real.lights[0])
+            return _normally(advice, params, real, last)
         paced = paced_for_behind(lambda plan: self.lost_behind(real, plan, params, trip_id, est), obs, advice, params)
         if paced is None:
-            return drive_normally(advice, params.units, real.lights[0])
-        if paced is not advice:  # spoken as the advisor speaks a plan: a new action, or a target moved by speak_change_mps
+            return _normally(advice, params, real, last)
+        if paced is not advice:  # spoken once: again only where its speed moves by speak_change_mps (not as the car reaches it)
             told = None if last is None else last.get("target_speed_mps")
-            said = last is not None and last.get("action") == paced.action and told is not None
+            said = last is not None and last.get("reason") == PACED_REASON and told is not None
             paced = replace(paced, speak=not (said and abs(told - paced.target_speed_mps) < params.speak_change_mps))
         return said_truly(paced, real.lights, obs.lights, params.units)
 
