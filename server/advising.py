@@ -276,7 +276,8 @@ class Engine:
             held = None
             if self.queue is not None:  # the lights as the car meets them in traffic, or "follow the car in front"
                 passed = light_passed(trip.corridor, at_m, speed or 0.0, fix.t_unix_s, readings) if on_route else None
-                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, trip.last["reason"] if trip.last else None, passed)
+                last = trip.last or {}
+                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, last.get("reason"), passed, trip.params, last.get("target_speed_mps"))
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
             fresh = self.queue is not None and trip.last is not None and self.queue.fresh(trip.last["reason"])  # out of a queue: plan anew

@@ -367,6 +367,35 @@ def test_board_holds_a_queued_car_until_it_is_over_the_line_then_plans_afresh():
     assert board.held == 3
 
 
+@pytest.mark.parametrize("units, lead_mps, want", [("mph", 10.0, "Queue ahead. Ease off to 22 miles per hour."),
+                                                     ("kmh", 10.0, "Queue ahead. Ease off to 35 kilometers per hour."),
+                                                     ("mph", 6.0, "Queue ahead. Ease off to 13 miles per hour."),
+                                                     ("mph", 3.0, "Queue ahead. Follow the car in front.")])
+def test_a_car_closing_in_on_a_slower_connected_car_lifts_off_to_its_speed(units, lead_mps, want):
+    """At 13.4 m/s, 30 m behind a connected car at ``lead_mps`` (within the 3 s follow gap and a car), 200 m before a
+    green light: told only to follow, the car closed in and braked where the gap ran out, and so did every car behind
+    it (traced in SUMO, docs/TRAFFIC.md). It is told to lift off to the car ahead's speed, in the advisor's whole mph
+    at or below it (never faster than the traffic ahead allows; km/h as spoken: 22 mph = 9.83 m/s = 35 km/h), spoken
+    once, again where that speed moves by 5 mph; behind a car crawling below the slowest advised speed (10 mph) it
+    follows, no speed. Over the line it is advised afresh, as before."""
+    board, t, params = QueueBoard(), 1000.0, AdvisorParams(units=units)
+    green = (LightView(1, 200.0, red_windows_s=((40.0, 70.0),)),)
+    lead = Observation(lead_mps, 13.4, tuple(replace(lv, distance_m=170.0) for lv in green), position_m=130.0)
+    board.see("c", "lead", t, lead)
+    _, held = board.see("c", "car", t, Observation(13.4, 13.4, green, position_m=100.0), params=params)
+    assert held is not None and held.reason == "queue" and held.message == want and held.speak
+    if held.target_speed_mps is not None:
+        assert held.action == "ease_off" and held.target_speed_mps <= lead_mps < held.target_speed_mps + 0.44704
+    closer = Observation(12.0, 13.4, tuple(replace(lv, distance_m=188.0) for lv in green), position_m=112.0)
+    _, again = board.see("c", "car", t + 1.0, closer, "queue", params=params, told_mps=held.target_speed_mps)
+    assert again.message == want and not again.speak  # said once
+    slower = replace(lead, speed_mps=lead_mps - 3.0)
+    board.see("c", "lead", t + 1.0, slower)
+    if lead_mps >= 8.0:
+        _, moved = board.see("c", "car", t + 1.0, closer, "queue", params=params, told_mps=held.target_speed_mps)
+        assert moved.target_speed_mps < held.target_speed_mps - 2.2 and moved.speak  # 3 m/s slower ahead: said again
+
+
 @pytest.mark.parametrize("amber_s, red_s, stops", [(0.0, 4.0, True), (0.0, 6.0, True), (0.0, 8.0, False), (None, 5.0, False), (4.0, 4.0, False)])
 def test_a_car_behind_one_that_takes_the_last_of_the_green_prepares_to_stop_instead_of_following(amber_s, red_s, stops):
     """At 22 m/s, 80 m before a light that turns red in ``red_s`` (its own drive at the limit there in 3.25 s: it
