@@ -8,7 +8,7 @@ the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~adviso
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.
 Follow the car in front." (reason ``queue``), or, at a fix where it closes in on a slower connected car, a lift-off
-to that car's speed (:func:`ease_to_car_ahead`); the advisor then plans afresh. Not where the cars ahead leave it no time
+to that car's speed (:func:`advisory.advice.queue.ease_to_car_ahead`); the advisor then plans afresh. Not where the cars ahead leave it no time
 to cross before the next light's red (``QueueEstimate.stop_behind``, :func:`advisory.advice.queue.behind_s`): that
 car is advised by the advisor, which sees the line closed to it until the red's end, and prepares to stop. The trips behind a car are probes too:
 with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
@@ -40,9 +40,8 @@ from bisect import bisect_left, insort
 from dataclasses import replace
 
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
-from advisory.advice.queue import (PACED_REASON, PastRed, Probe, QueueEstimate, QueueModel, apply, cut_behind, drive_normally, estimate, followers,
-                                   gives_up_green, held_up, normal_drive_s, paced_for_behind, queue_phrase, said_truly, seen_at_line, tail_glide)
-from advisory.advice.wording import published_speed_mps
+from advisory.advice.queue import (PACED_REASON, PastRed, Probe, QueueEstimate, QueueModel, apply, cut_behind, drive_normally, ease_to_car_ahead, estimate,
+                                   followers, gives_up_green, held_up, normal_drive_s, paced_for_behind, said_truly, seen_at_line, tail_glide)
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -152,37 +151,6 @@ def _normally(advice: Advice, params: AdvisorParams, real: Observation, last: di
     return replace(out, speak=False) if said else out
 
 
-def ease_to_car_ahead(follow: Advice, speed_mps: float, ahead_mps: float, params: AdvisorParams) -> Advice:
-    """``follow`` ("Queue ahead. Follow the car in front.", no speed) for a car closing in on a slower connected car
-    (at ``ahead_mps``), as a lift-off to that car's speed: "Queue ahead. Ease off to 22 miles per hour." (action
-    ``ease_off``, reason ``queue``; the advisor's whole-mph step at or below that car's speed, never above what the
-    traffic ahead allows); ``follow`` itself where that speed is below the slowest ever advised (``min_cruise_speed_mps``:
-    a car standing or crawling ahead, the driver stops behind it by car following) or not below this car's.
-
-    Told only to follow, a driver closes in at its speed and brakes where the gap runs out (car following: SUMO's
-    Krauss, and a person alike), shedding as heat what a lift-off a few seconds earlier would have kept; every car of a
-    connected platoon behind a gliding leader did so and passed the braking on down the platoon. Traced in SUMO (7th
-    Street fixed time, 900 veh/h, every car connected, seed 1, docs/TRAFFIC.md): the 170 of its 219 cars told to follow
-    at some fix cost together 0.043 $ more than with GLOSA's device, whose cars glide on their own (the run's whole gap:
-    0.034 $); lifting off to the car ahead's speed, the run's saving 5.0 -> 6.1 % (GLOSA 6.1 %), time unchanged.
-
-    Examples
-    --------
-    >>> follow = Advice("none", "queue", message="Queue ahead. Follow the car in front.")
-    >>> eased = ease_to_car_ahead(follow, 13.4, 10.0, AdvisorParams())
-    >>> eased.action, eased.target_speed_mps, eased.message
-    ('ease_off', 9.83, 'Queue ahead. Ease off to 22 miles per hour.')
-    >>> ease_to_car_ahead(follow, 13.4, 3.0, AdvisorParams()) is follow  # crawling ahead: follow it
-    True
-    """
-    step = params.speed_step_mps
-    target = math.floor(ahead_mps / step + 1e-9) * step
-    if target < params.min_cruise_speed_mps - 1e-9 or target >= speed_mps - params.hysteresis_mps:
-        return follow
-    out = replace(follow, action="ease_off", target_speed_mps=published_speed_mps(target), current_speed_mps=speed_mps)
-    return replace(out, message=queue_phrase(out, None, params.units))
-
-
 class QueueBoard:
     """Probes per corridor and red starts per intersection (see the module docstring)."""
 
@@ -287,7 +255,7 @@ class QueueBoard:
                told_mps: float | None = None) -> tuple[Observation, Advice | None]:  # fmt: skip
         """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
         stands in the next light's queue or closes in on a slower car, until it is over that light's line; at a fix
-        where it closes in on a slower connected car, lifting off to that car's speed (:func:`ease_to_car_ahead`). The
+        where it closes in on a slower connected car, lifting off to that car's speed (:func:`advisory.advice.queue.ease_to_car_ahead`). The
         connected cars it holds up are kept for :meth:`check`."""
         nxt = obs.lights[0]
         self._behind[trip_id] = est.behind

@@ -29,7 +29,8 @@ a distribution over the light's equally likely timings, which the advisor's choi
 surely standing, no waiting for the slowest discharge in every timing). A car that is
 itself in a queue (slower than ``queued_mps`` and not first at the line: ``in_queue``) or right behind a slower
 connected car (within ``follow_gap_s`` plus a jam spacing: ``follow_mps``) is given no speed by the service: it
-follows the car in front, and the advice resumes, planned afresh, once it is free (never a target above what the
+follows the car in front (closing in on a slower connected car, it lifts off to that car's speed:
+:func:`ease_to_car_ahead`), and the advice resumes, planned afresh, once it is free (never a target above what the
 traffic ahead allows; and a plan made in a queue is a crawl: every faster speed reaches the line before the queue has
 gone, and the advisor keeps a plan that still works, to the green after next).
 
@@ -1037,6 +1038,37 @@ def said_truly(advice: Advice, real: Sequence[LightView], held: Sequence[LightVi
         return advice
     keep_words = (advice.action == "none" and advice.reason != "red_ahead") or advice.reason == PACED_REASON  # (a paced plan names no countdown)
     return replace(out, message=phrase(out, units) if queue_s is None or keep_words else queue_phrase(out, queue_s, units))
+
+
+def ease_to_car_ahead(follow: Advice, speed_mps: float, ahead_mps: float, params: AdvisorParams) -> Advice:
+    """``follow`` ("Queue ahead. Follow the car in front.", no speed) for a car closing in on a slower connected car
+    (at ``ahead_mps``), as a lift-off to that car's speed: "Queue ahead. Ease off to 22 miles per hour." (action
+    ``ease_off``, reason ``queue``; the advisor's whole-mph step at or below that car's speed, never above what the
+    traffic ahead allows); ``follow`` itself where that speed is below the slowest ever advised (``min_cruise_speed_mps``:
+    a car standing or crawling ahead, the driver stops behind it by car following) or not below this car's.
+
+    Told only to follow, a driver closes in at its speed and brakes where the gap runs out (car following: SUMO's
+    Krauss, and a person alike), shedding as heat what a lift-off a few seconds earlier would have kept; every car of a
+    connected platoon behind a gliding leader did so and passed the braking on down the platoon. Traced in SUMO (7th
+    Street fixed time, 900 veh/h, every car connected, seed 1, docs/TRAFFIC.md): the 170 of its 219 cars told to follow
+    at some fix cost together 0.043 $ more than with GLOSA's device, whose cars glide on their own (the run's whole gap:
+    0.034 $); lifting off to the car ahead's speed, the run's saving 5.0 -> 6.1 % (GLOSA 6.1 %), time unchanged.
+
+    Examples
+    --------
+    >>> follow = Advice("none", "queue", message="Queue ahead. Follow the car in front.")
+    >>> eased = ease_to_car_ahead(follow, 13.4, 10.0, AdvisorParams())
+    >>> eased.action, eased.target_speed_mps, eased.message
+    ('ease_off', 9.83, 'Queue ahead. Ease off to 22 miles per hour.')
+    >>> ease_to_car_ahead(follow, 13.4, 3.0, AdvisorParams()) is follow  # crawling ahead: follow it
+    True
+    """
+    step = params.speed_step_mps
+    target = math.floor(ahead_mps / step + 1e-9) * step
+    if target < params.min_cruise_speed_mps - 1e-9 or target >= speed_mps - params.hysteresis_mps:
+        return follow
+    out = replace(follow, action="ease_off", target_speed_mps=published_speed_mps(target), current_speed_mps=speed_mps)
+    return replace(out, message=queue_phrase(out, None, params.units))
 
 
 def tail_glide(obs: Observation, est: QueueEstimate, advice: Advice, params: AdvisorParams, model: QueueModel | None = None) -> Advice | None:
