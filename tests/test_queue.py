@@ -826,8 +826,8 @@ def test_a_glide_to_the_green_after_a_red_is_not_paced_into_that_red():
     "Keep up with the traffic. Ease off to 11 mph."): its normal drive crossed the line at 14 s, inside the red, and
     the plan's car went on coasting past the line. The car sped up towards the red, was told to stop at the line, and
     the five cars following it stopped behind it (GLOSA's glided through). A normal drive reaching the line in a red
-    stands there until it ends (:func:`cut_behind`), and past the light it is for the plan's car drives on normally:
-    nobody behind crosses later than behind a normal drive here, and the glide stands."""
+    stands there until it ends (:func:`cut_behind`), and a lift-off for the line does not coast on past it (it holds
+    its speed there): nobody behind crosses later than behind a normal drive here, and the glide stands."""
     params, t = AdvisorParams(), 1000.0
     lights = (LightView(7001, 156.4, red_windows_s=((0.0, 33.0), (81.0, math.inf)), amber_s=4.0),
               LightView(7002, 329.0, red_windows_s=((14.0, 46.0), (100.0, math.inf)), amber_s=4.0))
