@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import replace
 
 from advisory.advice.advisor import advise
-from advisory.advice.views import Advice, AdvisorParams
+from advisory.advice.views import Advice, AdvisorMemory, AdvisorParams
 from advisory.advice.wording import published_speed_mps
 from advisory.evaluation.track import RED_TOLERANCE_M
 from advisory.physics.params import VEHICLE_PRESETS
@@ -276,13 +276,17 @@ class Engine:
             held = None
             if self.queue is not None:  # the lights as the car meets them in traffic, or "follow the car in front"
                 passed = light_passed(trip.corridor, at_m, speed or 0.0, fix.t_unix_s, readings) if on_route else None
-                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, trip.last["reason"] if trip.last else None, passed)
+                last = trip.last or {}
+                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, last.get("reason"), passed, trip.params, last.get("target_speed_mps"))
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
             fresh = self.queue is not None and trip.last is not None and self.queue.fresh(trip.last["reason"])  # out of a queue: plan anew
-            advice, memory = (held, trip.memory) if held is not None else advise(obs, None if fresh else trip.memory, trip.params, trip.tables)
+            before = None if fresh else trip.memory
+            advice, memory = (held, trip.memory) if held is not None else advise(obs, before, trip.params, trip.tables)
             if self.queue is not None and held is None:  # no plan that gives up a green a normal drive makes
-                advice = self.queue.check(obs, advice, trip.params, trip.id, trip.last)
+                planned, advice = advice, self.queue.check(obs, advice, trip.params, trip.id, trip.last)
+                if advice is not planned:
+                    memory = heard(memory, before, advice)
             if advice.action == "none" and advice.reason in ("no_spat", "stale_spat") and lights:
                 advice = _spat_reason(advice, trip.spat.status(lights[0].intersection_id))
         trip.memory = memory
@@ -314,6 +318,15 @@ class Engine:
         if self.on_advice is not None:
             self.on_advice(trip, advice, "ok" if on_route else ("poor_gps" if poor else "off_route"), time.perf_counter() - t0)
         return out
+
+
+def heard(memory: AdvisorMemory, before: AdvisorMemory | None, told: Advice) -> AdvisorMemory:
+    """The advisor's ``memory`` after the service answered ``told`` in place of its plan (the queue board's check: a
+    pace for the cars behind, "drive normally", the glide to a queue's tail): its plan stays its own (``last``, kept or
+    dropped by its rules at the next fix), but what the driver last heard is ``told`` where it was spoken, else what it
+    heard ``before`` this fix: so the advisor's plan, when it comes back, is spoken (before, the advisor took its own
+    plan as heard, and the driver told "Keep up with the traffic. Hold 40 km/h." never heard the plan again)."""
+    return AdvisorMemory(memory.last, told if told.speak else (before.spoken if before is not None else None))
 
 
 def corridor_units(corridor: Corridor) -> str:

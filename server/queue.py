@@ -7,7 +7,8 @@ the green: :meth:`QueueBoard.past_red`). For a fix on the route it hands the adv
 the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~advisory.advice.queue.apply`: each red the car
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.
-Follow the car in front." (reason ``queue``); the advisor then plans afresh. Not where the cars ahead leave it no time
+Follow the car in front." (reason ``queue``), or, at a fix where it closes in on a slower connected car, a lift-off
+to that car's speed (:func:`advisory.advice.queue.ease_to_car_ahead`); the advisor then plans afresh. Not where the cars ahead leave it no time
 to cross before the next light's red (``QueueEstimate.stop_behind``, :func:`advisory.advice.queue.behind_s`): that
 car is advised by the advisor, which sees the line closed to it until the red's end, and prepares to stop. The trips behind a car are probes too:
 with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
@@ -39,8 +40,8 @@ from bisect import bisect_left, insort
 from dataclasses import replace
 
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
-from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, cut_behind, drive_normally, estimate, followers, gives_up_green, held_up,
-                                   normal_drive_s, paced_for_behind, said_truly, seen_at_line, tail_glide)
+from advisory.advice.queue import (PACED_REASON, PastRed, Probe, QueueEstimate, QueueModel, apply, cut_behind, drive_normally, ease_to_car_ahead, estimate,
+                                   followers, gives_up_green, held_up, normal_drive_s, paced_for_behind, said_truly, seen_at_line, tail_glide)
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -142,6 +143,14 @@ def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) 
     return Probe(s + v * max(t_unix_s - t, 0.0) - here_m, v)
 
 
+def _normally(advice: Advice, params: AdvisorParams, real: Observation, last: dict | None) -> Advice:
+    """The service's "drive normally" in place of ``advice`` (:func:`advisory.advice.queue.drive_normally`), spoken
+    where the trip's ``last`` answer was not already "drive normally" (as the advisor speaks its own: on a change)."""
+    out = drive_normally(advice, params.units, real.lights[0])
+    said = last is not None and (last.get("action"), last.get("reason")) == (out.action, out.reason)
+    return replace(out, speak=False) if said else out
+
+
 class QueueBoard:
     """Probes per corridor and red starts per intersection (see the module docstring)."""
 
@@ -171,11 +180,12 @@ class QueueBoard:
         self.held = 0  # fixes answered "follow the car in front"
 
     def see(self, corridor: str, trip_id: str, t_unix_s: float, obs: Observation, last_reason: str | None = None,
-            passed: LightView | None = None) -> tuple[Observation, Advice | None]:  # fmt: skip
+            passed: LightView | None = None, params: AdvisorParams | None = None, told_mps: float | None = None) -> tuple[Observation, Advice | None]:  # fmt: skip
         """Note the car's fix; the observation the advisor should get, or the service's advice for a car in a queue
-        or behind a slower one (spoken when the trip's last advice, ``last_reason``, was another). After such advice
-        the advisor plans afresh (:meth:`fresh`). ``passed``: the light whose line the car passed last (distance
-        negative), for the cars behind that still have to cross it (:meth:`check`)."""
+        or behind a slower one (spoken when the trip's last advice, ``last_reason``, was another, or the speed it told,
+        ``told_mps``, moved by ``params.speak_change_mps``). After such advice the advisor plans afresh
+        (:meth:`fresh`). ``passed``: the light whose line the car passed last (distance negative), for the cars behind
+        that still have to cross it (:meth:`check`). ``params``: the trip's advisor settings (units, speed steps)."""
         lane = self.lane(corridor)
         if not obs.on_route or obs.position_m is None or not obs.lights:
             lane.drop(trip_id)
@@ -190,7 +200,7 @@ class QueueBoard:
         lane.expire(t_unix_s, MAX_AGE_S)
         self.note_behind(lane, trip_id, here, t_unix_s, obs, passed)
         est = self.estimate(lane, here, t_unix_s, obs, self.red_elapsed(obs, t_unix_s))
-        return self.answer(trip_id, obs, est, last_reason)
+        return self.answer(trip_id, obs, est, last_reason, params, told_mps)
 
     def red_elapsed(self, obs: Observation, t_unix_s: float) -> float | None:
         """How long the next light's current red has been on at ``t_unix_s`` (from the first fix that saw it on, on any
@@ -241,10 +251,12 @@ class QueueBoard:
             noted.append((light, behind, self._last_red(light.intersection_id, t_unix_s) if light is passed else None))
         self._passed[trip_id] = tuple(noted)
 
-    def answer(self, trip_id: str, obs: Observation, est: QueueEstimate, last_reason: str | None) -> tuple[Observation, Advice | None]:
+    def answer(self, trip_id: str, obs: Observation, est: QueueEstimate, last_reason: str | None, params: AdvisorParams | None = None,
+               told_mps: float | None = None) -> tuple[Observation, Advice | None]:  # fmt: skip
         """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
-        stands in the next light's queue or closes in on a slower car, until it is over that light's line. The connected
-        cars it holds up are kept for :meth:`check`."""
+        stands in the next light's queue or closes in on a slower car, until it is over that light's line; at a fix
+        where it closes in on a slower connected car, lifting off to that car's speed (:func:`advisory.advice.queue.ease_to_car_ahead`). The
+        connected cars it holds up are kept for :meth:`check`."""
         nxt = obs.lights[0]
         self._behind[trip_id] = est.behind
         self._seen[trip_id] = (obs, est)
@@ -257,8 +269,14 @@ class QueueBoard:
         if trip_id in self._queued:
             self.held += 1
             countdown = nxt.seconds_to_green() if nxt.red_now else nxt.seconds_to_red()
-            return obs, Advice("none", "queue", light_red=nxt.red_now, seconds_to_change_s=countdown, message=QUEUE_MESSAGE, speak=last_reason != "queue",
-                               light_id=nxt.intersection_id)  # fmt: skip
+            follow = Advice("none", "queue", light_red=nxt.red_now, seconds_to_change_s=countdown, message=QUEUE_MESSAGE, speak=last_reason != "queue",
+                            light_id=nxt.intersection_id)  # fmt: skip
+            if est.in_queue or est.follow_mps is None:
+                return obs, follow
+            eased = ease_to_car_ahead(follow, obs.speed_mps, est.follow_mps, params or AdvisorParams())
+            if eased is not follow and last_reason == "queue" and told_mps is not None:  # said already: again where the speed moved
+                eased = replace(eased, speak=abs(told_mps - eased.target_speed_mps) >= (params or AdvisorParams()).speak_change_mps)
+            return obs, eased
         return apply(obs, est), None
 
     def lane(self, corridor: str) -> Lane:
@@ -322,13 +340,13 @@ class QueueBoard:
         for_queue = self._for_queue.get(trip_id, False) if trip_id is not None else False
         at_line = bool(real.lights) and seen_at_line(real.lights[0], advice, for_queue, obs.speed_mps, obs.speed_limit_mps, params, self.model)
         if at_line or gives_up_green(obs, advice, params, model=self.model, behind=behind, queue=est):
-            return drive_normally(advice, params.units, real.lights[0])
+            return _normally(advice, params, real, last)
         paced = paced_for_behind(lambda plan: self.lost_behind(real, plan, params, trip_id, est), obs, advice, params)
         if paced is None:
-            return drive_normally(advice, params.units, real.lights[0])
-        if paced is not advice:  # spoken as the advisor speaks a plan: a new action, or a target moved by speak_change_mps
+            return _normally(advice, params, real, last)
+        if paced is not advice:  # spoken once: again only where its speed moves by speak_change_mps (not as the car reaches it)
             told = None if last is None else last.get("target_speed_mps")
-            said = last is not None and last.get("action") == paced.action and told is not None
+            said = last is not None and last.get("reason") == PACED_REASON and told is not None
             paced = replace(paced, speak=not (said and abs(told - paced.target_speed_mps) < params.speak_change_mps))
         return said_truly(paced, real.lights, obs.lights, params.units)
 

@@ -13,9 +13,11 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, model_validator
 
 from advisory.advice.views import ACTIONS, REASONS
 
-SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew", "queue")
-"""Reasons the service decides itself (``server.advising.SERVER_PHRASES``): pauses, and ``queue`` (queue-aware advice:
-"follow the car in front", no speed, or the glide that meets the queue's tail, a speed: ``server.queue.QueueBoard``)."""
+SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew", "queue", "traffic_behind")
+"""Reasons the service decides itself (``server.advising.SERVER_PHRASES``): pauses, ``queue`` (queue-aware advice:
+"follow the car in front", no speed, or the glide that meets the queue's tail, a speed: ``server.queue.QueueBoard``)
+and ``traffic_behind`` (a speed raised so that the cars behind are not cut off by a red: "Keep up with the traffic.
+Hold 40 kilometers per hour.", :func:`advisory.advice.queue.paced_for_behind`)."""
 Action = Enum("Action", {a: a for a in ACTIONS}, type=str)
 Action.__doc__ = "What the driver is advised to do; `none`: no speed advice (`reason` says why)."
 Reason = Enum("Reason", {r: r for r in (*REASONS, *SERVER_REASONS)}, type=str)

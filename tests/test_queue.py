@@ -367,6 +367,35 @@ def test_board_holds_a_queued_car_until_it_is_over_the_line_then_plans_afresh():
     assert board.held == 3
 
 
+@pytest.mark.parametrize("units, lead_mps, want", [("mph", 10.0, "Queue ahead. Ease off to 22 miles per hour."),
+                                                     ("kmh", 10.0, "Queue ahead. Ease off to 35 kilometers per hour."),
+                                                     ("mph", 6.0, "Queue ahead. Ease off to 13 miles per hour."),
+                                                     ("mph", 3.0, "Queue ahead. Follow the car in front.")])
+def test_a_car_closing_in_on_a_slower_connected_car_lifts_off_to_its_speed(units, lead_mps, want):
+    """At 13.4 m/s, 30 m behind a connected car at ``lead_mps`` (within the 3 s follow gap and a car), 200 m before a
+    green light: told only to follow, the car closed in and braked where the gap ran out, and so did every car behind
+    it (traced in SUMO, docs/TRAFFIC.md). It is told to lift off to the car ahead's speed, in the advisor's whole mph
+    at or below it (never faster than the traffic ahead allows; km/h as spoken: 22 mph = 9.83 m/s = 35 km/h), spoken
+    once, again where that speed moves by 5 mph; behind a car crawling below the slowest advised speed (10 mph) it
+    follows, no speed. Over the line it is advised afresh, as before."""
+    board, t, params = QueueBoard(), 1000.0, AdvisorParams(units=units)
+    green = (LightView(1, 200.0, red_windows_s=((40.0, 70.0),)),)
+    lead = Observation(lead_mps, 13.4, tuple(replace(lv, distance_m=170.0) for lv in green), position_m=130.0)
+    board.see("c", "lead", t, lead)
+    _, held = board.see("c", "car", t, Observation(13.4, 13.4, green, position_m=100.0), params=params)
+    assert held is not None and held.reason == "queue" and held.message == want and held.speak
+    if held.target_speed_mps is not None:
+        assert held.action == "ease_off" and held.target_speed_mps <= lead_mps < held.target_speed_mps + 0.44704
+    closer = Observation(12.0, 13.4, tuple(replace(lv, distance_m=188.0) for lv in green), position_m=112.0)
+    _, again = board.see("c", "car", t + 1.0, closer, "queue", params=params, told_mps=held.target_speed_mps)
+    assert again.message == want and not again.speak  # said once
+    slower = replace(lead, speed_mps=lead_mps - 3.0)
+    board.see("c", "lead", t + 1.0, slower)
+    if lead_mps >= 8.0:
+        _, moved = board.see("c", "car", t + 1.0, closer, "queue", params=params, told_mps=held.target_speed_mps)
+        assert moved.target_speed_mps < held.target_speed_mps - 2.2 and moved.speak  # 3 m/s slower ahead: said again
+
+
 @pytest.mark.parametrize("amber_s, red_s, stops", [(0.0, 4.0, True), (0.0, 6.0, True), (0.0, 8.0, False), (None, 5.0, False), (4.0, 4.0, False)])
 def test_a_car_behind_one_that_takes_the_last_of_the_green_prepares_to_stop_instead_of_following(amber_s, red_s, stops):
     """At 22 m/s, 80 m before a light that turns red in ``red_s`` (its own drive at the limit there in 3.25 s: it
@@ -704,12 +733,116 @@ def test_the_board_paces_a_plan_that_would_cut_off_the_cars_behind():
     assert lost(8.04) > GIVE_UP_SLACK_S and lost(16.0) > GIVE_UP_SLACK_S
     assert (out.action, out.target_speed_mps) == ("accelerate", published_speed_mps(39 * 0.44704))
     assert lost(out.target_speed_mps) <= GIVE_UP_SLACK_S < lost(38 * 0.44704)
-    assert out.message == "Green in 40 seconds. Speed up to 63 kilometers per hour." and out.speak
-    again = board.check(seen, slow, params, "car", {"action": "accelerate", "target_speed_mps": out.target_speed_mps, "reason": "green_wave"})
-    assert again.target_speed_mps == out.target_speed_mps and not again.speak  # said once, as the advisor says a plan
+    assert out.message == "Keep up with the traffic. Speed up to 63 kilometers per hour." and out.speak and out.reason == "traffic_behind"
+    assert (out.light_red, out.seconds_to_change_s, out.light_id) == (True, 40.0, 2)  # the display's countdown: the light's own
+    again = board.check(seen, slow, params, "car", {"action": "cruise", "target_speed_mps": out.target_speed_mps, "reason": "traffic_behind"})
+    assert again.target_speed_mps == out.target_speed_mps and not again.speak  # said once (not again as the car reaches it)
     alone = QueueBoard(arrivals_vph=900.0, connected_share=1.0)
     seen, _ = alone.see("c", "car", t, obs, passed=passed)
     assert alone.check(seen, slow, params, "car").target_speed_mps == 8.04
+
+
+def _paced_scene(units: str, t: float = 1000.0):
+    """The scene of the test above, the advisor's own plan asked for: the board and the car's observation (its
+    second light 393 m out, red for 40 s more), four connected cars standing behind the line it passed 7 m back."""
+    passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
+    obs = Observation(16.0, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),), position_m=107.0)
+    board = QueueBoard(arrivals_vph=900.0, connected_share=0.5)
+    for k in range(1, 5):
+        board.see("c", f"q{k}", t, Observation(0.0, 24.6, (LightView(1, 7.5 * k, red_windows_s=((15.0, 45.0),)),), position_m=100.0 - 7.5 * k))
+    return board, obs, passed, AdvisorParams(units=units)
+
+
+@pytest.mark.parametrize("units", ["mph", "kmh"])
+def test_a_paced_plan_says_why_and_never_promises_a_green_it_does_not_reach(units):
+    """A plan raised for the cars behind is not a plan for the light ahead: its words said that plan's countdown,
+    "Green in 40 seconds. Speed up to 63 kilometers per hour.", where 63 km/h is at the line 393 m out in 23 s, in the
+    red. Now, at every speed of the car, a paced plan says why ("Keep up with the traffic.") and the speed, the number
+    the display shows, and never a countdown to a green it reaches before; the countdown fields stay the light's."""
+    import re
+
+    from server.schemas import Reason
+
+    board, obs, passed, params = _paced_scene(units)
+    unit = "kilometers per hour" if units == "kmh" else "miles per hour"
+    paced = 0
+    for v in np.arange(8.0, 24.0, 1.0):
+        at = replace(obs, speed_mps=float(v))
+        seen, _ = board.see("c", "car", 1000.0, at, passed=passed)
+        plan, _ = advise(seen, None, params)
+        out = board.check(seen, plan, params, "car")
+        if out.target_speed_mps is None or out.target_speed_mps == plan.target_speed_mps:
+            continue  # the advisor's own plan, or drive normally: not paced
+        paced += 1
+        assert out.reason == "traffic_behind" and Reason(out.reason)  # (the API's enum lists it)
+        verb = {"accelerate": "Speed up to", "ease_off": "Ease off to", "cruise": "Hold"}[out.action]
+        assert out.message == f"Keep up with the traffic. {verb} {spoken_speed(out.target_speed_mps, units)} {unit}."
+        said = re.search(r"Green in (\d+)", out.message)
+        arrival_s = crossing_time_s(393.0, float(v), out.target_speed_mps, params, KEEP_MODES[out.action])
+        assert said is None or arrival_s >= int(said.group(1)), (v, out.message, arrival_s)
+        assert (out.light_red, out.seconds_to_change_s) == (True, 40.0)
+    assert paced >= 5  # the scene paces the plan at most of these speeds
+
+
+def test_a_paced_plan_is_spoken_once_and_the_advisors_plan_again_when_it_ends():
+    """Fix by fix as the service makes them (advise, the board's check, the memory the driver heard:
+    :func:`server.advising.heard`): the paced plan is spoken at its first fix only, not at each fix that keeps it;
+    when nobody is behind any more, the advisor's own plan comes back and is spoken (the driver last heard the pace).
+    Before, the advisor took its own plan as heard at the first fix and never spoke it again."""
+    from server.advising import heard
+
+    board, obs, passed, params = _paced_scene("kmh")
+    memory, last, told = None, None, []
+    for k in range(4):  # (the scene held still: what changes is what the driver heard)
+        seen, _ = board.see("c", "car", 1000.0 + 0.5 * k, obs, passed=passed if k < 3 else None)  # at the fourth nothing is behind
+        before = memory
+        plan, memory = advise(seen, memory, params)
+        out = board.check(seen, plan, params, "car", last)
+        if out is not plan:
+            memory = heard(memory, before, out)
+        last = out.as_dict()
+        told.append((out.reason, out.speak))
+    assert told == [("traffic_behind", True), ("traffic_behind", False), ("traffic_behind", False), ("green_wave", True)], told
+
+
+def test_the_service_says_drive_normally_once_not_at_every_fix():
+    """The board's "drive normally" (a plan that gives up a green a normal drive makes) is spoken where the driver
+    last heard something else, as the advisor speaks its own; it was spoken at every fix."""
+    params, t = AdvisorParams(), 1000.0
+    board = QueueBoard(arrivals_vph=900.0, connected_share=0.5)
+    lights = (LightView(1, 150.0, red_windows_s=((9.0, 39.0),)), LightView(2, 550.0, red_windows_s=((0.0, 45.0),)))
+    seen, _ = board.see("c", "car", t, Observation(20.0, 24.6, lights, position_m=250.0))
+    slow = Advice("slow_down", "green_wave", 9.0, light_red=True, seconds_to_change_s=45.0, light_id=2, light_ahead=2)
+    first = board.check(seen, slow, params, "car")
+    assert (first.action, first.reason, first.speak) == ("none", "tight_green", True)
+    again = board.check(seen, slow, params, "car", first.as_dict())
+    assert (again.action, again.reason, again.speak, again.message) == ("none", "tight_green", False, first.message)
+
+
+def test_a_glide_to_the_green_after_a_red_is_not_paced_into_that_red():
+    """Traced in SUMO (7th Street fixed time, 900 veh/h, every car connected, seed 1, ``main.12``): 156 m before a light
+    red for 33 s more, at 5.5 m/s, a platoon of connected cars following it, the advisor's plan lifts off and coasts
+    to the green. The board priced it as cutting off 600 s of the platoon behind and said "Drive normally." (then
+    "Keep up with the traffic. Ease off to 11 mph."): its normal drive crossed the line at 14 s, inside the red, and
+    the plan's car went on coasting past the line. The car sped up towards the red, was told to stop at the line, and
+    the five cars following it stopped behind it (GLOSA's glided through). A normal drive reaching the line in a red
+    stands there until it ends (:func:`cut_behind`), and a lift-off for the line does not coast on past it (it holds
+    its speed there): nobody behind crosses later than behind a normal drive here, and the glide stands."""
+    params, t = AdvisorParams(), 1000.0
+    lights = (LightView(7001, 156.4, red_windows_s=((0.0, 33.0), (81.0, math.inf)), amber_s=4.0),
+              LightView(7002, 329.0, red_windows_s=((14.0, 46.0), (100.0, math.inf)), amber_s=4.0))
+    obs = Observation(5.47, 13.41, lights, position_m=222.7)
+    glide = Advice("coast", "green_wave", 13.41, light_red=True, seconds_to_change_s=33.0, light_id=7001)
+    platoon = [Probe(-13.0 * k, 5.47) for k in range(1, 5)] + [Probe(-80.5 - 14.0 * k, 6.4) for k in range(7)] + [Probe(-209.3, 13.41)]  # (the trace's)
+    assert lights[0].is_red_at(normal_drive_s(156.4, 5.47, 13.41, 2.0))  # a normal drive meets the red
+    assert cut_behind(lights[0], obs, glide, params, platoon, 900 / 3600, 1.0) == 0.0
+    board = QueueBoard(arrivals_vph=900.0, connected_share=1.0)
+    for k, p in enumerate(platoon):
+        ahead = tuple(replace(lv, distance_m=lv.distance_m - p.ahead_m) for lv in lights)
+        board.see("c", f"f{k}", t, Observation(5.47, 13.41, ahead, position_m=222.7 + p.ahead_m))
+    seen, held = board.see("c", "car", t, obs)
+    out = board.check(seen, glide, params, "car")
+    assert held is None and (out.action, out.reason, out.target_speed_mps) == ("coast", "green_wave", 13.41), out
 
 
 def test_in_sumo_a_slow_plan_over_the_first_light_does_not_cut_off_the_cars_behind(tmp_path):

@@ -239,6 +239,21 @@ def crossing_time_s(
     return out.reshape(vt.shape) if vt.ndim else float(out[0])
 
 
+def line_speed_mps(distance_m: float, v0_mps: float, v_target_mps: float, params: AdvisorParams, mode: str = "auto", reaction_s: float | None = None) -> float:
+    """The speed on reaching a line ``distance_m`` ahead in the motion of :func:`crossing_time_s` (same arguments, one
+    target). [m/s]
+
+    Examples
+    --------
+    >>> line_speed_mps(100.0, 10.0, 5.0, AdvisorParams(), "brake"), line_speed_mps(100.0, 5.0, 10.0, AdvisorParams())
+    (5.0, 10.0)
+    """
+    reaction = params.reaction_s if reaction_s is None else reaction_s
+    out = line_speeds_mps(float(distance_m), float(v0_mps), np.array([float(v_target_mps)]), MODE_CODES[mode], float(reaction),
+                          params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *coast_arrays(params.vehicle))  # fmt: skip
+    return float(out[0])
+
+
 @lru_cache(maxsize=64)
 def candidates_mps(low_mps: float, limit_mps: float, step_mps: float) -> np.ndarray:
     speeds = np.append(np.arange(low_mps, limit_mps - 1e-6, step_mps), limit_mps)  # the limit once, exactly

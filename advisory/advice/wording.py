@@ -65,7 +65,15 @@ def phrase(advice: Advice, units: str = "mph") -> str:
     """Short, voice-ready English for an advisory (numbers rounded, speed in mph or km/h).
 
     The countdown is about the light the speed is chosen for (``advice.light_ahead``): "Second light: green in
-    20 seconds. Slow to 40 kilometers per hour." when the next light is passed on green anyway."""
+    20 seconds. Slow to 40 kilometers per hour." when the next light is passed on green anyway. A speed held for the
+    traffic behind (reason ``traffic_behind``) names no countdown: it is not chosen for a green.
+
+    Examples
+    --------
+    >>> paced = Advice("cruise", "traffic_behind", 11.17, light_red=True, seconds_to_change_s=40.0)
+    >>> phrase(paced, "kmh"), phrase(paced, "mph")
+    ('Keep up with the traffic. Hold 40 kilometers per hour.', 'Keep up with the traffic. Hold 25 miles per hour.')
+    """
     unit_word = "miles per hour" if units == "mph" else "kilometers per hour"
     when = say_seconds(advice.seconds_to_change_s)
     speed = "" if advice.target_speed_mps is None else f"{_say_speed(advice.target_speed_mps, units)} {unit_word}"
@@ -88,6 +96,11 @@ def phrase(advice: Advice, units: str = "mph") -> str:
             "past_lights": "Last light passed. Advice ends.",
             "far_ahead": "Next light too far ahead for advice.",
         }.get(advice.reason, "")
+    if advice.reason == "traffic_behind":
+        # a speed held for the cars behind (:func:`advisory.advice.queue.paced_for_behind`), not one that makes a green:
+        # no countdown, which would promise the green at that speed
+        verb = {"accelerate": "Speed up to", "ease_off": "Ease off to"}.get(advice.action, "Hold")
+        return f"Keep up with the traffic. {verb} {speed}."
     light = ""
     if when:
         light = f"Green in {when}. " if advice.light_red else f"Red in {when}. "

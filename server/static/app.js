@@ -17,6 +17,7 @@ const ACTIONS = {
   cruise: "Hold your speed", ease_off: "Ease off", coast: "Coast", slow_down: "Slow down", brake_to: "Brake",
   accelerate: "Speed up", stop: "Prepare to stop", resume: "Resume", none: "No advice",
 };
+const REASONS = { traffic_behind: "Keep up with traffic", queue: "Queue ahead" }; // a speed given for the traffic, not for the light
 const PAUSES = {
   no_fix: "Waiting for GPS", no_speed: "Waiting for speed", poor_gps: "GPS weak", off_route: "Off the route",
   no_spat: "No signal data", stale_spat: "Signal data old", low_confidence: "Timing uncertain",
@@ -277,7 +278,8 @@ function render(a) {
   $("target").classList.toggle("empty", !stopping && target === null);
   setText("target-unit", stopping || target === null ? "" : unit);
   $("action").dataset.action = a.action ?? "none";
-  setText("action", a.action === "none" || !a.action ? (PAUSES[a.reason] ?? ACTIONS.none) : (ACTIONS[a.action] ?? capitalise(a.action.replace(/_/g, " "))));
+  setText("action", a.action === "none" || !a.action ? (PAUSES[a.reason] ?? ACTIONS.none)
+    : (REASONS[a.reason] ?? ACTIONS[a.action] ?? capitalise(a.action.replace(/_/g, " "))));
   setText("message", a.message ?? "");
 
   const speed = speedIn(a.speed_mps, units);
