@@ -18,6 +18,8 @@ import uuid
 from array import array
 from typing import TYPE_CHECKING
 
+from pydantic_core import to_json
+
 from advisory.advice.views import Advice, AdvisorMemory
 from spat_feed.road.corridors import Corridor
 from spat_feed.transport.scenarios import FeedScenario
@@ -74,7 +76,7 @@ class Trip:
 
     __slots__ = (
         "id", "token", "token_hash", "corridor", "matcher", "timing", "vehicle", "entry_unix_s", "created_unix_s", "scenario", "spat",
-        "track", "memory", "last", "bucket", "trace_t", "trace_v", "trace_x", "trace_base", "n_fixes", "last_seen_s", "tables",
+        "track", "memory", "_last", "_last_json", "_memory_json", "bucket", "trace_t", "trace_v", "trace_x", "trace_base", "n_fixes", "last_seen_s", "tables",
         "client", "device", "units", "params", "observed", "n_rejected", "version",
     )  # fmt: skip
 
@@ -100,7 +102,8 @@ class Trip:
         self.bucket = bucket
         self.track = Track(dropout_s, max_speed_mps=max_speed_mps)
         self.memory: AdvisorMemory | None = None
-        self.last: dict | None = None  # the latest advisory, fields of server.schemas.AdviceOut
+        self.last = None  # the latest advisory, fields of server.schemas.AdviceOut
+        self._memory_json: tuple = ()  # (Advice, its JSON) of the advice the memory held when last written
         self.trace_t = array("d")
         self.trace_v = array("d")
         self.trace_x = array("d")
@@ -115,6 +118,24 @@ class Trip:
         self.observed = ObservedLights() if observe_spat else None  # live SPaT: what the trip saw, for its score
         self.n_rejected = 0  # fixes rejected as implausible (jumps)
         self.version = 0  # a shared store's version of the state this object holds
+
+    @property
+    def last(self) -> dict | None:
+        """The latest advisory (a plain dict with the fields of ``server.schemas.AdviceOut``); set, never changed in place."""
+        return self._last
+
+    @last.setter
+    def last(self, advisory: dict | None) -> None:
+        self._last = advisory
+        self._last_json = None
+
+    def last_json(self) -> bytes:
+        """:attr:`last` as JSON (``pydantic_core.to_json``), made once per advisory: the fix's answer and the state a
+        shared store writes (:meth:`state_json`) hold the same bytes."""
+        data = self._last_json
+        if data is None:
+            data = self._last_json = to_json(self._last)
+        return data
 
     @property
     def n_trace(self) -> int:
@@ -139,6 +160,28 @@ class Trip:
             "last": self.last, "n_fixes": self.n_fixes, "n_rejected": self.n_rejected, "n_trace": self.n_trace,
             "observed": None if self.observed is None else [[ix, runs] for ix, runs in self.observed.runs.items()],
         }  # fmt: skip
+
+    def state_json(self) -> bytes:
+        """``to_json(self.state())``, byte for byte, without encoding twice what a fix does not change or the answer
+        already holds: the latest advisory is :meth:`last_json`, and an advice the memory still holds since the last
+        call (the advisor keeps the last one it spoke for many fixes) is not encoded again."""
+        m = self.memory
+        if m is None:
+            memory = b"null"
+        else:
+            done = self._memory_json
+            parts = []
+            for advice in (m.last, m.spoken):
+                data = next((d for a, d in done if a is advice), None)
+                if data is None:
+                    data = b"null" if advice is None else to_json(advice)
+                parts.append(data)
+            self._memory_json = ((m.last, parts[0]), (m.spoken, parts[1]))
+            memory = b"[%s,%s]" % (parts[0], parts[1])
+        last = b"null" if self._last is None else self.last_json()
+        observed = b"null" if self.observed is None else to_json([[ix, runs] for ix, runs in self.observed.runs.items()])
+        return b'{"track":%s,"memory":%s,"last":%s,"n_fixes":%d,"n_rejected":%d,"n_trace":%d,"observed":%s}' % (
+            to_json(self.track.state()), memory, last, self.n_fixes, self.n_rejected, self.n_trace, observed)
 
     def restore(self, state: dict) -> None:
         """Take :meth:`state` (of this trip, from a store) as this object's own; pending samples are dropped."""
