@@ -16,10 +16,14 @@ part of reading a streamed fix, issue 30) when the parser stands where a new fra
 nothing it would treat otherwise (no extension, no fragmented message open, within the size limits, not closing,
 no debug log): the payload unmasked as it unmasks it (``websockets.frames.apply_mask``) goes to the app exactly as
 uvicorn hands it over. Anything else (a frame split over reads, two in one, binary, control or continuation frames,
-compressed ones, 64-bit lengths, reserved bits, a size over the limit) goes to the parser as before.
+compressed ones, 64-bit lengths, reserved bits, a size over the limit) goes to the parser as before. An answer (a
+text message) is framed the same way without building a ``websockets`` frame (:meth:`StreamProtocol.send`): the bytes
+``Frame.serialize`` writes for a server's final text frame, written where uvicorn would write them.
 """
 
 from __future__ import annotations
+
+import struct
 
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 from websockets.frames import apply_mask
@@ -79,6 +83,25 @@ class StreamProtocol(WebSocketsSansIOProtocol):
         if getattr(inner, "gi_code", None) is not _AT_FRAME_START or getattr(outer, "gi_code", None) is not _FRAMES:
             return None
         return apply_mask(data[start:], data[start - 4 : start])
+
+    async def send(self, message) -> None:
+        if not self.send_text_frame(message):
+            await super().send(message)
+
+    def send_text_frame(self, message) -> bool:
+        """What uvicorn's ``send`` does with a text message on an open stream with nothing else to write (no extension,
+        no fragmented message of the app's open, no debug log), done here: the frame written (FIN and opcode 1, the 7-,
+        16- or 64-bit length, unmasked: RFC 6455 5.2, as ``websockets`` frames it); False for anything else (uvicorn's)."""
+        text = message.get("text") if message["type"] == "websocket.send" and message.get("bytes") is None else None
+        conn = self.conn
+        if (text is None or not self.handshake_complete or self.close_sent or self.initial_response is not None or self.disconnected
+                or not self.writable.is_set() or conn.state is not State.OPEN or conn.expect_continuation_frame or conn.extensions or conn.debug
+                or conn.writes):  # fmt: skip
+            return False
+        data = text.encode()
+        n = len(data)
+        self.transport.write((bytes((0x81, n)) if n < 126 else struct.pack("!BBH", 0x81, 126, n) if n < 65536 else struct.pack("!BBQ", 0x81, 127, n)) + data)
+        return True
 
     def send_receive_event_to_app(self) -> None:
         data = self.frames[0] if len(self.frames) == 1 else b"".join(self.frames)

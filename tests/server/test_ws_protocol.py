@@ -146,16 +146,17 @@ def _frame(payload: bytes, opcode: int = 1, fin: bool = True, rsv: int = 0, mask
     n = len(payload)
     head = bytes([(0x80 if fin else 0) | rsv << 4 | opcode])
     m = 0x80 if masked else 0
-    head += bytes([m | 127]) + struct.pack("!Q", n) if long else bytes([m | n]) if n < 126 else bytes([m | 126]) + struct.pack("!H", n)
+    head += bytes([m | 127]) + struct.pack("!Q", n) if long or n >= 65536 else bytes([m | n]) if n < 126 else bytes([m | 126]) + struct.pack("!H", n)
     key = b"\x37\xfa\x21\x3d"
     return head + (key + apply_mask(payload, key) if masked else payload)
 
 
 CLOSE = _frame(struct.pack("!H", 1000), opcode=8)
+LIMIT = 70_000  # the servers' ws_max_size [bytes]
 SCRIPTS = {  # name: the client's writes after the handshake and how many frames the server answers each with
     "small texts, one a read": [(_frame(b'{"t_unix_s":1714557600.1,"lat_deg":37.8}'), 1), (_frame("é 漢字".encode()), 1), (_frame(b""), 1), (CLOSE, 1)],
-    "16-bit lengths, at the limit": [(_frame(b"x" * 126), 1), (_frame(b"y" * 1000), 1), (_frame(b"z" * 1024), 1), (CLOSE, 1)],
-    "over the limit": [(_frame(b"a"), 1), (_frame(b"z" * 1025), 1)],
+    "16- and 64-bit lengths, at the limit": [(_frame(b"x" * 126), 1), (_frame(b"y" * 65535), 1), (_frame(b"z" * 65536), 1), (_frame(b"z" * LIMIT), 1), (CLOSE, 1)],
+    "over the limit": [(_frame(b"a"), 1), (_frame(b"z" * (LIMIT + 1)), 1)],
     "two frames in one read, a frame over two writes": [(_frame(b"one") + _frame(b"two"), 2), (_frame(b"three")[:3], 0), (_frame(b"three")[3:], 1), (CLOSE, 1)],
     "fragmented text, then a text": [(_frame(b"frag", fin=False), 0), (_frame(b"mented", opcode=0), 1), (_frame(b"after"), 1), (CLOSE, 1)],
     "a text inside a fragmented message": [(_frame(b"frag", fin=False), 0), (_frame(b"text"), 1)],
@@ -219,7 +220,10 @@ def _recv(sock: socket.socket) -> bytes:
 
 
 class _Parsed(StreamProtocol):
-    """``StreamProtocol`` with every read given to the ``websockets`` parser (as before the short way)."""
+    """``StreamProtocol`` with every read given to the ``websockets`` parser and every answer framed by it (as before)."""
+
+    def send_text_frame(self, message) -> bool:
+        return False
 
     def one_text_frame(self, data: bytes) -> bytes | None:
         return None
@@ -227,11 +231,17 @@ class _Parsed(StreamProtocol):
 
 class _Counted(StreamProtocol):
     taken = 0
+    framed = 0
 
     def one_text_frame(self, data: bytes) -> bytes | None:
         payload = super().one_text_frame(data)
         _Counted.taken += payload is not None
         return payload
+
+    def send_text_frame(self, message) -> bool:
+        framed = super().send_text_frame(message)
+        _Counted.framed += framed
+        return framed
 
 
 def test_a_text_frame_read_whole_is_answered_as_the_parser_answers_it():
@@ -241,14 +251,16 @@ def test_a_text_frame_read_whole_is_answered_as_the_parser_answers_it():
     and, where reading ahead does not matter (one message at a time), as from uvicorn's own protocol."""
     got = {}
     for ws in (WebSocketsSansIOProtocol, _Parsed, _Counted):
-        with _EchoServer(ws, max_size=1024) as echo:
+        with _EchoServer(ws, max_size=LIMIT) as echo:
             echo.release.set()
             got[ws] = {name: _exchange(echo.port, writes) for name, writes in SCRIPTS.items()}
     for name in SCRIPTS:
         assert got[_Counted][name] == got[_Parsed][name] == got[WebSocketsSansIOProtocol][name], name
     assert got[_Counted]["small texts, one a read"].startswith(b"\x81\x28{")  # echoed
-    assert got[_Counted]["over the limit"].startswith(b"\x81\x01a\x88\x33\x03\xf1")  # the echo of "a", then a close 1009
+    over = got[_Counted]["over the limit"]
+    assert over.startswith(b"\x81\x01a\x88") and over[5:7] == b"\x03\xf1", over  # the echo of "a", then a close 1009
     assert _Counted.taken >= 10  # (every whole text frame of a read of its own took the short way)
+    assert _Counted.framed >= 15
 
 
 def test_the_short_way_is_not_taken_where_the_parser_is_inside_a_frame():
