@@ -5,12 +5,13 @@ answer: the in-process store, which has no Redis path at all."""
 
 from __future__ import annotations
 
+import pytest
 from fastapi.testclient import TestClient
 
 from server.app import create_app
 from server.config import Settings
 from spat_feed.road.corridors import load_corridor
-from tests.server.conftest import FIX_ERROR_STATUSES, fix_errors
+from tests.server.conftest import FIX_ERROR_STATUSES, RedisServer, fix_errors, redis_server_path
 
 NOW = 1_800_000_000.0
 HEADERS = ("content-type", "content-length", "retry-after", "www-authenticate")
@@ -52,6 +53,17 @@ def test_memory_and_redis_answer_the_same_bytes(store):
     assert statuses == [200] * 22 + FIX_ERROR_STATUSES + [200, 200]
     assert b'"fix_status":"duplicate"' in ref[5][1] and b'"fix_status":"out_of_order"' in ref[6][1]
     assert any(b'"action":"cruise"' not in a[1] and b'"action":"none"' not in a[1] for a in ref[:22])  # the drive met a light
+
+
+def test_redis_over_a_unix_socket_answers_the_same_bytes(tmp_path):
+    """``ECO_STORE_URL=unix:///path/redis.sock`` (a Redis on the same machine: no TCP stack per command)."""
+    if redis_server_path() is None:
+        pytest.skip("redis-server is not installed")
+    server = RedisServer(tmp_path, unix_socket=True).start()
+    try:
+        assert _answers(server.unix_url) == _answers(None)
+    finally:
+        server.kill()
 
 
 def test_a_trips_state_json_is_its_state_as_json_byte_for_byte():
