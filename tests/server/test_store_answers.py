@@ -66,9 +66,9 @@ def test_redis_over_a_unix_socket_answers_the_same_bytes(tmp_path):
         server.kill()
 
 
-def test_a_trips_state_json_is_its_state_as_json_byte_for_byte():
-    """``Trip.state_json`` (what a shared store writes per fix, the answer's advisory and the advice still remembered
-    not encoded again) against ``to_json(Trip.state())``, the plain encoding, over a drive on live SPaT (its observed
+def test_a_trips_state_json_and_its_advisory_are_encoded_once_byte_for_byte():
+    """``Trip.state_json`` (what a shared store writes per fix) is ``to_json(Trip.state())`` and the advisory sliced out
+    of it (``Trip.last_json``, the answer) is ``to_json`` of the advisory, over a drive on live SPaT (its observed
     phases in the state): stops at reds, speeches, held plans, a restore from the JSON."""
     import asyncio
 

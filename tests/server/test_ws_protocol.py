@@ -259,7 +259,7 @@ def test_a_text_frame_read_whole_is_answered_as_the_parser_answers_it():
     assert got[_Counted]["small texts, one a read"].startswith(b"\x81\x28{")  # echoed
     over = got[_Counted]["over the limit"]
     assert over.startswith(b"\x81\x01a\x88") and over[5:7] == b"\x03\xf1", over  # the echo of "a", then a close 1009
-    assert _Counted.taken >= 10  # (every whole text frame of a read of its own took the short way)
+    assert _Counted.taken >= 8  # (the whole text frames of a read of their own took the short way; a long one may come in pieces)
     assert _Counted.framed >= 15
 
 
