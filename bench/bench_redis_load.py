@@ -25,7 +25,10 @@ off, then on, in one run.
 ``StreamPhone``: a real ``websockets`` client, every answer checked as a REST one); ``both`` runs REST, then the
 stream, on the same service.
 
+``--redis-over unix``: the workers reach Redis over a Unix socket (a Redis on the same machine) instead of loopback TCP.
+
     .venv/bin/python bench/bench_redis_load.py [--low 500] [--high 2000] [--seconds 10] [--workers 2] [--queue-aware off|on|both] [--transport http|ws|both]
+                                               [--redis-over tcp|unix]
 """
 
 from __future__ import annotations
@@ -161,6 +164,8 @@ def main() -> int:
     ap.add_argument("--only", choices=["memory", "redis"], help="run one service only")
     ap.add_argument("--transport", choices=sorted(TRANSPORTS), default="http", help="fixes as REST POSTs (default), on each trip's WebSocket stream "
                     "as the app sends them, or both, one after the other on the same service")  # fmt: skip
+    ap.add_argument("--redis-over", choices=["tcp", "unix"], default="tcp", help="the workers reach Redis over loopback TCP (default) or a Unix socket "
+                    "(same machine: ECO_STORE_URL=unix:///path/redis.sock)")  # fmt: skip
     ap.add_argument("--queue-aware", choices=["off", "on", "both"], help="queue-aware advice (ECO_QUEUE_AWARE) off, on, or each service both ways; "
                     "default: as the environment says (off)")  # fmt: skip
     args = ap.parse_args()
@@ -171,9 +176,10 @@ def main() -> int:
     there = [corridor.position(float(s)) for s in range(int(corridor.length_m))]
     positions = there + there[::-1]
     print(f"bench_redis_load: {os.cpu_count()} CPUs, shared with other jobs (their load is printed beside each service); phones send 1 fix/s ({args.transport})")
-    with bench_redis() as (folder, redis):
+    with bench_redis(unix_socket=args.redis_over == "unix") as (folder, redis):
         idle = {"ECO_KEEP_ALIVE_S": "60", "ECO_READ_TIMEOUT_S": "60"}  # the phones beyond --low wait, connected, through two phases
-        services = [("in-process store, 1 worker", idle, 1), (f"Redis, {args.workers} workers", {**idle, "ECO_STORE_URL": redis.url}, args.workers)]
+        over = (" (Unix socket)", redis.unix_url) if args.redis_over == "unix" else ("", redis.url)
+        services = [("in-process store, 1 worker", idle, 1), (f"Redis{over[0]}, {args.workers} workers", {**idle, "ECO_STORE_URL": over[1]}, args.workers)]
         queue = {None: [None], "off": ["0"], "on": ["1"], "both": ["0", "1"]}[args.queue_aware]
         for name, env, workers in services:
             if args.only and (args.only == "redis") != ("ECO_STORE_URL" in env):

@@ -194,12 +194,13 @@ def running_service(port: int, log_path: Path, env: dict[str, str], workers: int
 
 
 @contextlib.contextmanager
-def bench_redis() -> Iterator[tuple[Path, RedisServer]]:
-    """A temporary folder and a ``redis-server`` in it (``appendfsync everysec``, as deployed), killed at the end."""
+def bench_redis(unix_socket: bool = False) -> Iterator[tuple[Path, RedisServer]]:
+    """A temporary folder and a ``redis-server`` in it (``appendfsync everysec``, as deployed; with ``unix_socket`` also
+    on a Unix socket there), killed at the end."""
     with tempfile.TemporaryDirectory(prefix="ecodrive-bench-") as tmp:
         folder = Path(tmp)
         (folder / "redis").mkdir()
-        redis = RedisServer(folder / "redis", fsync="everysec").start()
+        redis = RedisServer(folder / "redis", fsync="everysec", unix_socket=unix_socket).start()
         try:
             yield folder, redis
         finally:

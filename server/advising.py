@@ -23,6 +23,8 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
+from pydantic_core import from_json, to_json
+
 from advisory.advice.advisor import advise
 from advisory.advice.views import Advice, AdvisorMemory, AdvisorParams
 from advisory.advice.wording import published_speed_mps
@@ -39,7 +41,7 @@ from server.queue_store import SharedBoard
 from server.quotas import Creator, address_quota, key_quotas
 from spat_feed.prediction.observe import light_view, observation
 from server.ratelimit import TokenBucket
-from server.schemas import MS_TIMESTAMP_MIN, TripCreate
+from server.schemas import MS_TIMESTAMP_MIN, GpsFixIn, TripCreate
 from server.spat import ScenarioSpat, SharedSpat, SpatHub, TripSpat
 from server.store import Limits, RedisTrips, make_store, retry_after  # noqa: F401  (retry_after: re-exported)
 from server.trips import Trip
@@ -195,10 +197,19 @@ class Engine:
         """Authorize (one token of the trip's bucket), parse the fix (``parse`` raises the 422), apply it, and
         save the trip; with a shared store the fix is applied again on fresh state if another worker wrote
         the trip meanwhile (the bucket's token is taken by the first write only)."""
+        return (await self._apply(trip_id, token, parse))[1]
+
+    async def apply_fix_json(self, trip_id: str, token: str | None, parse: Callable[[], Fix]) -> bytes:
+        """:meth:`apply_fix`'s advisory as JSON (``pydantic_core.to_json``), the answer of the fix routes: a new advisory
+        is encoded once for the answer and the trip's state in a shared store (:meth:`server.trips.Trip.last_json`)."""
+        trip, out = await self._apply(trip_id, token, parse)
+        return trip.last_json() if out is trip.last else to_json(out)
+
+    async def _apply(self, trip_id: str, token: str | None, parse: Callable[[], Fix]) -> tuple[Trip, dict]:
         store = self.trips
         if not store.shared:
             trip = await store.authorize(trip_id, token, take=True)
-            return self.on_fix(trip, parse())
+            return trip, self.on_fix(trip, parse())
         fix = None
         for attempt in range(SAVE_TRIES):
             async with store.hold(trip_id):
@@ -207,7 +218,7 @@ class Engine:
                     fix = parse()
                 out = self.on_fix(trip, fix)
                 if await store.save(trip, take=attempt == 0):  # also when the fix changed nothing: the copy was current
-                    return out
+                    return trip, out
         raise ApiError(503, "trip_busy", "the trip changed under this fix too often (many workers at once); retry", headers={"Retry-After": "1"})
 
     # -- fixes ----------------------------------------------------------------------------------------
@@ -403,3 +414,49 @@ def _finite(x: float | None) -> float | None:
 
 def fix_from_schema(body) -> Fix:
     return Fix(body.time_unix_s, body.lat_deg, body.lon_deg, body.speed_mps, body.heading_deg, body.accuracy_m)
+
+
+PLAIN_FIX_RANGES = {
+    "t_unix_s": (-1.7976931348623157e308, MS_TIMESTAMP_MIN), "lat_deg": (-90.0, 90.0), "lon_deg": (-180.0, 180.0), "speed_mps": (0.0, 70.0),
+    "heading_deg": (0.0, 360.0), "accuracy_m": (0.0, 100_000.0), "altitude_m": (-1000.0, 10_000.0), "altitude_accuracy_m": (0.0, 100_000.0),
+}  # fmt: skip
+"""A plain fix's fields and their ranges, both ends allowed, as :class:`~server.schemas.GpsFixIn` validates them (its
+``ge`` / ``le``; ``t_unix_s``: finite, below ``MS_TIMESTAMP_MIN``, which GpsFixIn refuses as milliseconds)."""
+_EXACT_INT = 2**53  # a JSON integer below this in size is exactly a float, as GpsFixIn (strict) takes it
+
+
+def _plain_fix(data: str | bytes) -> Fix | None:
+    """The fix in ``data`` when it is a plain one: one JSON object of :data:`PLAIN_FIX_RANGES`' fields, each once, each a
+    number in its range (or null where optional), ``t_unix_s``, ``lat_deg`` and ``lon_deg`` given. Exactly what
+    GpsFixIn accepts of such bodies, with the same numbers (the same JSON parser, jiter), but no model built; None for
+    anything else (aliases, ``timestamp``, a wrong type, a value out of range, malformed JSON), for GpsFixIn to judge."""
+    try:
+        body = from_json(data)
+    except ValueError:
+        return None
+    if type(body) is not dict or data.count(b":" if type(data) is bytes else ":") != len(body):  # (a name twice: GpsFixIn's)
+        return None
+    values = {}
+    for name, value in body.items():
+        bounds = PLAIN_FIX_RANGES.get(name)
+        if bounds is None:
+            return None
+        if type(value) is int and -_EXACT_INT < value < _EXACT_INT:
+            value = float(value)
+        elif type(value) is not float:  # (bool, str, null, list, object: GpsFixIn's, or null left out as its default)
+            if value is None and name not in ("t_unix_s", "lat_deg", "lon_deg"):
+                continue
+            return None
+        if not bounds[0] <= value <= bounds[1]:  # (nan and inf too)
+            return None
+        values[name] = value
+    t = values.get("t_unix_s")
+    if t is None or t == MS_TIMESTAMP_MIN or "lat_deg" not in values or "lon_deg" not in values:
+        return None
+    return Fix(t, values["lat_deg"], values["lon_deg"], values.get("speed_mps"), values.get("heading_deg"), values.get("accuracy_m"))
+
+
+def parse_fix(data: str | bytes) -> Fix:
+    """The fix in the JSON ``data``, or :class:`pydantic.ValidationError` (GpsFixIn's errors). A plain fix, what phones
+    send once a second (:func:`_plain_fix`), is read without building the model; anything else goes through GpsFixIn."""
+    return _plain_fix(data) or fix_from_schema(GpsFixIn.model_validate_json(data))

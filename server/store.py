@@ -579,7 +579,7 @@ class RedisTrips:
             r = await self.redis.run(
                 _ADD, keys=[self._key(trip.id), f"{self.p}:open", f"{self.p}:c:{trip.client}", f"{self.p}:k:".encode() + trip.token_hash, *self._quota_keys(who)],
                 args=[repr(self.clock()), self.keep_s, s.max_trips, q.max_trips, trip.id, trip.token_hash, trip.client,
-                      s.rate_burst, _json(trip.meta()), _json(trip.state()), q.max_trips_per_device, who.device, 1 if who.anonymous else 0, self.p],
+                      s.rate_burst, _json(trip.meta()), trip.state_json(), q.max_trips_per_device, who.device, 1 if who.anonymous else 0, self.p],
             )  # fmt: skip
         code = int(r[0])
         if code:
@@ -671,7 +671,7 @@ class RedisTrips:
             with REACH:
                 r = await self.redis.run(
                     _SAVE, keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
-                    args=[trip.version, _json(trip.state()), samples, self.keep_s, trip.token_hash, 1 if take else 0,
+                    args=[trip.version, trip.state_json(), samples, self.keep_s, trip.token_hash, 1 if take else 0,
                           self.clock(), s.rate_per_s, s.rate_burst, self.p, trip.id, self.touch_every_s],
                 )  # fmt: skip
         except ApiError:

@@ -18,6 +18,8 @@ import uuid
 from array import array
 from typing import TYPE_CHECKING
 
+from pydantic_core import to_json
+
 from advisory.advice.views import Advice, AdvisorMemory
 from spat_feed.road.corridors import Corridor
 from spat_feed.transport.scenarios import FeedScenario
@@ -74,7 +76,7 @@ class Trip:
 
     __slots__ = (
         "id", "token", "token_hash", "corridor", "matcher", "timing", "vehicle", "entry_unix_s", "created_unix_s", "scenario", "spat",
-        "track", "memory", "last", "bucket", "trace_t", "trace_v", "trace_x", "trace_base", "n_fixes", "last_seen_s", "tables",
+        "track", "memory", "_last", "_last_json", "bucket", "trace_t", "trace_v", "trace_x", "trace_base", "n_fixes", "last_seen_s", "tables",
         "client", "device", "units", "params", "observed", "n_rejected", "version",
     )  # fmt: skip
 
@@ -100,7 +102,7 @@ class Trip:
         self.bucket = bucket
         self.track = Track(dropout_s, max_speed_mps=max_speed_mps)
         self.memory: AdvisorMemory | None = None
-        self.last: dict | None = None  # the latest advisory, fields of server.schemas.AdviceOut
+        self.last = None  # the latest advisory, fields of server.schemas.AdviceOut
         self.trace_t = array("d")
         self.trace_v = array("d")
         self.trace_x = array("d")
@@ -115,6 +117,24 @@ class Trip:
         self.observed = ObservedLights() if observe_spat else None  # live SPaT: what the trip saw, for its score
         self.n_rejected = 0  # fixes rejected as implausible (jumps)
         self.version = 0  # a shared store's version of the state this object holds
+
+    @property
+    def last(self) -> dict | None:
+        """The latest advisory (a plain dict with the fields of ``server.schemas.AdviceOut``); set, never changed in place."""
+        return self._last
+
+    @last.setter
+    def last(self, advisory: dict | None) -> None:
+        self._last = advisory
+        self._last_json = None
+
+    def last_json(self) -> bytes:
+        """:attr:`last` as JSON (``pydantic_core.to_json``), made once per advisory: the fix's answer and the state a
+        shared store writes (:meth:`state_json`) hold the same bytes."""
+        data = self._last_json
+        if data is None:
+            data = self._last_json = to_json(self._last)
+        return data
 
     @property
     def n_trace(self) -> int:
@@ -139,6 +159,16 @@ class Trip:
             "last": self.last, "n_fixes": self.n_fixes, "n_rejected": self.n_rejected, "n_trace": self.n_trace,
             "observed": None if self.observed is None else [[ix, runs] for ix, runs in self.observed.runs.items()],
         }  # fmt: skip
+
+    def state_json(self) -> bytes:
+        """``to_json(self.state())``, what a shared store writes per fix; the latest advisory's JSON in it is kept as
+        :meth:`last_json` (the fix's answer: the same bytes, not encoded again). One encoding and a slice: cheaper on a
+        worker that wakes cold for each fix than the parts encoded apart and joined (measured: ``profile_worker.py``)."""
+        data = to_json(self.state())
+        if self._last is not None and self._last_json is None:  # (keys in state()'s order: "last" follows "memory", "n_fixes" follows it)
+            start = data.index(b',"last":') + 8
+            self._last_json = data[start : data.index(b',"n_fixes":', start)]
+        return data
 
     def restore(self, state: dict) -> None:
         """Take :meth:`state` (of this trip, from a store) as this object's own; pending samples are dropped."""

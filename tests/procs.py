@@ -113,10 +113,16 @@ class RedisServer:
     port: int = field(default_factory=free_port)
     fsync: str = "always"
     proc: subprocess.Popen | None = None
+    unix_socket: bool = False
+    """Also listen on ``folder/redis.sock`` (:attr:`unix_url`; the folder's path must be short: at most ~100 bytes)."""
 
     @property
     def url(self) -> str:
         return f"redis://127.0.0.1:{self.port}/0"
+
+    @property
+    def unix_url(self) -> str:
+        return f"unix://{self.folder / 'redis.sock'}?db=0"
 
     def start(self) -> RedisServer:
         exe = redis_server_path()
@@ -124,6 +130,8 @@ class RedisServer:
             raise FileNotFoundError("redis-server")
         args = [exe, "--port", str(self.port), "--bind", "127.0.0.1", "--dir", str(self.folder), "--save", "", "--appendonly", "yes",
                 "--appendfsync", self.fsync, "--logfile", str(self.folder / "redis.log")]  # fmt: skip
+        if self.unix_socket:
+            args += ["--unixsocket", str(self.folder / "redis.sock"), "--unixsocketperm", "700"]
         self.proc = subprocess.Popen(args, cwd=self.folder, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
         import redis
 

@@ -20,14 +20,12 @@ from collections.abc import Callable
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 from pydantic import ValidationError
-from pydantic_core import to_json
 
-from server.advising import fix_from_schema
+from server.advising import parse_fix
 from server.gps import Fix
 from server.overload import RETRY_AFTER_S, Shedder
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
 from server.errors import ApiError, clean_errors, validation_summary
-from server.schemas import GpsFixIn
 from server.streams import StreamCounts
 
 router = APIRouter(prefix="/v1/trips", tags=["stream"])
@@ -35,7 +33,7 @@ router = APIRouter(prefix="/v1/trips", tags=["stream"])
 
 def _parse(text: str) -> Fix:
     try:
-        return fix_from_schema(GpsFixIn.model_validate_json(text))
+        return parse_fix(text)
     except ValidationError as exc:
         errors = clean_errors(exc.errors())
         kind = "malformed_json" if any(e["type"] == "json_invalid" for e in errors) else "validation_error"
@@ -104,10 +102,10 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
                     raise ApiError(503, "overloaded", shedder.error_body(reason)["message"], headers={"Retry-After": str(RETRY_AFTER_S)})
                 shedder.in_flight += 1
                 try:
-                    out = await engine.apply_fix(trip_id, token, lambda: _parse(text))
+                    out = await engine.apply_fix_json(trip_id, token, lambda: _parse(text))
                 finally:
                     shedder.in_flight -= 1
-                await ws.send_text(to_json(out).decode())
+                await ws.send_text(out.decode())
             except ApiError as exc:
                 await ws.send_text(_error(exc))
                 if exc.status == 404:

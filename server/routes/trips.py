@@ -11,7 +11,7 @@ from pydantic import ValidationError
 from pydantic_core import to_json
 from fastapi.concurrency import run_in_threadpool
 
-from server.advising import Engine, fix_from_schema
+from server.advising import Engine, parse_fix
 from server.bodies import JsonBodyRoute
 from server.gps import Fix
 from server.deps import ApiKeyDep, EngineDep, MetricsDep, TripDep, TripId, TripToEndDep, bearer_token
@@ -94,11 +94,11 @@ async def post_fix(trip_id: TripId, request: Request) -> Response:
 
     def parse() -> Fix:
         try:
-            return fix_from_schema(GpsFixIn.model_validate_json(body))
+            return parse_fix(body)
         except ValidationError as exc:
             raise RequestValidationError([{**e, "loc": ("body", *e["loc"])} for e in exc.errors(include_url=False)]) from None
 
-    return _json(await engine.apply_fix(trip_id, bearer_token(request), parse))
+    return _JsonResponse(await engine.apply_fix_json(trip_id, bearer_token(request), parse))
 
 
 async def _body(request: Request) -> bytes:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import socket
+import struct
 import threading
 import time
 
@@ -16,6 +18,11 @@ import pytest
 import uvicorn
 import websockets
 
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
+from websockets.frames import apply_mask
+from websockets.protocol import State
+from websockets.server import ServerProtocol
+
 from server.ws import IMPLEMENTATION, StreamProtocol
 from tests.server.conftest import SERVICE_ENV, Proc, free_port
 
@@ -23,10 +30,10 @@ from tests.server.conftest import SERVICE_ENV, Proc, free_port
 class _EchoServer:
     """uvicorn with ``StreamProtocol`` serving an echo app that reads nothing until ``release`` is set."""
 
-    def __init__(self) -> None:
+    def __init__(self, ws=IMPLEMENTATION, max_size: int = 16 * 1024 * 1024) -> None:
         self.release = threading.Event()
         self.port = free_port()
-        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.port, ws=IMPLEMENTATION, log_level="warning", lifespan="off", interface="asgi3")
+        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.port, ws=ws, ws_max_size=max_size, log_level="critical", lifespan="off", interface="asgi3")
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, daemon=True)
 
@@ -132,3 +139,148 @@ def test_the_service_answers_a_burst_of_fixes_one_by_one_in_order(start_proc, tm
     answers = asyncio.run(stream())
     assert [a.get("t_unix_s") for a in answers] == [f["t_unix_s"] for f in fixes], [a.get("error") or a.get("message") or a.get("t_unix_s") for a in answers][-6:]
     assert [a["seq"] for a in answers] == list(range(1, len(fixes) + 1)) and {a["fix_status"] for a in answers} == {"ok"}, answers[:3]
+
+
+def _frame(payload: bytes, opcode: int = 1, fin: bool = True, rsv: int = 0, masked: bool = True, long: bool = False) -> bytes:
+    """One client frame (RFC 6455 5.2): masked with a fixed key, a 64-bit length with ``long``."""
+    n = len(payload)
+    head = bytes([(0x80 if fin else 0) | rsv << 4 | opcode])
+    m = 0x80 if masked else 0
+    head += bytes([m | 127]) + struct.pack("!Q", n) if long or n >= 65536 else bytes([m | n]) if n < 126 else bytes([m | 126]) + struct.pack("!H", n)
+    key = b"\x37\xfa\x21\x3d"
+    return head + (key + apply_mask(payload, key) if masked else payload)
+
+
+CLOSE = _frame(struct.pack("!H", 1000), opcode=8)
+LIMIT = 70_000  # the servers' ws_max_size [bytes]
+SCRIPTS = {  # name: the client's writes after the handshake and how many frames the server answers each with
+    "small texts, one a read": [(_frame(b'{"t_unix_s":1714557600.1,"lat_deg":37.8}'), 1), (_frame("é 漢字".encode()), 1), (_frame(b""), 1), (CLOSE, 1)],
+    "16- and 64-bit lengths, at the limit": [(_frame(b"x" * 126), 1), (_frame(b"y" * 65535), 1), (_frame(b"z" * 65536), 1), (_frame(b"z" * LIMIT), 1), (CLOSE, 1)],
+    "over the limit": [(_frame(b"a"), 1), (_frame(b"z" * (LIMIT + 1)), 1)],
+    "two frames in one read, a frame over two writes": [(_frame(b"one") + _frame(b"two"), 2), (_frame(b"three")[:3], 0), (_frame(b"three")[3:], 1), (CLOSE, 1)],
+    "fragmented text, then a text": [(_frame(b"frag", fin=False), 0), (_frame(b"mented", opcode=0), 1), (_frame(b"after"), 1), (CLOSE, 1)],
+    "a text inside a fragmented message": [(_frame(b"frag", fin=False), 0), (_frame(b"text"), 1)],
+    "binary, ping, 64-bit length": [(_frame(b"\x00\x01", opcode=2), 1), (_frame(b"p", opcode=9), 1), (_frame(b"long", long=True), 1), (_frame(b"next"), 1), (CLOSE, 1)],
+    "invalid UTF-8": [(_frame(b"ok"), 1), (_frame(b"\xff\xfe"), 1)],
+    "unmasked": [(_frame(b"plain", masked=False), 1)],
+    "reserved bit": [(_frame(b"rsv", rsv=4), 1)],
+    "text after the close": [(CLOSE, 1), (_frame(b"late"), 0)],
+}
+
+
+def _frames_in(data: bytes) -> int:
+    """Whole server frames (unmasked) at the start of ``data``."""
+    n = i = 0
+    while i + 2 <= len(data):
+        length, i = data[i + 1] & 0x7F, i + 2
+        if length >= 126:
+            size = 2 if length == 126 else 8
+            if i + size > len(data):
+                break
+            length, i = int.from_bytes(data[i : i + size], "big"), i + size
+        if i + length > len(data):
+            break
+        n, i = n + 1, i + length
+    return n
+
+
+def _exchange(port: int, writes: list[tuple[bytes, int]]) -> bytes:
+    """The bytes the server sends after its handshake response to ``writes``, each written once the server has answered
+    the ones before (so that each is a read of its own), until the server closes."""
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        key = "dGhlIHNhbXBsZSBub25jZQ=="
+        sock.sendall(f"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
+        data = b""
+        while b"\r\n\r\n" not in data:
+            chunk = sock.recv(65536)
+            assert chunk, data
+            data += chunk
+        head, _, out = data.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 101"), head
+        expected = 0
+        for w, answers in writes:
+            try:
+                sock.sendall(w)
+            except OSError:  # closed by the server already
+                break
+            expected += answers
+            while _frames_in(out) < expected and (chunk := _recv(sock)):
+                out += chunk
+        while chunk := _recv(sock):
+            out += chunk
+        return out
+
+
+def _recv(sock: socket.socket) -> bytes:
+    try:
+        return sock.recv(65536)
+    except ConnectionResetError:
+        return b""
+
+
+class _Parsed(StreamProtocol):
+    """``StreamProtocol`` with every read given to the ``websockets`` parser and every answer framed by it (as before)."""
+
+    def send_text_frame(self, message) -> bool:
+        return False
+
+    def one_text_frame(self, data: bytes) -> bytes | None:
+        return None
+
+
+class _Counted(StreamProtocol):
+    taken = 0
+    framed = 0
+
+    def one_text_frame(self, data: bytes) -> bytes | None:
+        payload = super().one_text_frame(data)
+        _Counted.taken += payload is not None
+        return payload
+
+    def send_text_frame(self, message) -> bool:
+        framed = super().send_text_frame(message)
+        _Counted.framed += framed
+        return framed
+
+
+def test_a_text_frame_read_whole_is_answered_as_the_parser_answers_it():
+    """Raw frames (one or two a read, split, fragmented, binary, control, 64-bit lengths, over the size limit, invalid
+    UTF-8, unmasked, reserved bits, after a close) to an echo app: the same bytes back, the same closes, from
+    ``StreamProtocol`` (its whole text frames read without the parser) as with every read parsed by ``websockets``,
+    and, where reading ahead does not matter (one message at a time), as from uvicorn's own protocol."""
+    got = {}
+    for ws in (WebSocketsSansIOProtocol, _Parsed, _Counted):
+        with _EchoServer(ws, max_size=LIMIT) as echo:
+            echo.release.set()
+            got[ws] = {name: _exchange(echo.port, writes) for name, writes in SCRIPTS.items()}
+    for name in SCRIPTS:
+        assert got[_Counted][name] == got[_Parsed][name] == got[WebSocketsSansIOProtocol][name], name
+    assert got[_Counted]["small texts, one a read"].startswith(b"\x81\x28{")  # echoed
+    over = got[_Counted]["over the limit"]
+    assert over.startswith(b"\x81\x01a\x88") and over[5:7] == b"\x03\xf1", over  # the echo of "a", then a close 1009
+    assert _Counted.taken >= 8  # (the whole text frames of a read of their own took the short way; a long one may come in pieces)
+    assert _Counted.framed >= 15
+
+
+def test_the_short_way_is_not_taken_where_the_parser_is_inside_a_frame():
+    """A frame's header and mask read alone leave the parser waiting for its payload with nothing buffered: the next
+    read is that payload, not a new frame, however much it looks like one."""
+    stream = StreamProtocol.__new__(StreamProtocol)
+    stream.conn = conn = ServerProtocol(max_size=1024)
+    assert stream.one_text_frame(_frame(b"abcdef")) is None  # before the handshake
+    conn.receive_data(b"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+    conn.send_response(conn.accept(conn.events_received()[0]))
+    assert conn.state is State.OPEN
+    whole = _frame(b"abcdef")
+    assert stream.one_text_frame(whole) == b"abcdef"
+    stream.conn.receive_data(_frame(b"x" * 12)[:6])  # header and mask of a 12-byte frame
+    assert not stream.conn.reader.buffer and stream.one_text_frame(whole) is None
+    stream.conn.receive_data(b"x" * 12)
+    assert stream.one_text_frame(whole) == b"abcdef"
+    stream.conn.receive_data(_frame(b"frag", fin=False))
+    assert stream.one_text_frame(whole) is None  # a fragmented message is open
+    stream.conn.receive_data(_frame(b"ment", opcode=0))
+    assert stream.one_text_frame(whole) == b"abcdef"
+    stream.conn.receive_data(CLOSE)
+    assert stream.one_text_frame(whole) is None  # closing: the parser discards
