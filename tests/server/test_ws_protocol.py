@@ -20,8 +20,6 @@ import websockets
 
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 from websockets.frames import apply_mask
-from websockets.protocol import State
-from websockets.server import ServerProtocol
 
 from server.ws import IMPLEMENTATION, StreamProtocol
 from tests.server.conftest import SERVICE_ENV, Proc, free_port
@@ -219,68 +217,17 @@ def _recv(sock: socket.socket) -> bytes:
         return b""
 
 
-class _Parsed(StreamProtocol):
-    """``StreamProtocol`` with every read given to the ``websockets`` parser and every answer framed by it (as before)."""
-
-    def send_text_frame(self, message) -> bool:
-        return False
-
-    def one_text_frame(self, data: bytes) -> bytes | None:
-        return None
-
-
-class _Counted(StreamProtocol):
-    taken = 0
-    framed = 0
-
-    def one_text_frame(self, data: bytes) -> bytes | None:
-        payload = super().one_text_frame(data)
-        _Counted.taken += payload is not None
-        return payload
-
-    def send_text_frame(self, message) -> bool:
-        framed = super().send_text_frame(message)
-        _Counted.framed += framed
-        return framed
-
-
-def test_a_text_frame_read_whole_is_answered_as_the_parser_answers_it():
+def test_raw_frames_are_answered_as_uvicorns_own_protocol_answers_them():
     """Raw frames (one or two a read, split, fragmented, binary, control, 64-bit lengths, over the size limit, invalid
     UTF-8, unmasked, reserved bits, after a close) to an echo app: the same bytes back, the same closes, from
-    ``StreamProtocol`` (its whole text frames read without the parser) as with every read parsed by ``websockets``,
-    and, where reading ahead does not matter (one message at a time), as from uvicorn's own protocol."""
+    ``StreamProtocol`` (reading a few messages ahead) as from uvicorn's own protocol (one message at a time)."""
     got = {}
-    for ws in (WebSocketsSansIOProtocol, _Parsed, _Counted):
+    for ws in (WebSocketsSansIOProtocol, StreamProtocol):
         with _EchoServer(ws, max_size=LIMIT) as echo:
             echo.release.set()
             got[ws] = {name: _exchange(echo.port, writes) for name, writes in SCRIPTS.items()}
     for name in SCRIPTS:
-        assert got[_Counted][name] == got[_Parsed][name] == got[WebSocketsSansIOProtocol][name], name
-    assert got[_Counted]["small texts, one a read"].startswith(b"\x81\x28{")  # echoed
-    over = got[_Counted]["over the limit"]
+        assert got[StreamProtocol][name] == got[WebSocketsSansIOProtocol][name], name
+    assert got[StreamProtocol]["small texts, one a read"].startswith(b"\x81\x28{")  # echoed
+    over = got[StreamProtocol]["over the limit"]
     assert over.startswith(b"\x81\x01a\x88") and over[5:7] == b"\x03\xf1", over  # the echo of "a", then a close 1009
-    assert _Counted.taken >= 8  # (the whole text frames of a read of their own took the short way; a long one may come in pieces)
-    assert _Counted.framed >= 15
-
-
-def test_the_short_way_is_not_taken_where_the_parser_is_inside_a_frame():
-    """A frame's header and mask read alone leave the parser waiting for its payload with nothing buffered: the next
-    read is that payload, not a new frame, however much it looks like one."""
-    stream = StreamProtocol.__new__(StreamProtocol)
-    stream.conn = conn = ServerProtocol(max_size=1024)
-    assert stream.one_text_frame(_frame(b"abcdef")) is None  # before the handshake
-    conn.receive_data(b"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
-    conn.send_response(conn.accept(conn.events_received()[0]))
-    assert conn.state is State.OPEN
-    whole = _frame(b"abcdef")
-    assert stream.one_text_frame(whole) == b"abcdef"
-    stream.conn.receive_data(_frame(b"x" * 12)[:6])  # header and mask of a 12-byte frame
-    assert not stream.conn.reader.buffer and stream.one_text_frame(whole) is None
-    stream.conn.receive_data(b"x" * 12)
-    assert stream.one_text_frame(whole) == b"abcdef"
-    stream.conn.receive_data(_frame(b"frag", fin=False))
-    assert stream.one_text_frame(whole) is None  # a fragmented message is open
-    stream.conn.receive_data(_frame(b"ment", opcode=0))
-    assert stream.one_text_frame(whole) == b"abcdef"
-    stream.conn.receive_data(CLOSE)
-    assert stream.one_text_frame(whole) is None  # closing: the parser discards
