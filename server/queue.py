@@ -273,9 +273,10 @@ class QueueBoard:
                             light_id=nxt.intersection_id)  # fmt: skip
             if est.in_queue or est.follow_mps is None:
                 return obs, follow
-            eased = ease_to_car_ahead(follow, obs.speed_mps, est.follow_mps, params or AdvisorParams())
+            params = params or AdvisorParams()
+            eased = ease_to_car_ahead(follow, obs.speed_mps, est.follow_mps, params)
             if eased is not follow and last_reason == "queue" and told_mps is not None:  # said already: again where the speed moved
-                eased = replace(eased, speak=abs(told_mps - eased.target_speed_mps) >= (params or AdvisorParams()).speak_change_mps)
+                eased = replace(eased, speak=abs(told_mps - eased.target_speed_mps) >= params.speak_change_mps)
             return obs, eased
         return apply(obs, est), None
 
