@@ -365,10 +365,8 @@ def advise(
     # (constructor calls, not dataclasses.replace: this runs once a second per car)
     # the light the countdown is about: the next one unless the advice named another (the one after it, ``_timed``)
     light_id = a.light_id if a.light_id is not None or a.light_red is None or not obs.lights else obs.lights[0].intersection_id
-    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, source=a.source, current_speed_mps=obs.speed_mps,
-                    light_ahead=a.light_ahead, light_id=light_id)
-    message = phrase(advice, params.units)
-    speak = bool(message) and _meaningful_change(advice, memory.spoken, params)
+    message = phrase(a, params.units, obs.speed_mps)  # (the words read the advice's fields, and the car's speed)
+    speak = bool(message) and _meaningful_change(a, memory.spoken, params)
     advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps, a.light_ahead, light_id)
     spoken, last = (advice if advice.speak else memory.spoken), advice
     if advice.reason == "stale_spat" and advice.light_red is not None:
