@@ -7,6 +7,7 @@ of changing speed (:data:`MODE_CODES`), which candidate cruise speeds cross the 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -377,7 +378,7 @@ def feasible_speeds_mps(
 
 def green_crossing(light: LightView, t_s: float, after_red_s: float) -> bool:
     """The line is reached (finite time), not during a (conservative) red nor within ``after_red_s`` after one ends."""
-    return bool(np.isfinite(t_s)) and not any(start <= t_s < end + after_red_s for start, end in light.red_windows_s)
+    return math.isfinite(t_s) and not any(start <= t_s < end + after_red_s for start, end in light.red_windows_s)
 
 
 def slowed_into_red(light: LightView, t_s: float, margin_s: float) -> bool:
