@@ -261,7 +261,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     n_lines, mode, feasible = search(both, obs, params)
     to_red = None if red else nxt.seconds_to_red()  # (every light here is exact: uncertain ones went to _choose)
     if to_red is not None and (normal_s := normal_crossing_s(nxt.distance_m, obs, params)) < to_red:
-        planned_s = crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible.max()), params, mode) if feasible.size else np.inf
+        planned_s = crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible[-1]), params, mode) if feasible.size else np.inf
         if planned_s >= to_red:
             # green now, and a normal drive (speeding up to the limit at the regular driver's rate: no advice to react
             # to) is over the line before the red, where no comfortable speed is: a plan for the green after the red,
@@ -291,7 +291,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             return Advice("coast", "red_ahead", last.target_speed_mps if keep else v, red, to_change)
         # the countdown is the light's next change (to red while it is green now), never the green after a red to come
         return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_change)
-    target, source = float(feasible.max()), "rules"
+    target, source = float(feasible[-1]), "rules"  # (the fastest: candidates ascend, kinematics.candidates_mps)
     if tables is not None:
         wanted = tables.target_speed_mps(obs)
         if wanted is not None:  # the DP's speed at the next stop line: the feasible target that reaches the line nearest it

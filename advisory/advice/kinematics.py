@@ -8,8 +8,8 @@ of changing speed (:data:`MODE_CODES`), which candidate cruise speeds cross the 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -277,10 +277,9 @@ def candidates_mps(low_mps: float, limit_mps: float, step_mps: float) -> np.ndar
     return speeds
 
 
-@dataclass(frozen=True, slots=True)
-class Lines:
+class Lines(NamedTuple):
     """The lights to cross, packed for the kernels: distances (n,), red windows (n, k, 2), padded with +inf, and
-    which lights show no amber (n,)."""
+    which lights show no amber (n,). (A named tuple: made at every fix, cheaper than a frozen dataclass.)"""
 
     distances_m: np.ndarray
     windows_s: np.ndarray
