@@ -557,3 +557,37 @@ def test_a_plan_made_for_the_light_behind_is_not_kept_at_the_next():
     # the same plan made for this light is still the plan followed while it works (no new reaction delay)
     kept, _ = advise(obs, AdvisorMemory(last=replace(old, light_id=7002), spoken=old))
     assert (kept.action, kept.target_speed_mps) == ("coast", pytest.approx(11.176))
+
+
+@settings(max_examples=60, deadline=None)
+@given(d1=st.floats(20, 400), gap=st.floats(50, 500), v0=st.floats(0, 25), starts=st.lists(st.floats(-20, 120), min_size=2, max_size=4),
+       red=st.floats(5, 45), amber=st.booleans())  # fmt: skip
+def test_search_is_the_earliest_run_of_green_speeds_of_the_first_mode_that_makes_one(d1, gap, v0, starts, red, amber):
+    """The search (one kernel call: lines, mode, run) against its definition by brute force over green_mask: all lines,
+    else the first alone; the first mode of auto, brake_coast, brake, firm with a speed that makes every green; of its
+    speeds, the consecutive run that ends at the fastest. And a plan followed is re-checked as green_mask checks it."""
+    from advisory.advice.kinematics import Lines, candidates_mps, green_mask, keeps, search
+
+    half = len(starts) // 2
+    lights = (light(d1, *sorted((s, s + red) for s in starts[:half]), ident=1), light(d1 + gap, *sorted((s, s + red) for s in starts[half:]), ident=2))
+    lights = tuple(replace(x, amber_s=None if amber else 0.0) for x in lights)
+    obs, lines = Observation(v0, V, lights), Lines.of(lights)
+    speeds = candidates_mps(P.min_cruise_speed_mps, V, P.speed_step_mps)
+    coast = coast_arrays(P.vehicle)
+    want = (2, "auto", speeds[:0])
+    for n_lines in (2, 1):
+        found = next(((mode, ok) for mode, code in MODE_CODES.items()
+                      if (ok := green_mask(speeds, lines.distances_m, lines.windows_s, lines.no_amber, n_lines, P.green_margin_s, v0, code, P.reaction_s,
+                                           P.comfort_decel_mps2, P.firm_decel_mps2, P.comfort_accel_mps2, *coast)).any()), None)  # fmt: skip
+        if found is not None:
+            mode, ok = found
+            idx = np.flatnonzero(ok)
+            first = idx[np.flatnonzero(np.diff(idx) > 1)[-1] + 1] if (np.diff(idx) > 1).any() else idx[0]
+            want = (n_lines, mode, speeds[first : idx[-1] + 1])
+            break
+    n_lines, mode, run = search(lines, obs, P)
+    assert (n_lines, mode) == want[:2] and np.array_equal(run, want[2])
+    for code, name in ((0, "auto"), (2, "brake")):
+        ok = green_mask(speeds, lines.distances_m, lines.windows_s, lines.no_amber, 2, P.green_margin_s, v0, code, 0.0, P.comfort_decel_mps2,
+                        P.firm_decel_mps2, P.comfort_accel_mps2, *coast)  # fmt: skip
+        assert [keeps(lines, obs, P, name, float(s)) for s in speeds] == ok.tolist()

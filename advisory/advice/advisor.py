@@ -67,9 +67,10 @@ def _binding(lights: tuple[LightView, ...], obs: Observation, params: AdvisorPar
     return 0
 
 
-def _timed(action: str, reason: str, target: float | None, lights: tuple[LightView, ...], i: int, source: str = "rules") -> Advice:
-    """An advice whose countdown is light ``i``'s."""
-    red, to_change = light_timing(lights[i])
+def _timed(action: str, reason: str, target: float | None, lights: tuple[LightView, ...], i: int, source: str = "rules",
+           first: tuple[bool, float | None] | None = None) -> Advice:
+    """An advice whose countdown is light ``i``'s; ``first``: the first light's :func:`light_timing`, where known."""
+    red, to_change = first if i == 0 and first is not None else light_timing(lights[i])
     return Advice(action, reason, target, red, to_change, source=source, light_ahead=i + 1, light_id=lights[i].intersection_id)
 
 
@@ -204,12 +205,12 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
         if i == 0 and red and v > 0.0 and nxt.seconds_to_green() - crossing_time_s(nxt.distance_m, v, v, params) < params.short_wait_s:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)  # a stop to wait a moment: none
         if v < params.min_cruise_speed_mps:  # pulling away at a crawl: what is ahead, said
-            return _timed("none", "red_ahead", None, usable, i)
+            return _timed("none", "red_ahead", None, usable, i, first=(red, to_change))
         if i == 0 and nxt.distance_m <= v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2):
             return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_change)
         # lift off only: the words and the driver's motion are a lift-off (the stop, when it comes, is braked then)
         keep_target = last is not None and last.action == "coast" and last.reason == "red_ahead" and last.target_speed_mps is not None
-        return _timed("coast", "red_ahead", last.target_speed_mps if keep_target else v, usable, i)
+        return _timed("coast", "red_ahead", last.target_speed_mps if keep_target else v, usable, i, first=(red, to_change))
     target, mode = min(float(vts[best]), v_lim), MODE_NAMES[int(modes[best])]
     # the words say the motion the plan was priced in (a driver told "slow down" brakes, told "hold" lifts off)
     if mode == "brake_coast":
@@ -222,7 +223,7 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
         action = "accelerate"
     else:
         action = "cruise"
-    return _timed(action, "green_wave", target, usable, _binding(usable, obs, params))
+    return _timed(action, "green_wave", target, usable, _binding(usable, obs, params), first=(red, to_change))
 
 
 def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tables) -> Advice:
@@ -256,11 +257,11 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         # the driver is already following the last advice: keep it while it still works (no new reaction delay)
         if _kept(both, usable, obs, params, last):
             action = last.action if last.action != "accelerate" or last.target_speed_mps > obs.speed_mps + params.hysteresis_mps else "cruise"
-            return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source)
+            return _timed(action, last.reason, last.target_speed_mps, usable, _binding(usable, obs, params), last.source, (red, to_change))
     n_lines, mode, feasible = search(both, obs, params)
     to_red = None if red else nxt.seconds_to_red()  # (every light here is exact: uncertain ones went to _choose)
     if to_red is not None and (normal_s := normal_crossing_s(nxt.distance_m, obs, params)) < to_red:
-        planned_s = crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible.max()), params, mode) if feasible.size else np.inf
+        planned_s = crossing_time_s(nxt.distance_m, obs.speed_mps, float(feasible[-1]), params, mode) if feasible.size else np.inf
         if planned_s >= to_red:
             # green now, and a normal drive (speeding up to the limit at the regular driver's rate: no advice to react
             # to) is over the line before the red, where no comfortable speed is: a plan for the green after the red,
@@ -290,7 +291,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             return Advice("coast", "red_ahead", last.target_speed_mps if keep else v, red, to_change)
         # the countdown is the light's next change (to red while it is green now), never the green after a red to come
         return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_change)
-    target, source = float(feasible.max()), "rules"
+    target, source = float(feasible[-1]), "rules"  # (the fastest: candidates ascend, kinematics.candidates_mps)
     if tables is not None:
         wanted = tables.target_speed_mps(obs)
         if wanted is not None:  # the DP's speed at the next stop line: the feasible target that reaches the line nearest it
@@ -320,7 +321,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         near = feasible[np.abs(feasible - obs.speed_mps) <= params.hysteresis_mps]
         if near.size:  # within the band: hold the speed the car has, don't nudge it by a mile per hour
             target = float(near[np.argmin(np.abs(near - obs.speed_mps))])
-    return _timed(action, "green_wave", min(target, obs.speed_limit_mps), usable, _binding(usable[:n_lines], obs, params), source)
+    return _timed(action, "green_wave", min(target, obs.speed_limit_mps), usable, _binding(usable[:n_lines], obs, params), source, (red, to_change))
 
 
 def _plan_ahead(last: Advice | None, obs: Observation) -> bool:
@@ -365,10 +366,8 @@ def advise(
     # (constructor calls, not dataclasses.replace: this runs once a second per car)
     # the light the countdown is about: the next one unless the advice named another (the one after it, ``_timed``)
     light_id = a.light_id if a.light_id is not None or a.light_red is None or not obs.lights else obs.lights[0].intersection_id
-    advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, source=a.source, current_speed_mps=obs.speed_mps,
-                    light_ahead=a.light_ahead, light_id=light_id)
-    message = phrase(advice, params.units)
-    speak = bool(message) and _meaningful_change(advice, memory.spoken, params)
+    message = phrase(a, params.units, obs.speed_mps)  # (the words read the advice's fields, and the car's speed)
+    speak = bool(message) and _meaningful_change(a, memory.spoken, params)
     advice = Advice(a.action, a.reason, a.target_speed_mps, a.light_red, a.seconds_to_change_s, message, speak, a.source, obs.speed_mps, a.light_ahead, light_id)
     spoken, last = (advice if advice.speak else memory.spoken), advice
     if advice.reason == "stale_spat" and advice.light_red is not None:

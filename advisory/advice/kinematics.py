@@ -7,8 +7,9 @@ of changing speed (:data:`MODE_CODES`), which candidate cruise speeds cross the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -206,19 +207,34 @@ def green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, v
 
 
 @njit(cache=True)
+def makes_greens(speed, distances_m, windows_s, no_amber, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v,
+                 t_of_x):  # fmt: skip
+    """:func:`green_mask` of one speed, a bool (no array in or out: a plan followed now is re-checked at every fix)."""
+    return green_mask(np.full(1, speed), distances_m, windows_s, no_amber, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2,
+                      x_of_v, t_of_v, t_of_x)[0]  # fmt: skip
+
+
+@njit(cache=True)
 def first_feasible(speeds, distances_m, windows_s, no_amber, after_red_s, v0, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x):
     """The advisor's search in one call: all lines, else the first alone; in each, the modes in the order
-    auto, brake_coast, brake, firm (:data:`MODE_CODES`). Returns (lines used, mode code, mask of speeds)."""
+    auto, brake_coast, brake, firm (:data:`MODE_CODES`). Returns (lines used, mode code, ``lo``, ``hi``): the feasible
+    speeds that make the earliest greens are ``speeds[lo:hi]``, the run of consecutive feasible candidates that ends at
+    the fastest one (:func:`search`; empty where no mode makes a green)."""
     n = distances_m.size
-    ok = np.zeros(speeds.size, dtype=np.bool_)
     for attempt in range(2 if n > 1 else 1):
         n_lines = n if attempt == 0 else 1
         for mode in range(4):
             ok = green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, v0, mode, reaction_s, brake_mps2, firm_mps2, accel_mps2, x_of_v,
-                             t_of_v, t_of_x)  # fmt: skip
-            if ok.any():
-                return n_lines, mode, ok
-    return n, 0, ok
+                            t_of_v, t_of_x)  # fmt: skip
+            hi = ok.size
+            while hi > 0 and not ok[hi - 1]:
+                hi -= 1
+            if hi > 0:
+                lo = hi - 1
+                while lo > 0 and ok[lo - 1]:
+                    lo -= 1
+                return n_lines, mode, lo, hi
+    return n, 0, 0, 0
 
 
 def crossing_time_s(
@@ -232,10 +248,11 @@ def crossing_time_s(
     target, then coast all the way), "brake" / "firm" (brake gently / firmly to the target, then hold).
     ``inf`` where the car would not reach the line.
     """
-    vt = np.asarray(v_target_mps, dtype=float)
     reaction = params.reaction_s if reaction_s is None else reaction_s
-    out = crossing_times_s(float(distance_m), float(v0_mps), vt.reshape(-1), MODE_CODES[mode], float(reaction),
-                            params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *coast_arrays(params.vehicle))  # fmt: skip
+    if type(v_target_mps) is float:  # one target: the scalar kernel (no array in or out)
+        return time_to_line_s(float(distance_m), float(v0_mps), v_target_mps, MODE_CODES[mode], float(reaction), *motion_args(params))
+    vt = np.asarray(v_target_mps, dtype=float)
+    out = crossing_times_s(float(distance_m), float(v0_mps), vt.reshape(-1), MODE_CODES[mode], float(reaction), *motion_args(params))
     return out.reshape(vt.shape) if vt.ndim else float(out[0])
 
 
@@ -249,8 +266,7 @@ def line_speed_mps(distance_m: float, v0_mps: float, v_target_mps: float, params
     (5.0, 10.0)
     """
     reaction = params.reaction_s if reaction_s is None else reaction_s
-    out = line_speeds_mps(float(distance_m), float(v0_mps), np.array([float(v_target_mps)]), MODE_CODES[mode], float(reaction),
-                          params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *coast_arrays(params.vehicle))  # fmt: skip
+    out = line_speeds_mps(float(distance_m), float(v0_mps), np.array([float(v_target_mps)]), MODE_CODES[mode], float(reaction), *motion_args(params))
     return float(out[0])
 
 
@@ -261,10 +277,9 @@ def candidates_mps(low_mps: float, limit_mps: float, step_mps: float) -> np.ndar
     return speeds
 
 
-@dataclass(frozen=True, slots=True)
-class Lines:
+class Lines(NamedTuple):
     """The lights to cross, packed for the kernels: distances (n,), red windows (n, k, 2), padded with +inf, and
-    which lights show no amber (n,)."""
+    which lights show no amber (n,). (A named tuple: made at every fix, cheaper than a frozen dataclass.)"""
 
     distances_m: np.ndarray
     windows_s: np.ndarray
@@ -272,20 +287,44 @@ class Lines:
 
     @classmethod
     def of(cls, lights) -> Lines:
+        n = len(lights)
         k = max(max((len(light.red_windows_s) for light in lights), default=0), 1)
         flat: list[float] = []  # one flat list, one np.array call: the cheapest packing (runs once per fix)
         for light in lights:
-            for start, end in light.red_windows_s:
-                flat += (start, end)
+            for window in light.red_windows_s:
+                flat += window
             flat += (np.inf,) * (2 * (k - len(light.red_windows_s)))
-        windows = np.array(flat, dtype=float).reshape(len(lights), k, 2)
-        return cls(np.array([light.distance_m for light in lights], dtype=float), windows, np.array([light.amber_s == 0.0 for light in lights], dtype=np.bool_))
+        flat += [light.distance_m for light in lights]
+        packed = np.array(flat, dtype=float)  # windows, then distances
+        return cls(packed[2 * n * k :], packed[: 2 * n * k].reshape(n, k, 2), np.array([light.amber_s == 0.0 for light in lights], dtype=np.bool_))
+
+
+_MOTION: dict[int, tuple[AdvisorParams, tuple, tuple]] = {}
+"""The kernels' arguments that depend on the advisor's settings alone, by the identity of the settings (kept alive
+here, so their id is not reused): hashed once, not at every fix (a vehicle's dataclass hashes all its fields)."""
+
+
+def _motion(params: AdvisorParams) -> tuple[AdvisorParams, tuple, tuple]:
+    hit = _MOTION.get(id(params))
+    if hit is None or hit[0] is not params:
+        if len(_MOTION) >= 256:
+            _MOTION.clear()
+        coast = coast_arrays(params.vehicle)
+        hit = _MOTION[id(params)] = (params, (params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *coast),
+                                     (params.comfort_decel_mps2, params.firm_decel_mps2, params.normal_accel_mps2, *coast))  # fmt: skip
+    return hit
+
+
+def motion_args(params: AdvisorParams) -> tuple:
+    """The kernels' last arguments (``brake_mps2, firm_mps2, accel_mps2, x_of_v, t_of_v, t_of_x``) for an advised plan:
+    speeding up at ``comfort_accel_mps2``."""
+    return _motion(params)[1]
 
 
 def kernel_args(obs: Observation, params: AdvisorParams, reaction_s: float | None) -> tuple:
     speeds = candidates_mps(params.min_cruise_speed_mps, obs.speed_limit_mps, params.speed_step_mps)
     reaction = params.reaction_s if reaction_s is None else reaction_s
-    return speeds, float(obs.speed_mps), float(reaction), params.comfort_decel_mps2, params.firm_decel_mps2, params.comfort_accel_mps2, *coast_arrays(params.vehicle)
+    return speeds, float(obs.speed_mps), float(reaction), *_motion(params)[1]
 
 
 def _green(lines: Lines, obs: Observation, params: AdvisorParams, mode: str, speeds: np.ndarray, reaction_s: float | None = None, n_lines: int | None = None) -> np.ndarray:
@@ -305,7 +344,9 @@ def keeps(lines: Lines, obs: Observation, params: AdvisorParams, mode: str, targ
     the target is still a candidate speed and feasible (one speed through the kernel, not all candidates)."""
     if not params.min_cruise_speed_mps - 1e-9 <= target_mps <= obs.speed_limit_mps + 1e-9:
         return False
-    return bool(_green(lines, obs, params, mode, np.array([float(target_mps)]), 0.0, n_lines)[0])
+    n = lines.distances_m.size if n_lines is None else n_lines
+    return makes_greens(float(target_mps), lines.distances_m, lines.windows_s, lines.no_amber, n, params.green_margin_s, float(obs.speed_mps),
+                        MODE_CODES[mode], 0.0, *motion_args(params))  # fmt: skip
 
 
 MODE_NAMES = {code: name for name, code in MODE_CODES.items()}
@@ -314,23 +355,14 @@ MODE_NAMES = {code: name for name, code in MODE_CODES.items()}
 def search(lines: Lines, obs: Observation, params: AdvisorParams) -> tuple[int, str, np.ndarray]:
     """Lift off and coast (or speed up) if that makes the greens; brake gently only if coasting cannot;
     firmly only if gentle braking cannot; if no speed makes all lines, plan for the next one alone.
-    Returns (lines planned for, mode, feasible speeds)."""
+    Returns (lines planned for, mode, feasible speeds): of the feasible speeds, those that make the earliest greens,
+    the run of consecutive feasible candidates that ends at the fastest one. A gap in the run is a red between two
+    greens; a slower run aims at a later green, a whole cycle lost (the tables' value of time prices a crawl to the
+    next green below a brisk run to this one, but the paper's optimum is held to the regular driver's trip time, and
+    the driver would not wait a cycle for it)."""
     speeds, v0, reaction, *rest = kernel_args(obs, params, None)
-    n_lines, mode, ok = first_feasible(speeds, lines.distances_m, lines.windows_s, lines.no_amber, params.green_margin_s, v0, reaction, *rest)
-    return n_lines, MODE_NAMES[mode], _earliest_green(speeds, ok)
-
-
-def _earliest_green(speeds: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    """The feasible speeds that make the earliest greens: the run of consecutive feasible candidates that ends at
-    the fastest one. A gap in the run is a red between two greens; a slower run aims at a later green, a whole
-    cycle lost (the tables' value of time prices a crawl to the next green below a brisk run to this one, but the
-    paper's optimum is held to the regular driver's trip time, and the driver would not wait a cycle for it)."""
-    idx = np.flatnonzero(ok)
-    if idx.size == 0:
-        return speeds[ok]
-    gaps = np.flatnonzero(np.diff(idx) > 1)
-    first = idx[gaps[-1] + 1] if gaps.size else idx[0]
-    return speeds[first : idx[-1] + 1]
+    n_lines, mode, lo, hi = first_feasible(speeds, lines.distances_m, lines.windows_s, lines.no_amber, params.green_margin_s, v0, reaction, *rest)
+    return n_lines, MODE_NAMES[mode], speeds[lo:hi]
 
 
 def feasible_speeds_mps(
@@ -345,7 +377,7 @@ def feasible_speeds_mps(
 
 def green_crossing(light: LightView, t_s: float, after_red_s: float) -> bool:
     """The line is reached (finite time), not during a (conservative) red nor within ``after_red_s`` after one ends."""
-    return bool(np.isfinite(t_s)) and not any(start <= t_s < end + after_red_s for start, end in light.red_windows_s)
+    return math.isfinite(t_s) and not any(start <= t_s < end + after_red_s for start, end in light.red_windows_s)
 
 
 def slowed_into_red(light: LightView, t_s: float, margin_s: float) -> bool:
@@ -357,8 +389,7 @@ def slowed_into_red(light: LightView, t_s: float, margin_s: float) -> bool:
 def normal_crossing_s(distance_m: float, obs: Observation, params: AdvisorParams) -> float:
     """Time to a line ``distance_m`` ahead driving normally: speeding up to the limit at ``normal_accel_mps2`` at once
     (no advice to react to), the kernel's "auto" motion. [s]"""
-    return time_to_line_s(float(distance_m), float(obs.speed_mps), float(obs.speed_limit_mps), MODE_CODES["auto"], 0.0, params.comfort_decel_mps2,
-                           params.firm_decel_mps2, params.normal_accel_mps2, *coast_arrays(params.vehicle))  # fmt: skip
+    return time_to_line_s(float(distance_m), float(obs.speed_mps), float(obs.speed_limit_mps), MODE_CODES["auto"], 0.0, *_motion(params)[2])
 
 
 KEEP_MODES = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", "ease_off": "auto", "accelerate": "auto", "cruise": "auto"}

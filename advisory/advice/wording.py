@@ -61,8 +61,10 @@ def say_seconds(t_s: float | None) -> str:
     return "1 second" if n == 1 else f"{n:d} seconds"
 
 
-def phrase(advice: Advice, units: str = "mph") -> str:
-    """Short, voice-ready English for an advisory (numbers rounded, speed in mph or km/h).
+def phrase(advice: Advice, units: str = "mph", current_speed_mps: float | None = None) -> str:
+    """Short, voice-ready English for an advisory (numbers rounded, speed in mph or km/h). ``current_speed_mps``: the
+    car's speed, where the advice does not carry it yet (``Advice.current_speed_mps``; the advisor words its advice
+    before it builds the advisory that carries the words).
 
     The countdown is about the light the speed is chosen for (``advice.light_ahead``): "Second light: green in
     20 seconds. Slow to 40 kilometers per hour." when the next light is passed on green anyway. A speed held for the
@@ -117,7 +119,7 @@ def phrase(advice: Advice, units: str = "mph") -> str:
             if advice.light_red is False and when:
                 return f"Red in {when}. Lift off and coast."
             return f"Red light ahead. Green in {when}. Lift off and coast." if when else "Red light ahead. Lift off and coast."
-        speed_now = advice.current_speed_mps if advice.current_speed_mps is not None else np.inf
+        speed_now = current_speed_mps if current_speed_mps is not None else advice.current_speed_mps if advice.current_speed_mps is not None else np.inf
         if advice.target_speed_mps is not None and advice.target_speed_mps < SLOW_FIRST_FRAC * speed_now:
             return f"{light}Slow to {speed}, then coast."
         return f"{light}Lift off and coast."
