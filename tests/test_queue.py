@@ -733,14 +733,17 @@ def test_a_slow_plan_over_a_green_line_prices_the_cars_it_cuts_off_behind_it():
     connected cars standing behind the line, 900 veh/h, half connected: behind the plan 8 cars cross before the red,
     behind a normal drive 9 (:func:`platoon_through`); the four take places 1-4 and the cars not connected, K of them,
     Poisson with a mean of one per connected car (4, more than the flow's 0.125 x (15 + 0.76) = 2.0), the places from
-    5 on: the ninth is taken when K >= 5, and then waits the red: 30 s x P(K >= 5)."""
+    5 on: the ninth is taken when K >= 5, and then waits the red, and stands first in its queue: every car queuing
+    behind it over the red and its discharge, 0.25 x 30 / (1 - 0.25 x 1.4) = 11.5 cars, crosses 1.4 s later (the next
+    green not known: no more than a green as long as the red lets over): (30 + 16.2) s x P(K >= 5)."""
     params = AdvisorParams()
     passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
     obs = Observation(9.2, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),))
     four = [Probe(-7.0 - 7.5 * k, 0.0) for k in (1, 2, 3, 4)]
     hold = Advice("cruise", "green_wave", 8.04)
     p_ge_5 = 1.0 - sum(math.exp(-4.0) * 4.0**j / math.factorial(j) for j in range(5))
-    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 0.5) == pytest.approx(30.0 * p_ge_5)
+    queued = 0.25 * 30.0 / (1.0 - 0.25 * M.fast_headway_s)  # behind the car cut off in the red's queue, a headway each
+    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 0.5) == pytest.approx((30.0 + M.fast_headway_s * queued) * p_ge_5)
     assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 1.0) == 0.0  # every car connected: nobody beyond the four
     at_limit = replace(obs, speed_mps=24.58)  # holding the limit: as a normal drive
     assert cut_behind(passed, at_limit, Advice("cruise", "green_wave", 24.58), params, four, 900 / 3600, 0.5) == 0.0
