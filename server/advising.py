@@ -288,7 +288,8 @@ class Engine:
             if self.queue is not None:  # the lights as the car meets them in traffic, or "follow the car in front"
                 passed = light_passed(trip.corridor, at_m, speed or 0.0, fix.t_unix_s, readings) if on_route else None
                 last = trip.last or {}
-                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, last.get("reason"), passed, trip.params, last.get("target_speed_mps"))
+                obs, held = self.queue.see(trip.corridor.name, trip.id, fix.t_unix_s, obs, last.get("reason"), passed, trip.params, last.get("target_speed_mps"),
+                                           -self.approach_of(trip.corridor))  # fmt: skip
             lights = obs.lights
             spat_fresh = lights[0].fresh if lights else None
             fresh = self.queue is not None and trip.last is not None and self.queue.fresh(trip.last["reason"])  # out of a queue: plan anew

@@ -177,15 +177,20 @@ class QueueBoard:
         """trip -> the light it passed last and the next one, each with the connected cars behind that may still cross it
         in the green the car crosses it in, and the passed one's last red (:meth:`note_behind`, :meth:`cuts_behind`)."""
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
+        self._view_m: dict[str, float] = {}  # trip -> how far behind it the route begins for the service (:meth:`see`) [m]
         self.held = 0  # fixes answered "follow the car in front"
 
     def see(self, corridor: str, trip_id: str, t_unix_s: float, obs: Observation, last_reason: str | None = None,
-            passed: LightView | None = None, params: AdvisorParams | None = None, told_mps: float | None = None) -> tuple[Observation, Advice | None]:  # fmt: skip
+            passed: LightView | None = None, params: AdvisorParams | None = None, told_mps: float | None = None,
+            view_from_m: float = -math.inf) -> tuple[Observation, Advice | None]:  # fmt: skip
         """Note the car's fix; the observation the advisor should get, or the service's advice for a car in a queue
         or behind a slower one (spoken when the trip's last advice, ``last_reason``, was another, or the speed it told,
         ``told_mps``, moved by ``params.speak_change_mps``). After such advice the advisor plans afresh
         (:meth:`fresh`). ``passed``: the light whose line the car passed last (distance negative), for the cars behind
-        that still have to cross it (:meth:`check`). ``params``: the trip's advisor settings (units, speed steps)."""
+        that still have to cross it (:meth:`check`). ``params``: the trip's advisor settings (units, speed steps).
+        ``view_from_m``: the station where the route begins for the service (the approach's start): a connected car
+        behind it is no probe yet, and the cars behind are expected from the flow there
+        (:func:`advisory.advice.queue.unseen_behind`)."""
         lane = self.lane(corridor)
         if not obs.on_route or obs.position_m is None or not obs.lights:
             lane.drop(trip_id)
@@ -194,12 +199,14 @@ class QueueBoard:
             self._seen.pop(trip_id, None)
             self._for_queue.pop(trip_id, None)
             self._passed.pop(trip_id, None)
+            self._view_m.pop(trip_id, None)
             return obs, None
         here = float(obs.position_m)
+        self._view_m[trip_id] = max(here - view_from_m, 0.0)
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
         lane.expire(t_unix_s, MAX_AGE_S)
         self.note_behind(lane, trip_id, here, t_unix_s, obs, passed)
-        est = self.estimate(lane, here, t_unix_s, obs, self.red_elapsed(obs, t_unix_s))
+        est = self.estimate(lane, here, t_unix_s, obs, self.red_elapsed(obs, t_unix_s), self._view_m[trip_id])
         return self.answer(trip_id, obs, est, last_reason, params, told_mps)
 
     def red_elapsed(self, obs: Observation, t_unix_s: float) -> float | None:
@@ -289,7 +296,8 @@ class QueueBoard:
             lane.fresh()
         return lane
 
-    def estimate(self, lane: Lane, here_m: float, t_unix_s: float, obs: Observation, red_elapsed_s: float | None) -> QueueEstimate:
+    def estimate(self, lane: Lane, here_m: float, t_unix_s: float, obs: Observation, red_elapsed_s: float | None,
+                 view_m: float = math.inf) -> QueueEstimate:  # fmt: skip
         """:func:`advisory.advice.queue.estimate` over the cars that can change it, the same answer as over every car of
         the corridor, each where it is at the fix (``tests/server/test_queue_index.py``): the cars ahead up to the
         farthest light of ``obs`` plus what one following them across it keeps behind them (a jam spacing and a
@@ -297,7 +305,8 @@ class QueueBoard:
         whichever is farther; then, for the followers, the cars behind that can reach the next line within the window
         :func:`~advisory.advice.queue.followers` counts them in (this car's own normal drive to it or the instant the
         queue ahead lets it cross, whichever is later, plus ``follow_gap_s``): none farther than that window at the
-        faster of the limit and the fastest car (a normal drive is never faster)."""
+        faster of the limit and the fastest car (a normal drive is never faster); the connected ones behind the route's
+        start (``view_m`` behind this car) expected from the flow."""
         m = self.model
         far_m = max(light.distance_m for light in obs.lights) + m.jam_spacing_m + m.headway_s * lane.top_mps
         reach_m = max(far_m, obs.speed_mps * m.follow_gap_s + m.jam_spacing_m)
@@ -307,7 +316,7 @@ class QueueBoard:
         mine_s = normal_drive_s(line_m, obs.speed_mps, limit_mps, m.drive_accel_mps2)
         window_m = (max(est.free_at_s[0], mine_s) + m.follow_gap_s) * max(lane.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6
         behind = [p for p in lane.near(here_m, t_unix_s, line_m - window_m, 0.0) if p.ahead_m < 0.0]
-        return replace(est, followers=followers(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share),
+        return replace(est, followers=followers(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share, view_m),
                        behind=held_up(obs, behind, est.free_at_s[0], m))
 
     def check(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None = None, last: dict | None = None) -> Advice:
@@ -354,9 +363,10 @@ class QueueBoard:
     def lost_behind(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None, est: QueueEstimate | None = None) -> float:
         """The wait [s] that ``advice`` makes the cars behind lose at the light the car passed last and the next one
         (:func:`advisory.advice.queue.cut_behind`, the next one behind the queue in front, ``est``), as its last fix
-        found them (:meth:`note_behind`)."""
+        found them (:meth:`note_behind`), with the connected ones not yet on the route expected from the flow."""
         noted = self._passed.get(trip_id, ()) if trip_id is not None else ()
-        return sum(cut_behind(light, obs, advice, params, behind, self.arrivals_vps, self.connected_share, past, self.model, est)
+        view_m = self._view_m.get(trip_id, math.inf) if trip_id is not None else math.inf
+        return sum(cut_behind(light, obs, advice, params, behind, self.arrivals_vps, self.connected_share, past, self.model, est, view_m)
                    for light, behind, past in noted)  # fmt: skip
 
     @staticmethod
@@ -372,6 +382,7 @@ class QueueBoard:
         self._seen.pop(trip_id, None)
         self._for_queue.pop(trip_id, None)
         self._passed.pop(trip_id, None)
+        self._view_m.pop(trip_id, None)
 
     def state(self) -> str:
         """Where the probes come from (``/health``): ``local`` (this process, which serves every trip), ``shared``

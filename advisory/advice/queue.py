@@ -380,9 +380,37 @@ def behind_s(line_m: float, ahead: Sequence[tuple[float, float]], model: QueueMo
     return out
 
 
+def unseen_behind(arrivals_vps: float | None, connected_share: float, from_s: float, to_s: float,
+                  view_s: float = math.inf) -> tuple[float, float]:  # fmt: skip
+    """The cars expected to reach a line behind this car between ``from_s`` and ``to_s`` from now that the service does
+    not know as probes [-], two counts: the ones not connected, ``(1 - connected_share) x arrivals_vps x (to_s -
+    from_s)``, and the connected ones not on the route yet (Poisson arrivals at the flow's rate, each share of them alike): the service
+    sees a trip only from where it advises it on (the approach's start), and a connected car that reaches the line later
+    than ``view_s`` from now (the time a car at the limit takes from that start to the line) is still upstream of it now,
+    ``connected_share x arrivals_vps x (to_s - max(from_s, view_s))``. ``view_s`` inf: every connected car behind is seen.
+
+    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/TRAFFIC.md): a car told to slow 224 m before a light
+    green for 16 s more was priced as cutting off no one (0.54 cars expected behind it, all of them not connected); the
+    connected car 4.5 s behind it was still 70 m before the approach's start, seen four fixes later, once the car had
+    slowed, and it and the car behind it were cut off by the red, 33-35 s each.
+
+    Examples
+    --------
+    600 veh/h, half of them connected, over 12 s: 1 car not connected; the approach's start 6 s before the line at the
+    limit, the connected cars arriving in the last 6 s are not on the route yet: 0.5 more.
+
+    >>> unseen_behind(600 / 3600, 0.5, 0.0, 12.0), unseen_behind(600 / 3600, 0.5, 0.0, 12.0, 6.0), unseen_behind(None, 0.5, 0.0, 12.0, 6.0)
+    ((1.0, 0.0), (1.0, 0.5), (0.0, 0.0))
+    """
+    if not arrivals_vps or to_s <= from_s:
+        return 0.0, 0.0
+    share = min(max(connected_share, 0.0), 1.0)
+    return arrivals_vps * (1.0 - share) * (to_s - from_s), arrivals_vps * share * max(to_s - max(from_s, view_s), 0.0)
+
+
 def followers(
     obs: Observation, probes: Sequence[Probe], free_at_s: float = 0.0, model: QueueModel | None = None, arrivals_vps: float | None = None,
-    connected_share: float = 1.0,
+    connected_share: float = 1.0, view_m: float = math.inf,
 ) -> float:
     """The cars expected behind the car of ``obs`` that a slower plan holds up: the ones that reach the next light's
     line behind it before it can cross there (``free_at_s`` from now, where the queue in front holds it) plus
@@ -392,8 +420,9 @@ def followers(
     arrival at the line (speeding up to the limit at ``drive_accel_mps2`` from its speed now, as the regular driver)
     falls within that window after this car's own. The others are expected from the flow: ``(1 - connected_share) x
     arrivals_vps x`` the window (Poisson arrivals; at 600 veh/h and half of them connected, 0.25 cars within 3 s: one or
-    more with probability 1 - exp(-0.25) = 22 %). The advisor prices the time a plan gives up ``1 + followers`` times
-    (:func:`advisory.advice.views.time_price`). [-]
+    more with probability 1 - exp(-0.25) = 22 %), and the connected ones not yet on the route (``view_m``: how far
+    behind this car the service's view of the route begins; :func:`unseen_behind`). The advisor prices the time a plan
+    gives up ``1 + followers`` times (:func:`advisory.advice.views.time_price`). [-]
 
     Examples
     --------
@@ -403,13 +432,16 @@ def followers(
     0.25
     >>> followers(obs, [Probe(-30.0, 20.0), Probe(-100.0, 20.0)])  # 1.5 s and 5 s behind
     1.0
+    >>> round(followers(obs, [], arrivals_vps=600 / 3600, connected_share=0.5, view_m=0.0), 2)  # the route begins here
+    0.5
     """
     model = model or QueueModel()
     if not obs.lights:
         return 0.0
     known, window = _held_up(obs, probes, free_at_s, model)
-    unseen = (1.0 - connected_share) * arrivals_vps * window if arrivals_vps else 0.0
-    return float(len(known) + unseen)
+    d, lim = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
+    mine = normal_drive_s(d, obs.speed_mps, lim, model.drive_accel_mps2)
+    return float(len(known) + sum(unseen_behind(arrivals_vps, connected_share, mine, mine + window, (d + view_m) / lim)))
 
 
 def held_up(obs: Observation, probes: Sequence[Probe], free_at_s: float = 0.0, model: QueueModel | None = None) -> tuple[Probe, ...]:
@@ -750,7 +782,7 @@ def platoon_through(line_m: float, red_s: float, lead_s, gap_s: float, jam_m: fl
 
 def cut_behind(light: LightView, obs: Observation, advice: Advice, params: AdvisorParams, behind: Sequence[Probe] = (),
                arrivals_vps: float | None = None, connected_share: float = 1.0, past: PastRed | None = None,
-               model: QueueModel | None = None, queue: QueueEstimate | None = None) -> float:  # fmt: skip
+               model: QueueModel | None = None, queue: QueueEstimate | None = None, view_m: float = math.inf) -> float:  # fmt: skip
     """The wait [s] that the cars behind lose at ``light``'s line when the car follows ``advice`` instead of driving
     normally: the line the car has just passed (``light.distance_m <= 0``: behind it) or the next one ahead (its
     queue estimate ``queue``), in the green the car crosses it in (issue 28, the traffic behind).
@@ -766,30 +798,33 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     negative ``ahead_m``) still before the line that reach it before the red by their own normal drive, the ones
     already past it (they take the first places behind the car), and the cars that are not connected: a Poisson count
     whose mean is the larger of the flow's, ``(1 - connected_share) x arrivals_vps x`` the time from the car's own
-    crossing to the red, plus, at the line passed, its last red's queue still to cross (``past``, :func:`past_queue`),
-    and the connected cars' own, ``(1 - share) / share`` for each connected car counted (a saturated approach's
+    crossing to the red, with the connected cars not yet on the route (``view_m`` behind this car the service's view
+    of it begins: :func:`unseen_behind`), plus, at the line passed, its last red's queue still to cross (``past``,
+    :func:`past_queue`), and the connected cars' own, ``(1 - share) / share`` for each connected car counted (a saturated approach's
     residual queue is not in the flow's count). The advisor itself prices the time the followers lose at the lights
     ahead, not the green they lose behind it (:func:`advisory.advice.views.time_price`).
 
     Traced in SUMO (paper_s400 fixed 900 veh/h, 50 %, seed 1, docs/TRAFFIC.md): cars in the first light's discharging
     queue, told to hold 26-31 km/h for the second light's queue 400 m on, crossed the first at 8-9 m/s instead of
     14-18 m/s; the platoon behind them crossed at their pace and the last two to five cars of the green were cut off
-    (a 30 s red each, and the cycle's 30 s green), others' travel time +14 %.
+    (a 30 s red each, and the cycle's 30 s green), others' travel time +14 %. Each one cut off also stands first in the
+    next queue (:func:`knock_on_s`).
 
     Examples
     --------
     A car 7 m past a line turning red in 15 s (for 30 s), at 9.2 m/s, told to hold 29 km/h; four connected cars
     standing behind the line (7.5-30 m back), 900 veh/h, half of them connected: the plan lets 8 cars through before
     the red, a normal drive 9; the ninth place is taken with probability P(K >= 5) = 0.37 (K Poisson, mean 4: a car
-    not connected for each connected one), 11.1 s lost; a tenth of the cars connected, surely taken: the red's 30 s.
-    Nobody behind, every car connected: nothing lost.
+    not connected for each connected one), and the car cut off there waits the red's 30 s and delays the 11.5 cars
+    that queue behind it by a headway each (:func:`knock_on_s`, 16.2 s): 17.1 s lost; a tenth of the cars connected,
+    surely taken: 46.2 s. Nobody behind, every car connected: nothing lost.
 
     >>> from advisory.advice.views import Advice, AdvisorParams
     >>> passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
     >>> obs = Observation(9.2, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),))
     >>> four, hold = [Probe(-7.0 - 7.5 * k, 0.0) for k in (1, 2, 3, 4)], Advice("cruise", "green_wave", 8.04)
     >>> [round(cut_behind(passed, obs, hold, AdvisorParams(), four, 900 / 3600, share), 1) for share in (0.5, 0.1)]
-    [11.1, 30.0]
+    [17.1, 46.2]
     >>> cut_behind(passed, obs, hold, AdvisorParams())
     0.0
     """
@@ -849,14 +884,24 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     there = sum(1 for p in behind if p.ahead_m <= min(line_m, 0.0) and normal_drive_s(line_m - p.ahead_m, p.speed_mps, limit, model.drive_accel_mps2) < start)
     n_normal = platoon_through(line_m, start, normal, gap_s, model.jam_spacing_m, over + 1)
     n_plan = platoon_through(line_m, start, planned, gap_s, model.jam_spacing_m, over + 1)
-    if n_plan >= n_normal:
+    # a connected car behind, at a light that shows no amber, is to be over the line ``no_amber_margin_s`` before the red
+    # where the car in front sets its crossing, or it is told to stop (:func:`estimate`, ``stop_behind``): its place is
+    # cut off that much earlier (traced: a connected car 4.5 s behind a platoon held to 11.5 m/s, over the line 2 s
+    # before a red that no amber announces at its own pace, was told to stop; it and the car behind it lost 33-35 s)
+    margin_s = model.no_amber_margin_s if light.amber_s == 0.0 else 0.0
+    n_normal_c = platoon_through(line_m, start - margin_s, normal, gap_s, model.jam_spacing_m, over + 1) if margin_s else n_normal
+    n_plan_c = platoon_through(line_m, start - margin_s, planned, gap_s, model.jam_spacing_m, over + 1) if margin_s else n_plan
+    if n_plan >= n_normal and n_plan_c >= n_normal_c:
         return 0.0
     share = min(max(connected_share, 0.0), 1.0)
-    flow = (1.0 - share) * arrivals_vps * (start - crossed_s) if arrivals_vps else 0.0
+    not_connected, connected = unseen_behind(arrivals_vps, share, crossed_s, start, (line_m + view_m) / limit)
+    flow = not_connected + connected
     if flow and past is not None and line_m <= 0.0:
         flow += past_queue(past, model, arrivals_vps, share, math.inf, 0)[1]
     unseen = max(flow, (there + over) * (1.0 - share) / share if share > 0.0 else 0.0)
-    # the k-th place behind the line is taken with probability P(there + K >= k), K Poisson with mean ``unseen``
+    p_connected = connected / unseen if unseen > 0.0 else 0.0  # an unseen car in a place is a connected one not yet on the route
+    # the k-th place behind the line is taken with probability P(there + K >= k), K Poisson with mean ``unseen``; the
+    # first ``there`` by the connected cars known
     cut, p_k, p_at_least = 0.0, math.exp(-unseen), 1.0
     for k in range(1, n_normal + 1):
         if k > there:
@@ -864,9 +909,39 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
             p_k *= unseen / (k - there)
             if p_at_least < 1e-4:
                 break
-        if k > n_plan:
-            cut += 1.0 if k <= there else p_at_least
-    return cut * min(end - start, WAIT_CAP_S)
+        cut_c, cut_u = float(n_plan_c < k <= n_normal_c), float(n_plan < k <= n_normal)
+        cut += cut_c if k <= there else p_at_least * (p_connected * cut_c + (1.0 - p_connected) * cut_u)
+    return cut * (min(end - start, WAIT_CAP_S) + knock_on_s(light, start, end, arrivals_vps, model.fast_headway_s))
+
+
+def knock_on_s(light: LightView, start_s: float, end_s: float, arrivals_vps: float | None, headway_s: float) -> float:
+    """The time [s] that one car cut off at the red from ``start_s`` to ``end_s`` costs the cars behind it: it stands
+    first in that red's queue, so every car that queues behind it crosses a headway later. Those cars: the red's
+    arrivals and the ones joining while the queue discharges, ``flow x red / (1 - flow x headway)`` (a deterministic
+    queue at a signal, D/D/1: it clears when the discharge has caught up with the arrivals), no more than the next
+    green lets over the line (``green / headway``, an oversaturated approach; the green to the light's next red,
+    none known: the red's length). ``arrivals_vps`` None: not known, 0.
+
+    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/TRAFFIC.md): four cars cut off at light 1's end of
+    green each stood first in the next queue; that whole green crossed 1-2 s later, and its last cars lost light 2's
+    green (227 of the others' 309 s).
+
+    Examples
+    --------
+    600 veh/h, a 30 s red, the fast headway 1.4 s: 5 cars arrive over the red, 6.5 in all queue before it clears, each
+    1.4 s later: 9.1 s.
+
+    >>> lv = LightView(1, 100.0, red_windows_s=((10.0, 40.0), (70.0, 100.0)))
+    >>> round(knock_on_s(lv, 10.0, 40.0, 600 / 3600, 1.4), 2), knock_on_s(lv, 10.0, 40.0, None, 1.4)
+    (9.13, 0.0)
+    """
+    if not arrivals_vps or not math.isfinite(end_s):
+        return 0.0
+    windows = light.red_windows_s if light.likely_red_windows_s is None else light.likely_red_windows_s
+    green_s = next((a for a, _ in windows if a >= end_s), end_s + (end_s - start_s)) - end_s
+    load = arrivals_vps * headway_s
+    queued = arrivals_vps * (end_s - start_s) / (1.0 - load) if load < 1.0 else math.inf
+    return headway_s * min(queued, green_s / headway_s)
 
 
 def paced_for_behind(lost_s, obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S) -> Advice | None:

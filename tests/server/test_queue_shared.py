@@ -97,7 +97,8 @@ def test_a_car_queued_on_worker_a_holds_the_target_of_a_car_approaching_on_worke
     (which aims at the green)."""
     now = [T0 + 1.0]
     flow = {"queue_arrivals_vph": 720.0, "queue_connected_share": 0.5}
-    a, b, ref, alone = (Service(corridor, url, now, **flow) for url in (store.url, store.url, None, None))
+    a, b, ref = (Service(corridor, url, now, **flow) for url in (store.url, store.url, None))
+    alone = Service(corridor, None, now)  # the car alone: no flow behind it nor queue in front (a flow behind paces its glide)
     queued = [f"q{k}" for k in range(4)]
 
     async def go():
