@@ -97,7 +97,8 @@ from advisory.physics.params import model_params
 from advisory.signals import Scenario, TimelineSignal
 from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.timing.messages import IntersectionState, MovementState, to_unix_s
-from spat_feed.prediction.observe import PlanReading, light_view
+from spat_feed.prediction import oracle
+from spat_feed.prediction.observe import HORIZON_S, PlanReading, light_view
 from spat_feed.timing.plans import STOP_STATES, PhaseClass, phase_class
 from spat_feed.transport.store import DEFAULT_STALE_AFTER_S, SpatStore, TimeRules
 
@@ -121,6 +122,16 @@ class Setup:
     horizon_s: float = 240.0  # an approach needs this much recording after its entry
     stale_after_s: float = DEFAULT_STALE_AFTER_S  # the store's (the service's ``spat_stale_after_s``)
     driver: str = "careful"  # the virtual driver (advisory.drivers.closed_loop.DRIVERS); the regular driver is the same person
+    forecast: str = "predictor"  # each light's forecast (FORECASTS): the service's predictor, or an oracle's made from the truth
+    jitter_s: float = 0.0  # the spread of ``truth-jitter``'s forecasts [s]
+    seed: int = 0  # ``truth-jitter``'s draws
+
+
+FORECASTS = ("predictor", "truth", "truth-jitter")
+"""Where each light's forecast comes from (``--forecast``): ``predictor``, the service's (its store's reading and
+history); ``truth``, the changes that really came, published exactly
+(:func:`spat_feed.prediction.oracle.exact_reading`); ``truth-jitter``, the truth as the centre of a calibrated
+forecast of spread ``jitter_s`` (:func:`spat_feed.prediction.oracle.jitter_reading`)."""
 
 
 @dataclass
@@ -232,6 +243,20 @@ def _spec(n: int, position_m: float) -> IntersectionSpec:
                             approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
 
 
+def oracle_reading(log: GroupLog, reading: PlanReading, t_unix_s: float, setup: Setup) -> PlanReading:
+    """The store's ``reading`` of ``log``'s group at ``t_unix_s`` with the forecast ``setup.forecast`` says
+    (:data:`FORECASTS`; the predictor's: as it is). The oracle's truth is the log's, the hindsight DP's; a red the
+    reading still publishes lasts until the group's next snapshot (:func:`spat_feed.prediction.oracle.truth_phases`)."""
+    if setup.forecast == "predictor":
+        return reading
+    i = int(np.searchsorted(log.t_s, t_unix_s, side="right"))
+    args = (log.truth.reds_s, log.truth.ambers_s, t_unix_s, HORIZON_S)
+    next_s = float(log.t_s[i]) if i < len(log.t_s) else math.inf
+    if setup.forecast == "truth":
+        return oracle.exact_reading(reading, *args, next_reading_unix_s=next_s)
+    return oracle.jitter_reading(reading, *args, setup.jitter_s, (setup.seed, *log.key), next_reading_unix_s=next_s)
+
+
 def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     """One approach: groups ``job[0]`` in series entered at Unix time ``job[1]``; None if the truth runs out."""
     groups, entry_s, setup = job
@@ -249,7 +274,7 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
         views: list[LightView] = []
         for n, (g, p) in enumerate(zip(groups, positions)):
             if p > x_m and len(views) < 2:
-                reading = _REPLAY.reading(_LOGS[g].key, entry_s + t_s)
+                reading = oracle_reading(_LOGS[g], _REPLAY.reading(_LOGS[g].key, entry_s + t_s), entry_s + t_s, setup)
                 views.append(light_view(_spec(n, p), reading, x_m, entry_s + t_s, speed_mps=v_mps))
         return Observation(v_mps, v_lim, tuple(views), position_m=x_m)
 
@@ -464,6 +489,8 @@ def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_
     setup = setup or Setup()
     if setup.driver not in DRIVERS:
         raise ValueError(f"unknown driver {setup.driver!r} (one of {', '.join(DRIVERS)})")
+    if setup.forecast not in FORECASTS or (setup.forecast == "truth-jitter") != (setup.jitter_s > 0.0):
+        raise ValueError(f"forecast {setup.forecast!r} with jitter {setup.jitter_s} s: one of {', '.join(FORECASTS)}, a spread > 0 with truth-jitter only")
     cache = HindsightCache(hindsight_cache) if hindsight_cache is not None else None
     context = hindsight_context(path, setup, limit_s) if cache is not None else None
     snapshots = read_spat_log(path) if limit_s is None else _read_head(path, limit_s)
@@ -501,6 +528,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     ap.add_argument("--driver", choices=sorted(DRIVERS), default=Setup().driver,
                     help="the virtual driver, and the regular driver it is judged against (default %(default)s)")  # fmt: skip
+    ap.add_argument("--forecast", choices=FORECASTS, default=Setup().forecast,
+                    help="each light's forecast: the service's predictor (default), or an oracle's for research: 'truth' (the changes "
+                         "that really came, published exactly), 'truth-jitter' (the truth as the centre of a calibrated forecast "
+                         "of spread --jitter-s)")  # fmt: skip
+    ap.add_argument("--jitter-s", type=float, default=None, metavar="SIGMA_S", help="the spread of truth-jitter's forecasts [s] (needed with it)")
+    ap.add_argument("--seed", type=int, default=0, help="truth-jitter's draws (default %(default)s)")
     ap.add_argument("--every-s", type=float, default=Setup().every_s, help="seconds between single-light entries (default %(default)s)")
     ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
     ap.add_argument("--workers", type=int, default=2)
@@ -508,12 +541,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="keep each approach's hindsight DP result in this JSON file (read if present, written after the run): "
                          "the same output, minutes faster when only the advisor changed")  # fmt: skip
     args = ap.parse_args(argv)
+    if (args.forecast == "truth-jitter") != (args.jitter_s is not None) or (args.jitter_s is not None and not args.jitter_s > 0.0):
+        ap.error("--forecast truth-jitter needs --jitter-s SIGMA_S > 0, and --jitter-s goes with it only")
     from spat_feed.transport.recorded import RecordedLogError
 
     results = []
     for path in args.logs:
         try:
-            setup = Setup(every_s=args.every_s, driver=args.driver)
+            setup = Setup(every_s=args.every_s, driver=args.driver, forecast=args.forecast, jitter_s=args.jitter_s or 0.0, seed=args.seed)
             results.append(evaluate_log(path, setup, args.workers, args.limit_s, progress=True, hindsight_cache=args.hindsight_cache))
         except (OSError, RecordedLogError, HindsightCacheError) as exc:
             print(f"ecodrive spat-eval: {exc}", file=sys.stderr)
@@ -522,7 +557,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(json.dumps(results[0] if len(results) == 1 else results, indent=2))
         return 0
     for r in results:
-        print(f"{r['log']} ({r['driver']} driver): {r['approaches']} approaches; red entries {r['red_entries']}, hard brakes {r['hard_brakes']}; "
+        print(f"{r['log']} ({r['driver']} driver, {r['setup']['forecast']} forecast): {r['approaches']} approaches; red entries {r['red_entries']}, hard brakes {r['hard_brakes']}; "
               f"saving {100 * r['saving_frac']:.1f} % vs hindsight DP {100 * r['hindsight_saving_frac']:.1f} % "
               f"(kept {100 * (r['kept_frac'] or 0):.0f} %); worst {100 * r['worst_cost_frac']:+.1f} % cost; "
               f"speed advice {100 * r['advice_availability_frac']:.0f} % of approach seconds; time lost {r['time_lost_s']:+.1f} s; "
