@@ -127,11 +127,12 @@ class Setup:
     seed: int = 0  # ``truth-jitter``'s draws
 
 
-FORECASTS = ("predictor", "truth", "truth-jitter")
+FORECASTS = ("predictor", "truth", "truth-jitter", "truth-spread")
 """Where each light's forecast comes from (``--forecast``): ``predictor``, the service's (its store's reading and
 history); ``truth``, the changes that really came, published exactly
-(:func:`spat_feed.prediction.oracle.exact_reading`); ``truth-jitter``, the truth as the centre of a calibrated
-forecast of spread ``jitter_s`` (:func:`spat_feed.prediction.oracle.jitter_reading`)."""
+(:func:`spat_feed.prediction.oracle.exact_reading`); ``truth-jitter``, a calibrated forecast of spread ``jitter_s``
+about the truth (its centre off by a draw of that spread); ``truth-spread``, one of that spread centred on the truth
+(:func:`spat_feed.prediction.oracle.jitter_reading`)."""
 
 
 @dataclass
@@ -254,7 +255,7 @@ def oracle_reading(log: GroupLog, reading: PlanReading, t_unix_s: float, setup: 
     next_s = float(log.t_s[i]) if i < len(log.t_s) else math.inf
     if setup.forecast == "truth":
         return oracle.exact_reading(reading, *args, next_reading_unix_s=next_s)
-    return oracle.jitter_reading(reading, *args, setup.jitter_s, (setup.seed, *log.key), next_reading_unix_s=next_s)
+    return oracle.jitter_reading(reading, *args, setup.jitter_s, (setup.seed, *log.key), next_s, centred=setup.forecast == "truth-spread")
 
 
 def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
@@ -489,8 +490,9 @@ def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_
     setup = setup or Setup()
     if setup.driver not in DRIVERS:
         raise ValueError(f"unknown driver {setup.driver!r} (one of {', '.join(DRIVERS)})")
-    if setup.forecast not in FORECASTS or (setup.forecast == "truth-jitter") != (setup.jitter_s > 0.0):
-        raise ValueError(f"forecast {setup.forecast!r} with jitter {setup.jitter_s} s: one of {', '.join(FORECASTS)}, a spread > 0 with truth-jitter only")
+    if setup.forecast not in FORECASTS or setup.forecast.startswith("truth-") != (setup.jitter_s > 0.0):
+        raise ValueError(f"forecast {setup.forecast!r} with jitter {setup.jitter_s} s: one of {', '.join(FORECASTS)}, a spread > 0 with truth-jitter "
+                         "and truth-spread only")  # fmt: skip
     cache = HindsightCache(hindsight_cache) if hindsight_cache is not None else None
     context = hindsight_context(path, setup, limit_s) if cache is not None else None
     snapshots = read_spat_log(path) if limit_s is None else _read_head(path, limit_s)
@@ -530,9 +532,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="the virtual driver, and the regular driver it is judged against (default %(default)s)")  # fmt: skip
     ap.add_argument("--forecast", choices=FORECASTS, default=Setup().forecast,
                     help="each light's forecast: the service's predictor (default), or an oracle's for research: 'truth' (the changes "
-                         "that really came, published exactly), 'truth-jitter' (the truth as the centre of a calibrated forecast "
-                         "of spread --jitter-s)")  # fmt: skip
-    ap.add_argument("--jitter-s", type=float, default=None, metavar="SIGMA_S", help="the spread of truth-jitter's forecasts [s] (needed with it)")
+                         "that really came, published exactly), 'truth-jitter' (a calibrated forecast of spread --jitter-s about "
+                         "the truth), 'truth-spread' (one of that spread centred on the truth)")  # fmt: skip
+    ap.add_argument("--jitter-s", type=float, default=None, metavar="SIGMA_S", help="the spread of truth-jitter's and truth-spread's forecasts [s]")
     ap.add_argument("--seed", type=int, default=0, help="truth-jitter's draws (default %(default)s)")
     ap.add_argument("--every-s", type=float, default=Setup().every_s, help="seconds between single-light entries (default %(default)s)")
     ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
@@ -541,8 +543,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="keep each approach's hindsight DP result in this JSON file (read if present, written after the run): "
                          "the same output, minutes faster when only the advisor changed")  # fmt: skip
     args = ap.parse_args(argv)
-    if (args.forecast == "truth-jitter") != (args.jitter_s is not None) or (args.jitter_s is not None and not args.jitter_s > 0.0):
-        ap.error("--forecast truth-jitter needs --jitter-s SIGMA_S > 0, and --jitter-s goes with it only")
+    if args.forecast.startswith("truth-") != (args.jitter_s is not None) or (args.jitter_s is not None and not args.jitter_s > 0.0):
+        ap.error(f"--forecast {args.forecast}: --jitter-s SIGMA_S > 0 goes with truth-jitter and truth-spread, and only with them")
     from spat_feed.transport.recorded import RecordedLogError
 
     results = []

@@ -9,12 +9,14 @@ published state), :func:`~spat_feed.prediction.observe.light_view` and the safet
 * :func:`exact_reading` (``truth``): the light as if its controller published every coming change exactly (J2735
   ``minEndTime = maxEndTime``): an :class:`~spat_feed.timing.plans.UncertainPlan` of exact windows, which the advisor
   takes as exact timing (its rules, as on a fixed-time plan).
-* :func:`jitter_reading` (``truth-jitter``): the published plan as read, with a forecast in place of the
-  predictor's: each coming change as :data:`~spat_feed.prediction.predictor.N_SAMPLES` equally likely instants
-  ``truth + sigma z``, ``z`` standard normal draws (:func:`jittered_forecasts`), so the choice weighs a forecast
-  whose spread is ``sigma`` and that is calibrated by construction (the truth is as likely at any rank of the
-  samples). The draws of a change are seeded by the light and the change, the same at every second of an approach
-  (a forecast does not jump about from one reading to the next).
+* :func:`jitter_reading` (``truth-jitter``, ``truth-spread``): the published plan as read, with a forecast in place
+  of the predictor's: each coming change as :data:`~spat_feed.prediction.predictor.N_SAMPLES` equally likely
+  instants ``centre + sigma z``, ``z`` standard normal draws (:func:`jittered_forecasts`). ``truth-jitter``: the
+  centre is the truth off by ``sigma e``, ``e`` one more draw, so the forecast is calibrated by construction (the
+  truth is as likely at any rank of the instants; its median off by ``0.8 sigma`` on average, as a predictor's of
+  that spread is). ``truth-spread``: the centre is the truth (never wrong in its median, only unsure: what the
+  spread alone costs the choice). The draws of a change are seeded by the light and the change, the same at every
+  second of an approach (a forecast does not jump about from one reading to the next).
 
 A published red is never shown as green: where the reading still says red at an instant the truth has already
 turned green (the truth switches midway between the last red snapshot and the first green one), the red lasts in
@@ -101,22 +103,29 @@ def exact_plan(phases: Sequence[tuple[PhaseClass, float]]) -> UncertainPlan:
 
 
 @lru_cache(maxsize=4096)
-def _draws(seed: tuple[int, ...]) -> np.ndarray:
-    """:data:`N_SAMPLES` standard normal draws, sorted, for one change (``seed``: the light and the change)."""
-    z = np.sort(np.random.default_rng(seed).standard_normal(N_SAMPLES))
+def _draws(seed: tuple[int, ...]) -> tuple[float, np.ndarray]:
+    """One change's draws (``seed``: the light and the change): the error of its centre, and :data:`N_SAMPLES`
+    standard normal draws about it, sorted. [-]"""
+    rng = np.random.default_rng(seed)
+    error = float(rng.standard_normal())
+    z = np.sort(rng.standard_normal(N_SAMPLES))
     z.setflags(write=False)  # (cached: shared by every second of an approach)
-    return z
+    return error, z
 
 
-def jittered_forecasts(phases: Sequence[tuple[PhaseClass, float]], t_unix_s: float, sigma_s: float, seed: Sequence[int] = ()) -> tuple[ChangeForecast, ...]:
+def jittered_forecasts(phases: Sequence[tuple[PhaseClass, float]], t_unix_s: float, sigma_s: float, seed: Sequence[int] = (),
+                       centred: bool = False) -> tuple[ChangeForecast, ...]:  # fmt: skip
     """The changes of ``phases`` (:func:`truth_phases`) as forecasts of spread ``sigma_s``: each change's instants
-    ``truth + sigma_s z`` (:func:`_draws`, seeded by ``seed`` and the change's instant to the millisecond), none
-    before now or before the instants of the change before it (at each rank: a late change is followed by a late
-    one), sorted; its earliest instant the first of them; a phase that never ends (``inf``) is the last. [s]
+    ``centre + sigma_s z`` (:func:`_draws`, seeded by ``seed`` and the change's instant to the millisecond), its
+    centre the truth off by ``sigma_s e`` (``e`` one more standard normal draw: the truth is as likely at any rank of
+    the instants, a calibrated forecast whose median is off by ``0.8 sigma_s`` on average), or, ``centred``, the
+    truth itself (what the spread alone costs); none before now or before the instants of the change before it (at
+    each rank: a late change is followed by a late one), sorted; its earliest instant the first of them; a phase
+    that never ends (``inf``) is the last. [s]
 
     Examples
     --------
-    >>> f = jittered_forecasts([(PhaseClass.RED, 20.0), (PhaseClass.GREEN, 50.0), (PhaseClass.RED, math.inf)], 0.0, 3.0, (7,))
+    >>> f = jittered_forecasts([(PhaseClass.RED, 20.0), (PhaseClass.GREEN, 50.0), (PhaseClass.RED, math.inf)], 0.0, 3.0, (7,), centred=True)
     >>> [(x.ends.value, x.then and x.then.value) for x in f], [round(x.likely_unix_s, 1) for x in f]
     ([('red', 'green'), ('green', 'red'), ('red', None)], [19.9, 50.0, inf])
     """
@@ -124,8 +133,11 @@ def jittered_forecasts(phases: Sequence[tuple[PhaseClass, float]], t_unix_s: flo
     before = np.full(N_SAMPLES, t_unix_s)
     for k, (cls, end) in enumerate(phases):
         then = phases[k + 1][0] if k + 1 < len(phases) else None
-        z = _draws((*seed, int(round(end * 1000.0)))) if math.isfinite(end) else np.zeros(N_SAMPLES)
-        samples = np.maximum(end + sigma_s * z, before)
+        if math.isfinite(end):
+            error, z = _draws((*seed, int(round(end * 1000.0))))
+            samples = np.maximum(end + sigma_s * ((0.0 if centred else error) + z), before)
+        else:
+            samples = np.full(N_SAMPLES, math.inf)
         out.append(ChangeForecast(cls, then, float(samples[0]), samples, "truth-jitter"))
         before = samples
     return tuple(out)
@@ -141,13 +153,15 @@ def exact_reading(reading: PlanReading, reds_s, ambers_s, t_unix_s: float, horiz
 
 
 def jitter_reading(reading: PlanReading, reds_s, ambers_s, t_unix_s: float, horizon_s: float, sigma_s: float, seed: Sequence[int] = (),
-                   next_reading_unix_s: float = math.inf) -> PlanReading:  # fmt: skip
+                   next_reading_unix_s: float = math.inf, centred: bool = False) -> PlanReading:  # fmt: skip
     """``reading`` (the store's, at ``t_unix_s``) with the truth jittered by ``sigma_s`` as its forecast
-    (:func:`jittered_forecasts`; the published plan and its red hold as read); no plan stays no plan."""
+    (:func:`jittered_forecasts`, ``centred`` or not; the published plan and its red hold as read); no plan stays no
+    plan."""
     if reading.plan is None:
         return reading
     phases = truth_phases(reds_s, ambers_s, t_unix_s, horizon_s, _published(reading, t_unix_s), next_reading_unix_s)
-    return replace(reading, forecasts=jittered_forecasts(phases, t_unix_s, sigma_s, seed), clock_offset_s=0.0, clock_uncertainty_s=0.0)
+    forecasts = jittered_forecasts(phases, t_unix_s, sigma_s, seed, centred)
+    return replace(reading, forecasts=forecasts, clock_offset_s=0.0, clock_uncertainty_s=0.0)
 
 
 def _published(reading: PlanReading, t_unix_s: float) -> PhaseClass:
