@@ -16,7 +16,9 @@ published state), :func:`~spat_feed.prediction.observe.light_view` and the safet
   truth is as likely at any rank of the instants; its median off by ``0.8 sigma`` on average, as a predictor's of
   that spread is). ``truth-spread``: the centre is the truth (never wrong in its median, only unsure: what the
   spread alone costs the choice). The draws of a change are seeded by the light and the change, the same at every
-  second of an approach (a forecast does not jump about from one reading to the next).
+  second of an approach (a forecast does not jump about from one reading to the next). No change of the published
+  phase comes before its ``minEndTime`` (a hard bound: a forecast that put a red's end before it took cars into the
+  red on Antwerp's exact windows).
 
 A published red is never shown as green: where the reading still says red at an instant the truth has already
 turned green (the truth switches midway between the last red snapshot and the first green one), the red lasts in
@@ -33,7 +35,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from spat_feed.prediction.observe import PlanReading, published_state
+from spat_feed.prediction.observe import PlanReading, _published_window, published_state
 from spat_feed.prediction.predictor import N_SAMPLES, ChangeForecast
 from spat_feed.timing.plans import AMBER, GREEN, RED, ChangeWindow, MovementPhaseState, PhaseClass, UncertainPlan, phase_class
 
@@ -114,13 +116,14 @@ def _draws(seed: tuple[int, ...]) -> tuple[float, np.ndarray]:
 
 
 def jittered_forecasts(phases: Sequence[tuple[PhaseClass, float]], t_unix_s: float, sigma_s: float, seed: Sequence[int] = (),
-                       centred: bool = False) -> tuple[ChangeForecast, ...]:  # fmt: skip
+                       centred: bool = False, floor_unix_s: float = -math.inf) -> tuple[ChangeForecast, ...]:  # fmt: skip
     """The changes of ``phases`` (:func:`truth_phases`) as forecasts of spread ``sigma_s``: each change's instants
     ``centre + sigma_s z`` (:func:`_draws`, seeded by ``seed`` and the change's instant to the millisecond), its
     centre the truth off by ``sigma_s e`` (``e`` one more standard normal draw: the truth is as likely at any rank of
     the instants, a calibrated forecast whose median is off by ``0.8 sigma_s`` on average), or, ``centred``, the
-    truth itself (what the spread alone costs); none before now or before the instants of the change before it (at
-    each rank: a late change is followed by a late one), sorted; its earliest instant the first of them; a phase
+    truth itself (what the spread alone costs); none before now, the first none before ``floor_unix_s`` (the published
+    phase's ``minEndTime``: a hard bound, as the predictor keeps it), none before the instants of the change before it
+    (at each rank: a late change is followed by a late one), sorted; its earliest instant the first of them; a phase
     that never ends (``inf``) is the last. [s]
 
     Examples
@@ -130,7 +133,7 @@ def jittered_forecasts(phases: Sequence[tuple[PhaseClass, float]], t_unix_s: flo
     ([('red', 'green'), ('green', 'red'), ('red', None)], [19.9, 50.0, inf])
     """
     out: list[ChangeForecast] = []
-    before = np.full(N_SAMPLES, t_unix_s)
+    before = np.full(N_SAMPLES, max(t_unix_s, floor_unix_s))
     for k, (cls, end) in enumerate(phases):
         then = phases[k + 1][0] if k + 1 < len(phases) else None
         if math.isfinite(end):
@@ -159,8 +162,11 @@ def jitter_reading(reading: PlanReading, reds_s, ambers_s, t_unix_s: float, hori
     plan."""
     if reading.plan is None:
         return reading
-    phases = truth_phases(reds_s, ambers_s, t_unix_s, horizon_s, _published(reading, t_unix_s), next_reading_unix_s)
-    forecasts = jittered_forecasts(phases, t_unix_s, sigma_s, seed, centred)
+    published = _published(reading, t_unix_s)
+    phases = truth_phases(reds_s, ambers_s, t_unix_s, horizon_s, published, next_reading_unix_s)
+    window = _published_window(reading.plan, t_unix_s - reading.age_s) if isinstance(reading.plan, UncertainPlan) else None
+    floor = window[0] if window is not None and phases[0][0] is published else -math.inf  # the phase the reading publishes: its minEndTime
+    forecasts = jittered_forecasts(phases, t_unix_s, sigma_s, seed, centred, floor)
     return replace(reading, forecasts=forecasts, clock_offset_s=0.0, clock_uncertainty_s=0.0)
 
 
