@@ -1,5 +1,5 @@
-"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient] [--hindsight-cache FILE]`: the advisor on a recorded controller, judged on
-what really happened.
+"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient] [--hindsight-cache FILE] [--forecast F [--jitter-s S]]`: the advisor on a
+recorded controller, judged on what really happened.
 
 The log (the ``../shared/data/spat`` CSV, or our JSON lines: any format
 :func:`spat_feed.transport.player.read_spat_log` reads) is replayed through the service's own SPaT path, as
@@ -56,6 +56,15 @@ lenient): 2019-05-01 saving 16.4 / 16.5 % against hindsight 25.0 / 24.0 % (65 / 
 approaches above +10 %, 11 / 8 losing > 60 s; 2019-05-17 18.0 / 17.4 % against 27.9 / 26.6 % (64 / 66 %), 1.5 /
 1.8 %, 14 / 20; US 1136 (state only) 15.3 / 14.3 % against 28.9 / 24.4 % (53 / 58 %), 1.9 / 3.3 %, 2 / 3; no red
 entry, no hard brake. Every key: ``docs/ADVISOR.md``.
+
+``--forecast`` (:data:`FORECASTS`, for research; default ``predictor``, what ships): each light's forecast made
+from the truth instead (:mod:`spat_feed.prediction.oracle`, :func:`oracle_reading`), the rest of the path as it is
+(the store's reading, its freshness and published state, ``light_view``, the safety rule). ``truth``: the changes
+that really came, published exactly (the advisor's exact-timing rules); ``truth-jitter --jitter-s S``: a calibrated
+forecast of spread S about the truth (its median off by 0.8 S on average); ``truth-spread --jitter-s S``: one of
+spread S centred on the truth. They split the kept share into what the decision loses when the forecast is right
+and what the forecast's error costs (docs/ADVISOR.md, "What is lost to the forecast, and what to the decision").
+The output's ``setup`` names the forecast; the hindsight cache serves every forecast.
 
 The hindsight DP is :func:`advisory.drivers.closed_loop.hindsight_optimum`; approaches where it fails are left out
 of the hindsight mean (``hindsight_invalid``). 20 m stages instead of the study's 10 m keep a recording within

@@ -133,3 +133,16 @@ def test_cli_refuses_a_jitter_without_its_spread(recording, capsys):
         cli(["spat-eval", str(recording), "--jitter-s", "3"])
     with pytest.raises(SystemExit):
         cli(["spat-eval", str(recording), "--forecast", "truth-spread", "--jitter-s", "0"])
+
+
+def test_a_jittered_forecast_keeps_the_published_min_end():
+    """The published phase never ends before its minEndTime in a jittered forecast (a hard bound, as the predictor
+    keeps it): a red published to end at 50 s at the earliest, whose truth says 48 s, is drawn at 50 s or later."""
+    from spat_feed.prediction.observe import PlanReading
+    from spat_feed.timing.plans import GREEN, RED, ChangeWindow, UncertainPlan
+
+    reading = PlanReading(UncertainPlan((RED, GREEN), (ChangeWindow(50.0, 55.0, 70.0),)))
+    got = oracle.jitter_reading(reading, ((-10.0, 48.0), (100.0, 130.0)), (), 0.0, 150.0, 5.0, (1,))
+    assert [f.ends for f in got.forecasts[:2]] == [PhaseClass.RED, PhaseClass.GREEN]
+    assert got.forecasts[0].samples_unix_s.min() >= 50.0 and got.forecasts[0].earliest_unix_s >= 50.0
+    assert np.median(got.forecasts[1].samples_unix_s) == pytest.approx(100.0, abs=8.0)
