@@ -20,6 +20,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _figures import save  # noqa: E402
+
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "forecast_spread.png"
 
 
@@ -55,10 +59,7 @@ def main() -> None:
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("share of the hindsight saving kept [%]")
     axes[0][0].legend(fontsize=8, loc="lower left")
-    fig.tight_layout()
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(OUT, dpi=110)
-    print(f"wrote {OUT}")
+    save(fig, OUT, dpi=110)
 
 
 if __name__ == "__main__":
