@@ -132,8 +132,8 @@ class Setup:
     stale_after_s: float = DEFAULT_STALE_AFTER_S  # the store's (the service's ``spat_stale_after_s``)
     driver: str = "careful"  # the virtual driver (advisory.drivers.closed_loop.DRIVERS); the regular driver is the same person
     forecast: str = "predictor"  # each light's forecast (FORECASTS): the service's predictor, or an oracle's made from the truth
-    jitter_s: float = 0.0  # the spread of ``truth-jitter``'s forecasts [s]
-    seed: int = 0  # ``truth-jitter``'s draws
+    jitter_s: float = 0.0  # the spread of ``truth-jitter``'s and ``truth-spread``'s forecasts [s]
+    seed: int = 0  # their draws
 
 
 FORECASTS = ("predictor", "truth", "truth-jitter", "truth-spread")
@@ -544,7 +544,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                          "that really came, published exactly), 'truth-jitter' (a calibrated forecast of spread --jitter-s about "
                          "the truth), 'truth-spread' (one of that spread centred on the truth)")  # fmt: skip
     ap.add_argument("--jitter-s", type=float, default=None, metavar="SIGMA_S", help="the spread of truth-jitter's and truth-spread's forecasts [s]")
-    ap.add_argument("--seed", type=int, default=0, help="truth-jitter's draws (default %(default)s)")
+    ap.add_argument("--seed", type=int, default=0, help="the draws of truth-jitter and truth-spread (default %(default)s)")
     ap.add_argument("--every-s", type=float, default=Setup().every_s, help="seconds between single-light entries (default %(default)s)")
     ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
     ap.add_argument("--workers", type=int, default=2)
