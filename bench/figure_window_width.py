@@ -25,6 +25,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _figures import save  # noqa: E402
 from bench_advisor import window_sweep  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "advisor_window_width.png"
@@ -62,10 +63,7 @@ def main() -> None:
     ax.set_title("Saving against window width")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
-    fig.tight_layout()
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(OUT, dpi=120)
-    print(f"wrote {OUT}")
+    save(fig, OUT, dpi=120)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
-"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient] [--hindsight-cache FILE]`: the advisor on a recorded controller, judged on
-what really happened.
+"""`ecodrive spat-eval LOG [--json] [--driver careful|lenient] [--hindsight-cache FILE] [--forecast F [--jitter-s S]]`: the advisor on a
+recorded controller, judged on what really happened.
 
 The log (the ``../shared/data/spat`` CSV, or our JSON lines: any format
 :func:`spat_feed.transport.player.read_spat_log` reads) is replayed through the service's own SPaT path, as
@@ -57,6 +57,15 @@ approaches above +10 %, 11 / 8 losing > 60 s; 2019-05-17 18.0 / 17.4 % against 2
 1.8 %, 14 / 20; US 1136 (state only) 15.3 / 14.3 % against 28.9 / 24.4 % (53 / 58 %), 1.9 / 3.3 %, 2 / 3; no red
 entry, no hard brake. Every key: ``docs/ADVISOR.md``.
 
+``--forecast`` (:data:`FORECASTS`, for research; default ``predictor``, what ships): each light's forecast made
+from the truth instead (:mod:`spat_feed.prediction.oracle`, :func:`oracle_reading`), the rest of the path as it is
+(the store's reading, its freshness and published state, ``light_view``, the safety rule). ``truth``: the changes
+that really came, published exactly (the advisor's exact-timing rules); ``truth-jitter --jitter-s S``: a calibrated
+forecast of spread S about the truth (its median off by 0.8 S on average); ``truth-spread --jitter-s S``: one of
+spread S centred on the truth. They split the kept share into what the decision loses when the forecast is right
+and what the forecast's error costs (docs/ADVISOR.md, "What is lost to the forecast, and what to the decision").
+The output's ``setup`` names the forecast; the hindsight cache serves every forecast.
+
 The hindsight DP is :func:`advisory.drivers.closed_loop.hindsight_optimum`; approaches where it fails are left out
 of the hindsight mean (``hindsight_invalid``). 20 m stages instead of the study's 10 m keep a recording within
 minutes on two cores; at 20 m the DP costs ~0.5 % more (a slightly lenient yardstick).
@@ -97,7 +106,8 @@ from advisory.physics.params import model_params
 from advisory.signals import Scenario, TimelineSignal
 from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.timing.messages import IntersectionState, MovementState, to_unix_s
-from spat_feed.prediction.observe import PlanReading, light_view
+from spat_feed.prediction import oracle
+from spat_feed.prediction.observe import HORIZON_S, PlanReading, light_view
 from spat_feed.timing.plans import STOP_STATES, PhaseClass, phase_class
 from spat_feed.transport.store import DEFAULT_STALE_AFTER_S, SpatStore, TimeRules
 
@@ -121,6 +131,17 @@ class Setup:
     horizon_s: float = 240.0  # an approach needs this much recording after its entry
     stale_after_s: float = DEFAULT_STALE_AFTER_S  # the store's (the service's ``spat_stale_after_s``)
     driver: str = "careful"  # the virtual driver (advisory.drivers.closed_loop.DRIVERS); the regular driver is the same person
+    forecast: str = "predictor"  # each light's forecast (FORECASTS): the service's predictor, or an oracle's made from the truth
+    jitter_s: float = 0.0  # the spread of ``truth-jitter``'s and ``truth-spread``'s forecasts [s]
+    seed: int = 0  # their draws
+
+
+FORECASTS = ("predictor", "truth", "truth-jitter", "truth-spread")
+"""Where each light's forecast comes from (``--forecast``): ``predictor``, the service's (its store's reading and
+history); ``truth``, the changes that really came, published exactly
+(:func:`spat_feed.prediction.oracle.exact_reading`); ``truth-jitter``, a calibrated forecast of spread ``jitter_s``
+about the truth (its centre off by a draw of that spread); ``truth-spread``, one of that spread centred on the truth
+(:func:`spat_feed.prediction.oracle.jitter_reading`)."""
 
 
 @dataclass
@@ -232,6 +253,20 @@ def _spec(n: int, position_m: float) -> IntersectionSpec:
                             approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))  # fmt: skip
 
 
+def oracle_reading(log: GroupLog, reading: PlanReading, t_unix_s: float, setup: Setup) -> PlanReading:
+    """The store's ``reading`` of ``log``'s group at ``t_unix_s`` with the forecast ``setup.forecast`` says
+    (:data:`FORECASTS`; the predictor's: as it is). The oracle's truth is the log's, the hindsight DP's; a red the
+    reading still publishes lasts until the group's next snapshot (:func:`spat_feed.prediction.oracle.truth_phases`)."""
+    if setup.forecast == "predictor":
+        return reading
+    i = int(np.searchsorted(log.t_s, t_unix_s, side="right"))
+    args = (log.truth.reds_s, log.truth.ambers_s, t_unix_s, HORIZON_S)
+    next_s = float(log.t_s[i]) if i < len(log.t_s) else math.inf
+    if setup.forecast == "truth":
+        return oracle.exact_reading(reading, *args, next_reading_unix_s=next_s)
+    return oracle.jitter_reading(reading, *args, setup.jitter_s, (setup.seed, *log.key), next_s, centred=setup.forecast == "truth-spread")
+
+
 def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
     """One approach: groups ``job[0]`` in series entered at Unix time ``job[1]``; None if the truth runs out."""
     groups, entry_s, setup = job
@@ -249,7 +284,7 @@ def approach(job: tuple[tuple[int, ...], float, Setup]) -> dict | None:
         views: list[LightView] = []
         for n, (g, p) in enumerate(zip(groups, positions)):
             if p > x_m and len(views) < 2:
-                reading = _REPLAY.reading(_LOGS[g].key, entry_s + t_s)
+                reading = oracle_reading(_LOGS[g], _REPLAY.reading(_LOGS[g].key, entry_s + t_s), entry_s + t_s, setup)
                 views.append(light_view(_spec(n, p), reading, x_m, entry_s + t_s, speed_mps=v_mps))
         return Observation(v_mps, v_lim, tuple(views), position_m=x_m)
 
@@ -464,6 +499,9 @@ def evaluate_log(path: str, setup: Setup | None = None, workers: int = 2, limit_
     setup = setup or Setup()
     if setup.driver not in DRIVERS:
         raise ValueError(f"unknown driver {setup.driver!r} (one of {', '.join(DRIVERS)})")
+    if setup.forecast not in FORECASTS or setup.forecast.startswith("truth-") != (setup.jitter_s > 0.0):
+        raise ValueError(f"forecast {setup.forecast!r} with jitter {setup.jitter_s} s: one of {', '.join(FORECASTS)}, a spread > 0 with truth-jitter "
+                         "and truth-spread only")  # fmt: skip
     cache = HindsightCache(hindsight_cache) if hindsight_cache is not None else None
     context = hindsight_context(path, setup, limit_s) if cache is not None else None
     snapshots = read_spat_log(path) if limit_s is None else _read_head(path, limit_s)
@@ -501,6 +539,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     ap.add_argument("--driver", choices=sorted(DRIVERS), default=Setup().driver,
                     help="the virtual driver, and the regular driver it is judged against (default %(default)s)")  # fmt: skip
+    ap.add_argument("--forecast", choices=FORECASTS, default=Setup().forecast,
+                    help="each light's forecast: the service's predictor (default), or an oracle's for research: 'truth' (the changes "
+                         "that really came, published exactly), 'truth-jitter' (a calibrated forecast of spread --jitter-s about "
+                         "the truth), 'truth-spread' (one of that spread centred on the truth)")  # fmt: skip
+    ap.add_argument("--jitter-s", type=float, default=None, metavar="SIGMA_S", help="the spread of truth-jitter's and truth-spread's forecasts [s]")
+    ap.add_argument("--seed", type=int, default=0, help="the draws of truth-jitter and truth-spread (default %(default)s)")
     ap.add_argument("--every-s", type=float, default=Setup().every_s, help="seconds between single-light entries (default %(default)s)")
     ap.add_argument("--limit-s", type=float, default=None, help="use only the first seconds of each log")
     ap.add_argument("--workers", type=int, default=2)
@@ -508,12 +552,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="keep each approach's hindsight DP result in this JSON file (read if present, written after the run): "
                          "the same output, minutes faster when only the advisor changed")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.forecast.startswith("truth-") != (args.jitter_s is not None) or (args.jitter_s is not None and not args.jitter_s > 0.0):
+        ap.error(f"--forecast {args.forecast}: --jitter-s SIGMA_S > 0 goes with truth-jitter and truth-spread, and only with them")
     from spat_feed.transport.recorded import RecordedLogError
 
     results = []
     for path in args.logs:
         try:
-            setup = Setup(every_s=args.every_s, driver=args.driver)
+            setup = Setup(every_s=args.every_s, driver=args.driver, forecast=args.forecast, jitter_s=args.jitter_s or 0.0, seed=args.seed)
             results.append(evaluate_log(path, setup, args.workers, args.limit_s, progress=True, hindsight_cache=args.hindsight_cache))
         except (OSError, RecordedLogError, HindsightCacheError) as exc:
             print(f"ecodrive spat-eval: {exc}", file=sys.stderr)
@@ -522,7 +568,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(json.dumps(results[0] if len(results) == 1 else results, indent=2))
         return 0
     for r in results:
-        print(f"{r['log']} ({r['driver']} driver): {r['approaches']} approaches; red entries {r['red_entries']}, hard brakes {r['hard_brakes']}; "
+        print(f"{r['log']} ({r['driver']} driver, {r['setup']['forecast']} forecast): {r['approaches']} approaches; red entries {r['red_entries']}, hard brakes {r['hard_brakes']}; "
               f"saving {100 * r['saving_frac']:.1f} % vs hindsight DP {100 * r['hindsight_saving_frac']:.1f} % "
               f"(kept {100 * (r['kept_frac'] or 0):.0f} %); worst {100 * r['worst_cost_frac']:+.1f} % cost; "
               f"speed advice {100 * r['advice_availability_frac']:.0f} % of approach seconds; time lost {r['time_lost_s']:+.1f} s; "

@@ -57,6 +57,7 @@ from numba import njit
 from advisory.advice.views import AdvisorParams, LightView, Observation, Timings
 from spat_feed.prediction.predictor import (
     EXACT_S,
+    ChangeForecast,
     SCORE_AHEAD_S,
     current_end,
     cycle_period_s,
@@ -661,6 +662,10 @@ class PlanReading:
     red at once (:func:`no_amber`). [s]
     ``queue_m``: the queue standing back from the stop line that the controller's detectors published with the
     reading (J2735 ``queueLength``, :meth:`~spat_feed.timing.messages.MovementState.queue_length_m`); None: not said. [m]
+    ``forecasts``: the light's coming changes as forecast apart from the plan and its history, the first the end of
+    the phase now (an oracle's: :mod:`spat_feed.prediction.oracle`, ``spat-eval --forecast truth-jitter``), in place
+    of the predictor's (:func:`forecast_phases`); the published plan still holds its red (:func:`red_hold_s`).
+    None: the predictor's.
     """
 
     plan: Plan | None
@@ -671,6 +676,7 @@ class PlanReading:
     clock_uncertainty_s: float = 0.0
     amber_s: float | None = None
     queue_m: float | None = None
+    forecasts: tuple[ChangeForecast, ...] | None = None
 
     @classmethod
     def of_plan(cls, plan: Plan | None) -> PlanReading:
@@ -788,6 +794,25 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
     current = cycle.current is cls and len(out) - 2 <= _published_index(plan, t_unix_s)  # the phase in progress, not a later one
     rest = _continued(cls, since, begun, t_unix_s, max(t_unix_s, published[0]), horizon_s, cycle, published, current)
     return out if rest is None else out[:-2] + rest
+
+
+def forecast_phases(forecasts: Sequence[ChangeForecast], t_unix_s: float) -> list[tuple[PhaseClass, Bound, Bound]]:
+    """(class, start, end) of each phase that ``forecasts`` end (the first the phase now), as :func:`predicted_phases`
+    gives them: each end (earliest, likely, late, its :data:`N_SCENARIOS` levels) read off the forecast's samples as
+    :func:`_continued` reads the predictor's (likely its median, late its :data:`LATE_QUANTILE`, none before now or
+    its earliest), then the unknown (a red) past the last change."""
+    inf = math.inf
+    out: list[tuple[PhaseClass, Bound, Bound]] = []
+    start: Bound = (-inf, -inf, -inf)
+    for f in forecasts:
+        s, floor = f.samples_unix_s, max(t_unix_s, f.earliest_unix_s)
+        likely = max(sample_quantile(s, 0.5), floor)
+        end: Bound = (floor, likely, max(sample_quantile(s, LATE_QUANTILE), likely), _levels(s, floor))
+        out.append((f.ends, start, end))
+        start = end
+    if math.isfinite(start[0]):
+        out.append((PhaseClass.UNKNOWN, start, (inf, inf, inf)))
+    return out
 
 
 CLEARANCE_MAX_S = 6.0
@@ -1135,7 +1160,8 @@ def light_view(
             windows = likely = late = _widened(tuple((a - u, b - u) for a, b in windows), u)
         unknown = ()
     else:
-        phases = predicted_phases(plan, t_feed, horizon_s, reading.cycle)
+        given = reading.forecasts is not None
+        phases = forecast_phases(reading.forecasts, t_feed) if given else predicted_phases(plan, t_feed, horizon_s, reading.cycle)
         if reading.amber_s == 0.0:
             phases = no_amber(phases)
         read_at = t_unix_s - reading.age_s
@@ -1145,7 +1171,7 @@ def light_view(
             # 2.8 s behind said so 7 m before the line, "Drive normally.", and the car rolled into the red); the
             # windows, widened by u, carry that red. (A red that ended so is left to the eye: the light is green.)
             read_at -= u
-        if unknown_now(plan, read_at) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
+        if not given and unknown_now(plan, read_at) and (not _passable_now(reading.cycle) or all(c is PhaseClass.UNKNOWN for c, _, _ in phases)):
             return LightView(intersection.id, distance_m, fresh=False, age_s=float(reading.age_s))  # nothing reads it: no data
         # (widened by the clock, a published red held: where the windows then differ, so did they before)
         windows, likely, late = _view_windows(phases, t_feed - u, horizon_s + u, u, hold, red_now)
