@@ -377,7 +377,7 @@ def approach_m(corridor: Corridor, params: AdvisorParams, default_limit_mps: flo
 
 def light_passed(corridor: Corridor, station_m: float | None, speed_mps: float, t_unix_s: float, readings: dict):
     """The light whose stop line the car passed last (its view: distance negative), where it has a reading: the cars
-    behind still have to cross it (queue-aware advice prices them, :func:`advisory.advice.queue.cut_behind`); None
+    behind still have to cross it (queue-aware advice prices them, :func:`advisory.advice.behind.cut_behind`); None
     before the first line or where nothing is read."""
     if station_m is None:
         return None

@@ -57,7 +57,7 @@ class Settings(BaseSettings):
     spat_late_s: float = Field(default=0.0, ge=0)
     spat_confidence_frac: float = Field(default=1.0, ge=0, le=1)
 
-    # queue-aware advice (server.queue, advisory.advice.queue, docs/TRAFFIC.md)
+    # queue-aware advice (server.queue; advisory.advice.queue, behind, queue_words; docs/TRAFFIC.md)
     queue_aware: bool = Field(default=False, description="aim advice at the moment the queue ahead has cleared (every trip's fix a probe of its corridor); a car standing in a queue is told to follow the car in front")
     queue_arrivals_vph: float | None = Field(default=None, ge=0, description="flow arriving at each light, per lane (detector counts), to count the cars that are not connected; None: connected cars alone [veh/h]")
     queue_connected_share: float = Field(default=1.0, ge=0, le=1, description="share of the arriving cars that are connected (with queue_arrivals_vph)")

@@ -8,7 +8,7 @@ the lights in traffic (:func:`advisory.advice.queue.estimate` and :func:`~adviso
 faces ends when the queue in front of it has crossed the line), or, for a car standing in a queue or closing in on a
 slower connected car, the service's own advice until it is over the next light's line: no speed, "Queue ahead.
 Follow the car in front." (reason ``queue``), or, at a fix where it closes in on a slower connected car, a lift-off
-to that car's speed (:func:`advisory.advice.queue.ease_to_car_ahead`); the advisor then plans afresh. Not where the cars ahead leave it no time
+to that car's speed (:func:`advisory.advice.queue_words.ease_to_car_ahead`); the advisor then plans afresh. Not where the cars ahead leave it no time
 to cross before the next light's red (``QueueEstimate.stop_behind``, :func:`advisory.advice.queue.behind_s`): that
 car is advised by the advisor, which sees the line closed to it until the red's end, and prepares to stop. The trips behind a car are probes too:
 with the flow they give the followers a slower plan would hold up (``Observation.followers``), which the advisor and
@@ -39,9 +39,10 @@ import math
 from bisect import bisect_left, insort
 from dataclasses import replace
 
+from advisory.advice.behind import PACED_REASON, cut_behind, gives_up_green, paced_for_behind
+from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, estimate, followers, held_up, normal_drive_s
+from advisory.advice.queue_words import drive_normally, ease_to_car_ahead, said_truly, seen_at_line, tail_glide
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
-from advisory.advice.queue import (PACED_REASON, PastRed, Probe, QueueEstimate, QueueModel, apply, cut_behind, drive_normally, ease_to_car_ahead, estimate,
-                                   followers, gives_up_green, held_up, normal_drive_s, paced_for_behind, said_truly, seen_at_line, tail_glide)
 from server.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
@@ -144,7 +145,7 @@ def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) 
 
 
 def _normally(advice: Advice, params: AdvisorParams, real: Observation, last: dict | None) -> Advice:
-    """The service's "drive normally" in place of ``advice`` (:func:`advisory.advice.queue.drive_normally`), spoken
+    """The service's "drive normally" in place of ``advice`` (:func:`advisory.advice.queue_words.drive_normally`), spoken
     where the trip's ``last`` answer was not already "drive normally" (as the advisor speaks its own: on a change)."""
     out = drive_normally(advice, params.units, real.lights[0])
     said = last is not None and (last.get("action"), last.get("reason")) == (out.action, out.reason)
@@ -262,7 +263,7 @@ class QueueBoard:
                told_mps: float | None = None) -> tuple[Observation, Advice | None]:  # fmt: skip
         """For the car's queue estimate: the observation with the queues in it, or "follow the car in front" while it
         stands in the next light's queue or closes in on a slower car, until it is over that light's line; at a fix
-        where it closes in on a slower connected car, lifting off to that car's speed (:func:`advisory.advice.queue.ease_to_car_ahead`). The
+        where it closes in on a slower connected car, lifting off to that car's speed (:func:`advisory.advice.queue_words.ease_to_car_ahead`). The
         connected cars it holds up are kept for :meth:`check`."""
         nxt = obs.lights[0]
         self._behind[trip_id] = est.behind
@@ -323,15 +324,15 @@ class QueueBoard:
         """The advisor's advice (planned on ``obs``, the lights as the queue holds them), or:
 
         * the glide that meets the queue's tail and follows it through where the advisor asks a stop that only the
-          queue asks for (:func:`advisory.advice.queue.tail_glide`; spoken when the trip's ``last`` answer was not it);
+          queue asks for (:func:`advisory.advice.queue_words.tail_glide`; spoken when the trip's ``last`` answer was not it);
         * "drive normally" where it gives up green time that a normal drive, behind the queue, uses, priced with the
-          followers it holds up (:func:`advisory.advice.queue.gives_up_green`), the connected ones where the trip's last
+          followers it holds up (:func:`advisory.advice.behind.gives_up_green`), the connected ones where the trip's last
           fix (:meth:`see`) found them;
         * "drive normally" at the line (the advisor silent there, ``too_close``) where the plan the driver follows was
-          made for the queue and the light itself is green (:func:`advisory.advice.queue.seen_at_line`);
+          made for the queue and the light itself is green (:func:`advisory.advice.queue_words.seen_at_line`);
 
         its countdown, whichever it is, the light's own, and the queue said where the queue holds the car
-        (:func:`advisory.advice.queue.said_truly`): the advisor sees the queue as a red."""
+        (:func:`advisory.advice.queue_words.said_truly`): the advisor sees the queue as a red."""
         real, est = self._seen.get(trip_id, (obs, None)) if trip_id is not None else (obs, None)
         out = self._checked(obs, real, est, advice, params, trip_id, last)
         if trip_id is not None and not (out.action == "none" and out.reason in SILENT):  # the plan the driver follows now
@@ -362,7 +363,7 @@ class QueueBoard:
 
     def lost_behind(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None, est: QueueEstimate | None = None) -> float:
         """The wait [s] that ``advice`` makes the cars behind lose at the light the car passed last and the next one
-        (:func:`advisory.advice.queue.cut_behind`, the next one behind the queue in front, ``est``), as its last fix
+        (:func:`advisory.advice.behind.cut_behind`, the next one behind the queue in front, ``est``), as its last fix
         found them (:meth:`note_behind`), with the connected ones not yet on the route expected from the flow."""
         noted = self._passed.get(trip_id, ()) if trip_id is not None else ()
         view_m = self._view_m.get(trip_id, math.inf) if trip_id is not None else math.inf

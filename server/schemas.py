@@ -17,7 +17,7 @@ SERVER_REASONS = ("poor_gps", "no_speed", "no_fix", "clock_skew", "queue", "traf
 """Reasons the service decides itself (``server.advising.SERVER_PHRASES``): pauses, ``queue`` (queue-aware advice:
 "follow the car in front", no speed, or the glide that meets the queue's tail, a speed: ``server.queue.QueueBoard``)
 and ``traffic_behind`` (a speed raised so that the cars behind are not cut off by a red: "Keep up with the traffic.
-Hold 40 kilometers per hour.", :func:`advisory.advice.queue.paced_for_behind`)."""
+Hold 40 kilometers per hour.", :func:`advisory.advice.behind.paced_for_behind`)."""
 Action = Enum("Action", {a: a for a in ACTIONS}, type=str)
 Action.__doc__ = "What the driver is advised to do; `none`: no speed advice (`reason` says why)."
 Reason = Enum("Reason", {r: r for r in (*REASONS, *SERVER_REASONS)}, type=str)

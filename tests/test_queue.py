@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from advisory.advice.advisor import advise
+from advisory.advice.behind import GIVE_UP_SLACK_S, cut_behind, cut_off, gives_up_green, platoon_through, pushed_past
 from advisory.advice.kinematics import KEEP_MODES, crossing_time_s
+from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, estimate, followers, normal_drive_s
+from advisory.advice.queue_words import said_truly, tail_glide
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation, time_price
 from advisory.advice.wording import published_speed_mps, spoken_speed
-from advisory.advice.queue import (PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, cut_behind, cut_off, estimate, followers, gives_up_green,
-                                  normal_drive_s, platoon_through, pushed_past, said_truly, tail_glide)
-from advisory.advice.queue import GIVE_UP_SLACK_S
 from server.queue import QueueBoard
 
 M = QueueModel()

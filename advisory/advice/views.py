@@ -188,7 +188,7 @@ def time_price(obs: Observation) -> float:
     """How many cars lose the time a plan gives up: this one and the followers it holds up (``1 + obs.followers``).
     The price on time (``time_value_usd_per_s``, the choice under uncertainty) is multiplied by it, and the time a plan
     may give up for its energy (``table_slack_s``, the tables' target) divided by it (issue 28: the traffic behind; the
-    service's own check counts it alike, :func:`advisory.advice.queue.gives_up_green`). [-]
+    service's own check counts it alike, :func:`advisory.advice.behind.gives_up_green`). [-]
 
     Examples
     --------

@@ -99,7 +99,7 @@ def phrase(advice: Advice, units: str = "mph", current_speed_mps: float | None =
             "far_ahead": "Next light too far ahead for advice.",
         }.get(advice.reason, "")
     if advice.reason == "traffic_behind":
-        # a speed held for the cars behind (:func:`advisory.advice.queue.paced_for_behind`), not one that makes a green:
+        # a speed held for the cars behind (:func:`advisory.advice.behind.paced_for_behind`), not one that makes a green:
         # no countdown, which would promise the green at that speed
         verb = {"accelerate": "Speed up to", "ease_off": "Ease off to"}.get(advice.action, "Hold")
         return f"Keep up with the traffic. {verb} {speed}."
