@@ -29,7 +29,8 @@ import numpy as np
 
 from advisory.advice.advisor import advise
 from advisory.advice.views import AdvisorMemory, Observation
-from spat_feed.prediction.observe import IntersectionHistory, PlanReading, light_view
+from spat_feed.prediction.history import IntersectionHistory
+from spat_feed.prediction.observe import PlanReading, light_view
 from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.timing.messages import plan_from_movement, to_unix_s
 from spat_feed.transport.recorded import read_spat_csv

@@ -4,7 +4,7 @@ Offers every snapshot of a shared Antwerp recording (K648, 10 signal groups, 1 H
 :class:`~spat_feed.transport.store.SpatStore` and reads one group's :meth:`~spat_feed.transport.store.SpatStore.plan_reading` after each,
 as the service does for a car. Prints the microseconds per message, against the same messages only parsed
 (``plan_from_movement`` for each group: the store's floor), measured in the same run, and what was learnt: the
-groups whose phases a link ends (:class:`~spat_feed.prediction.observe.ChangeLinks`) and the share of red readings a link speaks in.
+groups whose phases a link ends (:class:`~spat_feed.prediction.history.ChangeLinks`) and the share of red readings a link speaks in.
 
     .venv/bin/python bench/bench_spat_store.py [LOG.csv.gz]   (default: the 2019-05-01 recording)
 """

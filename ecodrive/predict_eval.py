@@ -2,7 +2,7 @@
 
 The log (``../shared/data/spat`` CSV, ``.csv`` or ``.csv.gz``) is replayed second by second as the service reads
 it: each snapshot's movements become plans (:func:`spat_feed.timing.messages.plan_from_movement`), the
-intersection's :class:`~spat_feed.prediction.observe.IntersectionHistory` learns from the past only, and at every
+intersection's :class:`~spat_feed.prediction.history.IntersectionHistory` learns from the past only, and at every
 snapshot each signal group's current phase gets a forecast (:func:`spat_feed.prediction.predictor.forecast`). When
 the phase really ended is the first snapshot that shows another phase class (red, amber, green, unknown), as the
 history times it; a change seen only after a gap of more than :data:`MAX_GAP_S` in the group's snapshots is not
@@ -39,7 +39,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from spat_feed.prediction.observe import IntersectionHistory
+from spat_feed.prediction.history import IntersectionHistory
 from spat_feed.prediction.predictor import forecast
 from spat_feed.timing.messages import plan_from_movement, to_unix_s
 from spat_feed.timing.plans import PhaseClass, phase_class

@@ -7,7 +7,7 @@ The log (the ``../shared/data/spat`` CSV, or our JSON lines: any format
 :class:`~spat_feed.transport.store.SpatStore` at its own time on an injected clock (the service's time rules:
 stale after ``stale_after_s`` = 2 s), and whenever the driver asks (each whole second) the advisor's reading of a
 group is the store's ``plan_reading(intersection, group)`` at that instant (its plan, freshness, age and the
-store's own :class:`~spat_feed.prediction.observe.IntersectionHistory`), turned into a view by
+store's own :class:`~spat_feed.prediction.history.IntersectionHistory`), turned into a view by
 :func:`spat_feed.prediction.observe.light_view`; the virtual driver of :func:`advisory.drivers.closed_loop.simulate`
 follows the advice, seeing the light's real colour. So whatever the store does (partial messages, stale data,
 what it learns), spat-eval measures. The readings come from one pass through one store

@@ -6,8 +6,8 @@ Four subpackages in layers, imports pointing down only (no cycles between module
    conversion (``messages``), the paper's timings (``paper``) and signal-plan files (``signal_plans``);
 2. ``road``: corridor files and the paper's corridors (``corridors``), the OSM import (``osm``), DP tables
    for a corridor's plans (``corridor_tables``); imports ``timing``;
-3. ``prediction``: a matched position + SPaT plans -> the advisor's observation (``observe``); imports
-   ``timing`` and ``road``;
+3. ``prediction``: each signal group's learnt history (``history``), the phase-end forecast (``predictor``), a
+   matched position + SPaT plans -> the advisor's observation (``observe``); imports ``timing`` and ``road``;
 4. ``transport``: the SPaT store and its time rules (``store``), scenario -> message (``scenarios``), the
    simulator, recorded logs, player, MQTT, pump, the remote-feed client, the feed's app (``service``) and
    the simulated actuated controllers (``actuated``); imports the three below it.

@@ -1,7 +1,9 @@
 """From a matched GPS fix and SPaT plans to the advisor's :class:`~advisory.advice.views.Observation`.
 
 Pure: the bridge between ``spat_feed`` (plans on the Unix time axis) and ``advisory`` (lights ahead, times
-relative to the fix). No clock, no I/O.
+relative to the fix). No clock, no I/O. What each signal group has been seen to do, which bounds the phases after the
+published ones, is learnt in :mod:`spat_feed.prediction.history`; the phase ends forecast from it in
+:mod:`spat_feed.prediction.predictor`.
 
 Conversion of one light (:func:`light_view`):
 
@@ -23,13 +25,13 @@ Conversion of one light (:func:`light_view`):
 * ``confidence_frac``: the lowest confidence of the change windows that bound a red window within the horizon
   (1 for a fixed-time plan).
 * **After the published phases** (an actuated controller publishes the current phase only): what the signal
-  group has been seen to do (:class:`PhaseHistory`, passed as ``PlanReading.cycle``) bounds the phases that
-  follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the current phase ends
-  no earlier than ``minEndTime`` (hard), likely at the median of the forecast of
+  group has been seen to do (:class:`~spat_feed.prediction.history.PhaseHistory`, passed as ``PlanReading.cycle``)
+  bounds the phases that follow, so a red is no longer endless. Each change is a triple (earliest, likely, late): the
+  current phase ends no earlier than ``minEndTime`` (hard), likely at the median of the forecast of
   :mod:`spat_feed.prediction.predictor` (a linked change of another group, a held ``minEndTime`` running again, the
   controller's cycle or the durations seen, whichever applies) but no later than the published ``maxEndTime``,
-  late at its :data:`LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the Antwerp controller was now
-  9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the next phases end at the
+  late at its :data:`~spat_feed.prediction.history.LATE_QUANTILE` (soft; it replaces ``maxEndTime``, which on the
+  Antwerp controller was now 9 s early, now 2 minutes late; without a history ``maxEndTime`` is the late bound); the next phases end at the
   shortest durations seen after the earliest, and at the forecast chained over their durations (median, late).
   ``red_windows_s`` spans earliest start to late
   end; ``likely_red_windows_s`` the likely ones (the countdown; "stop" only when a stop is likely);
@@ -44,41 +46,28 @@ Conversion of one light (:func:`light_view`):
 
 from __future__ import annotations
 
-import bisect
 import math
-from collections import deque
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 from numba import njit
 
 from advisory.advice.views import AdvisorParams, LightView, Observation, Timings
-from spat_feed.prediction.predictor import (
-    EXACT_S,
-    ChangeForecast,
-    SCORE_AHEAD_S,
-    current_end,
-    cycle_period_s,
-    durations_given_stage,
-    durations_given_state,
-    ends_given_window,
-    next_end,
-    period_fit_s,
-    sample_quantile,
-    scored_errors_s,
-)
+from spat_feed.prediction.history import LATE_QUANTILE, CycleStats, _quantile
+from spat_feed.prediction.predictor import EXACT_S, ChangeForecast, current_end, next_end, sample_quantile
 from spat_feed.road.corridors import Corridor, IntersectionSpec
 from spat_feed.timing.plans import (
     STOP_STATES,
     UNKNOWN_STATES,
     FixedTimePlan,
-    MovementPhaseState,
     PhaseClass,
     Plan,
     UncertainPlan,
     phase_class,
+    published_index,
+    published_state,
     uncertain_from_fixed,
 )
 
@@ -89,572 +78,14 @@ BLOCKING_STATES = STOP_STATES | UNKNOWN_STATES
 """States a car must not plan to cross in: red, and anything the plan does not know."""
 
 
-LATE_QUANTILE = 0.9
-"""A phase counts as "late" past this quantile of the durations seen: the soft end of a window, like maxEndTime
-(which real phases outlast 6-12 % of the time). [-]"""
-
-MIN_PHASES_SEEN = 3
-"""Durations of a phase class needed before they bound anything. [-]"""
-
-HOLD_STEP_S = 0.5
-"""A published ``minEndTime`` that moves later by at least this between two readings of one phase is held (the
-controller extends the phase); one that then stays put again has resumed. [s]"""
-
-MIN_RESUMED_SEEN = 20
-"""Readings of resumed phases (with how long after their ``minEndTime`` they ended) needed before they say when
-one ends. [-]"""
-
-RESUMED_KEEP = 300
-"""The readings of resumed phases kept per class (and the exact ends, :meth:`PhaseHistory.exact_lags_s`). [-]"""
-
-EXACT_NEAREST = 20
-"""Past exact ends, the nearest in how far ahead they were first published, whose lags to the change a new one
-reads (:meth:`PhaseHistory.exact_lags_s`). [-]"""
-EXACT_NEAR_S = 1.0
-"""... and only those first published no more than this nearer or farther ahead: a feed's period. [s]"""
-
 BLOCKING_CLASSES = frozenset({PhaseClass.RED, PhaseClass.UNKNOWN})
-
-
-@dataclass(frozen=True, slots=True)
-class CycleStats:
-    """What one signal group has been seen to do: a snapshot of a :class:`PhaseHistory`. Durations [s], sorted."""
-
-    durations_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)
-    following: Mapping[PhaseClass, PhaseClass] = field(default_factory=dict)  # the class seen after each class
-    current: PhaseClass | None = None
-    since_unix_s: float | None = None  # the latest instant the current phase can have begun (first seen)
-    resumed: bool = False  # the current phase's minEndTime was held and runs again (:class:`PhaseHistory`)
-    resumed_excess_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # end - minEnd, resumed phases
-    linked_end_unix_s: tuple[float, float] | None = None  # the current phase's (likely, late) end from another group's change (:class:`ChangeLinks`)
-    linked_ends_unix_s: tuple[float, ...] = ()  # the current phase's end from another group's change, one per lag seen (:class:`ChangeLinks`)
-    # per class, the readings of its phases seen whole that carried a finite window (:meth:`PhaseHistory.window_law`;
-    # arrays, left out of ==: they follow from the same readings as the durations)
-    window_law_s: Mapping[PhaseClass, tuple] = field(default_factory=dict, compare=False)
-    state_id: int = -1  # the intersection's state now (:class:`IntersectionHistory`; -1: not known)
-    window_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # the window law's share in the pool, per class (:meth:`PhaseHistory.window_weight`)
-    ends_unix_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # when phases of each class ended
-    cycle_classes: frozenset = frozenset()  # classes told better by the point of the cycle they end at than by their durations
-    period_s: float | None = None  # the controller's fixed cycle, if its changes keep to one (:func:`~spat_feed.prediction.predictor.cycle_period_s`)
-    period_error_s: float = 0.0  # ... and its standard error (:func:`~spat_feed.prediction.predictor.period_fit_s`)
-    # (durations, from, to): past phases of the current class while the intersection was in its state now (:meth:`PhaseHistory.spans_in`)
-    state_spans_s: tuple | None = None
-    state_entered_s: float | None = None  # how long after the current phase began the intersection entered its state now
-    stage_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # the stage's law's share in ``state``, per class (:meth:`PhaseHistory.stage_weight`)
-    # the current phase's exact published end (minEndTime = maxEndTime) and how long after such ends its class changed
-    # in the past, for ends first published as far ahead (:meth:`PhaseHistory.exact_lags_s`); () until enough are seen
-    exact_end_unix_s: float | None = None
-    exact_lags_s: tuple[float, ...] = ()
-    # the forecast chained after the phase in progress, as views of this snapshot made it (:func:`_chain`); not an init
-    # field: each snapshot has its own (``replace`` makes a new one), and it goes with the snapshot
-    chains: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-
-    def ends(self, cls: PhaseClass) -> tuple[float, ...]:
-        """The instants phases of ``cls`` ended at, if enough are seen, else ()."""
-        e = self.ends_unix_s.get(cls, ())
-        return e if len(e) >= MIN_PHASES_SEEN else ()
-
-    def after_resumed(self, cls: PhaseClass) -> tuple[float, ...]:
-        """How long after their ``minEndTime`` resumed phases of ``cls`` ended (sorted), if enough are seen, else ()."""
-        d = self.resumed_excess_s.get(cls, ())
-        return d if len(d) >= MIN_RESUMED_SEEN else ()
-
-    def durations(self, cls: PhaseClass) -> tuple[float, ...]:
-        """The durations seen of ``cls`` if there are enough to go by, else ()."""
-        d = self.durations_s.get(cls, ())
-        return d if len(d) >= MIN_PHASES_SEEN else ()
-
-    @property
-    def cycle_s(self) -> float | None:
-        """Median cycle: the sum of the median durations around the cycle of classes seen (None if not closed)."""
-        cls, total, seen = self.current, 0.0, set()
-        while cls is not None and cls not in seen and (d := self.durations(cls)):
-            seen.add(cls)
-            total += _quantile(d, 0.5)
-            cls = self.following.get(cls)
-        return total if cls is not None and cls == self.current and seen else None
-
-
-def _quantile(sorted_s: Sequence[float], q: float) -> float:
-    """The ``q`` quantile of sorted samples (nearest rank, up: conservative for a late end)."""
-    return sorted_s[min(len(sorted_s) - 1, max(0, math.ceil(q * len(sorted_s)) - 1))]
-
-
-def _scored(score: list[float], errors) -> None:
-    """Add one phase's errors of two laws to ``score`` = [n, first's mean squared error, second's]: a running mean
-    over about :data:`METHOD_MEMORY` phases. [s²]"""
-    score[0] += 1
-    w = max(1.0 / score[0], 1.0 / METHOD_MEMORY)
-    score[1] += w * (errors[0] ** 2 - score[1])
-    score[2] += w * (errors[1] ** 2 - score[2])
-
-
-def _share(score) -> float:
-    """The first law's share in a pool of two scored by :func:`_scored`: in inverse proportion to the mean squared
-    errors (Bates and Granger, :meth:`PhaseHistory.window_weight`); half each until :data:`MIN_PHASES_SEEN` phases
-    are scored. [-]"""
-    n, first, second = score
-    return 0.5 if n < MIN_PHASES_SEEN or first + second <= 0.0 else second / (first + second)
-
-
-class PhaseHistory:
-    """Learns one (intersection, signal group) from successive readings: the durations of its phases, by class.
-
-    Feed it every accepted reading of the group (``update``); it keeps the last ``keep`` completed phases of
-    each class and the class that followed each. A change is dated at the first reading that shows it (the
-    feed's period is the error); across a gap longer than ``max_gap_s`` the phase in progress is not timed, unless
-    it went on (the same class on both sides, and it cannot have ended yet or cannot have ended and come back).
-
-    Given plans, it also follows the published ``minEndTime`` of the phase in progress: an actuated controller
-    counts it down, *holds* it while it extends the phase (it moves later with the clock), and once it runs again
-    (*resumed*) the phase ends at or soon after it (2019-05-01: reds within 1.5 s of it 97 % of the time, against
-    36 % before any hold). For each class it keeps how long after the ``minEndTime`` of a resumed phase the phase
-    ended, reading by reading; and, for every phase seen whole, each reading that carried a finite window: how long
-    the phase had run, how far ahead its ``minEndTime`` and ``maxEndTime`` were, the intersection's state, and how long
-    after ``max(reading, minEndTime)`` the phase ended (:meth:`window_law`, what
-    :func:`~spat_feed.prediction.predictor.ends_given_window` reads).
-    Pure: no clock, the caller passes the reading's instant (Unix seconds, the plan's axis).
-    """
-
-    __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
-                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score", "_stage_score",
-                 "_exact_first", "_after_exact")  # fmt: skip
-
-    def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
-        self.keep, self.max_gap_s = keep, max_gap_s
-        self._durations: dict[PhaseClass, deque[float]] = {}
-        self._following: dict[PhaseClass, PhaseClass] = {}
-        self._current: PhaseClass | None = None
-        self._since: float | None = None  # the latest instant the current phase can have begun
-        self._exact = False  # whether that is when it began (its change seen, with no gap before)
-        self._last_t: float | None = None
-        self._min_end: float | None = None  # the phase in progress: its minEndTime at the last reading
-        self._held = self._resumed = False  # ... held since it began; running again since
-        self._resumed_min_ends: list[float] = []  # ... its minEndTime at each reading since it resumed
-        self._excess: dict[PhaseClass, deque[float]] = {}
-        self._sorted: tuple | None = None  # the two above, sorted (until a phase ends)
-        self._ends: dict[PhaseClass, deque[float]] = {}  # when phases of each class were seen to end
-        self.ended: tuple | None = None  # the phase seen whole that the last reading ended: (class, start, end, durations and ends before it)
-        self._path: list[tuple[float, int]] = []  # the phase in progress: (time since it began, the intersection's state) at each change of state
-        self._paths: dict[PhaseClass, deque[tuple[float, tuple]]] = {}  # phases seen whole: (duration, their path)
-        self._window: list[tuple[float, float, float]] = []  # the phase in progress: (t, minEndTime, maxEndTime) of each reading with a finite window
-        self._windowed: dict[PhaseClass, deque[int]] = {}  # phases seen whole: how many readings with a finite window each gave its law
-        self._laws: dict[PhaseClass, tuple] = {}  # ... and those readings (:meth:`window_law`)
-        self._window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, window law's mean squared error, durations'] (:meth:`_score_window`)
-        self._stage_score: dict[PhaseClass, list[float]] = {}  # class -> [n, the stage's law's mean squared error, by the phase's start] (:meth:`_given_before`)
-        self._exact_first: list[list[float]] = []  # the phase in progress: [exact end, first reading that published it], in order
-        self._after_exact: dict[PhaseClass, deque[tuple[float, float]]] = {}  # class -> (how far ahead an exact end was first published, change - it)
-
-    def update(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> CycleStats:
-        """Take one reading at ``t_unix_s`` (:meth:`record`) and return the :meth:`stats` after it."""
-        self.record(t_unix_s, plan)
-        return self.stats()
-
-    def record(self, t_unix_s: float, plan: Plan | MovementPhaseState | None) -> bool:
-        """Take one reading at ``t_unix_s``: the published plan (its state then) or the state itself. Returns
-        whether the history changed (a new phase seen: the :meth:`stats` of before are out of date)."""
-        if plan is None or isinstance(plan, FixedTimePlan):
-            return False
-        if self._last_t is not None and t_unix_s <= self._last_t:
-            return False  # a repeat or an older reading
-        state = plan if isinstance(plan, MovementPhaseState) else published_state(plan, t_unix_s)
-        window = None if isinstance(plan, MovementPhaseState) else _published_window(plan, t_unix_s)
-        min_end = None if window is None else window[0]
-        cls = phase_class(state)
-        gap = self._last_t is not None and t_unix_s - self._last_t > self.max_gap_s
-        changed = cls != self._current
-        if gap and not changed and self._went_on(t_unix_s):
-            gap = False
-        was_resumed = self._resumed
-        if changed or gap:
-            self.ended = None
-            if changed and not gap and self._current is not None:
-                if self._exact:
-                    before = self.stats()
-                    self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current),
-                                  self._given_before(t_unix_s))  # fmt: skip
-                    self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
-                    self._paths.setdefault(self._current, deque(maxlen=self.keep)).append((t_unix_s - self._since, tuple(self._path)))
-                    if self._window:
-                        self._score_window(t_unix_s, before, self.ended[5])
-                        self._add_to_law(self._current, self._window_readings(t_unix_s))
-                self._following[self._current] = cls
-                self._ends.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s)
-                excess = self._excess.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
-                excess.extend(t_unix_s - m for m in self._resumed_min_ends)
-                # the change came after the last reading that did not show it: no earlier than that after each exact end
-                lags = self._after_exact.setdefault(self._current, deque(maxlen=RESUMED_KEEP))
-                lags.extend((end - first, max(0.0, self._last_t - end)) for end, first in self._exact_first)
-                self._sorted = None
-            # first seen now: it began now or before (a start dated late makes its end late: the safe side for a red)
-            self._since, self._exact = t_unix_s, changed and not gap and self._current is not None
-            self._current = cls
-            self._path, self._window, self._exact_first = [], [], []
-            self._held = self._resumed = False
-            self._resumed_min_ends = []
-        elif min_end is not None and self._min_end is not None:
-            if min_end - self._min_end >= HOLD_STEP_S:  # moved later: held
-                self._held, self._resumed = True, False
-            elif self._held and abs(min_end - self._min_end) < HOLD_STEP_S:  # put again after a hold: resumed
-                self._resumed = True
-            if self._resumed and min_end >= t_unix_s:
-                self._resumed_min_ends.append(min_end)
-        self._min_end = min_end
-        self._last_t = t_unix_s
-        new_exact = False  # a new exact end published (the stats' ``exact_end_unix_s``, ``exact_lags_s`` change)
-        if window is not None and math.isfinite(window[1]):
-            self._window.append((t_unix_s, *window))
-            seen = self._exact_first and abs(self._exact_first[-1][0] - window[1]) < EXACT_S
-            if window[1] - window[0] < EXACT_S and window[1] >= t_unix_s and not seen:
-                self._exact_first.append([window[1], t_unix_s])
-                new_exact = True
-        return changed or gap or self._resumed != was_resumed or new_exact
-
-    def _went_on(self, t_unix_s: float) -> bool:
-        """Across a gap in the readings, with the same class on both sides: the phase in progress went on if it
-        cannot have ended yet (seen from its start, it has run less than the shortest phase of its class), or cannot
-        have ended and come back (the gap is shorter than the shortest phase of the class that follows it)."""
-        own = self._durations.get(self._current, ())
-        after = self._durations.get(self._following.get(self._current), ())
-        if self._exact and len(own) >= MIN_PHASES_SEEN and t_unix_s - self._since < min(own):
-            return True
-        return len(after) >= MIN_PHASES_SEEN and t_unix_s - self._last_t < min(after)
-
-    def stats(self) -> CycleStats:
-        """A frozen snapshot to pass along with a reading (``PlanReading.cycle``)."""
-        if self._sorted is None:
-            self._sorted = tuple({c: tuple(sorted(d)) for c, d in dd.items()} for dd in (self._durations, self._excess))
-        durations, excess = self._sorted
-        law = self.window_law()
-        ends = {c: tuple(e) for c, e in self._ends.items()}
-        return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess, ends_unix_s=ends, window_law_s=law,
-                          window_weight={c: self.window_weight(c) for c in self._window_score},
-                          stage_weight={c: _share(self._stage_score[c]) for c in self._stage_score},
-                          exact_end_unix_s=self._exact_first[-1][0] if self._exact_first else None, exact_lags_s=self.exact_lags_s())  # fmt: skip
-
-    def exact_lags_s(self) -> tuple[float, ...]:
-        """How long after an exact published end (minEndTime = maxEndTime) the phase in progress changes class, by the
-        phases of its class seen whole: the lags after the :data:`EXACT_NEAREST` ends first published about as far
-        ahead as its latest exact end was (sorted); () without such an end or before :data:`MIN_PHASES_SEEN` are seen.
-
-        Only ends first published within :data:`EXACT_NEAR_S` as far ahead count (none: the end is the change). A red's
-        exact end is its change as published (the lags after them moved greens later: 2019-05-01 -0.04 points).
-        J2735 gives a movement state's own end. A feed that publishes a go phase as one state ("unavailable") states
-        the end of its green and then that of its amber (2019-05-17: the green's exact end about 7 s ahead, then the
-        amber's 3 s), or only the amber's: the red begins when the amber ends, and an end first published more than an
-        amber ahead is, in such a feed, its green's. Read as the change, it put the red an amber early (docs/ADVISOR.md,
-        "the cycles still lost" (c)); a feed whose exact ends are its changes gives lags of 0, the end as before."""
-        past = self._after_exact.get(self._current) if self._exact_first and self._current is not PhaseClass.RED else None
-        if not past or len(past) < MIN_PHASES_SEEN:
-            return ()
-        end, first = self._exact_first[-1]
-        pairs = np.asarray(past)
-        off = np.abs(pairs[:, 0] - (end - first))
-        nearest = np.argsort(off, kind="stable")[:EXACT_NEAREST]
-        nearest = nearest[off[nearest] <= EXACT_NEAR_S]
-        return tuple(np.sort(pairs[nearest, 1]).tolist())
-
-    def _score_window(self, end_unix_s: float, before: CycleStats, given: np.ndarray | None) -> None:
-        """Score the window law and the durations on the phase in progress, which ends at ``end_unix_s``: the likely
-        end each said (on the history ``before`` it) at its last reading with a window :data:`SCORE_AHEAD_S` or more
-        before the end; ``given``: the durations the intersection's state gave then (``state``), else those not yet
-        outlasted. A running mean of each one's squared error over about :data:`METHOD_MEMORY` phases."""
-        law = before.window_law_s.get(self._current)
-        k = bisect.bisect_right([r[0] for r in self._window], max(self._since, end_unix_s - SCORE_AHEAD_S)) - 1
-        if law is None or k < 0:
-            return
-        t, lo, hi = self._window[k]
-        el, floor = t - self._since, max(t, lo)
-        states = [s for a, s in self._path if a <= el]
-        by_window = ends_given_window(law, self._since, t, lo, hi, states[-1] if states else -1)
-        own = given if given is not None else [d for d in before.durations(self._current) if d > el]
-        if by_window is None or not len(own):
-            return
-        errors = (sample_quantile(np.sort(by_window), 0.5) - end_unix_s, max(self._since + sample_quantile(np.sort(own), 0.5), floor) - end_unix_s)
-        _scored(self._window_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
-
-    def window_weight(self, cls: PhaseClass) -> float:
-        """The window law's share of the forecast of ``cls`` where it is pooled with the durations: the weights of the
-        two in inverse proportion to their mean squared errors (:meth:`_score_window`), as in the combination of
-        forecasts of Bates and Granger [1]; half each until :data:`MIN_PHASES_SEEN` phases are scored. [-]
-
-        References
-        ----------
-        .. [1] J. M. Bates and C. W. J. Granger, "The combination of forecasts," Oper. Res. Q., vol. 20, pp. 451-468,
-           1969, doi:10.2307/3008764.
-        """
-        return _share(self._window_score.get(cls, (0, 0.0, 0.0)))
-
-    def _window_readings(self, end_unix_s: float) -> tuple[np.ndarray, ...]:
-        """The readings with a finite window of the phase in progress, which ends at ``end_unix_s``, as arrays: how
-        long it had run, how far ahead ``minEndTime`` (0 once past) and ``maxEndTime`` were, the intersection's state,
-        how long after ``max(reading, minEndTime)`` it ended, and its duration. [s]"""
-        t, lo, hi = np.array(self._window).T
-        floor = np.maximum(t, lo)
-        at, states = (np.array(x) for x in zip(*self._path)) if self._path else (np.empty(0), np.empty(0, dtype=np.int64))
-        k = np.searchsorted(at, t - self._since, side="right")
-        state = np.where(k > 0, np.r_[states, -1][k - 1], -1).astype(np.int64)
-        return t - self._since, floor - t, hi - t, state, end_unix_s - floor, np.full(len(t), end_unix_s - self._since)
-
-    def _add_to_law(self, cls: PhaseClass, readings: tuple[np.ndarray, ...]) -> None:
-        """Append a phase's :meth:`_window_readings` to the class's law, dropping the oldest phase past ``keep``."""
-        sizes = self._windowed.setdefault(cls, deque())
-        old = self._laws.get(cls)
-        drop = sizes.popleft() if len(sizes) >= self.keep else 0
-        self._laws[cls] = readings if old is None else tuple(np.concatenate([o[drop:], r]) for o, r in zip(old, readings))
-        sizes.append(len(readings[0]))
-
-    def window_law(self) -> dict[PhaseClass, tuple[np.ndarray, ...]]:
-        """Per class, the readings with a finite window of its last ``keep`` phases seen whole (:meth:`_window_readings`,
-        each of the six arrays concatenated over the phases)."""
-        return dict(self._laws)
-
-    @property
-    def current(self) -> PhaseClass | None:
-        """The class of the phase in progress (None before the first reading)."""
-        return self._current
-
-    def _given_before(self, end_unix_s: float) -> np.ndarray | None:
-        """The durations ``state`` gave :data:`SCORE_AHEAD_S` before the phase in progress ended at ``end_unix_s``
-        (:func:`~spat_feed.prediction.predictor.durations_given_state`), what the cycle is scored against; and the
-        score of its two laws then, by the phase's start and by the stage's (their likely ends' squared errors, a
-        running mean over about :data:`METHOD_MEMORY` phases: :meth:`stage_weight`)."""
-        el = max(0.0, end_unix_s - SCORE_AHEAD_S - self._since)
-        then = [(at, s) for at, s in self._path if at <= el]
-        if not then:
-            return None
-        entered, state = then[-1]
-        spans = self.spans_in(self._current, state)
-        by_phase = durations_given_state(spans, el)
-        if by_phase is None:
-            return None
-        by_stage = durations_given_stage(spans, el, entered)
-        if by_stage is not None:
-            errors = [max(el, sample_quantile(np.sort(x), 0.5)) - (end_unix_s - self._since) for x in (by_stage, by_phase)]
-            _scored(self._stage_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
-        return durations_given_state(spans, el, entered, self.stage_weight(self._current))
-
-    def stage_weight(self, cls: PhaseClass) -> float:
-        """The share of the stage's law in the ``state`` law of ``cls``
-        (:func:`~spat_feed.prediction.predictor.durations_given_state`): in inverse proportion to its mean squared
-        error against the law by the phase's start, as :meth:`window_weight`; half each until scored. [-]"""
-        return _share(self._stage_score.get(cls, (0, 0.0, 0.0)))
-
-    @property
-    def entered_s(self) -> float | None:
-        """How long after the phase in progress began the intersection entered its state now (None: not known). [s]"""
-        return self._path[-1][0] if self._path else None
-
-    def note_state(self, t_unix_s: float, state: int) -> None:
-        """The intersection's state (an id of every group's class, :class:`IntersectionHistory`) from ``t_unix_s`` on."""
-        if self._since is not None and (not self._path or self._path[-1][1] != state):
-            self._path.append((t_unix_s - self._since, state))
-
-    def spans_in(self, cls: PhaseClass | None, state: int) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] | None:
-        """The phases of ``cls`` seen whole while the intersection was in ``state``: each one's duration and the span
-        of its own time (from, to) it spent so, as three tuples; None when none was. [s]"""
-        out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d)
-               for d, path in self._paths.get(cls, ()) for k, (el, s) in enumerate(path) if s == state]  # fmt: skip
-        return None if not out else tuple(zip(*out))
-
-
-LINK_TOLERANCE_S = 1.5
-"""A link holds for a phase end that came within this of the link's median lag (the feed's period is 1 s). [s]"""
-
-LINK_SHARE = 0.9
-"""Share of the phase ends seen that a link must have held for, to say when the phase in progress ends. [-]"""
-
-MIN_LINKS_SEEN = 10
-"""Phase ends seen with a link before it says anything. [-]"""
-
-
-class ChangeLinks:
-    """Learns which change of *another* signal group of the intersection each group's phases end a steady time
-    after: the controller's stage sequence, read from the stream (no signal plan needed).
-
-    A controller runs its stages in order, and the intergreen between one stage's green and the next is fixed:
-    on the Antwerp controller K648, group 1's green came 10.6 s after group 10's green ended (96 % within 1.5 s),
-    groups 5, 7 and 8's 17.0 s after group 12's (95 %). Once such a change is seen, the phase it ends is known
-    to about a second, 10-20 s ahead, where the group's own durations and ``minEndTime`` are seconds off (reds
-    10-20 s ahead: mean error 1.3 -> 0.2 s on 2019-05-01, 4.8 -> 0.2 s on 2019-05-17).
-
-    For each (group, class of its phase) and each *change* of another group (group, class before, class after),
-    it keeps the lags from the change's last instant within a phase to that phase's end (last ``keep``). A link
-    speaks once :data:`MIN_LINKS_SEEN` lags are seen and :data:`LINK_SHARE` of them lie within
-    :data:`LINK_TOLERANCE_S` of their median: then, once its change comes during a phase of the group, the phase
-    ends likely at the change plus the median lag, late at its :data:`LATE_QUANTILE` (the latest such change
-    speaks). A gap over ``max_gap_s`` forgets the changes and phases in progress. Pure: the caller passes the
-    reading's instant.
-    """
-
-    __slots__ = ("keep", "max_gap_s", "_current", "_last_change", "_lags", "_links", "_last_t")
-
-    def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
-        self.keep, self.max_gap_s = keep, max_gap_s
-        self._current: dict[int, tuple[PhaseClass, float, bool]] = {}  # group -> (class, since, since exact)
-        self._last_change: dict[tuple[int, PhaseClass, PhaseClass], float] = {}  # (group, before, after) -> last instant
-        self._lags: dict[tuple[int, PhaseClass, tuple], deque[float]] = {}
-        self._links: dict[tuple[int, PhaseClass, tuple], tuple[float, float] | None] = {}  # (median, late) when it holds
-        self._last_t: float | None = None
-
-    def record(self, t_unix_s: float, classes: Mapping[int, PhaseClass | None]) -> bool:
-        """Take one reading of the intersection: the published class of each group (at least of each whose class
-        may have changed since the last reading); returns whether a class changed."""
-        if self._last_t is not None and t_unix_s <= self._last_t:
-            return False
-        if self._last_t is not None and t_unix_s - self._last_t > self.max_gap_s:
-            self._current, self._last_change = {}, {}
-        self._last_t = t_unix_s
-        changes = []
-        for g, cls in classes.items():
-            if cls is None:
-                continue
-            now = self._current.get(g)
-            if now is not None and now[0] is cls:
-                continue
-            if now is not None:
-                changes.append((g, now[0], cls))
-                if now[2]:  # a phase seen whole: learn the lag of every other group's change within it
-                    for key, at in self._last_change.items():
-                        if key[0] != g and now[1] <= at < t_unix_s:
-                            lags = self._lags.setdefault((g, now[0], key), deque(maxlen=self.keep))
-                            lags.append(t_unix_s - at)
-                            self._links.pop((g, now[0], key), None)
-            self._current[g] = (cls, t_unix_s, now is not None)
-        for key in changes:
-            self._last_change[key] = t_unix_s
-        return bool(changes)
-
-    def _link(self, index: tuple[int, PhaseClass, tuple]) -> tuple[float, float, tuple[float, ...]] | None:
-        """(median, late, every lag) of a link that holds, else None."""
-        if index not in self._links:
-            lags = sorted(self._lags.get(index, ()))
-            link = None
-            if len(lags) >= MIN_LINKS_SEEN:
-                median = _quantile(lags, 0.5)
-                if sum(abs(x - median) <= LINK_TOLERANCE_S for x in lags) >= LINK_SHARE * len(lags):
-                    link = (median, _quantile(lags, LATE_QUANTILE), tuple(lags))
-            self._links[index] = link
-        return self._links[index]
-
-    def end_of(self, group: int) -> tuple[float, float] | None:
-        """(likely, late) end of ``group``'s phase in progress from the latest linked change seen in it, else None."""
-        ends = self.ends_of(group)
-        return None if not ends else (_quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE))
-
-    def ends_of(self, group: int) -> tuple[float, ...]:
-        """The end of ``group``'s phase in progress after the latest linked change seen in it, one instant per lag
-        seen (sorted), else ()."""
-        now = self._current.get(group)
-        if now is None:
-            return ()
-        best = None  # the latest change; of changes at one instant, the link whose lags spread least
-        for key, at in self._last_change.items():
-            if key[0] != group and at >= now[1] and (link := self._link((group, now[0], key))):
-                rank = (at, link[0] - link[1], -link[0], key)  # (the key: one answer whatever order the groups came in)
-                if best is None or rank > best[0]:
-                    best = (rank, tuple(at + x for x in link[2]))
-        return () if best is None else best[1]
-
-
-METHOD_MEMORY = 10
-"""Phases over which the running error of each method is kept (an exponential mean). [-]"""
-
-PERIOD_EVERY = (20, 640)
-"""Phase ends (of all groups) between two searches for the controller's cycle (~5-10 ms each): the first after 20,
-each next one twice as far off, found or not (a period found is re-checked less and less often), at most 640 apart. [-]"""
-
-
-class IntersectionHistory:
-    """What the receiver learns of one intersection's signal groups: each group's :class:`PhaseHistory` and the
-    :class:`ChangeLinks` between them. ``record`` each message's plans; ``stats(group)`` is the group's
-    :class:`CycleStats` (cached until the group's history or a link changes)."""
-
-    __slots__ = ("groups", "links", "_stats", "period_s", "_ends_since_period", "_period_every", "_errors", "_states", "_state", "period_error_s")
-
-    def __init__(self) -> None:
-        self.groups: dict[int, PhaseHistory] = {}
-        self.links = ChangeLinks()
-        self._stats: dict[int, CycleStats] = {}
-        self.period_s: float | None = None  # the controller's cycle, if its changes keep to one (cycle_period_s)
-        self.period_error_s = 0.0  # ... its standard error (period_fit_s)
-        self._ends_since_period = 0
-        self._period_every = PERIOD_EVERY[0]
-        self._errors: dict[tuple[int, PhaseClass], list[float]] = {}  # (group, class) -> [n, cycle's mean error, durations']
-        self._states: dict[tuple, int] = {}  # the intersection's states seen (every group's class) -> id
-        self._state = -1  # the state now
-
-    def record(self, t_unix_s: float, plans: Mapping[int, Plan | MovementPhaseState | None]) -> None:
-        """Take one message: each signal group's plan (or state) at ``t_unix_s``."""
-        changed = {}
-        for g, plan in plans.items():
-            history = self.groups.get(g)
-            if history is None:
-                history = self.groups[g] = PhaseHistory()
-            if history.record(t_unix_s, plan):
-                self._stats.pop(g, None)
-                changed[g] = history.current
-                if history.ended is not None:
-                    self._score(g, history.ended)
-        if changed:
-            state = tuple((g, h.current) for g, h in self.groups.items())
-            self._state = self._states.setdefault(state, len(self._states))
-            for h in self.groups.values():
-                h.note_state(t_unix_s, self._state)
-        if self.links.record(t_unix_s, changed):
-            self._stats.clear()  # a change may start a link for any group
-            self._ends_since_period += len(changed)
-            if self._ends_since_period >= self._period_every:
-                self._ends_since_period = 0
-                ends = [e for h in self.groups.values() for e in h.stats().ends_unix_s.values()]
-                self.period_s, self.period_error_s = None, 0.0
-                if (found := cycle_period_s(ends)) is not None:  # refined by least squares, with its standard error
-                    self.period_s, self.period_error_s = period_fit_s(ends, found)
-                self._period_every = min(2 * self._period_every, PERIOD_EVERY[1])
-
-    def _score(self, group: int, ended: tuple) -> None:
-        """Score the cycle and the durations on a phase seen whole (:func:`~spat_feed.prediction.predictor.scored_errors_s`):
-        a running mean of each one's error over about the last :data:`METHOD_MEMORY` phases of the class."""
-        cls, since, end, durations, ends, given = ended
-        errors = scored_errors_s(since, end, durations, ends, self.period_s, given)
-        if errors is None:
-            return
-        score = self._errors.setdefault((group, cls), [0, 0.0, 0.0])
-        score[0] += 1
-        w = max(1.0 / score[0], 1.0 / METHOD_MEMORY)
-        score[1] += w * (errors[0] - score[1])
-        score[2] += w * (errors[1] - score[2])
-
-    def cycle_classes(self, group: int) -> frozenset:
-        """The classes of ``group`` whose ends the cycle has told better than the durations (at least
-        :data:`MIN_PHASES_SEEN` phases scored)."""
-        return frozenset(c for (g, c), (n, by_cycle, by_duration) in self._errors.items() if g == group and n >= MIN_PHASES_SEEN and by_cycle < by_duration)
-
-    def stats(self, group: int) -> CycleStats | None:
-        """``group``'s snapshot (:meth:`PhaseHistory.stats` with the linked end of its phase in progress)."""
-        cycle = self._stats.get(group)
-        if cycle is None and (history := self.groups.get(group)) is not None:
-            ends = self.links.ends_of(group)
-            linked = (_quantile(ends, 0.5), _quantile(ends, LATE_QUANTILE)) if ends else None
-            cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=linked, linked_ends_unix_s=ends, period_s=self.period_s, period_error_s=self.period_error_s,
-                                                 cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset(),
-                                                 state_spans_s=history.spans_in(history.current, self._state), state_id=self._state,
-                                                 state_entered_s=history.entered_s)  # fmt: skip
-        return cycle
-
-
-def _published_window(plan: UncertainPlan, t_unix_s: float) -> tuple[float, float] | None:
-    """The ``(minEndTime, maxEndTime)`` of the published phase (:func:`published_state`; ``inf`` for an unknown
-    ``maxEndTime``), None when it has none."""
-    i = _published_index(plan, t_unix_s)
-    return (plan.changes[i].min_end_s, plan.changes[i].max_end_s) if i < len(plan.changes) else None
 
 
 @dataclass(frozen=True, slots=True)
 class PlanReading:
     """One light's plan (Unix axis) as read from a SPaT source, with the reading's freshness. ``plan`` None: no data.
 
-    ``cycle``: what the signal group has been seen to do (:meth:`PhaseHistory.stats`), to bound the phases after
+    ``cycle``: what the signal group has been seen to do (:meth:`~spat_feed.prediction.history.PhaseHistory.stats`), to bound the phases after
     the published ones. ``clock_offset_s``: the feed clock minus ours, as estimated (subtracted from the plan's
     instants); ``clock_uncertainty_s``: how far that estimate may be off (red windows widened by it). [s]
     ``amber_s``: the amber the light really shows before each red, where the source knows it: None (unknown) is
@@ -755,17 +186,6 @@ def _pick(bound: Bound, which) -> float:
     return mid + (hi - mid) * (which - 0.5) / 0.5 if math.isfinite(hi) else hi
 
 
-def published_state(plan: UncertainPlan, t_unix_s: float) -> MovementPhaseState:
-    """The state the plan says holds unless a change has surely come (the lowest possible index at ``t_unix_s``).
-    A phase past its ``minEndTime`` is still this state: it may end any moment, it is not unknown."""
-    return plan.states[_published_index(plan, t_unix_s)]
-
-
-def _published_index(plan: UncertainPlan, t_unix_s: float) -> int:
-    """The lowest index the plan's state can have at ``t_unix_s``: changes that have surely come."""
-    return sum(1 for c in plan.changes if c.max_end_s <= t_unix_s)
-
-
 def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cycle: CycleStats | None) -> list[tuple[PhaseClass, Bound, Bound]]:
     """(class, start, end) of each phase of the plan, each bound an (earliest, likely, late) triple on the plan's axis;
     the open tail (a last "unavailable") bounded by ``cycle`` where the history can (module docstring)."""
@@ -791,7 +211,7 @@ def predicted_phases(plan: UncertainPlan, t_unix_s: float, horizon_s: float, cyc
     # unbounded (its window's middle as the likely end slowed cars that the regular driver beat: docs/ADVISOR.md 1a)
     cls, begun, published = out[-2]
     since = begun[1] if math.isfinite(begun[1]) else (cycle.since_unix_s if cycle.current is cls else None)
-    current = cycle.current is cls and len(out) - 2 <= _published_index(plan, t_unix_s)  # the phase in progress, not a later one
+    current = cycle.current is cls and len(out) - 2 <= published_index(plan, t_unix_s)  # the phase in progress, not a later one
     rest = _continued(cls, since, begun, t_unix_s, max(t_unix_s, published[0]), horizon_s, cycle, published, current)
     return out if rest is None else out[:-2] + rest
 
@@ -1073,7 +493,7 @@ def confidence_frac(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -
 
 
 def unknown_now(plan: Plan, t_unix_s: float) -> bool:
-    """True when the plan cannot say the state at ``t_unix_s``: the published state (:func:`published_state`) is
+    """True when the plan cannot say the state at ``t_unix_s``: the published state (:func:`~spat_feed.timing.plans.published_state`) is
     unavailable or dark. A phase past its ``minEndTime``, which may turn unavailable any moment, is not unknown."""
     if isinstance(plan, FixedTimePlan):
         return False
@@ -1107,7 +527,7 @@ def red_hold_s(plan: UncertainPlan, t_reading_unix_s: float, speed_mps: float, p
     end, the advisor's own rule) is at least ``READING_PERIOD_S + reaction_s + v / (2 firm_decel_mps2)`` away, the
     time the car takes at its speed to its point of no return and one reading more. A plan never crosses a published
     red on a guess. 0 where the red's end is exact (:data:`EXACT_S`) or the light is not red. [s]"""
-    i = _published_index(plan, t_reading_unix_s)
+    i = published_index(plan, t_reading_unix_s)
     cls = phase_class(plan.states[i])
     k = i if cls is PhaseClass.RED else i + 1 if cls is PhaseClass.AMBER else None  # the change out of the red
     if k is None or (k < len(plan.changes) and plan.changes[k].max_end_s - plan.changes[k].min_end_s < EXACT_S):

@@ -35,9 +35,20 @@ from functools import lru_cache
 
 import numpy as np
 
-from spat_feed.prediction.observe import PlanReading, _published_window, published_state
+from spat_feed.prediction.observe import PlanReading
 from spat_feed.prediction.predictor import N_SAMPLES, ChangeForecast
-from spat_feed.timing.plans import AMBER, GREEN, RED, ChangeWindow, MovementPhaseState, PhaseClass, UncertainPlan, phase_class
+from spat_feed.timing.plans import (
+    AMBER,
+    GREEN,
+    RED,
+    ChangeWindow,
+    MovementPhaseState,
+    PhaseClass,
+    UncertainPlan,
+    phase_class,
+    published_state,
+    published_window,
+)
 
 STATE_OF: dict[PhaseClass, MovementPhaseState] = {PhaseClass.RED: RED, PhaseClass.AMBER: AMBER, PhaseClass.GREEN: GREEN}
 """The J2735 state an oracle publishes for each class of the truth (amber counts as green for the rules). [-]"""
@@ -164,7 +175,7 @@ def jitter_reading(reading: PlanReading, reds_s, ambers_s, t_unix_s: float, hori
         return reading
     published = _published(reading, t_unix_s)
     phases = truth_phases(reds_s, ambers_s, t_unix_s, horizon_s, published, next_reading_unix_s)
-    window = _published_window(reading.plan, t_unix_s - reading.age_s) if isinstance(reading.plan, UncertainPlan) else None
+    window = published_window(reading.plan, t_unix_s - reading.age_s) if isinstance(reading.plan, UncertainPlan) else None
     floor = window[0] if window is not None and phases[0][0] is published else -math.inf  # the phase the reading publishes: its minEndTime
     forecasts = jittered_forecasts(phases, t_unix_s, sigma_s, seed, centred, floor)
     return replace(reading, forecasts=forecasts, clock_offset_s=0.0, clock_uncertainty_s=0.0)

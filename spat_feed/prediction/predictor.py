@@ -2,11 +2,11 @@ r"""When a signal group's phases end: a distribution for each coming change, fro
 
 One interface for every kind of controller: :func:`forecast` takes what the controller publishes now (the plan of
 a reading: the current state, its ``minEndTime``, ``maxEndTime``) and what the group has been seen to do
-(:class:`~spat_feed.prediction.observe.CycleStats`, learnt reading by reading by
-:class:`~spat_feed.prediction.observe.IntersectionHistory`), and returns a :class:`ChangeForecast` for the end
+(:class:`~spat_feed.prediction.history.CycleStats`, learnt reading by reading by
+:class:`~spat_feed.prediction.history.IntersectionHistory`), and returns a :class:`ChangeForecast` for the end
 of the current phase and of the phases after it (up to ``horizon_s``). Each forecast is a set of equally likely
 instants (at most :data:`N_SAMPLES`; ``inf`` where nothing seen bounds it), so any quantile (the inverse of their
-distribution function, as ``observe``'s quantiles of durations), the likely time
+distribution function, as ``history``'s quantiles of durations), the likely time
 (median) and central intervals (:meth:`ChangeForecast.interval`) come from one object, and a hard lower bound
 ``earliest_unix_s`` (no change comes before it) that advice may rely on.
 
@@ -14,7 +14,7 @@ Where the samples come from, in the order they are trusted (each *method* names 
 
 ``linked``
     A change of another group of the intersection that this group's phases end a steady time after has come
-    (the controller's stage sequence, :class:`~spat_feed.prediction.observe.ChangeLinks`): the instant of that
+    (the controller's stage sequence, :class:`~spat_feed.prediction.history.ChangeLinks`): the instant of that
     change plus each lag seen that is not yet past (a phase that went on past its lags is the case the link does not
     know, a phase skipped: with fewer than :data:`MIN_SEEN` lags left, the methods below say).
 ``resumed``
@@ -31,7 +31,7 @@ Where the samples come from, in the order they are trusted (each *method* names 
     The durations of the past phases of the class that, as long after they began as this one now, saw the
     intersection in the state it is in now (every signal group's class), where at least :data:`MIN_SEEN` did: on an
     actuated controller what its phases do depends on which stage runs, and this tells it from the stream alone
-    (no signal plan, no detectors; :meth:`~spat_feed.prediction.observe.PhaseHistory.spans_in`); pooled with the
+    (no signal plan, no detectors; :meth:`~spat_feed.prediction.history.PhaseHistory.spans_in`); pooled with the
     *stage's* law, the same phases counted from when the intersection entered that state (those that stayed in it as
     long as this one has: a stage's end is told by how long the stage has run), each with a share in inverse
     proportion to its scored mean squared error (:func:`durations_given_state`); the plain durations below weigh
@@ -48,7 +48,7 @@ the window law (pooled into ``resumed``, ``state`` and ``duration``; the method 
     A held ``minEndTime`` (moved later with the clock: the controller extends the phase) and a ``maxEndTime``
     counting down to a force-off read differently from a duration alone. The two laws are pooled (a linear opinion
     pool [2]), each with a share in inverse proportion to its mean squared error, scored per (group, class) at each
-    phase end (:meth:`~spat_feed.prediction.observe.PhaseHistory.window_weight`; half each until scored): on Antwerp
+    phase end (:meth:`~spat_feed.prediction.history.PhaseHistory.window_weight`; half each until scored): on Antwerp
     each one's median errs about as much as the other's, on different changes, so the pool beats either.
 ``published``
     The controller's window is exact (``maxEndTime - minEndTime`` under :data:`EXACT_S`): then.
@@ -57,7 +57,7 @@ the window law (pooled into ``resumed``, ``state`` and ``duration``; the method 
 
 Between ``cycle`` and ``duration`` (``state`` is the latter, conditioned) the one that has erred less for that (group, class) wins: at each phase end the
 likely end each would have said :data:`SCORE_AHEAD_S` before it is scored (:func:`scored_errors_s`, a running mean kept by
-:class:`~spat_feed.prediction.observe.IntersectionHistory`). A state-only coordinated controller earns the cycle
+:class:`~spat_feed.prediction.history.IntersectionHistory`). A state-only coordinated controller earns the cycle
 (2024-04-15, device 1136: ends within a few seconds of a fixed point of its 75 s cycle); the actuated Antwerp
 controller, whose changes drift off any period, keeps the durations. Nothing here is fitted to one controller.
 
@@ -92,7 +92,7 @@ N_SAMPLES = 64
 """Samples kept per forecast (its quantiles, evenly spaced). [-]"""
 
 MIN_SEEN = 3
-"""Phases of a class needed before their durations say anything (as ``observe.MIN_PHASES_SEEN``). [-]"""
+"""Phases of a class needed before their durations say anything (as ``history.MIN_PHASES_SEEN``). [-]"""
 
 PRIOR_PHASES = MIN_SEEN
 """What the plain durations of a class weigh, in phases, in the law that the phases seen in the intersection's state
@@ -117,7 +117,7 @@ MIN_PERIOD_CONCENTRATION = 0.5
 
 def sample_quantile(sorted_s, q: float) -> float:
     """The ``q`` quantile of sorted, equally likely samples: the inverse of their distribution function (the smallest
-    sample with at least ``q`` of them at or before it; ``inf`` in an unbounded tail), as ``observe``'s quantiles of
+    sample with at least ``q`` of them at or before it; ``inf`` in an unbounded tail), as ``history``'s quantiles of
     durations.
 
     Examples
@@ -309,7 +309,7 @@ def scored_errors_s(since_unix_s: float, end_unix_s: float, durations_s: tuple[f
     that began at ``since_unix_s`` ended at ``end_unix_s`` (or at its start, if shorter), on the history before it;
     None where either cannot say. ``given_s``: the durations ``state`` gave then (:func:`durations_given_state`),
     scored in place of the durations where given (what the cycle would replace). [s] What
-    :class:`~spat_feed.prediction.observe.IntersectionHistory` scores each class's methods by."""
+    :class:`~spat_feed.prediction.history.IntersectionHistory` scores each class's methods by."""
     if period_s is None or len(durations_s) < MIN_SEEN or len(ends_unix_s) < MIN_SEEN:
         return None
     at = max(since_unix_s, end_unix_s - SCORE_AHEAD_S)
@@ -422,7 +422,7 @@ difference in seconds, so the same state comes first. [s]"""
 def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_s: float, max_end_unix_s: float, state_id: int = -1) -> np.ndarray | None:
     """Samples of the end of a phase that began at ``since_unix_s``, now published with the finite window
     ``[min_end, max_end]``, from the readings of past phases of its class that carried one (``law``:
-    :meth:`~spat_feed.prediction.observe.PhaseHistory.window_law`'s arrays): of the readings of phases that outlasted
+    :meth:`~spat_feed.prediction.history.PhaseHistory.window_law`'s arrays): of the readings of phases that outlasted
     this one's run so far, the :data:`WINDOW_NEIGHBOURS` nearest (the same intersection state ``state_id`` first,
     then by the sum of the differences of how long the phase had run and how far ahead ``minEndTime`` and
     ``maxEndTime`` were), each moved to now: ``max(now, min_end)`` plus how long after ``max(its reading, its
@@ -485,7 +485,7 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
                 published_max_unix_s: float = math.inf, current: bool = True) -> tuple[np.ndarray, str] | None:  # fmt: skip
     """Samples of the end of the phase of class ``cls`` that began at ``since_unix_s`` (None: unknown), in progress
     at ``now_unix_s`` with the published window ``[minEndTime, maxEndTime]`` (module docstring), and the method; None
-    when nothing bounds it. ``cycle``: the group's :class:`~spat_feed.prediction.observe.CycleStats`; ``current``:
+    when nothing bounds it. ``cycle``: the group's :class:`~spat_feed.prediction.history.CycleStats`; ``current``:
     the phase is the one the group is in (its hold and links are known), not a later one of the plan."""
     inf = math.inf
     floor_unix_s = max(now_unix_s, published_min_unix_s)
@@ -552,7 +552,7 @@ def forecast(plan: UncertainPlan, t_unix_s: float, cycle, horizon_s: float = 180
     end is bounded by nothing.
 
     ``plan``: the group's latest reading as a plan (:func:`spat_feed.timing.messages.plan_from_movement`: the
-    published state and its window); ``cycle``: the group's :class:`~spat_feed.prediction.observe.CycleStats` or None.
+    published state and its window); ``cycle``: the group's :class:`~spat_feed.prediction.history.CycleStats` or None.
     """
     i = sum(1 for c in plan.changes if c.max_end_s <= t_unix_s)  # the published phase (changes that surely came)
     if i >= len(plan.changes):

@@ -323,6 +323,24 @@ def uncertain_from_fixed(
     return UncertainPlan(tuple(states), tuple(changes))
 
 
+def published_state(plan: UncertainPlan, t_s: float) -> MovementPhaseState:
+    """The state the plan says holds unless a change has surely come (the lowest possible index at ``t_s``).
+    A phase past its ``minEndTime`` is still this state: it may end any moment, it is not unknown."""
+    return plan.states[published_index(plan, t_s)]
+
+
+def published_index(plan: UncertainPlan, t_s: float) -> int:
+    """The lowest index the plan's state can have at ``t_s``: changes that have surely come."""
+    return sum(1 for c in plan.changes if c.max_end_s <= t_s)
+
+
+def published_window(plan: UncertainPlan, t_s: float) -> tuple[float, float] | None:
+    """The ``(minEndTime, maxEndTime)`` of the published phase (:func:`published_state`; ``inf`` for an unknown
+    ``maxEndTime``), None when it has none."""
+    i = published_index(plan, t_s)
+    return (plan.changes[i].min_end_s, plan.changes[i].max_end_s) if i < len(plan.changes) else None
+
+
 # --------------------------------------------------------------------------------------------------
 # Questions every plan answers
 

@@ -39,7 +39,8 @@ from advisory.signals import FixedTimeSignal, Scenario, TimelineSignal
 from advisory.trajectory import Trajectory
 from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
 from spat_feed.timing.messages import MovementState, confidence_index, movement_events, plan_from_movement, to_unix_s
-from spat_feed.prediction.observe import IntersectionHistory, PlanReading, light_view
+from spat_feed.prediction.history import IntersectionHistory
+from spat_feed.prediction.observe import PlanReading, light_view
 from spat_feed.timing.plans import AMBER, GREEN, RED, STOP_STATES, ChangeWindow, MovementPhaseState, UncertainPlan
 
 SAMPLE_S = 1.0
@@ -272,7 +273,7 @@ def conflicting_light(light: ActuatedLight, rng: np.random.Generator, *, after_s
     an intergreen after each of its reds begins to a fixed lead before it ends (an intergreen and any fixed stage
     between them; each drawn once, in ``after_start_s`` and ``before_end_s``: a controller's are fixed). In
     ``misfire_frac`` of its greens another stage comes in between: the green ends ``misfire_s`` earlier, so a
-    receiver that learnt "``light``'s red ends the lead after this green" (:class:`~spat_feed.prediction.observe.ChangeLinks`)
+    receiver that learnt "``light``'s red ends the lead after this green" (:class:`~spat_feed.prediction.history.ChangeLinks`)
     is told too early an end, or, with too many such, learns no link. Its windows are exact; its greens end in an amber
     as ``light``'s do (``amber_s``)."""
     after_start, before_end = float(rng.uniform(*after_start_s)), float(rng.uniform(*before_end_s))

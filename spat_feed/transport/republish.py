@@ -3,7 +3,7 @@
 What the feed (its ``/spat/intersections``, its stream, MQTT, its recording) and the service (a trip's SPaT) send
 on is the controller's state with, for each movement whose controller did not state them, the predicted end of its
 current phase (:func:`spat_feed.prediction.predictor.forecast`, from what the intersection's groups have been seen
-to do, :class:`~spat_feed.prediction.observe.IntersectionHistory`, fed with every state):
+to do, :class:`~spat_feed.prediction.history.IntersectionHistory`, fed with every state):
 
 * ``likelyTime``: the forecast's median (``ChangeForecast.likely_unix_s``), held inside the published
   ``[minEndTime, maxEndTime]`` (J2735 puts the likely time between the two; ``maxEndTime`` is soft and a later
@@ -39,7 +39,7 @@ import math
 import threading
 from collections.abc import Callable
 
-from spat_feed.prediction.observe import CycleStats, IntersectionHistory
+from spat_feed.prediction.history import CycleStats, IntersectionHistory
 from spat_feed.prediction.predictor import ChangeForecast, forecast
 from spat_feed.timing.messages import (
     PREDICTED_REGION_ID,
@@ -180,7 +180,7 @@ def predicted_movement(
     """``movement`` with the predicted likelyTime and confidence of each event that lacks them (module docstring).
 
     ``t_unix_s``: the intersection's timestamp; ``cycle``: the group's
-    :class:`~spat_feed.prediction.observe.CycleStats`; ``frac``: the probability to state for a forecast (a
+    :class:`~spat_feed.prediction.history.CycleStats`; ``frac``: the probability to state for a forecast (a
     :class:`Calibration`'s); ``plan``: :func:`plan_from_movement` of it, if already made.
     """
     events = [_own(e) for e in movement.state_time_speed]
@@ -214,7 +214,7 @@ class _Ix:
 
 class Republisher:
     """Adds the predictions to each state it is handed (``republisher(state)``, module docstring), learning each
-    intersection from those states: its groups (:class:`~spat_feed.prediction.observe.IntersectionHistory`, as a
+    intersection from those states: its groups (:class:`~spat_feed.prediction.history.IntersectionHistory`, as a
     store does) and how its forecasts came true (:class:`Calibration`). Thread-safe. ``latest``: the last state
     returned per intersection."""
 

@@ -48,7 +48,8 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from spat_feed.timing.messages import IntersectionState, SpatMessage, plan_from_movement, to_unix_s
-from spat_feed.prediction.observe import IntersectionHistory, PlanReading
+from spat_feed.prediction.history import IntersectionHistory
+from spat_feed.prediction.observe import PlanReading
 from spat_feed.timing.plans import PhaseClass, UncertainPlan, phase_class, possible_states_at, state_at
 from spat_feed.transport.scenarios import FeedScenario, spat_message_at
 
@@ -139,7 +140,7 @@ class IntersectionStats:
 class _Entry:
     """One intersection: its latest message, each signal group's latest state (its plan parsed once, the
     timestamp and arrival of the message that carried it), its clock offsets, and what its signal groups have been
-    seen to do (:class:`~spat_feed.prediction.observe.IntersectionHistory`)."""
+    seen to do (:class:`~spat_feed.prediction.history.IntersectionHistory`)."""
 
     __slots__ = ("state", "stamp", "received", "heard_unix_s", "groups", "offsets", "recent_low", "recent_high", "offset",
                  "uncertainty", "skewed", "ahead_unix_s", "ahead_offset", "history")

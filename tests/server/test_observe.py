@@ -1,4 +1,5 @@
-"""spat_feed.prediction.observe (SPaT plans -> LightView/Observation) and server.gps (map matching, ordering, speed): pure."""
+"""spat_feed.prediction.observe (SPaT plans -> LightView/Observation), spat_feed.prediction.history (what each signal group
+has been seen to do) and server.gps (map matching, ordering, speed): pure."""
 
 from __future__ import annotations
 
@@ -140,7 +141,7 @@ def test_server_doctests():
 
 # -- issue 13: what a real actuated controller publishes --------------------------------------------
 
-from spat_feed.prediction.observe import LATE_QUANTILE, PhaseHistory  # noqa: E402
+from spat_feed.prediction.history import LATE_QUANTILE, PhaseHistory  # noqa: E402
 from spat_feed.timing.plans import PhaseClass  # noqa: E402
 from spat_feed.timing.messages import MovementEvent, MovementState, TimeChangeDetails, UNSTATED_CONFIDENCE_FRAC  # noqa: E402
 from spat_feed.timing.messages import from_unix_s  # noqa: E402
@@ -490,7 +491,7 @@ def test_a_phase_ends_as_the_change_of_another_group_it_follows():
     other group precedes), nothing is linked."""
     import numpy as np
 
-    from spat_feed.prediction.observe import IntersectionHistory
+    from spat_feed.prediction.history import IntersectionHistory
 
     history = IntersectionHistory()
     ix = make_scenario("paper_s400").corridor.intersections[0]
@@ -526,7 +527,7 @@ def test_links_speak_only_once_they_hold_and_forget_a_gap():
     the :data:`MIN_LINKS_SEEN`-th red of group 2 seen whole (the first began before the readings did), once group 1
     has turned red in it; group 2's own change into red (its start: the lags vary) never speaks. A gap in the
     readings forgets the changes seen and the phases in progress."""
-    from spat_feed.prediction.observe import MIN_LINKS_SEEN, ChangeLinks
+    from spat_feed.prediction.history import MIN_LINKS_SEEN, ChangeLinks
 
     links = ChangeLinks(max_gap_s=5.0)
     G, R_ = PhaseClass.GREEN, PhaseClass.RED
@@ -561,7 +562,8 @@ def test_links_on_a_real_controller_tell_when_a_red_ends():
     from dataclasses import replace
     from itertools import islice
 
-    from spat_feed.prediction.observe import IntersectionHistory, predicted_phases
+    from spat_feed.prediction.history import IntersectionHistory
+    from spat_feed.prediction.observe import predicted_phases
     from spat_feed.transport.recorded import iter_spat_csv
     from tests.conftest import SHARED_DATA
 
@@ -599,7 +601,8 @@ def test_what_is_learnt_of_the_phase_in_progress_does_not_end_a_later_one():
     """A feed that publishes several phases (red now, green, red again, then unknown): the link (or a resumed
     minEnd) that ends the red *now* must not end the later red, whose end comes from the durations seen (reds of
     40 s: it began at +25 s, so likely at +65 s). It ended at its minEnd (+60 s), where the link's end was clamped."""
-    from spat_feed.prediction.observe import CycleStats, predicted_phases
+    from spat_feed.prediction.history import CycleStats
+    from spat_feed.prediction.observe import predicted_phases
 
     t = T0
     durations = {PhaseClass.RED: (40.0,) * 5, PhaseClass.GREEN: (20.0,) * 5}

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from spat_feed.prediction.observe import IntersectionHistory, PhaseHistory
+from spat_feed.prediction.history import IntersectionHistory, PhaseHistory
 from spat_feed.prediction.predictor import ChangeForecast, _spread_on_cycle, cycle_period_s, forecast
 from spat_feed.timing.plans import ChangeWindow, MovementPhaseState, PhaseClass, UncertainPlan
 from tests.conftest import SHARED_DATA
@@ -400,7 +400,7 @@ def test_a_light_view_is_the_same_from_its_shortcuts_as_from_the_plain_path(path
     from spat_feed.timing.messages import plan_from_movement, to_unix_s
 
     spec = IntersectionSpec(id=1, name="light", stop_line_m=300.0, lat_deg=0.0, lon_deg=0.0, approach_heading_deg=0.0, signal_groups=(SignalGroupSpec(id=1),))
-    history, readings = ob.IntersectionHistory(), []
+    history, readings = IntersectionHistory(), []
     for k, ix in enumerate(recorded_snapshots(path)[:800]):
         t = to_unix_s(ix.timestamp)
         plans = {m.signal_group: plan_from_movement(m, t) for m in ix.states}

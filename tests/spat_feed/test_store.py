@@ -225,7 +225,7 @@ def test_the_store_learns_each_group_and_hands_it_to_the_observation(tmp_path):
     same messages directly learns it (durations, how soon after a resumed minEndTime phases end, and the changes of
     other groups its phases follow); the controller's clock offset comes along (feed minus ours)."""
     from spat_feed.timing.messages import plan_from_movement
-    from spat_feed.prediction.observe import IntersectionHistory
+    from spat_feed.prediction.history import IntersectionHistory
 
     log = read_spat_log(recorded_spat_slice(tmp_path, 30000))
     clock = Clock(T0)
