@@ -74,9 +74,6 @@ from spat_feed.timing.plans import (
 HORIZON_S = 150.0
 """Red windows are reported this far ahead of the fix. [s]"""
 
-BLOCKING_STATES = STOP_STATES | UNKNOWN_STATES
-"""States a car must not plan to cross in: red, and anything the plan does not know."""
-
 
 BLOCKING_CLASSES = frozenset({PhaseClass.RED, PhaseClass.UNKNOWN})
 
