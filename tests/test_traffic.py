@@ -498,3 +498,26 @@ def test_a_driver_rolling_into_its_stop_gap_stops_at_the_line_gently():
     xs, vs = _drive(driver, x, v, lim, lambda t, x: LightNow(0, line, t < 4.0) if x <= line else None, seconds=4.0)
     assert (vs[0] - vs[1]) / STEP_S <= 1.5 + 1e-9 and np.diff(vs).min() / STEP_S >= -3.0 - 1e-9
     assert vs.min() == 0.0 and xs.max() <= line  # stood before the line through the red
+
+
+
+def test_a_driver_going_for_a_green_it_can_no_longer_stop_for_is_not_slowed_into_the_red_by_a_car_far_ahead():
+    """Committed at the limit (24.59 m/s) to a light that shows no amber, 87.6 m out (stopping for its line takes
+    3.5 m/s², more than the firm 3 m/s² the driver plans a stop with), over the line 0.3 s before the red at its speed;
+    a car 73.6 m ahead, just over that line, brakes at 1.5 m/s² from 16.6 m/s. The driver does not slow for its brake
+    lights (SUMO's car following keeps the gap): before, it kept Krauss's safe speed at 3 m/s² behind that car, slowed
+    24.6 -> 18.7 m/s at 1.8 m/s² and crossed 0.3 s into the red (traced in SUMO: paper_s400 fixed 300 veh/h, 100 %,
+    seed 3, `main.28`, behind a car slowing for the second light's queue: the five-seed matrix's only red entry).
+    Where it can still stop (160 m out, 1.9 m/s²), or has not decided yet (300 m out), it slows for that car as before."""
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line = 24.5872, 1000.0
+    red_s = 87.6 / lim + 0.3
+    light = LightNow(0, line, False, False, np.inf, False)
+    for out_m, committed, slows in ((87.6, True, False), (160.0, True, True), (300.0, False, True)):
+        driver = AdvisedDriver((line,), vid="main.0")
+        if committed:
+            driver.committed.add(0)
+        cmd = driver.command(0.0, line - out_m, lim, STEP_S, lim, light, (73.6 - 7.5, 16.56, -1.5))
+        assert (cmd is not None and cmd < lim - 0.1) == slows, (out_m, committed, cmd)
+    assert 87.6 / lim < red_s  # at its speed, over the line before the red

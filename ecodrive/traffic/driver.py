@@ -102,16 +102,30 @@ class AdvisedDriver:
         seen only once that one was under 2 m/s: 3.51 m/s²). Behind a car that holds or gains speed SUMO's car
         following alone keeps the gap (slowing for every slower car cost 5 points of saving at 600 veh/h, every car
         connected). Where that car sets the pace (:data:`HELD_MPS`), the driver judges a green by when it reaches the
-        line behind it (:func:`_led_arrival_s`)."""
+        line behind it (:func:`_led_arrival_s`). A driver that has decided to cross the next line before its red and can
+        no longer stop for it at the firm rate does not slow for brake lights ahead (SUMO's car following keeps the
+        gap): slowed so, it could neither stop nor make the green (traced: 0.3 s into a red that no amber announced,
+        behind a car 74 m ahead slowing for the next light's queue)."""
         self.clearing = False
         firm = self.advisor.firm_decel_mps2
         v_follow = np.inf if leader is None else follow_mps(leader[0], leader[1], firm, self.model.reaction_s)
         cmd = self._command(t_s, x_m, v_mps, dt_s, v_lim_mps, light, leader[:2] if v_follow <= v_mps + HELD_MPS else None)
         braking = leader is not None and len(leader) > 2 and leader[2] < -BRAKING_MPS2
+        if braking and self._past_stopping(x_m, v_mps, light):
+            braking = False  # going for a green it can no longer stop for: not slowed into its red (above)
         if leader is None or (leader[1] >= QUEUED_MPS and not braking) or v_follow >= v_mps - FOLLOW_TOL_MPS or (cmd is not None and cmd <= v_follow):
             return cmd
         self.controlling = True
         return max(v_follow, v_mps - firm * dt_s, 0.0)
+
+    def _past_stopping(self, x_m: float, v_mps: float, light: LightNow | None) -> bool:
+        """Whether the car has decided to cross ``light`` before its red (committed, the light not red) and can no
+        longer stop before its line at the firmest braking it plans a stop with."""
+        if light is None or light.red or light.index not in self.committed:
+            return False
+        planned = min(self.advisor.firm_decel_mps2, self.model.regular().brake_max_mps2)
+        room = light.station_m - x_m - self.model.regular().stop_gap_m
+        return v_mps * v_mps > 2.0 * planned * max(room, 1e-6)
 
     def _command(self, t_s: float, x_m: float, v_mps: float, dt_s: float, v_lim_mps: float, light: LightNow | None,
                  led: tuple[float, float] | None) -> float | None:  # fmt: skip
