@@ -819,7 +819,7 @@ def test_a_paced_plan_says_why_and_never_promises_a_green_it_does_not_reach(unit
             continue  # the advisor's own plan, or drive normally: not paced
         paced += 1
         assert out.reason == "traffic_behind" and Reason(out.reason)  # (the API's enum lists it)
-        verb = {"accelerate": "Speed up to", "ease_off": "Ease off to", "cruise": "Hold"}[out.action]
+        verb = {"accelerate": "Speed up to", "ease_off": "Ease off only to", "cruise": "Hold"}[out.action]
         assert out.message == f"Keep up with the traffic. {verb} {spoken_speed(out.target_speed_mps, units)} {unit}."
         said = re.search(r"Green in (\d+)", out.message)
         arrival_s = crossing_time_s(393.0, float(v), out.target_speed_mps, params, KEEP_MODES[out.action])

@@ -68,13 +68,17 @@ def phrase(advice: Advice, units: str = "mph", current_speed_mps: float | None =
 
     The countdown is about the light the speed is chosen for (``advice.light_ahead``): "Second light: green in
     20 seconds. Slow to 40 kilometers per hour." when the next light is passed on green anyway. A speed held for the
-    traffic behind (reason ``traffic_behind``) names no countdown: it is not chosen for a green.
+    traffic behind (reason ``traffic_behind``) names no countdown: it is not chosen for a green; lifting off for it, it
+    says how far only ("Keep up with the traffic. Ease off only to 20 miles per hour.").
 
     Examples
     --------
     >>> paced = Advice("cruise", "traffic_behind", 11.17, light_red=True, seconds_to_change_s=40.0)
     >>> phrase(paced, "kmh"), phrase(paced, "mph")
     ('Keep up with the traffic. Hold 40 kilometers per hour.', 'Keep up with the traffic. Hold 25 miles per hour.')
+    >>> from dataclasses import replace
+    >>> phrase(replace(paced, action="ease_off", target_speed_mps=8.94), "mph")
+    'Keep up with the traffic. Ease off only to 20 miles per hour.'
     """
     unit_word = "miles per hour" if units == "mph" else "kilometers per hour"
     when = say_seconds(advice.seconds_to_change_s)
@@ -100,8 +104,9 @@ def phrase(advice: Advice, units: str = "mph", current_speed_mps: float | None =
         }.get(advice.reason, "")
     if advice.reason == "traffic_behind":
         # a speed held for the cars behind (:func:`advisory.advice.behind.paced_for_behind`), not one that makes a green:
-        # no countdown, which would promise the green at that speed
-        verb = {"accelerate": "Speed up to", "ease_off": "Ease off to"}.get(advice.action, "Hold")
+        # no countdown, which would promise the green at that speed; a lift-off says how far only (the advisor's own plan
+        # was slower: "Keep up with the traffic. Ease off to 14 mph." told a driver two things at once)
+        verb = {"accelerate": "Speed up to", "ease_off": "Ease off only to"}.get(advice.action, "Hold")
         return f"Keep up with the traffic. {verb} {speed}."
     light = ""
     if when:
