@@ -123,9 +123,9 @@ class AdvisedDriver:
         longer stop before its line at the firmest braking it plans a stop with."""
         if light is None or light.red or light.index not in self.committed:
             return False
-        planned = min(self.advisor.firm_decel_mps2, self.model.regular().brake_max_mps2)
-        room = light.station_m - x_m - self.model.regular().stop_gap_m
-        return v_mps * v_mps > 2.0 * planned * max(room, 1e-6)
+        rules = self.model.regular()
+        planned = min(self.advisor.firm_decel_mps2, rules.brake_max_mps2)  # as :meth:`_command` plans a stop
+        return v_mps * v_mps > 2.0 * planned * max(light.station_m - x_m - rules.stop_gap_m, 1e-6)
 
     def _command(self, t_s: float, x_m: float, v_mps: float, dt_s: float, v_lim_mps: float, light: LightNow | None,
                  led: tuple[float, float] | None) -> float | None:  # fmt: skip
