@@ -1,10 +1,10 @@
 """``python bench/_floor_app.py --port P [--redis URL] [--ws IMPL]``: the floor under a fix, for ``bench/bench_floor.py``.
 
-One uvicorn worker with the service's HTTP protocol (``server.protocol``), uvloop and httptools, serving a minimal ASGI
+One uvicorn worker with the service's HTTP protocol (``server.web.protocol``), uvloop and httptools, serving a minimal ASGI
 app that speaks the phones' part of the API and nothing else: ``POST /v1/trips`` (a trip id and token), a fix by
 ``POST /v1/trips/{id}/fixes`` (the body read, 600 bytes of JSON answered) or on ``/v1/trips/{id}/stream`` (each
 message answered with the same 600 bytes); with ``--redis``, each fix first writes 1.6 kB (a trip's state) to Redis
-with one pipelined ``SET`` (``server.redispipe``) and is answered once Redis has it. No parsing, advice or store.
+with one pipelined ``SET`` (``server.storage.redispipe``) and is answered once Redis has it. No parsing, advice or store.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from pathlib import Path
 import uvicorn
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from server.protocol import protocol_class  # noqa: E402
-from server.redispipe import RedisPipe  # noqa: E402
-from server.ws import IMPLEMENTATION  # noqa: E402
+from server.web.protocol import protocol_class  # noqa: E402
+from server.storage.redispipe import RedisPipe  # noqa: E402
+from server.web.ws import IMPLEMENTATION  # noqa: E402
 
 STATE = b"s" * 1600
 """What a fix writes to Redis: the size of a trip's state. [bytes]"""
@@ -79,7 +79,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--port", type=int, required=True)
     ap.add_argument("--redis", help="Redis URL: one pipelined SET per fix")
-    ap.add_argument("--ws", default=IMPLEMENTATION, help="uvicorn WebSocket implementation (default: the service's, server.ws)")
+    ap.add_argument("--ws", default=IMPLEMENTATION, help="uvicorn WebSocket implementation (default: the service's, server.web.ws)")
     args = ap.parse_args()
     redis = RedisPipe(args.redis, 10.0) if args.redis else None
     config = uvicorn.Config(make_app(redis), port=args.port, log_level="warning", access_log=False, ws=args.ws, http=protocol_class(60.0, 0, 0),

@@ -2,8 +2,8 @@
 
 The same phones as ``bench/bench_redis_load.py`` (``bench/_phones.py``: one fix a second each, REST or the WebSocket
 stream) against ``bench/_floor_app.py``: uvicorn with the service's HTTP protocol and a minimal app answering each
-fix with 600 bytes of JSON, alone or after one pipelined Redis ``SET`` of 1.6 kB (``server.redispipe``); on the
-stream with uvicorn's own ``websockets-sansio`` protocol and with the service's (``server.ws``). A row is the
+fix with 600 bytes of JSON, alone or after one pipelined Redis ``SET`` of 1.6 kB (``server.storage.redispipe``); on the
+stream with uvicorn's own ``websockets-sansio`` protocol and with the service's (``server.web.ws``). A row is the
 worker's CPU per fix over ``--seconds`` after a 3 s warm-up; ``--rounds`` repeats the rows in turn. The machine is
 shared: read the rows of one round against each other (its load is printed).
 
@@ -26,16 +26,16 @@ from bench._procs import cpu_seconds, free_port, wait_healthy  # noqa: E402
 from bench.bench_redis_load import run_phones  # noqa: E402
 from bench.bench_scaleout import bench_redis  # noqa: E402
 from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
-from server.ws import IMPLEMENTATION  # noqa: E402
+from server.web.ws import IMPLEMENTATION  # noqa: E402
 from spat_feed.road.corridors import load_corridor  # noqa: E402
 
 ROWS = (  # (label, transport, Redis write, WebSocket implementation)
     ("REST", "http", False, None),
     ("REST + Redis SET", "http", True, None),
     ("WebSocket, uvicorn's websockets-sansio", "ws", False, "websockets-sansio"),
-    ("WebSocket, server.ws", "ws", False, IMPLEMENTATION),
+    ("WebSocket, server.web.ws", "ws", False, IMPLEMENTATION),
     ("WebSocket, uvicorn's websockets-sansio + Redis SET", "ws", True, "websockets-sansio"),
-    ("WebSocket, server.ws + Redis SET", "ws", True, IMPLEMENTATION),
+    ("WebSocket, server.web.ws + Redis SET", "ws", True, IMPLEMENTATION),
 )
 
 

@@ -18,7 +18,7 @@ machine's CPU taken by other jobs, and the 1-minute load average. The machine is
 within one run, not across runs.
 
 ``--queue-aware on`` runs each service with queue-aware advice (``ECO_QUEUE_AWARE=1``: every fix a probe of the
-corridor's traffic; with Redis every worker's probes shared, ``server/queue_store.py``), ``both`` each service with it
+corridor's traffic; with Redis every worker's probes shared, ``server/storage/queue_store.py``), ``both`` each service with it
 off, then on, in one run.
 
 ``--transport ws`` sends the same fixes on each trip's WebSocket stream, as the app does (``bench/_phones.py``

@@ -35,21 +35,21 @@ from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
 from spat_feed.road.corridors import load_corridor  # noqa: E402
 
 PARTS = (  # (part, frames that put a sample in it): a sample goes to the innermost frame named here
-    ("HTTP: request parsed (uvicorn, httptools)", ("server/protocol.py:data_received", "server/protocol.py:on_headers_complete", "server/protocol.py:on_message_complete")),
+    ("HTTP: request parsed (uvicorn, httptools)", ("server/web/protocol.py:data_received", "server/web/protocol.py:on_headers_complete", "server/web/protocol.py:on_message_complete")),
     ("HTTP: response written (starlette Response, uvicorn send, socket)", ("starlette/responses.py:__call__",)),
     ("ASGI layers (uvicorn proxy headers, FastAPI, error and limit middleware, fix lane)", ("uvicorn/protocols/http/httptools_impl.py:run_asgi",)),
     ("WebSocket: message read (uvicorn websockets-sansio: frame parsed, queued)", ("uvicorn/protocols/websockets/websockets_sansio_impl.py:data_received",
                                                                                     "uvicorn/protocols/websockets/websockets_sansio_impl.py:receive",
-                                                                                    "server/ws.py:data_received")),
-    ("WebSocket: answer written (frame built, socket)", ("uvicorn/protocols/websockets/websockets_sansio_impl.py:send", "server/ws.py:send")),
+                                                                                    "server/web/ws.py:data_received")),
+    ("WebSocket: answer written (frame built, socket)", ("uvicorn/protocols/websockets/websockets_sansio_impl.py:send", "server/web/ws.py:send")),
     ("WebSocket: ASGI layers (starlette WebSocket, FastAPI wrappers)", ("starlette/websockets.py:receive", "starlette/websockets.py:send",
                                                                          "starlette/_exception_handler.py:sender")),
-    ("metrics (requests, fixes, advice)", ("server/middleware.py:_count", "server/metrics.py:observe_advice")),
+    ("metrics (requests, fixes, advice)", ("server/web/middleware.py:_count", "server/web/metrics.py:observe_advice")),
     ("fix body parsed (plain fix, else pydantic)", ("server/routes/trips.py:parse", "server/routes/stream.py:_parse")),
-    ("store: token checked, trip loaded, held", ("server/store.py:for_fix", "server/store.py:authorize", "server/store.py:__aenter__", "server/store.py:__aexit__", "server/store.py:hold")),
-    ("store: state encoded, script call, reply (Python)", ("server/store.py:save",)),
-    ("Redis: commands written (socket send)", ("server/redispipe.py:flush",)),
-    ("Redis: replies read and matched", ("server/redispipe.py:data_received",)),
+    ("store: token checked, trip loaded, held", ("server/storage/store.py:for_fix", "server/storage/store.py:authorize", "server/storage/store.py:__aenter__", "server/storage/store.py:__aexit__", "server/storage/store.py:hold")),
+    ("store: state encoded, script call, reply (Python)", ("server/storage/store.py:save",)),
+    ("Redis: commands written (socket send)", ("server/storage/redispipe.py:flush",)),
+    ("Redis: replies read and matched", ("server/storage/redispipe.py:data_received",)),
     ("map matching", ("server/gps.py:match",)),
     ("track (order, plausibility, speed)", ("server/gps.py:order", "server/gps.py:add", "server/gps.py:implausible")),
     ("SPaT readings and observation", ("spat_feed/prediction/observe.py:observation", "server/spat.py:readings")),
@@ -57,7 +57,7 @@ PARTS = (  # (part, frames that put a sample in it): a sample goes to the innerm
     ("advice (advisor)", ("advisory/advice/advisor.py:advise",)),
     ("advisory built (the response's dict, on_fix's own lines)", ("server/advising.py:on_fix",)),
     ("fix route or stream loop, apply_fix (the rest)", ("server/routes/trips.py:post_fix", "server/routes/stream.py:stream", "server/advising.py:apply_fix")),
-    ("queue board shared through Redis (background sync)", ("server/queue_store.py:sync",)),
+    ("queue board shared through Redis (background sync)", ("server/storage/queue_store.py:sync",)),
 )
 
 

@@ -34,16 +34,16 @@ from spat_feed.road.corridors import Corridor
 from spat_feed.transport.scenarios import FeedScenario, Uncertainty, resolve_timing
 
 from server.config import Settings
-from server.errors import ApiError
+from server.web.errors import ApiError
 from server.gps import Fix, RouteMatcher
 from server.queue import QUEUE_MESSAGE, QueueBoard
-from server.queue_store import SharedBoard
-from server.quotas import Creator, address_quota, key_quotas
+from server.storage.queue_store import SharedBoard
+from server.admission.quotas import Creator, address_quota, key_quotas
 from spat_feed.prediction.observe import light_view, observation
-from server.ratelimit import TokenBucket
+from server.admission.ratelimit import TokenBucket
 from server.schemas import MS_TIMESTAMP_MIN, GpsFixIn, TripCreate
 from server.spat import ScenarioSpat, SharedSpat, SpatHub, TripSpat
-from server.store import Limits, RedisTrips, make_store, retry_after  # noqa: F401  (retry_after: re-exported)
+from server.storage.store import Limits, RedisTrips, make_store, retry_after  # noqa: F401  (retry_after: re-exported)
 from server.trips import Trip
 from spat_feed.transport.simulator import shared_scenario
 
@@ -85,14 +85,14 @@ class Engine:
         self.clock = clock
         self.limits = Limits(settings)
         self.key_quotas = key_quotas(settings)
-        """Each API key's quota, by key id (server.quotas)."""
+        """Each API key's quota, by key id (server.admission.quotas)."""
         self.address_quota = address_quota(settings)
         self.trips = make_store(settings, self.limits, self.trip_from_meta, self._release, clock)
         self._params = {units: replace(self.params, units=ADVISOR_UNITS[units]) for units in ADVISOR_UNITS}
         self._approach: dict[str, float] = {}  # corridor -> how far before its entry a fix is on the route
         self.queue: QueueBoard | None = None
         """Queue-aware advice (server.queue): every trip's fix a probe of its corridor's traffic, on every worker with
-        the Redis store (its ``shared`` board synced by the app, server.queue_store); None: off."""
+        the Redis store (its ``shared`` board synced by the app, server.storage.queue_store); None: off."""
         if settings.queue_aware:
             shared = SharedBoard(self.trips.redis, settings.store_prefix, corridors, settings.queue_sync_s, clock) if isinstance(self.trips, RedisTrips) else None
             self.queue = QueueBoard(arrivals_vph=settings.queue_arrivals_vph, connected_share=settings.queue_connected_share, shared=shared)

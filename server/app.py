@@ -29,18 +29,18 @@ from spat_feed.road.corridors import Corridor, load_corridor, load_corridor_dir
 from server.advising import Engine
 from server.audio import Speech
 from server.config import Settings
-from server.errors import install_handlers
-from server.fastlane import FixLane
-from server.metrics import Metrics
-from server.middleware import GuardMiddleware
-from server.openapi import install_docs
-from server.overload import ShedCollector, ShedMiddleware, Shedder
+from server.web.errors import install_handlers
+from server.web.fastlane import FixLane
+from server.web.metrics import Metrics
+from server.web.middleware import GuardMiddleware
+from server.web.openapi import install_docs
+from server.admission.overload import ShedCollector, ShedMiddleware, Shedder
 from server.routes import audio, corridors, health, stream, trips, webapp
 from server.score import trip_score
 from server.spat import SpatHub
 from spat_feed.prediction.observe import PlanReading, observation
 from spat_feed.transport.simulator import shared_scenario
-from server.streams import RedisStreams, StreamCounts
+from server.storage.streams import RedisStreams, StreamCounts
 
 log = logging.getLogger("server")
 
@@ -157,7 +157,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         sweeper = asyncio.create_task(_expire_idle(engine, metrics, min(60.0, settings.trip_idle_ttl_s / 2)))
         lag_probe = asyncio.create_task(shedder.watch())
         tasks = [sweeper, lag_probe]
-        if engine.queue is not None and engine.queue.shared is not None:  # every worker's probes (server.queue_store)
+        if engine.queue is not None and engine.queue.shared is not None:  # every worker's probes (server.storage.queue_store)
             tasks.append(asyncio.create_task(engine.queue.shared.run()))
         gc.freeze()  # start-up objects (tables, corridors, numba) to the permanent generation: collections stop rescanning them
         log.info("advisory service ready in %.1f s: %d corridors, tables for %s, speech %s", time.perf_counter() - t0, len(corridors_), sorted(tables), speech.reason)

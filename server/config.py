@@ -62,7 +62,7 @@ class Settings(BaseSettings):
     queue_arrivals_vph: float | None = Field(default=None, ge=0, description="flow arriving at each light, per lane (detector counts), to count the cars that are not connected; None: connected cars alone [veh/h]")
     queue_connected_share: float = Field(default=1.0, ge=0, le=1, description="share of the arriving cars that are connected (with queue_arrivals_vph)")
     queue_sync_s: float = Field(default=0.25, gt=0, le=1.0, description="with the Redis store: each worker publishes its trips' probes and loads every other "
-                                "worker's this often, in the background (server.queue_store) [s]")
+                                "worker's this often, in the background (server.storage.queue_store) [s]")
 
     # lookup tables (advisory.advice.tables), built or loaded at start-up
     tables: bool = Field(default=True, description="build/load the DP lookup tables at start-up")
@@ -87,7 +87,7 @@ class Settings(BaseSettings):
     docs_access: Literal["public", "api_key", "off"] = Field(default="public", description="/docs, /redoc, /openapi.json: same choices")
     cors_origins: Annotated[tuple[str, ...], NoDecode] = Field(default=(), description="browser origins allowed to call the API (CORS); '*' = any; empty = CORS off")
 
-    # trip store (server.store): where open trips live
+    # trip store (server.storage.store): where open trips live
     store_url: str | None = Field(default=None, description="Redis holding the open trips, shared by every worker (redis://host:6379/0), run with --appendonly yes "
                                      "(without it a restart of Redis loses every open trip); None = in this process (one worker; a restart loses them)")
     store_prefix: str = Field(default="eco", min_length=1, description="prefix of the store's Redis keys (several services on one Redis)")
@@ -115,7 +115,7 @@ class Settings(BaseSettings):
     create_rate_per_client_per_s: float = Field(default=1.0, gt=0, description="trip creation per client address without an API key: token bucket rate [1/s]")
     create_burst_per_client: float = Field(default=20.0, ge=1)
 
-    # connections (enforced by server.protocol in the uvicorn process)
+    # connections (enforced by server.web.protocol in the uvicorn process)
     read_timeout_s: float = Field(default=10.0, gt=0, description="a request's headers and body must arrive within this, else 408 and close [s]")
     keep_alive_s: float = Field(default=5.0, gt=0, description="idle keep-alive connections are closed after this [s]")
     max_connections: int = Field(default=0, ge=0, description="open connections in all; 0 = the process's file limit less a reserve")
@@ -132,7 +132,7 @@ class Settings(BaseSettings):
     max_speed_mps: float = Field(default=50.0, gt=0, description="a fix implying a faster jump along the route is ignored as a GPS glitch [m/s]")
     max_trace_fixes: int = Field(default=7_200, ge=10, description="fixes kept per trip for its score")
 
-    # overload (server.overload, per worker): beyond either, 503 overloaded + Retry-After instead of a queue
+    # overload (server.admission.overload, per worker): beyond either, 503 overloaded + Retry-After instead of a queue
     max_in_flight: int = Field(default=256, ge=1, description="requests served at once per worker (awaiting Redis or a trip's turn)")
     max_loop_lag_s: float = Field(default=0.25, gt=0, description="shed while the worker's event loop runs this late at two probes in a row [s]")
 
@@ -159,7 +159,7 @@ class Settings(BaseSettings):
 
     @model_validator(mode="after")
     def _quotas_name_keys(self) -> Settings:
-        from server.quotas import key_id
+        from server.admission.quotas import key_id
 
         known = {*self.api_keys, *(key_id(k) for k in self.api_keys)}
         if unknown := sorted(set(self.api_key_quotas) - known):

@@ -16,9 +16,9 @@ from starlette.requests import HTTPConnection
 from server.advising import Engine
 from server.audio import Speech
 from server.config import Settings
-from server.errors import ApiError
-from server.metrics import Metrics
-from server.quotas import ANONYMOUS_PREFIX, anonymous_allowed, key_id
+from server.web.errors import ApiError
+from server.web.metrics import Metrics
+from server.admission.quotas import ANONYMOUS_PREFIX, anonymous_allowed, key_id
 from server.trips import Trip
 
 API_KEY_HEADER = "x-api-key"
@@ -107,7 +107,7 @@ def client_address(conn: HTTPConnection) -> str:
 async def require_api_key(conn: HTTPConnection) -> str:
     """Creating trips needs one of ``ECO_API_KEYS`` when keys are configured, unless ``ECO_ANONYMOUS_TRIPS``
     allows trips without one (a key sent must still be valid). Returns the client the trip is counted against
-    for quotas (``server.quotas``): the key's id, else the client's address (``addr-<address>``)."""
+    for quotas (``server.admission.quotas``): the key's id, else the client's address (``addr-<address>``)."""
     settings = conn.app.state.settings
     if not (anonymous_allowed(settings) and api_key_of(conn) is None):
         if kid := check_api_key(conn, "creating a trip"):

@@ -13,9 +13,9 @@ import uvicorn
 
 from server.app import create_app
 from server.config import Settings
-from server.protocol import protocol_class
-from server.quotas import anonymous_allowed, key_quotas
-from server.ws import IMPLEMENTATION as WS_IMPLEMENTATION
+from server.web.protocol import protocol_class
+from server.admission.quotas import anonymous_allowed, key_quotas
+from server.web.ws import IMPLEMENTATION as WS_IMPLEMENTATION
 
 log = logging.getLogger("server")
 
@@ -99,7 +99,7 @@ def app_from_env():
 
 
 def __getattr__(name: str):
-    """``server.main:EnvProtocol``: the guarded HTTP protocol (``server.protocol``) with the environment's limits,
+    """``server.main:EnvProtocol``: the guarded HTTP protocol (``server.web.protocol``) with the environment's limits,
     named by import string so that uvicorn's worker processes can build it."""
     if name == "EnvProtocol":
         s = Settings()
@@ -117,7 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=1, help="worker processes (default 1); more need ECO_STORE_URL (trips in Redis, shared by the workers)")
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     parser.add_argument("--ws", default="ecodrive", choices=["ecodrive", "auto", "websockets", "websockets-sansio", "wsproto"],
-                        help="WebSocket implementation: ecodrive (default: uvicorn's websockets-sansio reading a few messages ahead, server.ws) or one of uvicorn's")  # fmt: skip
+                        help="WebSocket implementation: ecodrive (default: uvicorn's websockets-sansio reading a few messages ahead, server.web.ws) or one of uvicorn's")  # fmt: skip
     parser.add_argument("--no-access-log", action="store_true", help="do not log every request")
     parser.add_argument("--ssl-certfile", help="serve HTTPS with this certificate (PEM): phones give a page GPS only over https (docs/APP.md)")
     parser.add_argument("--ssl-keyfile", help="the certificate's private key (PEM)")

@@ -26,7 +26,7 @@ line while it may be held there; the answer is the one the loop over every car o
 (``tests/server/test_queue_index.py``), at a cost that grows with the cars near it, not with the corridor's.
 
 Where the probes and red starts are kept (``shared``): in this worker with the in-process store (one process: it
-sees every trip); with the Redis store (several workers, ``ECO_STORE_URL``) in :class:`server.queue_store.SharedBoard`
+sees every trip); with the Redis store (several workers, ``ECO_STORE_URL``) in :class:`server.storage.queue_store.SharedBoard`
 tables, which every worker publishes its changes to and loads the others' from in the background every
 ``ECO_QUEUE_SYNC_S``, so that a fix on one worker counts the cars that the others serve (no Redis call on a fix's path;
 Redis unreachable: this worker's own probes, said in ``/health`` and ``/metrics``).
@@ -43,7 +43,7 @@ from advisory.advice.behind import PACED_REASON, cut_behind, gives_up_green, pac
 from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, estimate, followers, held_up, normal_drive_s
 from advisory.advice.queue_words import drive_normally, ease_to_car_ahead, said_truly, seen_at_line, tail_glide
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
-from server.queue_store import SharedBoard
+from server.storage.queue_store import SharedBoard
 
 MAX_AGE_S = 3.0
 """A trip's position older than this is no longer a probe. [s]"""
@@ -53,7 +53,7 @@ SILENT = ("too_close", "short_wait", "far_ahead")  # the advisor's silences: the
 
 class Lane:
     """One corridor's probes (``table``: trip -> ``(t_unix_s, station_m, speed_mps)``, the board's dict or the shared
-    board's :class:`~server.queue_store.Noted`) indexed for :meth:`QueueBoard.see`, so that a fix looks only at the cars
+    board's :class:`~server.storage.queue_store.Noted`) indexed for :meth:`QueueBoard.see`, so that a fix looks only at the cars
     that can change its estimate instead of at every car on the corridor:
 
     * ``order``: ``(station_m, seq, trip, speed_mps)`` sorted by station; ``seq`` is the table's insertion order, so

@@ -4,7 +4,7 @@ A trip's state only changes in :meth:`server.advising.Engine.on_fix`, after the 
 and in one synchronous step on the event loop, so a bad request never leaves a trip half-updated.
 Everything a trip records is plain data of bounded size (numbers, strings, lists of floats; the fix trace
 capped by ``max_trace_fixes``, observed phases by ``ObservedLights.MAX_RUNS``), so a shared store
-(``server.store``) holds it as three parts: :meth:`Trip.meta` (written once: what the trip was created
+(``server.storage.store``) holds it as three parts: :meth:`Trip.meta` (written once: what the trip was created
 with, from which any worker rebuilds its corridor, SPaT view and tables), :meth:`Trip.state` (rewritten
 per fix: track, advisor memory, last advice, counters) and the score samples (appended per fix).
 """
@@ -27,7 +27,7 @@ from spat_feed.transport.scenarios import FeedScenario
 from spat_feed.timing.plans import phase_class, state_at, state_start_s
 
 from server.gps import RouteMatcher, Track
-from server.ratelimit import TokenBucket
+from server.admission.ratelimit import TokenBucket
 
 if TYPE_CHECKING:
     from server.spat import TripSpat
@@ -111,7 +111,7 @@ class Trip:
         self.last_seen_s = time.monotonic()
         self.tables = tables
         self.client = client  # who created it (API key id or client address): per-client quotas
-        self.device = device  # the device id it was created with ("": none): per-device limits (server.quotas)
+        self.device = device  # the device id it was created with ("": none): per-device limits (server.admission.quotas)
         self.units = units  # "metric" or "imperial": the spoken speeds
         self.params = params  # the advisor's settings for this trip (units)
         self.observed = ObservedLights() if observe_spat else None  # live SPaT: what the trip saw, for its score

@@ -6,7 +6,7 @@ from fastapi import APIRouter, Response
 
 from server.audio import SpeechUnavailable
 from server.deps import EngineDep, SpeechDep, TripDep
-from server.errors import ApiError
+from server.web.errors import ApiError
 from server.routes.trips import ERRORS
 from server.schemas import ErrorOut
 

@@ -8,7 +8,7 @@ from typing import Annotated
 from spat_feed.road.corridors import Corridor, IntersectionSpec
 
 from server.deps import EngineDep
-from server.errors import not_found
+from server.web.errors import not_found
 from server.schemas import CorridorSummary, ErrorOut
 
 router = APIRouter(prefix="/v1/corridors", tags=["corridors"])

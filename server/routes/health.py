@@ -7,7 +7,7 @@ import time
 from fastapi import APIRouter, Response
 
 from server.deps import EngineDep, MetricsAccessDep, MetricsDep, SettingsDep, SpeechDep
-from server.metrics import CONTENT_TYPE_LATEST
+from server.web.metrics import CONTENT_TYPE_LATEST
 from server.schemas import HealthOut, SpatHealthOut
 
 router = APIRouter(tags=["service"])

@@ -5,9 +5,9 @@ one place a token may ride in the URL: browsers cannot set headers there). A ref
 accepted, told why (``{"error": ..., "status": 401|403|404|429}``) and closed with code 4000 + HTTP
 status. A bad message gets an error object and the stream goes on; nothing about the trip changes. Every
 message keeps the trip alive (``last_seen``). At most ``ws_max_per_trip`` streams per trip are open at once (a
-newer one replaces the oldest, which is told why and closed with 4409: ``server.streams``) and
+newer one replaces the oldest, which is told why and closed with 4409: ``server.storage.streams``) and
 ``ws_max_per_client`` per client address (4429 beyond). A fix that comes while the worker sheds load
-(``server.overload``) gets ``{"error": "overloaded", "status": 503, ...}`` and is dropped; the stream goes on.
+(``server.admission.overload``) gets ``{"error": "overloaded", "status": 503, ...}`` and is dropped; the stream goes on.
 """
 
 from __future__ import annotations
@@ -23,10 +23,10 @@ from pydantic import ValidationError
 
 from server.advising import parse_fix
 from server.gps import Fix
-from server.overload import RETRY_AFTER_S, Shedder
+from server.admission.overload import RETRY_AFTER_S, Shedder
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
-from server.errors import ApiError, clean_errors, validation_summary
-from server.streams import StreamCounts
+from server.web.errors import ApiError, clean_errors, validation_summary
+from server.storage.streams import StreamCounts
 
 router = APIRouter(prefix="/v1/trips", tags=["stream"])
 
@@ -45,7 +45,7 @@ def _error(exc: ApiError) -> str:
 
 
 def _replaced(ws: WebSocket, per_trip: int) -> Callable[[], None]:
-    """What a stream does when a newer one of its trip replaces it (``server.streams``): say why, close 4409."""
+    """What a stream does when a newer one of its trip replaces it (``server.storage.streams``): say why, close 4409."""
     tasks: set[asyncio.Task] = set()
 
     async def close() -> None:
@@ -65,7 +65,7 @@ def _replaced(ws: WebSocket, per_trip: int) -> Callable[[], None]:
 
 @router.websocket("/{trip_id}/stream")
 async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: MetricsDep, settings: SettingsDep) -> None:
-    counts: StreamCounts = ws.app.state.streams  # or server.streams.RedisStreams
+    counts: StreamCounts = ws.app.state.streams  # or server.storage.streams.RedisStreams
     client = client_address(ws)
     token = bearer_token(ws, allow_query=True)
     try:  # the slot is taken before the handshake completes: a client whose handshake is done holds it
@@ -98,7 +98,7 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
                 if size > limit:
                     await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
                     raise ApiError(413, "payload_too_large", f"message of {size} bytes, larger than {limit}")
-                if (reason := shedder.refusal()) is not None:  # overloaded (server.overload): this fix is dropped, the stream goes on
+                if (reason := shedder.refusal()) is not None:  # overloaded (server.admission.overload): this fix is dropped, the stream goes on
                     raise ApiError(503, "overloaded", shedder.error_body(reason)["message"], headers={"Retry-After": str(RETRY_AFTER_S)})
                 shedder.in_flight += 1
                 try:

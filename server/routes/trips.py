@@ -12,14 +12,14 @@ from pydantic_core import to_json
 from fastapi.concurrency import run_in_threadpool
 
 from server.advising import Engine, parse_fix
-from server.bodies import JsonBodyRoute
+from server.web.bodies import JsonBodyRoute
 from server.gps import Fix
 from server.deps import ApiKeyDep, EngineDep, MetricsDep, TripDep, TripId, TripToEndDep, bearer_token
 from server.schemas import AdviceOut, ErrorOut, GpsFixIn, TripCreate, TripCreated, TripLinks, TripOut, TripScoreOut
 from server.trips import Trip
 from server.score import trip_score
 
-router = APIRouter(prefix="/v1/trips", tags=["trips"], route_class=JsonBodyRoute)  # bodies parsed strictly (server.bodies)
+router = APIRouter(prefix="/v1/trips", tags=["trips"], route_class=JsonBodyRoute)  # bodies parsed strictly (server.web.bodies)
 
 ERRORS = {code: {"model": ErrorOut} for code in (401, 403, 404, 422, 429)}
 

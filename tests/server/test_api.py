@@ -21,7 +21,7 @@ from advisory.advice.views import AdvisorMemory, LightView, Observation
 from server.app import create_app
 from server.config import Settings
 from server.schemas import AdviceOut
-from server.store import Limits
+from server.storage.store import Limits
 from spat_feed.road.corridors import load_corridor
 
 NOW = 1_800_000_000.0

@@ -1,4 +1,4 @@
-"""``server.fastlane.FixLane`` answers every fix request exactly as the router does (independent answer: the same
+"""``server.web.fastlane.FixLane`` answers every fix request exactly as the router does (independent answer: the same
 app with the lane taken out): advisories, each error's status, body and headers, and the request metrics."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from fastapi.testclient import TestClient
 
 from server.app import create_app
 from server.config import Settings
-from server.fastlane import FixLane
+from server.web.fastlane import FixLane
 from spat_feed.road.corridors import load_corridor
 from tests.server.conftest import FIX_ERROR_STATUSES, fix_errors
 

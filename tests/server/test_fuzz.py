@@ -28,7 +28,7 @@ from hypothesis import HealthCheck, given, settings as hsettings, strategies as 
 from starlette.routing import Mount, Route
 
 from server.app import create_app
-from server.bodies import JsonBodyRoute
+from server.web.bodies import JsonBodyRoute
 from server.config import Settings
 from server.routes.trips import DirectRoute
 from spat_feed import load_corridor  # the package's export: stable while its modules move
@@ -270,7 +270,7 @@ BODY_ROUTES = [r.path for r in create_app(_settings()).routes if getattr(r, "bod
 
 
 def test_every_json_body_is_parsed_strictly():
-    """Every route that takes a JSON body parses it with jiter (``server.bodies``) or reads it raw (``DirectRoute``):
+    """Every route that takes a JSON body parses it with jiter (``server.web.bodies``) or reads it raw (``DirectRoute``):
     Python's ``json.loads`` lets lone surrogates and invalid UTF-8 through (a 500 on ``POST /v1/trips``)."""
     app = create_app(_settings())
     with_body = [r for r in app.routes if getattr(r, "body_field", None) is not None]

@@ -85,7 +85,7 @@ def test_half_sent_requests_are_timed_out_and_capped(start_proc, tmp_path):
 
 
 def test_the_read_deadline_counts_from_each_request_on_a_kept_alive_connection(start_proc, tmp_path):
-    """The connection keeps one timer across requests (server.protocol): a request begun after the first one's
+    """The connection keeps one timer across requests (server.web.protocol): a request begun after the first one's
     deadline would have passed gets its own full deadline, and a half-sent one is still cut off with a 408."""
     svc = start_proc(_proc(tmp_path, ECO_READ_TIMEOUT_S="2"))
     s = _sock(svc.port, "127.0.0.1")

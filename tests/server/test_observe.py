@@ -133,9 +133,9 @@ def test_server_doctests():
     import doctest
 
     import spat_feed.prediction.observe
-    import server.ratelimit
+    import server.admission.ratelimit
 
-    for module in (spat_feed.prediction.observe, server.ratelimit):
+    for module in (spat_feed.prediction.observe, server.admission.ratelimit):
         assert doctest.testmod(module).failed == 0
 
 

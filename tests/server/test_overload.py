@@ -1,4 +1,4 @@
-"""Overload shedding (``server.overload``): a worker refuses what it cannot serve in time with 503 ``overloaded`` and
+"""Overload shedding (``server.admission.overload``): a worker refuses what it cannot serve in time with 503 ``overloaded`` and
 ``Retry-After``, at once, instead of queueing it, and serves again as soon as the load falls.
 
 The in-flight bound on a real ``python -m server`` worker with its trips in a real ``redis-server``, paused
@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 import httpx
 import pytest
 
-from server.overload import ShedMiddleware, Shedder
+from server.admission.overload import ShedMiddleware, Shedder
 from tests.procs import RedisServer, redis_server_path
 from tests.server.conftest import service_proc
 

@@ -11,7 +11,7 @@ import pytest
 from advisory.advice.views import LightView, Observation
 from advisory.advice.queue import Probe, estimate
 from server.queue import MAX_AGE_S, QueueBoard, probe_at
-from server.queue_store import Corridors, Noted
+from server.storage.queue_store import Corridors, Noted
 
 STOP_LINES_M = (200.0, 600.0, 1000.0, 1400.0)
 LIMIT_MPS = 13.4

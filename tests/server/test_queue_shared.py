@@ -1,5 +1,5 @@
 """Queue-aware advice across workers (issue 28, item 3): with the Redis store every worker's queue board holds every
-worker's probes and red starts (``server.queue_store``), so a fix on worker B counts the cars that worker A serves.
+worker's probes and red starts (``server.storage.queue_store``), so a fix on worker B counts the cars that worker A serves.
 
 Two engines (two workers' boards) on one real ``redis-server`` on loopback, each with its own SPaT store fed the same
 SPaT; the boards' background call made explicitly (``SharedBoard.sync``), so that nothing waits on time. Independent
@@ -19,11 +19,11 @@ import redis
 
 from server.advising import Engine
 from server.config import Settings
-from server.errors import ApiError
+from server.web.errors import ApiError
 from server.gps import Fix
-from server.metrics import Metrics
+from server.web.metrics import Metrics
 from server.queue import MAX_AGE_S
-from server.queue_store import KEEP_S
+from server.storage.queue_store import KEEP_S
 from server.schemas import TripCreate
 from server.spat import SpatHub
 from spat_feed.road.corridors import load_corridor

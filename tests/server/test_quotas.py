@@ -23,7 +23,7 @@ from fastapi.testclient import TestClient
 
 from server.app import create_app
 from server.config import Settings
-from server.errors import ApiError
+from server.web.errors import ApiError
 from tests.procs import Proc, RedisServer, redis_server_path
 
 ENV = {
@@ -237,8 +237,8 @@ def test_stream_leases_are_renewed_by_their_worker_and_lapse_with_it(store, empt
     """The lease logic on a fake clock, two workers' stream counters on the real Redis: a silent stream keeps
     counting while its worker renews it; a dead worker's stream stops counting within ECO_WS_LEASE_S (the address
     cap, 1 here, admits again); a stream replaced through the other worker is told so at its worker's renewal."""
-    from server.store import Limits, RedisTrips
-    from server.streams import RedisStreams
+    from server.storage.store import Limits, RedisTrips
+    from server.storage.streams import RedisStreams
 
     now = [time.time()]
     settings = Settings(corridors=("paper_s200",), default_corridor="paper_s200", tables=False, speech=False, store_url=store.url, store_prefix="lease")
@@ -283,7 +283,7 @@ def test_stream_leases_are_renewed_by_their_worker_and_lapse_with_it(store, empt
 def test_an_operator_sets_a_key_quota_by_the_key_or_its_id_and_mistakes_stop_the_start():
     from pydantic import ValidationError
 
-    from server.quotas import Quota, key_quotas
+    from server.admission.quotas import Quota, key_quotas
 
     base = dict(corridors=("paper_s200",), default_corridor="paper_s200", api_keys=("k-app", "k-small"), key_max_trips=100)
     small_id = "key-" + hashlib.sha256(b"k-small").hexdigest()[:8]

@@ -1,4 +1,4 @@
-"""server.redispipe: one pipelined connection to a real ``redis-server`` on loopback. Concurrent calls get their
+"""server.storage.redispipe: one pipelined connection to a real ``redis-server`` on loopback. Concurrent calls get their
 own replies (checked against values each call alone determines), a cancelled call does not shift the others,
 scripts unknown to Redis are sent whole, error replies raise, a silent Redis fails calls (TimeoutError) and a
 dead one fails them (ConnectionError), and the next call after a restart reconnects. Every wait is bounded."""
@@ -12,7 +12,7 @@ import signal
 import pytest
 from redis.exceptions import ConnectionError, ResponseError, TimeoutError
 
-from server.redispipe import RedisPipe, Script
+from server.storage.redispipe import RedisPipe, Script
 
 
 def test_concurrent_calls_share_one_connection_and_get_their_own_replies(store):

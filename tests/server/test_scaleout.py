@@ -222,7 +222,7 @@ def test_the_idle_clock_is_reset_at_most_every_tenth_of_the_ttl_and_the_bucket_h
     bucket is taken in the same write. In process (``Engine`` on the shared Redis, no HTTP), on a fake clock."""
     from server.advising import Engine
     from server.config import Settings
-    from server.errors import ApiError
+    from server.web.errors import ApiError
     from server.gps import Fix
     from server.schemas import TripCreate
 

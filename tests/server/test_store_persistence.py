@@ -8,7 +8,7 @@ import asyncio
 import pytest
 
 from server.config import Settings
-from server.store import Limits, RedisTrips
+from server.storage.store import Limits, RedisTrips
 from tests.procs import RedisServer, redis_server_path
 
 

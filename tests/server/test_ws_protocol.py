@@ -1,4 +1,4 @@
-"""The service's WebSocket protocol (``server.ws.StreamProtocol``): uvicorn's, reading a few messages ahead.
+"""The service's WebSocket protocol (``server.web.ws.StreamProtocol``): uvicorn's, reading a few messages ahead.
 
 A real uvicorn server on loopback in a thread (an echo app that can be held still) and a real ``python -m server``
 (its default ``--ws``), both spoken to by the ``websockets`` client; every wait bounded, nothing timed.
@@ -21,7 +21,7 @@ import websockets
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 from websockets.frames import apply_mask
 
-from server.ws import IMPLEMENTATION, StreamProtocol
+from server.web.ws import IMPLEMENTATION, StreamProtocol
 from tests.server.conftest import SERVICE_ENV, Proc, free_port
 
 

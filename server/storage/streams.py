@@ -22,9 +22,9 @@ import logging
 import uuid
 from collections.abc import Callable
 
-from server.errors import ApiError
-from server.redispipe import Script
-from server.store import REACH, RedisTrips
+from server.web.errors import ApiError
+from server.storage.redispipe import Script
+from server.storage.store import REACH, RedisTrips
 
 log = logging.getLogger("server")
 

@@ -11,8 +11,8 @@ import time
 from fastapi import HTTPException
 from starlette.requests import ClientDisconnect
 
-from server.metrics import Metrics
-from server.protocol import READ_TIMED_OUT
+from server.web.metrics import Metrics
+from server.web.protocol import READ_TIMED_OUT
 
 log = logging.getLogger("server")
 CLIENT_CLOSED = 499
@@ -75,7 +75,7 @@ class GuardMiddleware:
         except ClientDisconnect:
             gone = True
         finally:
-            if scope.get(READ_TIMED_OUT):  # answered 408 and logged by the protocol (server.protocol)
+            if scope.get(READ_TIMED_OUT):  # answered 408 and logged by the protocol (server.web.protocol)
                 status = 408
             elif gone:  # whatever the app made of it (FastAPI answers a body it could not read with 400), nobody heard it
                 status = CLIENT_CLOSED

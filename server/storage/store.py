@@ -29,14 +29,14 @@ the trip's last request (up to ``touch_every_s`` later: the idle clock is reset 
   (the caps: in all, per API key or address, per device; members idle longer than the TTL are dropped when
   counted);
 * ``eco:anon``: the open trips created without an API key, by creation time: when the service is full, a keyed
-  trip takes the place of the newest (``server.quotas``); members of expired trips are dropped by ``sweep``;
+  trip takes the place of the newest (``server.admission.quotas``); members of expired trips are dropped by ``sweep``;
 * ``eco:rl:create`` and ``eco:rl:c:<client>``: the creation buckets;
-* ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`server.streams.RedisStreams`, leases).
+* ``eco:ws:t:<id>`` and ``eco:ws:c:<address>``: open WebSocket streams (:class:`server.storage.streams.RedisStreams`, leases).
 * ``eco:q:p:<corridor>`` and ``eco:q:red``: the queue board's probes and red starts, with queue-aware advice
-  (:class:`server.queue_store.SharedBoard`, over this store's connection).
+  (:class:`server.storage.queue_store.SharedBoard`, over this store's connection).
 
 Each call is one round trip (a Lua script, atomic in Redis; a fix's write is 3 commands in it) over the worker's
-one pipelined connection (:class:`server.redispipe.RedisPipe`: a call alone written at once, the calls of one event-loop turn behind it in one write). A worker keeps the trips it served in a small
+one pipelined connection (:class:`server.storage.redispipe.RedisPipe`: a call alone written at once, the calls of one event-loop turn behind it in one write). A worker keeps the trips it served in a small
 cache (:class:`RedisTrips` ``_cache``): a fix on a cached trip is applied to the copy and written with the
 version it was computed from (one round trip); a trip not cached, or whose version moved (another worker
 served it), is read first (two). Within a worker, fixes of one trip are serialised (:meth:`RedisTrips.hold`);
@@ -65,10 +65,10 @@ from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeoutError
 
 from server.config import Settings
-from server.errors import ApiError
-from server.quotas import Creator, Quota
-from server.ratelimit import KeyedBuckets, TokenBucket
-from server.redispipe import RedisPipe, Script
+from server.web.errors import ApiError
+from server.admission.quotas import Creator, Quota
+from server.admission.ratelimit import KeyedBuckets, TokenBucket
+from server.storage.redispipe import RedisPipe, Script
 from server.trips import Trip, token_hash
 
 log = logging.getLogger("server")

@@ -59,7 +59,7 @@ class SpatCollector:
 
 
 class QueueBoardCollector:
-    """The queue board's storage (server.queue_store), read at each scrape: ``ecodrive_queue_board_shared`` (1 while every
+    """The queue board's storage (server.storage.queue_store), read at each scrape: ``ecodrive_queue_board_shared`` (1 while every
     worker's probes are shared through Redis, 0 while this worker counts its own trips only) and
     ``ecodrive_queue_board_sync_failures_total``. Nothing when queue-aware advice is off or the store is in process."""
 

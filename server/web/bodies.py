@@ -6,7 +6,7 @@ message quoting it was a 500 with a traceback), invalid UTF-8 bytes (decoded wit
 UTF-16/32 bodies. :class:`JsonBodyRoute` (FastAPI's documented extension point: a custom
 ``APIRoute.get_route_handler`` with a custom ``Request``) parses with ``pydantic_core.from_json`` instead, the
 parser ``POST .../fixes`` and the WebSocket already use: invalid Unicode, nesting deeper than 200 and numbers
-of more than 4,300 digits are a 422 ``malformed_json`` that says so (``server.errors.json_error_message``).
+of more than 4,300 digits are a 422 ``malformed_json`` that says so (``server.web.errors.json_error_message``).
 A UTF-8 byte-order mark is skipped, as ``json.loads`` did. ``NaN``/``Infinity`` parse, and the models refuse
 them (``allow_inf_nan=False``): 422 ``validation_error``.
 """

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
-IMPLEMENTATION = "server.ws:StreamProtocol"
+IMPLEMENTATION = "server.web.ws:StreamProtocol"
 """What ``ecodrive serve --ws ecodrive`` gives uvicorn (an import string: uvicorn's worker processes build it)."""
 
 

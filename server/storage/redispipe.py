@@ -1,4 +1,4 @@
-"""One pipelined connection to Redis per worker: the trip store's client (``server.store.RedisTrips``).
+"""One pipelined connection to Redis per worker: the trip store's client (``server.storage.store.RedisTrips``).
 
 Every call of the worker goes over the same connection. A command made while nothing else is in flight leaves at
 once (the common case at a phone's fix a second: no extra turn of the event loop, and its poll, before the write);

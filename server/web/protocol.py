@@ -182,7 +182,7 @@ def protocol_class(read_timeout_s: float, max_connections: int, max_per_client: 
             if cycle is not None:
                 # The app, if waiting for the body, hears a disconnect, and what it sends is dropped: the 408 is
                 # the answer (before, its 400 went to the closed transport: a 500 and a traceback per timeout).
-                # The scope says why, so the request is counted as 408 (server.middleware), not as a 499.
+                # The scope says why, so the request is counted as 408 (server.web.middleware), not as a 499.
                 cycle.scope[READ_TIMED_OUT] = True
                 cycle.disconnected = True
                 cycle.message_event.set()

@@ -6,7 +6,7 @@ speed_mps)`` of its last fix (a *probe*), intersection -> when its current red w
 last red that has ended, ``(start, end, jam_m)`` (its queue goes on discharging after the end). With the in-process
 store they are dicts of this worker. With the Redis store they are :class:`Noted` dicts: a write by this worker is
 also appended to a log of its changes (a dict's cost, no I/O), and :class:`SharedBoard` runs beside the service, every
-``ECO_QUEUE_SYNC_S`` (default 0.25 s), one Lua script over the worker's one pipelined connection (``server.redispipe``)
+``ECO_QUEUE_SYNC_S`` (default 0.25 s), one Lua script over the worker's one pipelined connection (``server.storage.redispipe``)
 that applies the worker's changes since the last call to Redis and answers every worker's current tables, which then
 replace this worker's copy (the changes made while the call was out applied again on top). A fix on worker A thus
 sees a car that worker B serves from at most two intervals after B's fix, as it would see its own.
@@ -43,7 +43,7 @@ from typing import Any
 
 from redis.exceptions import RedisError
 
-from server.redispipe import RedisPipe, Script
+from server.storage.redispipe import RedisPipe, Script
 
 log = logging.getLogger("server")
 
