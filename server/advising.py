@@ -360,7 +360,7 @@ def approach_m(corridor: Corridor, params: AdvisorParams, default_limit_mps: flo
 
     Without it the paper's corridor (first light 100 m after the entry, 55 mph) was advised from 27 m before the entry
     (map matching's ``off_route_m``): 5 s before the line, where a red needs 3.7 m/s² from any driver at the limit
-    (SUMO, docs/TRAFFIC.md). [m]
+    (SUMO, docs/history/TRAFFIC.md). [m]
 
     Examples
     --------

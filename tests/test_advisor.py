@@ -82,7 +82,7 @@ def test_advised_speed_never_above_limit_and_always_crosses_on_green(v, d1, gap,
 @settings(max_examples=30, deadline=None)
 @given(st.floats(100.0, 150.0) | st.just(124.46))
 def test_a_slowing_plan_keeps_a_margin_before_a_reds_start(d1_m):
-    """Issue 28's red entry (docs/TRAFFIC.md, ``--spat-queue``): light 1, 124.46 m ahead, green for 6 s more, then red
+    """Issue 28's red entry (docs/history/TRAFFIC.md, ``--spat-queue``): light 1, 124.46 m ahead, green for 6 s more, then red
     with no amber; light 2, 400 m on, red until 42 s; 55 mph. "Second light: green in 42 seconds. Slow to 25 miles per
     hour, then coast." was priced crossing light 1 at 5.75 s, 0.25 s before its red: the driver, a reaction late,
     crossed 0.5 s into it. At a light that shows no amber no plan that slows the car reaches the line within
@@ -541,7 +541,7 @@ def test_a_plan_is_not_dropped_while_the_driver_still_reacts_to_it():
 
 def test_a_plan_made_for_the_light_behind_is_not_kept_at_the_next():
     """Over the line of the light a plan was made for, the plan is done: the next light gets its own. Traced in SUMO
-    (docs/TRAFFIC.md, 7th Street fixed time): "Slow to 25 mph, then coast" for light 7001 was kept 165 m before 7002.
+    (docs/history/TRAFFIC.md, 7th Street fixed time): "Slow to 25 mph, then coast" for light 7001 was kept 165 m before 7002.
     Independent answer: at the limit (13.41 m/s) the car is over 7002's line 164.5 / 13.41 = 12.3 s from now, 4.3 s
     after its red ends (8 s), more than the 2 s margin, so the limit is feasible and no slower speed is needed."""
     v_lim = 13.4112

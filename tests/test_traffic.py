@@ -108,7 +108,7 @@ def test_fixed_time_spat_is_sumos_state_now_and_every_change_ahead(oakland_fixed
 def test_fixed_time_spat_reaches_the_next_time_the_state_now_begins(oakland_fixed):
     """A fixed-time light publishes its whole cycle: from a green, its amber, its red and the next green's start, so
     the red after an amber has an end (three events left it open, and the advisor saw that red as lasting for good:
-    docs/TRAFFIC.md, 7th Street). SUMO's own state agrees at every step to there
+    docs/history/TRAFFIC.md, 7th Street). SUMO's own state agrees at every step to there
     (``test_fixed_time_spat_is_sumos_state_now_and_every_change_ahead``); here: the last state known is the one now,
     each of the light's three states is in between, and the plan reaches at least a cycle less the state's own time."""
     net = oakland_fixed

@@ -330,7 +330,7 @@ def _plan_ahead(last: Advice | None, obs: Observation) -> bool:
     plan has done its work; kept for the next light ("keep it while it still works"), a speed chosen for the light
     behind held the car below what the next light asks. (The choice under uncertain timing prices the plan followed
     against every other, :func:`_choose`: there it stays a candidate.) Traced in SUMO (7th Street, fixed time, 300 veh/h, 50 %,
-    seed 1, docs/TRAFFIC.md): "Slow to 25 mph, then coast" for light 1's green, kept 165 m before light 2, whose
+    seed 1, docs/history/TRAFFIC.md): "Slow to 25 mph, then coast" for light 1's green, kept 165 m before light 2, whose
     green the limit reaches 4 s after it starts; planned afresh, the advisor says "Hold 30 mph". A plan that names no
     light: kept, as before."""
     if last is None or last.light_id is None:

@@ -323,7 +323,7 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     # red). A plan that holds a speed is priced holding it: past the line the car is advised again, for the next light,
     # often as slowly (tried: a normal drive from the line for every plan; 7th Street fixed 900 veh/h saved 1-1.5 points
     # more, but paper_s400 fixed 900 veh/h 100 % cost +4.4 points of advised time and 7th Street actuated 900 veh/h
-    # +1.4 to +4.4; docs/TRAFFIC.md, ninth session)
+    # +1.4 to +4.4; docs/history/TRAFFIC.md, ninth session)
     coast_to = mode == "brake_coast" and line_m > 0.0 and advice.light_ahead == 1 and advice.light_id in (None, light.intersection_id)
     if coast_to:  # (held at the line by the queue or the red, it leaves it as a normal drive does)
         at_line_s = float(crossing_time_s(line_m, v, target, params, mode))
@@ -382,7 +382,7 @@ def knock_on_s(light: LightView, start_s: float, end_s: float, arrivals_vps: flo
     green lets over the line (``green / headway``, an oversaturated approach; the green to the light's next red,
     none known: the red's length). ``arrivals_vps`` None: not known, 0.
 
-    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/TRAFFIC.md): four cars cut off at light 1's end of
+    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/history/TRAFFIC.md): four cars cut off at light 1's end of
     green each stood first in the next queue; that whole green crossed 1-2 s later, and its last cars lost light 2's
     green (227 of the others' 309 s).
 

@@ -192,7 +192,7 @@ def green_mask(speeds, distances_m, windows_s, no_amber, n_lines, after_red_s, v
 
     The margin before a red's start (issue 28): a slowing plan is a speed change the driver makes a reaction late and
     tracks loosely, as it is after a red's end; "Slow to 25 mph, then coast" priced 0.25 s before a red with no amber
-    crossed 0.5 s into it (docs/TRAFFIC.md, the ``--spat-queue`` red entry). A plan that holds or speeds up is the
+    crossed 0.5 s into it (docs/history/TRAFFIC.md, the ``--spat-queue`` red entry). A plan that holds or speeds up is the
     regular driver's own motion, over the line no later than planned; where an amber comes first, it warns the driver
     (who clears it or stops, as without advice)."""
     ok = np.ones(speeds.size, dtype=np.bool_)

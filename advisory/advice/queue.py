@@ -380,7 +380,7 @@ def unseen_behind(arrivals_vps: float | None, connected_share: float, from_s: fl
     than ``view_s`` from now (the time a car at the limit takes from that start to the line) is still upstream of it now,
     ``connected_share x arrivals_vps x (to_s - max(from_s, view_s))``. ``view_s`` inf: every connected car behind is seen.
 
-    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/TRAFFIC.md): a car told to slow 224 m before a light
+    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/history/TRAFFIC.md): a car told to slow 224 m before a light
     green for 16 s more was priced as cutting off no one (0.54 cars expected behind it, all of them not connected); the
     connected car 4.5 s behind it was still 70 m before the approach's start, seen four fixes later, once the car had
     slowed, and it and the car behind it were cut off by the red, 33-35 s each.

@@ -391,7 +391,7 @@ def _to_line_mps(v_mps: float, room_m: float, dt_s: float, hardest_mps2: float, 
     ``roll_mps`` (the advisor's slowest advised speed), speeding up at ``accel_mps2``, from where ``decel_mps2`` still
     stops it at the line (Euler steps: it moves at the new speed). Without the roll a car crawling in a queue at
     0.7 m/s "stopped" for a light 70 m ahead at 0.003 m/s² for a whole cycle, and the lane behind it with it (SUMO,
-    7th Street at 900 veh/h, docs/TRAFFIC.md). [m/s]
+    7th Street at 900 veh/h, docs/history/TRAFFIC.md). [m/s]
 
     Examples
     --------

@@ -295,7 +295,7 @@ class PhaseHistory:
         J2735 gives a movement state's own end. A feed that publishes a go phase as one state ("unavailable") states
         the end of its green and then that of its amber (2019-05-17: the green's exact end about 7 s ahead, then the
         amber's 3 s), or only the amber's: the red begins when the amber ends, and an end first published more than an
-        amber ahead is, in such a feed, its green's. Read as the change, it put the red an amber early (docs/ADVISOR.md,
+        amber ahead is, in such a feed, its green's. Read as the change, it put the red an amber early (docs/history/ADVISOR.md,
         "the cycles still lost" (c)); a feed whose exact ends are its changes gives lags of 0, the end as before."""
         past = self._after_exact.get(self._current) if self._exact_first and self._current is not PhaseClass.RED else None
         if not past or len(past) < MIN_PHASES_SEEN:

@@ -31,7 +31,7 @@ For a static program the events follow the current one for a whole cycle, up to 
 current state begins (green, amber, red, green at a light with amber; green, red, green without): the controller
 runs a fixed program and knows it, as SUMO's GLOSA device reads it (``MSDevice_GLOSA::getTimeToSwitch`` walks the
 program's phases). Three events (the simulator's default) leave a green's red after its amber without an end, so the
-advisor saw that red as lasting for good and could not plan for the green after it (traced: 7th Street, docs/TRAFFIC.md).
+advisor saw that red as lasting for good and could not plan for the green after it (traced: 7th Street, docs/history/TRAFFIC.md).
 ``n_events`` caps them where given.
 
 The amber each group shows before its reds (:meth:`SumoSpatSource.amber_s`) is read from the program too, and
