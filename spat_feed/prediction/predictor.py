@@ -15,8 +15,11 @@ Where the samples come from, in the order they are trusted (each *method* names 
 ``linked``
     A change of another group of the intersection that this group's phases end a steady time after has come
     (the controller's stage sequence, :class:`~spat_feed.prediction.history.ChangeLinks`): the instant of that
-    change plus each lag seen that is not yet past (a phase that went on past its lags is the case the link does not
-    know, a phase skipped: with fewer than :data:`MIN_SEEN` lags left, the methods below say).
+    change plus each lag seen that is not yet past, nor before the published ``minEndTime`` (a phase that went on
+    past its lags is the case the link does not know, a phase skipped; a ``minEndTime`` held past the usual lag says
+    the controller extends the phase, and the longer lags seen say by how much: the usual lag held at ``minEndTime``
+    put such reds 6 s early in ``test_a_link_whose_lags_the_published_min_end_has_passed_speaks_by_the_lags_left``;
+    with fewer than :data:`MIN_SEEN` lags left, the methods below say).
 ``resumed``
     The published ``minEndTime`` was held (moved later with the clock) and runs again: it plus each excess
     (end - minEndTime) seen of resumed phases of the class; pooled half and half with ``state`` where that speaks
@@ -511,7 +514,7 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
             given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
     if cycle is not None and current:
         linked = np.asarray(cycle.linked_ends_unix_s or cycle.linked_end_unix_s or (), dtype=float)  # every lag seen, or (likely, late)
-        ahead = linked[linked >= now_unix_s]  # the link has not failed (the phase went on past its lags) while some are ahead
+        ahead = linked[linked >= floor_unix_s]  # the link has not failed (the phase went on past its lags, or minEndTime did) while some are ahead
         if len(ahead) >= min(MIN_SEEN, len(linked)) > 0:
             return _after(ahead, floor_unix_s, None), "linked"
         if cycle.resumed and (excess := cycle.after_resumed(cls)) and math.isfinite(published_min_unix_s):

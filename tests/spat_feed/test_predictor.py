@@ -359,6 +359,36 @@ def test_a_link_that_failed_no_longer_says_the_phase_ends_now():
     assert len(failed) > 10 and all(e >= 2.0 for m, e in failed), failed
 
 
+def test_a_link_whose_lags_the_published_min_end_has_passed_speaks_by_the_lags_left():
+    """Group 2's red ends 6 s after group 1's green does (a link), but in one cycle of 11 the controller extends it:
+    from group 1's green end on, it publishes ``minEndTime`` held 8 s ahead (moved with the clock), and the red ends
+    12-20 s after group 1's green (evenly, whole seconds). One second after group 1's green ends in such a cycle,
+    ``minEndTime`` (9 s on) is past the usual lag: the lags it leaves, the extended cycles', say when (the true law's
+    mean absolute deviation from its median: 20/9 = 2.2 s, here from the 3-4 such lags of the last 40), where the
+    usual lag held at ``minEndTime`` says 9 s on (6.1 s off); in the usual cycles the link still tells the end."""
+    rng = np.random.default_rng(3)
+    history = IntersectionHistory()
+    t, extended, usual = T0, [], []
+    for k in range(200):
+        held = k % 11 == 5
+        lag_s = float(rng.integers(12, 21)) if held else 6.0
+        start, end = t, t + 30.0 + lag_s
+        while t < start + 70.0 - 1e-9:
+            if t < end:
+                min_end = min(t + 8.0, end) if held and t - start >= 30.0 else start + 36.0
+                plan2 = UncertainPlan((RED, MovementPhaseState.UNAVAILABLE), (ChangeWindow(min_end, min_end, start + 66.0),))
+            else:
+                plan2 = state_only(GREEN, t)
+            history.record(t, {1: state_only(GREEN if t - start < 30.0 else RED, t), 2: plan2})
+            if k >= 80 and t - start == 31.0:
+                fc = forecast(plan2, t, history.stats(2))[0]
+                (extended if held else usual).append((fc.method, abs(fc.likely_unix_s - end), lag_s - 9.0))
+            t += 1.0
+    assert len(extended) == 11 and all(m == "linked" for m, _, _ in extended)
+    assert np.mean([e for _, e, _ in extended]) <= 3.5 and np.mean([at_min for _, _, at_min in extended]) > 6.0
+    assert all(m == "linked" and e == 0.0 for m, e, _ in usual)
+
+
 def test_cycle_period_needs_enough_changes_and_a_real_cycle():
     rng = np.random.default_rng(1)
     assert cycle_period_s([[T0 + 60.0 * k for k in range(5)]]) is None  # too few to tell
