@@ -15,8 +15,11 @@ Where the samples come from, in the order they are trusted (each *method* names 
 ``linked``
     A change of another group of the intersection that this group's phases end a steady time after has come
     (the controller's stage sequence, :class:`~spat_feed.prediction.history.ChangeLinks`): the instant of that
-    change plus each lag seen that is not yet past (a phase that went on past its lags is the case the link does not
-    know, a phase skipped: with fewer than :data:`MIN_SEEN` lags left, the methods below say).
+    change plus each lag seen that is not yet past, nor before the published ``minEndTime`` (a phase that went on
+    past its lags is the case the link does not know, a phase skipped; a ``minEndTime`` held past the usual lag says
+    the controller extends the phase, and the longer lags seen say by how much: the usual lag held at ``minEndTime``
+    put such reds 6 s early in ``test_a_link_whose_lags_the_published_min_end_has_passed_speaks_by_the_lags_left``;
+    with fewer than :data:`MIN_SEEN` lags left, the methods below say).
 ``resumed``
     The published ``minEndTime`` was held (moved later with the clock) and runs again: it plus each excess
     (end - minEndTime) seen of resumed phases of the class; pooled half and half with ``state`` where that speaks
@@ -53,7 +56,10 @@ the window law (pooled into ``resumed``, ``state`` and ``duration``; the method 
 ``published``
     The controller's window is exact (``maxEndTime - minEndTime`` under :data:`EXACT_S`): then.
 ``window``
-    No history yet and a finite published window: evenly spread in ``[minEndTime, maxEndTime]``.
+    A finite published window, and no duration seen that the phase has not outlasted: the window law alone (below:
+    the readings of past phases with a like window, each phase's length then saying nothing); with no such readings
+    yet, evenly spread in ``[minEndTime, maxEndTime]`` (on 2019-05-01 a red of 71 s that had outlasted its 13
+    minutes of history, ``maxEndTime`` 163 s ahead, was put 66 s late so).
 
 Between ``cycle`` and ``duration`` (``state`` is the latter, conditioned) the one that has erred less for that (group, class) wins: at each phase end the
 likely end each would have said :data:`SCORE_AHEAD_S` before it is scored (:func:`scored_errors_s`, a running mean kept by
@@ -428,7 +434,9 @@ def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_
     ``maxEndTime`` were), each moved to now: ``max(now, min_end)`` plus how long after ``max(its reading, its
     minEndTime)`` its phase ended. A phase speaks by as many readings as lie near (a kernel weight on how alike its
     course was): on Antwerp 2019-05-01 (first 100 min) one reading per phase, the nearest 16 or 32 phases, erred
-    more (ratio to the baseline 0.636 / 0.635 against 0.627). None with fewer than :data:`MIN_SEEN` such readings. [s]
+    more (ratio to the baseline 0.636 / 0.635 against 0.627). A phase that has outlasted every one seen is read by its
+    window alone: all the readings, the nearest by ``minEndTime`` and ``maxEndTime`` (how long they had run says
+    nothing of a phase longer than any of theirs). None with fewer than :data:`MIN_SEEN` such readings. [s]
 
     Examples
     --------
@@ -441,10 +449,14 @@ def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_
     el, to_min, to_max, state, excess, duration = law
     elapsed_s, floor_unix_s = now_unix_s - since_unix_s, max(now_unix_s, min_end_unix_s)
     alive = duration > elapsed_s  # phases this one has outlasted say nothing
+    if outlasted := not alive.any():  # ... unless it has outlasted them all: then the window alone speaks
+        alive = np.ones_like(alive)
     n = int(np.count_nonzero(alive))
     if n < MIN_SEEN:
         return None
-    d = np.abs(el - elapsed_s) + np.abs(to_min - (floor_unix_s - now_unix_s)) + np.abs(to_max - (max_end_unix_s - now_unix_s))
+    d = np.abs(to_min - (floor_unix_s - now_unix_s)) + np.abs(to_max - (max_end_unix_s - now_unix_s))
+    if not outlasted:
+        d += np.abs(el - elapsed_s)
     d += OTHER_STATE_S * (state != state_id)
     d[~alive] = np.inf
     k = min(WINDOW_NEIGHBOURS, n)
@@ -502,7 +514,7 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
             given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
     if cycle is not None and current:
         linked = np.asarray(cycle.linked_ends_unix_s or cycle.linked_end_unix_s or (), dtype=float)  # every lag seen, or (likely, late)
-        ahead = linked[linked >= now_unix_s]  # the link has not failed (the phase went on past its lags) while some are ahead
+        ahead = linked[linked >= floor_unix_s]  # the link has not failed (the phase went on past its lags, or minEndTime did) while some are ahead
         if len(ahead) >= min(MIN_SEEN, len(linked)) > 0:
             return _after(ahead, floor_unix_s, None), "linked"
         if cycle.resumed and (excess := cycle.after_resumed(cls)) and math.isfinite(published_min_unix_s):
@@ -522,7 +534,9 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         if own is not None:
             return own
     if math.isfinite(published_max_unix_s) and published_max_unix_s > floor_unix_s:
-        return np.linspace(floor_unix_s, published_max_unix_s, 9), "window"
+        # the window law alone (the phase has outlasted every duration seen), else the window evenly
+        by_window = _pooled(np.empty(0), "", cycle, cls, since, now_unix_s, published_min_unix_s, published_max_unix_s)[0] if cycle is not None and current else ()
+        return (by_window if len(by_window) else np.linspace(floor_unix_s, published_max_unix_s, 9)), "window"
     if math.isfinite(published_max_unix_s):
         return np.array([max(floor_unix_s, published_max_unix_s)]), "window"
     return None if not durations else (np.array([inf]), "duration")

@@ -256,6 +256,38 @@ def test_a_published_window_is_read_by_the_readings_of_past_phases_with_a_like_w
     assert np.mean(pooled) < 0.6 * np.mean(plain), (np.mean(pooled), np.mean(plain), np.mean(inside))
 
 
+def test_a_phase_that_outlasted_every_one_seen_is_read_by_its_window():
+    """An actuated controller that publishes each red's window: ``minEndTime`` a draw ``U`` (0-4 s, evenly) before the
+    real end, ``maxEndTime`` 180 s after the red began (a far, soft bound, as K648 publishes before demand comes). After
+    40 reds of 20-40 s comes one of 90 s (demand the history has not seen). Once it has outlasted every red seen, the
+    durations say nothing; the readings of past reds with a like window do: the end comes 0-4 s after ``minEndTime``,
+    so the forecast errs about what the true law does (its mean absolute deviation from its median: 1 s), where the
+    window spread evenly (what it said before) puts the end half way to ``maxEndTime``, ~50 s off. Ten such
+    afternoons; every reading of the long red from 41 s in until its ``minEndTime``."""
+    errors, spread_errors, early = [], [], 0
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        history = IntersectionHistory()
+        t = T0
+        for k in range(41):
+            red_s, u = (90.0 if k == 40 else float(rng.integers(20, 41))), float(rng.uniform(0.0, 4.0))
+            start, end = t, t + red_s
+            while t < end - 1e-9:
+                min_end, max_end = end - u, start + 180.0
+                plan = UncertainPlan((RED, MovementPhaseState.UNAVAILABLE), (ChangeWindow(min_end, min_end, max_end),))
+                history.record(t, {1: plan})
+                if k == 40 and t - start > 40.0 and t < min_end:
+                    fc = forecast(plan, t, history.stats(1))[0]
+                    assert fc.method == "window"
+                    errors.append(abs(fc.likely_unix_s - end))
+                    spread_errors.append(abs(0.5 * (min_end + max_end) - end))
+                    early += fc.samples_unix_s[0] < min_end
+                t += 1.0
+            t = _drive(history, [(GREEN, 30.0)], t)
+    assert len(errors) > 300 and early == 0
+    assert np.mean(errors) <= 1.5 and np.mean(spread_errors) > 40.0, (np.mean(errors), np.mean(spread_errors))
+
+
 @pytest.mark.parametrize("level", [0.5, 0.8, 0.9])
 def test_interval_coverage_of_a_forecast_that_is_the_true_law_is_its_level(level):
     """A change that comes at a whole second drawn evenly from 10..49, seen at the first reading after it (the one
@@ -325,6 +357,36 @@ def test_a_link_that_failed_no_longer_says_the_phase_ends_now():
                 t += 1.0
     assert len(linked) > 30 and all(m == "linked" and abs(e - 1.0) <= 1.0 for m, e in linked), [x for x in linked if x != ("linked", 1.0)]
     assert len(failed) > 10 and all(e >= 2.0 for m, e in failed), failed
+
+
+def test_a_link_whose_lags_the_published_min_end_has_passed_speaks_by_the_lags_left():
+    """Group 2's red ends 6 s after group 1's green does (a link), but in one cycle of 11 the controller extends it:
+    from group 1's green end on, it publishes ``minEndTime`` held 8 s ahead (moved with the clock), and the red ends
+    12-20 s after group 1's green (evenly, whole seconds). One second after group 1's green ends in such a cycle,
+    ``minEndTime`` (9 s on) is past the usual lag: the lags it leaves, the extended cycles', say when (the true law's
+    mean absolute deviation from its median: 20/9 = 2.2 s, here from the 3-4 such lags of the last 40), where the
+    usual lag held at ``minEndTime`` says 9 s on (6.1 s off); in the usual cycles the link still tells the end."""
+    rng = np.random.default_rng(3)
+    history = IntersectionHistory()
+    t, extended, usual = T0, [], []
+    for k in range(200):
+        held = k % 11 == 5
+        lag_s = float(rng.integers(12, 21)) if held else 6.0
+        start, end = t, t + 30.0 + lag_s
+        while t < start + 70.0 - 1e-9:
+            if t < end:
+                min_end = min(t + 8.0, end) if held and t - start >= 30.0 else start + 36.0
+                plan2 = UncertainPlan((RED, MovementPhaseState.UNAVAILABLE), (ChangeWindow(min_end, min_end, start + 66.0),))
+            else:
+                plan2 = state_only(GREEN, t)
+            history.record(t, {1: state_only(GREEN if t - start < 30.0 else RED, t), 2: plan2})
+            if k >= 80 and t - start == 31.0:
+                fc = forecast(plan2, t, history.stats(2))[0]
+                (extended if held else usual).append((fc.method, abs(fc.likely_unix_s - end), lag_s - 9.0))
+            t += 1.0
+    assert len(extended) == 11 and all(m == "linked" for m, _, _ in extended)
+    assert np.mean([e for _, e, _ in extended]) <= 3.5 and np.mean([at_min for _, _, at_min in extended]) > 6.0
+    assert all(m == "linked" and e == 0.0 for m, e, _ in usual)
 
 
 def test_cycle_period_needs_enough_changes_and_a_real_cycle():
