@@ -210,6 +210,7 @@ class PhaseHistory:
             return False
         if self._last_t is not None and t_unix_s <= self._last_t:
             return False  # a repeat or an older reading
+        self.ended = None  # set by the reading that ends a phase only: scored once
         state = plan if isinstance(plan, MovementPhaseState) else published_state(plan, t_unix_s)
         window = None if isinstance(plan, MovementPhaseState) else published_window(plan, t_unix_s)
         min_end = None if window is None else window[0]
@@ -220,7 +221,6 @@ class PhaseHistory:
             gap = False
         was_resumed = self._resumed
         if changed or gap:
-            self.ended = None
             if changed and not gap and self._current is not None:
                 if self._exact:
                     before = self.stats()

@@ -481,3 +481,29 @@ def test_a_light_view_is_the_same_from_its_shortcuts_as_from_the_plain_path(path
     for t, r in readings:
         phases = ob.predicted_phases(r.plan, t, ob.HORIZON_S, r.cycle)
         assert ob._scenario_windows(phases, t, ob.HORIZON_S) == tuple(ob._windows(phases, t, ob.HORIZON_S, q, q) for q in ob.SCENARIO_LEVELS)
+
+
+def test_a_phase_seen_whole_is_scored_once_whatever_else_its_successors_readings_change():
+    """The cycle and the durations are scored on each phase seen whole, once (``IntersectionHistory._score``). A
+    reading that changes the history without a change of phase (here each green's exact end, published 5 s ahead)
+    used to score the phase before it again: the red that ended 25 s earlier counted twice, and on 2019-05-17 a spurious
+    cycle won classes by it. Counted by hand: 40 cycles of red 40 s, green 30 s, amber 5 s are 120 phases, of which all
+    but the first (its start unseen) and the last (its end unseen) are seen whole: 118."""
+    scored = []
+
+    class Counted(IntersectionHistory):
+        def _score(self, group, ended):
+            scored.append(ended[:3])
+            super()._score(group, ended)
+
+    history = Counted()
+    t = T0
+    for _ in range(40):
+        for state, duration in ((RED, 40.0), (GREEN, 30.0), (AMBER, 5.0)):
+            end = t + duration
+            for k in range(int(duration)):
+                now = t + k
+                window = ChangeWindow(end, end, end) if state is GREEN and end - now <= 5.0 else ChangeWindow(now, now, math.inf)
+                history.record(now, {1: UncertainPlan((state, MovementPhaseState.UNAVAILABLE), (window,))})
+            t = end
+    assert len(scored) == 118 and len(set(scored)) == 118
