@@ -11,6 +11,7 @@ import pytest
 
 from advisory.advice.advisor import advise
 from advisory.advice.behind import GIVE_UP_SLACK_S, cut_behind, cut_off, gives_up_green, platoon_through, pushed_past
+from advisory.advice.choice import WAIT_CAP_S
 from advisory.advice.kinematics import KEEP_MODES, crossing_time_s
 from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, estimate, followers, normal_drive_s
 from advisory.advice.queue_words import said_truly, tail_glide
@@ -751,6 +752,32 @@ def test_a_slow_plan_over_a_green_line_prices_the_cars_it_cuts_off_behind_it():
     assert all(a >= b for a, b in zip(waits, waits[1:]))  # the faster the plan, the fewer cut off (what the board's search needs)
     red = LightView(1, -7.0, red_windows_s=((-1.0, 29.0), (59.0, 89.0)))  # red now: its next green is far off
     assert cut_behind(red, obs, hold, params, four, 900 / 3600, 0.5) == 0.0
+
+
+def test_a_slow_plan_towards_an_actuated_green_prices_the_timings_in_which_a_normal_drive_makes_it():
+    """An actuated light green now, past its minimum: it may turn red any second (the sure view red from now), the
+    red's end not known, and its equally likely timings (``scenario_red_windows_s``) turn it red 10 s or 30 s from now.
+    A car 387 m out at 9.6 m/s, told to coast, a connected car 20 m behind it at its speed: a normal drive crosses in
+    18.0 s, the one behind it 1.4 s later; behind the coasting car nobody crosses before 30 s. In the timing whose red
+    begins at 30 s the follower loses the green to the plan and waits the red (no end known: ``WAIT_CAP_S``); in the
+    other one both drives meet the red: half of 150 s expected. Before, the wait was priced on the likely timing alone
+    (red from 15 s, a normal drive meeting it too): nothing, and the coast stood. Traced in SUMO (paper_s400 actuated
+    900 veh/h, 50 %, seed 2, ``main.15``): told "Lift off and coast." 387 m before the second light, green then, it
+    crawled on at 10 -> 5 m/s through the rest of that green, the red after it and the next green, which the controller
+    ended (no car at its loop) while the car was 73 m short of the line; it crossed 31 s later than unadvised, the cars
+    behind it with it (10 greens at that light ended so over five seeds, none unadvised)."""
+    params = AdvisorParams()
+    light = LightView(2, 387.0, red_windows_s=((0.0, math.inf),), likely_red_windows_s=((15.0, math.inf),),
+                      late_red_windows_s=((30.0, math.inf),), scenario_red_windows_s=(((10.0, math.inf),), ((30.0, math.inf),)))  # fmt: skip
+    obs = Observation(9.6, 24.6, (light,))
+    coast = Advice("coast", "red_ahead", 9.6, light_id=2)
+    one = [Probe(-20.0, 9.6)]
+    assert normal_drive_s(387.0, 9.6, 24.6, 2.0) == pytest.approx(18.0, abs=0.05)
+    assert cut_behind(light, obs, coast, params, one) == pytest.approx(0.5 * WAIT_CAP_S)
+    assert cut_behind(replace(light, scenario_red_windows_s=None), obs, coast, params, one) == 0.0  # the likely timing alone
+    early = replace(light, scenario_red_windows_s=(((10.0, math.inf),), ((15.0, math.inf),)))  # a normal drive never makes it
+    assert cut_behind(early, obs, coast, params, one) == 0.0
+    assert cut_behind(light, obs, coast, params) == 0.0  # nobody behind
 
 
 def test_the_board_paces_a_plan_that_would_cut_off_the_cars_behind():
