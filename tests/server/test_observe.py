@@ -428,6 +428,28 @@ def test_a_phase_nobody_can_read_is_no_data_not_a_red():
     assert red.unknown_windows_s == () and advise(Observation(50 / 3.6, 50 / 3.6, (red,)))[0].action in ("stop", "coast")
 
 
+def test_no_plan_slows_the_car_for_a_second_light_in_a_phase_nobody_can_read():
+    """The same group as the second light (2019-05-01 groups 5-6 at 1556735004.609, +21 %, and three more pairs at
+    +17..+24 %): light 1 green as the car goes, light 2 (group 6) green for 7 s more, then "unavailable" for ~65 s.
+    A normal drive reaches light 2 in the unknown phase. In the choice's timings that phase blocked like a red, so
+    "Second light: red in 7 seconds. Slow down to 34 km/h" was the cheapest plan, and the car was slowed for a phase
+    the regular driver went through. Now light 2 is not planned for (nothing is known of it where the car gets
+    there): no speed change is asked for it, and the advice is light 1's own (green all the way: no slowing)."""
+    corridor = make_scenario("paper_s400").corridor
+    ix1, ix2 = corridor.intersections[0], corridor.intersections[1]
+    h = PhaseHistory()
+    t = feed(h, T0, [(GREEN, 8), (UNAVAILABLE, 65)] * 4)
+    stats = h.update(t, published(GREEN, t + 7.0, t + 7.0))  # light 2's green has begun: ends in 7 s
+    x_m = ix1.stop_line_m - 160.0  # light 1 160 m ahead, light 2 beyond it
+    second = light_view(ix2, PlanReading(published(GREEN, t + 7.0, t + 7.0), cycle=stats), x_m, t)
+    first = light_view(ix1, PlanReading(published(GREEN, t + 60.0, t + 90.0)), x_m, t)  # green until 60 s at least
+    v = 48 / 3.6
+    assert second.unknown_at(second.distance_m / v) and not first.is_red_at(first.distance_m / v)  # the case's shape
+    advice, _ = advise(Observation(v, 50 / 3.6, (first, second), position_m=x_m))
+    assert advice.action not in ("slow_down", "brake_to", "coast", "ease_off", "stop") and advice.light_ahead in (None, 1)
+    assert advice.target_speed_mps is None or advice.target_speed_mps >= v - 0.5
+
+
 def test_a_red_that_ended_within_the_clock_uncertainty_may_still_be_red():
     """A feed clock that may be 3 s off: a red that ended 1 s ago by the feed's clock may still be red on ours for
     2 s. It used to vanish from the view (windows were widened only after the ended ones were dropped): the display
