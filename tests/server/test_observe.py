@@ -742,6 +742,34 @@ def test_the_exact_end_of_a_go_phase_s_green_is_not_its_red_s_start():
     assert view.red_windows_s[0][0] == pytest.approx(red_at - t) and view.likely_red_windows_s[0][0] == pytest.approx(red_at - t)
 
 
+def test_an_exact_end_of_a_go_phase_no_history_explains_may_be_its_green_s():
+    """2019-05-17 group 7 at 1558112892.65 (102.8 s lost), t = 14 s: the go phase ("unavailable") published its green's
+    exact end 6 s ahead; no end of this group's go phase had been first published about as far ahead (the history's
+    lags, ``exact_lags_s``, were empty), so it was read as the red's start at confidence 1, exact: "Red in 6 seconds",
+    "Prepare to stop" 88 m out, for an amber that began at that end and a red 3 s later, which the regular driver
+    cleared. Which end it states is not known then: the red may begin at it (the amber's end) or an amber after it
+    (the green's), an amber as long as a real one (at most ``EXACT_LAG_MAX_S``). The sure view keeps the end itself
+    (no plan reaches the line where the red may be on); the likely red is in between, the last timing an amber later.
+    A group whose go phase always states its amber's end 3 s ahead, then a green's end first published 7 s ahead."""
+    from spat_feed.prediction.predictor import EXACT_LAG_MAX_S
+
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    h, t = PhaseHistory(), T0
+    for _ in range(12):  # go phase 23 s (its amber's exact end published 3 s ahead), red 40 s
+        red_at = t + 23.0
+        for k in range(23):
+            h.update(t + k, published(UNAVAILABLE, red_at, red_at) if k >= 20 else published(UNAVAILABLE, t + 10.0, t + 30.0))
+        t = feed(h, red_at, [(RED, 40)])
+    plan = published(UNAVAILABLE, t + 13.0, t + 13.0)  # 6 s into a go phase: its green's end 7 s ahead
+    for k in range(7):
+        stats = h.update(t + k, published(UNAVAILABLE, t + 10.0, t + 30.0) if k < 6 else plan)
+    assert stats.exact_lags_s == ()  # no end of its go phase first published this far ahead
+    view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t + 6.0)
+    assert view.fresh and view.red_windows_s[0][0] == pytest.approx(7.0)  # never later than the end (sure)
+    assert 7.0 < view.likely_red_windows_s[0][0] < 7.0 + EXACT_LAG_MAX_S  # was 7.0: exact, the red's start
+    assert max(w[0][0] for w in view.scenario_red_windows_s) == pytest.approx(7.0 + EXACT_LAG_MAX_S, abs=0.5)
+
+
 def test_the_views_and_timings_are_made_as_the_views_own_steps_make_them():
     """The three views' windows (``_view_windows``: earliest to latest, likely, latest) and each equally likely
     timing's (``_scenario_windows``), each made for all at once in one kernel, are the ones the views' own steps make
