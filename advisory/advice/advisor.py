@@ -56,6 +56,20 @@ def _past_next_green(light: LightView, obs: Observation, params: AdvisorParams) 
     return len(starts) >= 2 and normal_crossing_s(light.distance_m, obs, params) > starts[1]
 
 
+def _known_ahead(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> tuple[LightView, ...]:
+    """The lights the advice can plan for: those before the first that a normal drive (no advice: speeding up to the
+    limit at ``normal_accel_mps2``) reaches in a phase whose state nobody knows (``LightView.unknown_windows_s``: J2735
+    "unavailable" that the group's history cannot read). What the car meets there is no basis for a plan: in the
+    lights' timings such a phase blocks like a red, so a plan priced through it slowed the car for it, or for the green
+    after it, where the regular driver went through (2019-05-01 groups 5-6: group 6 publishes a green of ~8 s, then
+    "unavailable" for ~65 s, no red at all; "Second light: red in 7 seconds. Slow down to 34 km/h": +17..+24 % in four
+    approaches). None left (the next light itself): no data, said so."""
+    for i, light in enumerate(lights):
+        if light.unknown_windows_s and light.unknown_at(normal_crossing_s(light.distance_m, obs, params)):
+            return lights[:i]
+    return lights
+
+
 def _binding(lights: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> int:
     """Which light the advice is for (index into ``lights``): the first one that the car, holding its speed, would
     not cross on green (with the after-red margin); the next light if it makes them all. The countdown names it."""
@@ -185,13 +199,9 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
         best = vts.size - 1  # the plan followed now, unless another is better by more than a new reaction costs
     elif allowed[stop] and cost[stop] <= cost[best] + reaction_usd:
         best = stop  # as good a plan as any (within a reaction's worth): the stop it comes to, said
-    if p_stop[best] >= 0.5 and any(light.unknown_at(float(cross[normal, j])) for j, light in enumerate(usable)):
-        # what comes as the car goes is a phase whose state nobody knows: no stop is asked for it (the regular driver
-        # went through it), and no plan slows the car for the green after it: no data, said so
-        return Advice("none", "no_spat", light_red=red, seconds_to_change_s=to_change)
     if best == normal:  # nothing does better than driving on as the driver would (the red may come late): no speed advice
         arrival = float(cross[normal, 0])
-        reason = "no_spat" if nxt.unknown_at(arrival) else "tight_green" if not red and to_change is not None and arrival < to_change else "low_confidence"
+        reason = "tight_green" if not red and to_change is not None and arrival < to_change else "low_confidence"
         return Advice("none", reason, light_red=red, seconds_to_change_s=to_change)
     if stop_plan[best]:
         # "prepare to stop" is the plan: said when a stop must begin soon; farther out lift off (its motion until then:
@@ -246,7 +256,9 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         return Advice("none", "far_ahead", light_red=red, seconds_to_change_s=to_change)
     if nxt.distance_m < max(params.too_close_m, obs.speed_mps * params.too_close_s):
         return Advice("none", "too_close", light_red=red, seconds_to_change_s=to_change)
-    usable = tuple(light for light in obs.lights[:2] if light.fresh and light.confidence_frac >= params.min_confidence_frac)
+    usable = _known_ahead(tuple(light for light in obs.lights[:2] if light.fresh and light.confidence_frac >= params.min_confidence_frac), obs, params)
+    if not usable:  # a normal drive meets the next light in a phase whose state nobody knows: no stop asked, no plan
+        return Advice("none", "no_spat", light_red=red, seconds_to_change_s=to_change)
     last = memory.last
     if any(light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in usable):
         return _choose(obs, usable, last, params, red, to_change)  # uncertain timing: the plan of least expected cost

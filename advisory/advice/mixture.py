@@ -53,6 +53,19 @@ def wide_levels(n: int) -> np.ndarray:
     return np.array([round(level * (n - 1) / (IMPLIED_TIMINGS - 1)) for level in WIDE_LEVELS], dtype=np.int64)
 
 
+WIDE_FLOOR_FRAC = 0.15
+"""The wide component puts a change no nearer its median instant than this share of the time to it, at its outer
+levels (less at its inner ones): a change 20 s ahead known to no better than 2-3 s. [-]"""
+
+
+@njit(cache=True, inline="always")
+def _spread(dev, t_med, q):
+    """A change's deviation from its median instant ``t_med`` [s] in the wide component: ``dev`` (the forecast's,
+    stretched), or at least ``WIDE_FLOOR_FRAC * t_med * q`` on the side of level ``q`` (-1 .. 1). [s]"""
+    floor = WIDE_FLOOR_FRAC * max(t_med, 0.0) * q
+    return floor if abs(floor) > abs(dev) else dev
+
+
 @njit(cache=True, error_model="numpy")
 def wide_component(timings, levels, stretch):
     """The wide component of one light's mixture: a copy of the forecast's equally likely timings (packed: ``timings``
@@ -80,7 +93,8 @@ def wide_component(timings, levels, stretch):
         for w in range(c):
             a, b = timings[i, w, 0], timings[i, w, 1]
             am, bm = (timings[med, w, 0], timings[med, w, 1]) if w < c_med else (a, b)
-            b2 = bm + stretch * (b - bm) if np.isfinite(b) and np.isfinite(bm) else b
+            q = 2.0 * (i + 0.5) / n - 1.0  # the level's side and distance from the median, -1 .. 1
+            b2 = bm + _spread(stretch * (b - bm), bm, q) if np.isfinite(b) and np.isfinite(bm) else b
             if a <= 0.0:  # red on now: its end no earlier than every timing says
                 e = np.inf
                 for r in range(n):
@@ -88,7 +102,7 @@ def wide_component(timings, levels, stretch):
                         e = timings[r, w, 1]
                 a2, b2 = a, (e if e > b2 else b2)
             else:
-                a2 = am + stretch * (a - am) if np.isfinite(a) and np.isfinite(am) else a
+                a2 = am + _spread(stretch * (a - am), am, q) if np.isfinite(a) and np.isfinite(am) else a
                 if np.isfinite(a) and np.isfinite(am) and 0.0 > a2:
                     a2 = 0.0
                 if a2 > b2:

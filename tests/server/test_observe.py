@@ -428,6 +428,28 @@ def test_a_phase_nobody_can_read_is_no_data_not_a_red():
     assert red.unknown_windows_s == () and advise(Observation(50 / 3.6, 50 / 3.6, (red,)))[0].action in ("stop", "coast")
 
 
+def test_no_plan_slows_the_car_for_a_second_light_in_a_phase_nobody_can_read():
+    """The same group as the second light (2019-05-01 groups 5-6 at 1556735004.609, +21 %, and three more pairs at
+    +17..+24 %): light 1 green as the car goes, light 2 (group 6) green for 7 s more, then "unavailable" for ~65 s.
+    A normal drive reaches light 2 in the unknown phase. In the choice's timings that phase blocked like a red, so
+    "Second light: red in 7 seconds. Slow down to 34 km/h" was the cheapest plan, and the car was slowed for a phase
+    the regular driver went through. Now light 2 is not planned for (nothing is known of it where the car gets
+    there): no speed change is asked for it, and the advice is light 1's own (green all the way: no slowing)."""
+    corridor = make_scenario("paper_s400").corridor
+    ix1, ix2 = corridor.intersections[0], corridor.intersections[1]
+    h = PhaseHistory()
+    t = feed(h, T0, [(GREEN, 8), (UNAVAILABLE, 65)] * 4)
+    stats = h.update(t, published(GREEN, t + 7.0, t + 7.0))  # light 2's green has begun: ends in 7 s
+    x_m = ix1.stop_line_m - 160.0  # light 1 160 m ahead, light 2 beyond it
+    second = light_view(ix2, PlanReading(published(GREEN, t + 7.0, t + 7.0), cycle=stats), x_m, t)
+    first = light_view(ix1, PlanReading(published(GREEN, t + 60.0, t + 90.0)), x_m, t)  # green until 60 s at least
+    v = 48 / 3.6
+    assert second.unknown_at(second.distance_m / v) and not first.is_red_at(first.distance_m / v)  # the case's shape
+    advice, _ = advise(Observation(v, 50 / 3.6, (first, second), position_m=x_m))
+    assert advice.action not in ("slow_down", "brake_to", "coast", "ease_off", "stop") and advice.light_ahead in (None, 1)
+    assert advice.target_speed_mps is None or advice.target_speed_mps >= v - 0.5
+
+
 def test_a_red_that_ended_within_the_clock_uncertainty_may_still_be_red():
     """A feed clock that may be 3 s off: a red that ended 1 s ago by the feed's clock may still be red on ours for
     2 s. It used to vanish from the view (windows were widened only after the ended ones were dropped): the display
@@ -718,6 +740,34 @@ def test_the_exact_end_of_a_go_phase_s_green_is_not_its_red_s_start():
     stats, plan, red_at = cycle(both=False, last=True)  # the amber's end alone: the red's start
     view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t)
     assert view.red_windows_s[0][0] == pytest.approx(red_at - t) and view.likely_red_windows_s[0][0] == pytest.approx(red_at - t)
+
+
+def test_an_exact_end_of_a_go_phase_no_history_explains_may_be_its_green_s():
+    """2019-05-17 group 7 at 1558112892.65 (102.8 s lost), t = 14 s: the go phase ("unavailable") published its green's
+    exact end 6 s ahead; no end of this group's go phase had been first published about as far ahead (the history's
+    lags, ``exact_lags_s``, were empty), so it was read as the red's start at confidence 1, exact: "Red in 6 seconds",
+    "Prepare to stop" 88 m out, for an amber that began at that end and a red 3 s later, which the regular driver
+    cleared. Which end it states is not known then: the red may begin at it (the amber's end) or an amber after it
+    (the green's), an amber as long as a real one (at most ``EXACT_LAG_MAX_S``). The sure view keeps the end itself
+    (no plan reaches the line where the red may be on); the likely red is in between, the last timing an amber later.
+    A group whose go phase always states its amber's end 3 s ahead, then a green's end first published 7 s ahead."""
+    from spat_feed.prediction.predictor import EXACT_LAG_MAX_S
+
+    ix = make_scenario("paper_s400").corridor.intersections[0]
+    h, t = PhaseHistory(), T0
+    for _ in range(12):  # go phase 23 s (its amber's exact end published 3 s ahead), red 40 s
+        red_at = t + 23.0
+        for k in range(23):
+            h.update(t + k, published(UNAVAILABLE, red_at, red_at) if k >= 20 else published(UNAVAILABLE, t + 10.0, t + 30.0))
+        t = feed(h, red_at, [(RED, 40)])
+    plan = published(UNAVAILABLE, t + 13.0, t + 13.0)  # 6 s into a go phase: its green's end 7 s ahead
+    for k in range(7):
+        stats = h.update(t + k, published(UNAVAILABLE, t + 10.0, t + 30.0) if k < 6 else plan)
+    assert stats.exact_lags_s == ()  # no end of its go phase first published this far ahead
+    view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t + 6.0)
+    assert view.fresh and view.red_windows_s[0][0] == pytest.approx(7.0)  # never later than the end (sure)
+    assert 7.0 < view.likely_red_windows_s[0][0] < 7.0 + EXACT_LAG_MAX_S  # was 7.0: exact, the red's start
+    assert max(w[0][0] for w in view.scenario_red_windows_s) == pytest.approx(7.0 + EXACT_LAG_MAX_S, abs=0.5)
 
 
 def test_the_views_and_timings_are_made_as_the_views_own_steps_make_them():
