@@ -39,7 +39,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from spat_feed.prediction.history import IntersectionHistory
+from spat_feed.prediction.history import IntersectionHistory, past_its_events
 from spat_feed.prediction.predictor import forecast
 from spat_feed.timing.messages import plan_from_movement, to_unix_s
 from spat_feed.timing.plans import PhaseClass, phase_class
@@ -68,6 +68,8 @@ def predictions(snapshots) -> dict[tuple[int, int], list[tuple]]:
         history = histories.setdefault(ix.id, IntersectionHistory())
         history.record(t, plans)
         for g, plan in plans.items():
+            if past_its_events(plan, t):  # no reading of the phase now, as the history takes it
+                continue
             stats = history.stats(g)
             cls = phase_class(plan.states[sum(1 for c in plan.changes if c.max_end_s <= t)])
             fc = forecast(plan, t, stats)

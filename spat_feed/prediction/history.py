@@ -38,6 +38,7 @@ from spat_feed.timing.plans import (
     PhaseClass,
     Plan,
     phase_class,
+    published_index,
     published_state,
     published_window,
 )
@@ -128,6 +129,16 @@ class CycleStats:
         return total if cls is not None and cls == self.current and seen else None
 
 
+def past_its_events(plan: Plan | MovementPhaseState | None, t_unix_s: float) -> bool:
+    """Whether a reading at ``t_unix_s`` is past every change it publishes (each ``maxEndTime`` at or before it): it
+    says what ended, not the phase now, so a history takes it as no reading. (Read as a phase, it is a 1 s "unknown"
+    after each phase so ended: SUMO stamps a phase due to switch at that step with ``maxEndTime`` = the stamp, 2 % of
+    its readings; the group's cycle then went red -> unknown -> red and never green, its reds' likely end 150-200 s
+    out where SUMO published a window ending in 43 s. None in the three recordings.)"""
+    changes = getattr(plan, "changes", ())
+    return bool(changes) and not isinstance(plan, FixedTimePlan) and published_index(plan, t_unix_s) == len(changes)
+
+
 def _quantile(sorted_s: Sequence[float], q: float) -> float:
     """The ``q`` quantile of sorted samples (nearest rank, up: conservative for a late end)."""
     return sorted_s[min(len(sorted_s) - 1, max(0, math.ceil(q * len(sorted_s)) - 1))]
@@ -208,8 +219,8 @@ class PhaseHistory:
         whether the history changed (a new phase seen: the :meth:`stats` of before are out of date)."""
         if plan is None or isinstance(plan, FixedTimePlan):
             return False
-        if self._last_t is not None and t_unix_s <= self._last_t:
-            return False  # a repeat or an older reading
+        if self._last_t is not None and t_unix_s <= self._last_t or past_its_events(plan, t_unix_s):
+            return False  # a repeat or an older reading, or one that says nothing of the phase now
         self.ended = None  # set by the reading that ends a phase only: scored once
         state = plan if isinstance(plan, MovementPhaseState) else published_state(plan, t_unix_s)
         window = None if isinstance(plan, MovementPhaseState) else published_window(plan, t_unix_s)

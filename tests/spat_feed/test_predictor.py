@@ -507,3 +507,31 @@ def test_a_phase_seen_whole_is_scored_once_whatever_else_its_successors_readings
                 history.record(now, {1: UncertainPlan((state, MovementPhaseState.UNAVAILABLE), (window,))})
             t = end
     assert len(scored) == 118 and len(set(scored)) == 118
+
+
+def test_a_reading_stamped_at_its_phase_s_latest_end_is_not_an_unknown_phase():
+    """SUMO's source stamps a phase due to switch at that step with ``maxEndTime`` = the stamp (2 % of its readings).
+    Taken as a phase, each such reading was a 1 s "unknown" after each amber and red, and the cycle went red ->
+    unknown -> red, never green: a red published to end within 9 s was forecast to be followed by another red. Here
+    each phase publishes its exact end (red 17 s, green 20 s, amber 4 s); the forecast 8 s into a red chains red,
+    green, amber at those durations."""
+    history = IntersectionHistory()
+    t = T0
+    cycle = [(RED, 17.0), (GREEN, 20.0), (AMBER, 4.0)]
+    for _ in range(8):
+        for state, duration_s in cycle:
+            end = t + duration_s
+            for k in range(1, int(duration_s) + 1):  # readings up to and including the one stamped at the end
+                history.record(t + k, {1: UncertainPlan((state, MovementPhaseState.UNAVAILABLE), (ChangeWindow(end, end, end),))})
+            t = end
+    red_end = t + 17.0
+    for k in range(1, 9):
+        history.record(t + k, {1: UncertainPlan((RED, MovementPhaseState.UNAVAILABLE), (ChangeWindow(red_end, red_end, red_end),))})
+    now = t + 8.0
+    stats = history.stats(1)
+    assert PhaseClass.UNKNOWN not in stats.durations_s and stats.following[PhaseClass.RED] is PhaseClass.GREEN
+    changes = forecast(state_only(RED, now), now, stats)
+    assert [c.ends for c in changes[:3]] == [PhaseClass.RED, PhaseClass.GREEN, PhaseClass.AMBER]
+    # the red's end, dated by the first reading that shows the green (1 s after it): 17 s in, 9-10 s from now
+    assert now + 9.0 <= changes[0].likely_unix_s <= now + 10.0
+    assert changes[1].likely_unix_s - changes[0].likely_unix_s == pytest.approx(20.0, abs=1.0)
