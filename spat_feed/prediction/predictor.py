@@ -94,6 +94,7 @@ from spat_feed.timing.plans import PhaseClass, UncertainPlan, phase_class
 EXACT_LAG_MAX_S = 6.0
 """The longest amber (MUTCD 4D.26): how long after an exact end of a go phase published as "unavailable" its red may
 begin, before the group's history says (:func:`current_end`). [s]"""
+_UNKNOWN_LAGS_S = tuple(np.linspace(0.0, EXACT_LAG_MAX_S, 7).tolist())  # that lag, 0 .. EXACT_LAG_MAX_S, equally likely [s]
 EXACT_S = 0.5
 """A published window narrower than this is exact (fixed-time, exact SPaT): the change comes then. [s]"""
 
@@ -510,7 +511,7 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         if not lags and cls is PhaseClass.UNKNOWN and current:
             # a go phase published as one state ("unavailable"), before its history has told which end it states:
             # its green's (the red an amber later) or its amber's (the red then), either, the amber as long as a real one
-            lags = tuple(np.linspace(0.0, EXACT_LAG_MAX_S, 7).tolist())
+            lags = _UNKNOWN_LAGS_S
         # the class changes that long after it (a go phase published as one state: its green's end, then its amber)
         return np.maximum(published_max_unix_s + np.asarray(lags or (0.0,)), floor_unix_s), "published"
     given, n_given = None, 0  # the durations of the phases of the class seen in the intersection's state now, this far in
