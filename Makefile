@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
+# pytest-xdist workers for `make test` (CI has 2 cores; the tests that start services draw ports per worker)
+TEST_JOBS ?= 2
 
 .PHONY: run test bench study feed antwerp app-figure clean
 
@@ -18,7 +20,7 @@ run: $(STAMP)
 
 test: $(STAMP)
 	sh scripts/system-deps.sh
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_JOBS) --dist worksteal
 
 study: $(STAMP)
 	$(VENV)/bin/ecodrive study --out out/study

@@ -33,11 +33,15 @@ def free_port() -> int:
     """A loopback port free now and outside the kernel's range for outgoing connections: a port from that range (what
     binding port 0 gives) may be taken by any client socket of the suite before the server binds it, or while a
     killed server is restarted on it (seen as "address already in use" on a loaded machine, issue 29). Never the same
-    port twice in one run."""
-    low = _ephemeral_low()
+    port twice in one run; under ``pytest -n N`` (``make test``) each worker draws from its own slice of the range, so
+    two workers never pick the same port between the check and the server's bind."""
+    low = max(_ephemeral_low(), 10_001)
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:] or 0)
+    width = (low - 10_000) // workers
     rng = random.Random()
     for _ in range(200):
-        port = rng.randrange(10_000, max(low, 10_001))
+        port = rng.randrange(10_000 + worker * width, 10_000 + (worker + 1) * width)
         if port in _HANDED:
             continue
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
