@@ -30,6 +30,7 @@ from spat_feed.prediction.predictor import (
     ends_given_window,
     period_fit_s,
     sample_quantile,
+    says_when,
     scored_errors_s,
 )
 from spat_feed.timing.plans import (
@@ -81,7 +82,7 @@ class CycleStats:
     resumed_excess_s: Mapping[PhaseClass, tuple[float, ...]] = field(default_factory=dict)  # end - minEnd, resumed phases
     linked_end_unix_s: tuple[float, float] | None = None  # the current phase's (likely, late) end from another group's change (:class:`ChangeLinks`)
     linked_ends_unix_s: tuple[float, ...] = ()  # the current phase's end from another group's change, one per lag seen (:class:`ChangeLinks`)
-    # per class, the readings of its phases seen whole that carried a finite window (:meth:`PhaseHistory.window_law`;
+    # per class, the readings of its phases seen whole whose window said when (:func:`says_when`, :meth:`PhaseHistory.window_law`;
     # arrays, left out of ==: they follow from the same readings as the durations)
     window_law_s: Mapping[PhaseClass, tuple] = field(default_factory=dict, compare=False)
     state_id: int = -1  # the intersection's state now (:class:`IntersectionHistory`; -1: not known)
@@ -173,7 +174,8 @@ class PhaseHistory:
     counts it down, *holds* it while it extends the phase (it moves later with the clock), and once it runs again
     (*resumed*) the phase ends at or soon after it (2019-05-01: reds within 1.5 s of it 97 % of the time, against
     36 % before any hold). For each class it keeps how long after the ``minEndTime`` of a resumed phase the phase
-    ended, reading by reading; and, for every phase seen whole, each reading that carried a finite window: how long
+    ended, reading by reading; and, for every phase seen whole, each reading whose window said when (a known
+    ``maxEndTime`` or a ``minEndTime`` ahead, :func:`~spat_feed.prediction.predictor.says_when`): how long
     the phase had run, how far ahead its ``minEndTime`` and ``maxEndTime`` were, the intersection's state, and how long
     after ``max(reading, minEndTime)`` the phase ended (:meth:`window_law`, what
     :func:`~spat_feed.prediction.predictor.ends_given_window` reads).
@@ -201,8 +203,8 @@ class PhaseHistory:
         self.ended: tuple | None = None  # the phase seen whole that the last reading ended: (class, start, end, durations and ends before it)
         self._path: list[tuple[float, int]] = []  # the phase in progress: (time since it began, the intersection's state) at each change of state
         self._paths: dict[PhaseClass, deque[tuple[float, tuple]]] = {}  # phases seen whole: (duration, their path)
-        self._window: list[tuple[float, float, float]] = []  # the phase in progress: (t, minEndTime, maxEndTime) of each reading with a finite window
-        self._windowed: dict[PhaseClass, deque[int]] = {}  # phases seen whole: how many readings with a finite window each gave its law
+        self._window: list[tuple[float, float, float]] = []  # the phase in progress: (t, minEndTime, maxEndTime) of each reading whose window says when
+        self._windowed: dict[PhaseClass, deque[int]] = {}  # phases seen whole: how many readings with a window each gave its law
         self._laws: dict[PhaseClass, tuple] = {}  # ... and those readings (:meth:`window_law`)
         self._window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, window law's mean squared error, durations'] (:meth:`_score_window`)
         self._stage_score: dict[PhaseClass, list[float]] = {}  # class -> [n, the stage's law's mean squared error, by the phase's start] (:meth:`_given_before`)
@@ -266,7 +268,7 @@ class PhaseHistory:
         self._min_end = min_end
         self._last_t = t_unix_s
         new_exact = False  # a new exact end published (the stats' ``exact_end_unix_s``, ``exact_lags_s`` change)
-        if window is not None and math.isfinite(window[1]):
+        if window is not None and says_when(*window, t_unix_s):
             self._window.append((t_unix_s, *window))
             seen = self._exact_first and abs(self._exact_first[-1][0] - window[1]) < EXACT_S
             if window[1] - window[0] < EXACT_S and window[1] >= t_unix_s and not seen:
@@ -350,9 +352,9 @@ class PhaseHistory:
         return _share(self._window_score.get(cls, (0, 0.0, 0.0)))
 
     def _window_readings(self, end_unix_s: float) -> tuple[np.ndarray, ...]:
-        """The readings with a finite window of the phase in progress, which ends at ``end_unix_s``, as arrays: how
-        long it had run, how far ahead ``minEndTime`` (0 once past) and ``maxEndTime`` were, the intersection's state,
-        how long after ``max(reading, minEndTime)`` it ended, and its duration. [s]"""
+        """The readings with a window (:func:`says_when`) of the phase in progress, which ends at ``end_unix_s``, as
+        arrays: how long it had run, how far ahead ``minEndTime`` (0 once past) and ``maxEndTime`` (``inf``: unknown)
+        were, the intersection's state, how long after ``max(reading, minEndTime)`` it ended, and its duration. [s]"""
         t, lo, hi = np.array(self._window).T
         floor = np.maximum(t, lo)
         at, states = (np.array(x) for x in zip(*self._path)) if self._path else (np.empty(0), np.empty(0, dtype=np.int64))
@@ -369,7 +371,7 @@ class PhaseHistory:
         sizes.append(len(readings[0]))
 
     def window_law(self) -> dict[PhaseClass, tuple[np.ndarray, ...]]:
-        """Per class, the readings with a finite window of its last ``keep`` phases seen whole (:meth:`_window_readings`,
+        """Per class, the readings with a window of its last ``keep`` phases seen whole (:meth:`_window_readings`,
         each of the six arrays concatenated over the phases)."""
         return dict(self._laws)
 

@@ -43,9 +43,9 @@ Where the samples come from, in the order they are trusted (each *method* names 
     Each past duration of the class from the phase's start, given that it has run this long (the empirical
     conditional distribution: durations it has already outlasted are out).
 the window law (pooled into ``resumed``, ``state`` and ``duration``; the method keeps their name)
-    Where the controller publishes a finite window, what it says is part of the forecast: of the readings of past
-    phases of the class that carried one (and outlasted how long this phase has run), the :data:`WINDOW_NEIGHBOURS`
-    nearest to the reading now, the intersection in the same state first, then by the sum of the differences in
+    Where the controller publishes a window that says when (a known ``maxEndTime``, or a ``minEndTime`` ahead:
+    :func:`says_when`), what it says is part of the forecast: of the readings of past phases of the class that
+    carried one (and outlasted how long this phase has run), the :data:`WINDOW_NEIGHBOURS` nearest to the reading now, the intersection in the same state first, then by the sum of the differences in
     seconds of how far ahead ``minEndTime`` and ``maxEndTime`` were and how long the phase had run; each says the
     phase ends as long after ``max(now, minEndTime)`` as that one did after its own (:func:`ends_given_window`).
     A held ``minEndTime`` (moved later with the clock: the controller extends the phase) and a ``maxEndTime``
@@ -56,10 +56,10 @@ the window law (pooled into ``resumed``, ``state`` and ``duration``; the method 
 ``published``
     The controller's window is exact (``maxEndTime - minEndTime`` under :data:`EXACT_S`): then.
 ``window``
-    A finite published window, and no duration seen that the phase has not outlasted: the window law alone (below:
-    the readings of past phases with a like window, each phase's length then saying nothing); with no such readings
-    yet, evenly spread in ``[minEndTime, maxEndTime]`` (on 2019-05-01 a red of 71 s that had outlasted its 13
-    minutes of history, ``maxEndTime`` 163 s ahead, was put 66 s late so).
+    A published window that says when, and no duration seen that the phase has not outlasted: the window law alone
+    (below: the readings of past phases with a like window, each phase's length then saying nothing); with no such
+    readings yet and a known ``maxEndTime``, evenly spread in ``[minEndTime, maxEndTime]`` (on 2019-05-01 a red of
+    71 s that had outlasted its 13 minutes of history, ``maxEndTime`` 163 s ahead, was put 66 s late so).
 
 Between ``cycle`` and ``duration`` (``state`` is the latter, conditioned) the one that has erred less for that (group, class) wins: at each phase end the
 likely end each would have said :data:`SCORE_AHEAD_S` before it is scored (:func:`scored_errors_s`, a running mean kept by
@@ -429,14 +429,41 @@ OTHER_STATE_S = 1e6
 difference in seconds, so the same state comes first. [s]"""
 
 
+UNBOUNDED_APART_S = 1e3
+"""What a reading with an unknown ``maxEndTime`` counts against one with a known one in the distance of
+:func:`ends_given_window` (and the other way round): more than any difference in seconds, less than another state. [s]"""
+
+
+def says_when(min_end_unix_s: float, max_end_unix_s: float, now_unix_s: float) -> bool:
+    """Whether a published window says something of when the phase ends: a known ``maxEndTime``, or a
+    ``minEndTime`` still ahead (an actuated controller's red with no call publishes no ``maxEndTime``, but counts its
+    ``minEndTime`` down; a state-only controller publishes neither, and its ``minEndTime`` is the reading's instant).
+
+    Examples
+    --------
+    >>> says_when(100.0, math.inf, 90.0), says_when(90.0, math.inf, 90.0), says_when(90.0, 120.0, 95.0)
+    (True, False, True)
+    """
+    return math.isfinite(max_end_unix_s) or min_end_unix_s > now_unix_s
+
+
+def _apart_s(to_max_s: np.ndarray, ahead_s: float) -> np.ndarray:
+    """How far apart the past readings' ``maxEndTime`` (``to_max_s`` ahead of each) are from one ``ahead_s`` ahead
+    now: the difference in seconds, 0 where both are unknown, :data:`UNBOUNDED_APART_S` where one is. [s]"""
+    if math.isinf(ahead_s):
+        return np.where(np.isinf(to_max_s), 0.0, UNBOUNDED_APART_S)
+    return np.minimum(np.abs(to_max_s - ahead_s), UNBOUNDED_APART_S)
+
+
 def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_s: float, max_end_unix_s: float, state_id: int = -1) -> np.ndarray | None:
-    """Samples of the end of a phase that began at ``since_unix_s``, now published with the finite window
-    ``[min_end, max_end]``, from the readings of past phases of its class that carried one (``law``:
-    :meth:`~spat_feed.prediction.history.PhaseHistory.window_law`'s arrays): of the readings of phases that outlasted
-    this one's run so far, the :data:`WINDOW_NEIGHBOURS` nearest (the same intersection state ``state_id`` first,
-    then by the sum of the differences of how long the phase had run and how far ahead ``minEndTime`` and
-    ``maxEndTime`` were), each moved to now: ``max(now, min_end)`` plus how long after ``max(its reading, its
-    minEndTime)`` its phase ended. A phase speaks by as many readings as lie near (a kernel weight on how alike its
+    """Samples of the end of a phase that began at ``since_unix_s``, now published with the window
+    ``[min_end, max_end]`` (:func:`says_when`; ``inf``: an unknown ``maxEndTime``), from the readings of past phases of
+    its class that carried one (``law``: :meth:`~spat_feed.prediction.history.PhaseHistory.window_law`'s arrays): of
+    the readings of phases that outlasted this one's run so far, the :data:`WINDOW_NEIGHBOURS` nearest (the same
+    intersection state ``state_id`` first, then by the sum of the differences of how long the phase had run and how far
+    ahead ``minEndTime`` and ``maxEndTime`` were, an unknown ``maxEndTime`` :data:`UNBOUNDED_APART_S` from a known one
+    and 0 from another unknown one: :func:`_apart_s`), each moved to now: ``max(now, min_end)`` plus how long after
+    ``max(its reading, its minEndTime)`` its phase ended. A phase speaks by as many readings as lie near (a kernel weight on how alike its
     course was): on Antwerp 2019-05-01 (first 100 min) one reading per phase, the nearest 16 or 32 phases, erred
     more (ratio to the baseline 0.636 / 0.635 against 0.627). A phase that has outlasted every one seen is read by its
     window alone: all the readings, the nearest by ``minEndTime`` and ``maxEndTime`` (how long they had run says
@@ -458,7 +485,7 @@ def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_
     n = int(np.count_nonzero(alive))
     if n < MIN_SEEN:
         return None
-    d = np.abs(to_min - (floor_unix_s - now_unix_s)) + np.abs(to_max - (max_end_unix_s - now_unix_s))
+    d = np.abs(to_min - (floor_unix_s - now_unix_s)) + _apart_s(to_max, max_end_unix_s - now_unix_s)
     if not outlasted:
         d += np.abs(el - elapsed_s)
     d += OTHER_STATE_S * (state != state_id)
@@ -469,10 +496,10 @@ def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_
 
 def _pooled(samples: np.ndarray, method: str, cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: float,
             min_end_unix_s: float, max_end_unix_s: float) -> tuple[np.ndarray, str]:  # fmt: skip
-    """``samples`` of ``method`` for the phase in progress pooled with :func:`ends_given_window`'s where the window is
-    finite and the class's readings say, the latter's share the class's ``window_weight`` (half until scored). Only
+    """``samples`` of ``method`` for the phase in progress pooled with :func:`ends_given_window`'s where the window
+    says when (:func:`says_when`) and the class's readings say, the latter's share the class's ``window_weight`` (half until scored). Only
     for the phase in progress: the law is learnt from readings of phases in progress, with how long they had run."""
-    law = cycle.window_law_s.get(cls) if since_unix_s is not None and math.isfinite(max_end_unix_s) else None
+    law = cycle.window_law_s.get(cls) if since_unix_s is not None and says_when(min_end_unix_s, max_end_unix_s, now_unix_s) else None
     by_window = None if law is None else ends_given_window(law, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
     if by_window is None:
         return samples, method
@@ -541,10 +568,11 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         own = _by_durations(cycle, cls, since, now_unix_s, floor_unix_s, given, n_given, published_min_unix_s, published_max_unix_s, current)
         if own is not None:
             return own
-    if math.isfinite(published_max_unix_s) and published_max_unix_s > floor_unix_s:
-        # the window law alone (the phase has outlasted every duration seen), else the window evenly
+    if says_when(published_min_unix_s, published_max_unix_s, now_unix_s) and published_max_unix_s > floor_unix_s:
+        # the window law alone (the phase has outlasted every duration seen), else a known window evenly
         by_window = _pooled(np.empty(0), "", cycle, cls, since, now_unix_s, published_min_unix_s, published_max_unix_s)[0] if cycle is not None and current else ()
-        return (by_window if len(by_window) else np.linspace(floor_unix_s, published_max_unix_s, 9)), "window"
+        if len(by_window) or math.isfinite(published_max_unix_s):
+            return (by_window if len(by_window) else np.linspace(floor_unix_s, published_max_unix_s, 9)), "window"
     if math.isfinite(published_max_unix_s):
         return np.array([max(floor_unix_s, published_max_unix_s)]), "window"
     return None if not durations else (np.array([inf]), "duration")

@@ -175,13 +175,16 @@ def test_a_green_past_its_min_end_is_still_fresh():
     assert view.fresh and view.red_windows_s[0][0] == 0.0  # it may end any moment: a red is possible now
 
 
-def feed(history, t0, phases):
-    """Readings once a second through ``phases`` [(state, duration)], the controller's windows published each second."""
+def feed(history, t0, phases, min_end_frac=0.5):
+    """Readings once a second through ``phases`` [(state, duration)], the controller's windows published each second:
+    ``minEndTime`` ``min_end_frac`` of the phase after its start (or now, once past), ``maxEndTime`` unknown. With
+    ``min_end_frac`` 0 the windows say nothing (``minEndTime`` is each reading's instant): the history is the
+    durations alone, and no law of past windows (``says_when``) speaks against the window a test then publishes."""
     t = t0
     for state, dur in phases:
         start = t
         while t < start + dur - 1e-9:
-            history.update(t, published(state, max(start + 0.5 * dur, t), None))
+            history.update(t, published(state, max(start + min_end_frac * dur, t), None))
             t += 1.0
     return t
 
@@ -189,9 +192,10 @@ def feed(history, t0, phases):
 def test_history_bounds_the_phases_after_the_published_one_by_hand():
     """A controller that repeats red 40 s, green 20 s exactly and says so (minEnd = the end): after a few cycles the
     next green and red follow the red now, exactly (every duration seen is the same). With minEnd earlier, the next
-    red may begin that much earlier (minEnd is the only hard bound on the red now)."""
+    red may begin that much earlier (minEnd is the only hard bound on the red now), and is likely to: every past red
+    ended at its minEnd (the window law, pooled half and half with the durations, which say 5 s later)."""
     h = PhaseHistory()
-    t = feed(h, T0, [(RED, 40), (GREEN, 20)] * 5)  # ends at the start of a red
+    t = feed(h, T0, [(RED, 40), (GREEN, 20)] * 5, min_end_frac=1.0)  # ends at the start of a red
     stats = h.update(t, published(RED, t + 5))
     assert stats.current.value == "red" and stats.since_unix_s == t and stats.cycle_s == pytest.approx(60.0)
     ix = make_scenario("paper_s400").corridor.intersections[0]
@@ -200,7 +204,7 @@ def test_history_bounds_the_phases_after_the_published_one_by_hand():
     assert view.likely_red_windows_s is None  # nothing uncertain left
     early = light_view(ix, PlanReading(published(RED, t + 35), cycle=stats), 0.0, t + 10.0)
     assert [x for w in early.red_windows_s[:2] for x in w] == pytest.approx([0.0, 30.0, 45.0, 90.0])
-    assert [x for w in early.likely_red_windows_s[:2] for x in w] == pytest.approx([0.0, 30.0, 50.0, 90.0])
+    assert [x for w in early.likely_red_windows_s[:2] for x in w] == pytest.approx([0.0, 25.0, 45.0, 85.0])
     # without the history, the red runs forever
     bare = light_view(ix, PlanReading(published(RED, t + 40)), 0.0, t + 10.0)
     assert bare.red_windows_s == ((0.0, math.inf),)
@@ -214,7 +218,7 @@ def test_history_windows_keep_min_end_hard_and_spread_the_rest():
     reds = [30, 36, 42, 48, 33, 39, 45]
     t = T0
     for r in reds:
-        t = feed(h, t, [(RED, r), (GREEN, 20)])
+        t = feed(h, t, [(RED, r), (GREEN, 20)], min_end_frac=0.0)
     stats = h.update(t, published(RED, t + 5))
     ix = make_scenario("paper_s400").corridor.intersections[0]
     view = light_view(ix, PlanReading(published(RED, t + 35), cycle=stats), 0.0, t + 10.0)  # minEnd 35 s in
@@ -362,7 +366,7 @@ def test_a_phase_the_history_would_end_before_its_min_end_ends_at_min_end():
     Antwerp days, red ends 3-45 s ahead: mean error 3.78 -> 3.63 s and 3.98 -> 3.81 s."""
     ix = make_scenario("paper_s400").corridor.intersections[0]
     h = PhaseHistory()
-    t = feed(h, T0, [x for d in (40, 41, 42, 55, 56) for x in ((RED, d), (GREEN, 20))] + [(RED, 30)])
+    t = feed(h, T0, [x for d in (40, 41, 42, 55, 56) for x in ((RED, d), (GREEN, 20))] + [(RED, 30)], min_end_frac=0.0)
     plan = published(RED, t + 14.0, t + 90.0)
     view = light_view(ix, PlanReading(plan, cycle=h.update(t, plan)), 0.0, t)
     assert view.likely_red_windows_s[0] == pytest.approx((0.0, 14.0))  # (was 25: the median of 55 and 56 s)
@@ -373,9 +377,14 @@ def test_a_red_whose_min_end_runs_again_after_a_hold_ends_at_it():
     """An actuated controller counts a red's minEndTime down, holds it while it extends the red (it moves later with
     the clock), then lets it run again, and the red ends then (2019-05-01: within 1.5 s of it in 97 % of such
     readings, 36 % before any hold). Reds of 30-55 s, each held for 5-30 s; one now resumed 13 s before its minEnd:
-    likely over at minEnd (the durations alone say 25 s), and late within a second of it. Both days' recordings:
-    approaches > +10 % against the regular driver 28 -> 23 and 32 -> 24 (the likely end), 22 -> 12 and 19 -> 20
-    (and the late end)."""
+    likely over at minEnd (the durations alone say 25 s). Both days' recordings: approaches > +10 % against the
+    regular driver 28 -> 23 and 32 -> 24 (the likely end), 22 -> 12 and 19 -> 20 (and the late end then within a
+    second of minEnd). This controller publishes no maxEndTime; since its minEndTime ahead is read by the readings of
+    past reds with a like one (the window law, ``says_when``), which do not tell a held minEndTime from a resumed
+    one (a reading 15 s in with minEndTime 13-15 s ahead was, in a held red, 17-23 s from its end), the late end is
+    no longer sure of minEnd: no earlier than it, no later than the longest red seen. (Matching resumed readings
+    with resumed ones kept the late end at minEnd but lost the window law's gain: predict-eval 2019-05-01 ratio
+    0.6143 -> 0.6153, 2019-05-17 0.6002 -> 0.6005.)"""
     ix = make_scenario("paper_s400").corridor.intersections[0]
     h = PhaseHistory()
 
@@ -400,7 +409,7 @@ def test_a_red_whose_min_end_runs_again_after_a_hold_ends_at_it():
     assert stats.resumed and max(stats.after_resumed(PhaseClass.RED)) < 1.0
     view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t)
     assert view.likely_red_windows_s[0][1] == pytest.approx(13.0, abs=1.0)  # at minEnd (the durations' median: 25 s)
-    assert view.late_red_windows_s[0][1] == pytest.approx(13.0, abs=1.0)  # late: as late as such reds ended (the durations: 26 s)
+    assert 13.0 - 1e-9 <= view.late_red_windows_s[0][1] <= 55.0 - 15.0  # late: not before minEnd, nor after the longest red seen
 
 
 def test_a_phase_nobody_can_read_is_no_data_not_a_red():
@@ -469,7 +478,7 @@ def test_the_likely_end_is_no_later_than_the_controllers_max_end():
     what the group has done (6-12 % of phases outlast maxEndTime)."""
     ix = make_scenario("paper_s400").corridor.intersections[0]
     h = PhaseHistory()
-    t = feed(h, T0, [(RED, 40), (GREEN, 20)] * 4)
+    t = feed(h, T0, [(RED, 40), (GREEN, 20)] * 4, min_end_frac=0.0)
     plan = published(RED, t + 10.0, t + 25.0)
     stats = h.update(t, plan)
     view = light_view(ix, PlanReading(plan, cycle=stats), 0.0, t)
