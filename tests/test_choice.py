@@ -109,11 +109,15 @@ def _to_end(t_s, v_mps, x_m):
     return [(t1, v_mps), (t2, V_LIM), (t2 + (END_M - x2) / V_LIM, V_LIM)]
 
 
-def test_a_slow_plan_speeds_up_when_the_green_comes_early():
+@pytest.mark.parametrize("next_red", [(), ((30.0, 90.0),)])
+def test_a_slow_plan_speeds_up_when_the_green_comes_early(next_red):
     """Recourse, hand answer: "slow down to 6 m/s" towards a red that in this timing ends at 10 s, well before the slow
     plan gets there: the car brakes, holds 6 m/s, and once the light turns green reacts and speeds up to the limit.
-    Priced as that drive is scored (paper Eq. 4 plus time), not as the crawl the plan alone would be; no stop."""
-    cost, p_stop, _ = _priced(6.0, MODE_CODES["brake"], 1.0, 1.5, (((0.0, 10.0),),) * 4)
+    Priced as that drive is scored (paper Eq. 4 plus time), not as the crawl the plan alone would be; no stop. So too
+    where the crawl would have reached the line in the next red (at 45 s, in the red from 30 s): the car is over the
+    line at 27 s, before it (at ca94a7b priced as a stop through that red, a wait to 90 s: chance of a stop 1; on
+    US 1136 group 5 a glide to a green 62 s ahead, "Slow to 19 km/h, then coast", costed 20.3 m$ where it costs 14.2)."""
+    cost, p_stop, _ = _priced(6.0, MODE_CODES["brake"], 1.0, 1.5, (((0.0, 10.0), *next_red),) * 4)
     t_slow = 1.0 + (V_LIM - 6.0) / 1.5
     x_b = V_LIM + (V_LIM**2 - 36.0) / 3.0 + 6.0 * (10.0 - t_slow)
     want, dist = _scored([(0.0, V_LIM), (1.0, V_LIM), (t_slow, 6.0), (10.0, 6.0), *_to_end(10.0, 6.0, x_b)])
@@ -122,6 +126,19 @@ def test_a_slow_plan_speeds_up_when_the_green_comes_early():
     assert p_stop == 0.0
     open_loop, _, _ = _priced(6.0, MODE_CODES["brake"], 1.0, 1.5, ((),))  # the crawl all the way, no light in the way
     assert cost < open_loop
+
+
+def test_a_green_that_comes_before_the_driver_follows_the_plan_is_no_worth_of_the_plan():
+    """A red on now that ends at 0.5 s, before the driver has reacted to "slow down to 6 m/s" (1 s), and a next red from
+    30 s that the slow plan, crawling, would reach the line in: sped up at 0.5 s the car would drive exactly as driving
+    normally does, which is a candidate of its own, so the slow plan's price holds no speed-up from then; it is
+    dearer than driving normally (over the line at 22 s), not as cheap (2019-05-01 group 12 at 1556733492.6: "Slow to
+    23 km/h, then coast" 0.8 s before a green, the car braked for a second and sped up again: +21 %)."""
+    timings = (((0.0, 0.5), (30.0, 90.0)),) * 4
+    slow, _, _ = _priced(6.0, MODE_CODES["brake"], 1.0, 1.5, timings)
+    normal, p_normal, _ = _priced(V_LIM, 0, 0.0, 2.0, timings)
+    assert p_normal == 0.0
+    assert slow > normal * 1.05
 
 
 def test_a_red_that_ends_while_the_car_brakes_for_it_is_rolled_through():

@@ -8,7 +8,8 @@ forecast) and chooses the cheapest in expectation (docs/ADVISOR.md, "Under uncer
 * **Outcome of a plan in one timing, with recourse**: the advice is made again every second, so the car follows the
   plan only until the light shows which timing it is in, then does the best it can knowing it, to a point ``x_end``
   past the last line planned for, where every plan is back at the speed limit (:func:`expected_costs`): a green that
-  comes early is met by speeding up to the limit from that instant (where that is cheaper and meets no red); a red on
+  comes early (once the driver follows the plan) is met by speeding up to the limit from that instant (where that is
+  cheaper and meets no red; also where the plan itself would have met a later red); a red on
   now that the plan would meet is ridden out (the plan until it ends, braking comfortably from where a stop at the
   line must begin, rolling on when the green comes, a stop if it does not come first); a red still to come that the
   plan would meet is glided to (from its amber, reaching the line after it, no slower than the slowest advised
@@ -310,6 +311,36 @@ def _later_usd(x_m, t_s, v_mps, reaction_s, j, s, lines):
 
 
 @njit(cache=True, inline="always")
+def _early_green_usd(c, s, n_first, path, n_knots, cross_s, windows, n_windows, after_red_s, d_m, reaction_s, v_lim, normal, clear_s, x_end_m, rates,
+                     up, lam, followed_s):  # fmt: skip
+    """Cost [$] (time priced at ``lam``) of plan ``c`` in timing ``s`` where a red of one of the first ``n_first`` lines ends
+    before the plan reaches that line (its green comes early) and once the driver follows the plan (``followed_s`` on,
+    its reaction: before, the car drives as it did, and driving on is a candidate of its own): the plan until then, a
+    reaction, then speeding up to the limit, where that meets no red of the timing at any line; the cheapest such
+    instant, inf if none."""
+    best = np.inf
+    for j in range(n_first):
+        tc = cross_s[c, j]
+        for k in range(n_windows):
+            b = windows[j, s, k, 1]
+            if not max(followed_s, 0.0) < b <= tc - after_red_s:
+                continue
+            x, v, u = _state_at(path, n_knots, b)
+            if x >= d_m[j]:
+                continue
+            ok = True
+            for i in range(d_m.size):
+                if d_m[i] > x:
+                    ki, _ = _met(b + _go_s(d_m[i] - x, v, reaction_s, v_lim, normal), windows, i, s, n_windows, after_red_s, k if i == j else -1, clear_s[i])
+                    if ki >= 0:
+                        ok = False
+            if ok:
+                g, tg = _go_usd(x, v, reaction_s, x_end_m, v_lim, rates, up, normal, lam)
+                best = min(best, u + g + lam * b)
+    return best
+
+
+@njit(cache=True, inline="always")
 def _met(tc, windows, j, s, n_windows, after_red_s, skip, amber_s):
     """Window index (and the chance [-] of meeting it) of timing ``s`` at line ``j`` that a crossing at ``tc`` meets:
     inside a red, the margin after it or the amber (``amber_s``) before a red still to come, or within :data:`EDGE_S`
@@ -354,8 +385,9 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     **With recourse**: the advice is made again every second, so in each timing the car follows the plan only until
     the light shows what that timing is, then does the best it can knowing it (module docstring):
 
-    * a red that ends before the plan reaches the line (the green comes early): from that instant, a reaction, then
-      speeding up to the limit, if that is cheaper and meets no red of the timing;
+    * a red that ends before the plan reaches the line (the green comes early), after the plan's reaction: from that
+      instant, a reaction, then speeding up to the limit, if that is cheaper and meets no red of the timing, whether or
+      not the plan itself meets a later red (:func:`_early_green_usd`);
     * a red on now that the plan would meet: the plan until its end; if a comfortable stop must begin first, braking
       until the red ends (rolling on from the speed then) or to a stop;
     * a red still to come that the plan would meet, shown (its amber) before a comfortable stop must begin: from then
@@ -446,6 +478,10 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 a = windows[blocked, s, kb, 0]
                 first, last = max(a - amber_max_s[blocked], 0.0) - 0.5 * EDGE_S, max(a - clear_s[blocked], 0.0) + 0.5 * EDGE_S
                 w = min(max((no_stop[blocked] - first) / (last - first), 0.0), 1.0)
+            early = np.inf  # the recourse of a green that comes early (none for "prepare to stop": it stops whatever)
+            if not stop_plan[c] and (w < 1.0 or blocked >= 0):
+                early = _early_green_usd(c, s, n_lines if blocked < 0 else blocked + 1, path, n_knots, cross_s, windows, n_windows, after_red_s, d_m,
+                                         reaction_s, v_lim, normal, clear_s, x_end_m, rates, up, lam_usd_per_s, reactions[c])  # fmt: skip
             if w < 1.0 and stop_plan[c]:
                 # told to stop, the car stops at the line however the light shows (braked from where a comfortable stop
                 # must begin), then pulls away: dear wherever the light is likely green
@@ -459,27 +495,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                     continue
             elif w < 1.0:
                 # the plan goes through: unless a green comes early, where speeding up from then is cheaper
-                best = plan
-                for j in range(n_lines if blocked < 0 else blocked + 1):
-                    tc = cross_s[c, j]
-                    for k in range(n_windows):
-                        b = windows[j, s, k, 1]
-                        if not 0.0 < b <= tc - after_red_s:
-                            continue
-                        x, v, u = _state_at(path, n_knots, b)
-                        if x >= d_m[j]:
-                            continue
-                        ok = True
-                        for i in range(n_lines):
-                            if d_m[i] > x:
-                                ki, _ = _met(b + _go_s(d_m[i] - x, v, reaction_s, v_lim, normal), windows, i, s, n_windows, after_red_s, k if i == j else -1,
-                                              clear_s[i])
-                                if ki >= 0:
-                                    ok = False
-                        if ok:
-                            g, tg = _go_usd(x, v, reaction_s, x_end_m, v_lim, rates, up, normal, lam_usd_per_s)
-                            best = min(best, u + g + lam_usd_per_s * b)
-                total += weights[s] * (1.0 - w) * best
+                total += weights[s] * (1.0 - w) * min(plan, early)
                 if blocked < 0:
                     continue
             # the plan meets the red of line ``blocked``: what the car does once the timing shows itself
@@ -530,6 +546,10 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 c_usd = (_stop_usd(tb, xb, vb, ub, usd, cross_s[c, blocked], b, d_line, x_end_m, v_lim, rates, up, down, idle_usd_per_s, comfort, normal,
                                    lam_usd_per_s)
                          + _later_usd(d_line, t_go, 0.0, 0.0, blocked, s, tail))  # fmt: skip
+            if early < c_usd:
+                # a green before the red the plan would meet (a slow plan that reaches the line after the red on now and
+                # into the next one): the car speeds up as it comes, as where the plan meets no red
+                c_usd, stopped = early, False
             total += weights[s] * w * c_usd
             if stopped:
                 stops += weights[s] * w
