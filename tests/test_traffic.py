@@ -19,7 +19,7 @@ from ecodrive.traffic_eval import count_stops, evaluate, main as traffic_eval_ma
 from advisory.physics.params import model_params  # noqa: E402
 from spat_feed.road.corridors import load_corridor  # noqa: E402
 from spat_feed.timing.messages import plan_from_movement  # noqa: E402
-from spat_feed.timing.plans import possible_states_at, state_at  # noqa: E402
+from spat_feed.timing.plans import MovementPhaseState as S, possible_states_at, state_at  # noqa: E402
 from spat_feed.transport.store import SpatStore  # noqa: E402
 from spat_feed.transport.sumo import SumoLight, SumoSpatSource, link_state  # noqa: E402
 
@@ -147,6 +147,29 @@ def test_actuated_spat_windows_hold_sumos_changes(oakland_actuated):
                 greens.append(run_len)
                 run_len = 0
     assert len(set(greens)) > 1
+
+
+def test_an_actuated_reading_at_a_due_switch_names_the_phase_after_it(oakland_actuated):
+    """A phase due to end at a publication (its maxDur reached: SUMO switches at the start of the coming step) is
+    published with the event after it, so every reading says the state SUMO shows from its stamp on, and its window
+    holds that state's end. (Before, such a reading published the ended phase alone: past all its events, the
+    service had no state for the light that second, 2 % of the readings; docs/TRAFFIC.md, "What remains".)"""
+    net = oakland_actuated
+    states, plans = _run_source(net, 300.0, cross_vph=400.0)
+    by_t = dict(states)
+    due = 0
+    for t, ps in plans[:-1]:
+        for i, plan in enumerate(ps):
+            now = net.t0_unix_s + t
+            coming = link_state(by_t[t + STEP_S][i])  # the state SUMO shows in the step after the stamp
+            assert plan.changes[-1].max_end_s > now, (t, i)  # not past its own events
+            possible = possible_states_at(plan, now + STEP_S / 2)  # (unavailable: past a window's min end, unknown)
+            assert possible != {S.UNAVAILABLE} and (coming in possible or S.UNAVAILABLE in possible), (t, i)
+            if link_state(by_t[t][i]) is not coming and plan.changes[0].max_end_s <= now:
+                due += 1  # a switch due at the stamp: the next phase's window, from now, holds when SUMO leaves it
+                end_s = next(tk for tk, s in states if tk > t and link_state(s[i]) is not coming) - STEP_S
+                assert plan.changes[1].min_end_s <= net.t0_unix_s + end_s <= plan.changes[1].max_end_s, (t, i)
+    assert due >= 5  # (ambers of 4-5 s and the cross street's phases end on whole seconds now and then)
 
 
 def test_connected_cars_depend_on_seed_and_index_only():

@@ -17,7 +17,11 @@ What SUMO knows and the message says, per signal group (one SUMO link: the corri
   current phase ends at SUMO's own next switch, the later ones after their programmed durations;
 * for an ``actuated`` program, the current event alone, with the window SUMO's controller is held to: it ends no
   earlier than its phase's ``minDur`` and no later than its ``maxDur`` after the phase began (the phases after it
-  showing the same state add their own ``minDur`` .. ``maxDur``); no ``likelyTime`` and no confidence. SUMO does not
+  showing the same state add their own ``minDur`` .. ``maxDur``); no ``likelyTime`` and no confidence. Where that
+  event is due to end now (its ``maxDur`` reached: SUMO switches at the start of the coming step), the event after
+  it follows, with its own window from now: a reading says what the light does from its stamp on, and one whose
+  every event has ended says nothing of it (before, 2 % of the readings: the end of each amber and fixed-length red,
+  read as "no data" for that second). SUMO does not
   predict them, and this is what a real actuated controller publishes (the Antwerp recordings: the current phase,
   ``minEndTime`` and ``maxEndTime``): the service's predictor bounds the phases after it from the group's history.
   (Later events with summed windows would overlap the current one's, and J2735 readers, ours included, cut such
@@ -194,7 +198,7 @@ class SumoSpatSource:
     def events(self, light: SumoLight) -> list[MovementEvent]:
         """The light's current event and those after it, with their windows: a static program's whole cycle, to the
         next time the current state begins (at most ``n_events`` in all where given), an actuated one's current event
-        alone (see the module docstring)."""
+        alone, and the next one where the current is due to end now (see the module docstring)."""
         tl = self.conn.trafficlight
         now = self.now_unix_s()
         _, kind, states, times = self._program(light.tls_id)
@@ -235,7 +239,9 @@ class SumoSpatSource:
             events.append(MovementEvent(event_state=state, timing=timing))
             if len(events) > 1 and state is current:  # the cycle is round: the current state begins again
                 break
-            start = now + lo if exact else math.nan
+            if not exact and len(events) == 1 and hi <= 0.0:  # due to switch now: what the controller does next
+                wanted = 2
+            start = now + lo if lo == hi else math.nan
             state, j = nxt, k
             d, mn, mx = times[k]
             lo, hi = lo + (d if exact else mn), hi + (d if exact else mx)
