@@ -24,6 +24,21 @@ BOUNDED_S = 1800.0
 an hour ahead (J2735). [s]"""
 
 
+def pytest_configure(config) -> None:
+    """Under pytest-xdist (``make test``: ``-n 2``) the controller compiles numba's kernels into their on-disk cache
+    before the workers start, by starting the service in process once (its DP tables, a warm-up advice). On a fresh
+    clone that is ~50 s of CPU; left to the workers, both compiled at once inside the services their first tests
+    started, and on a loaded 2-core machine every browser test's service ran past the 60 s it is given to answer."""
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        from fastapi.testclient import TestClient
+
+        from server.app import create_app
+        from server.config import Settings
+
+        with TestClient(create_app(Settings(corridors=("paper_s200", "paper_s400")))) as client:
+            client.get("/health")
+
+
 @pytest.fixture
 def start_proc(tmp_path) -> Iterator:
     """``start_proc(Proc) -> Proc`` (a real process on loopback, ``tests.procs``); everything started is killed at the end of the test."""

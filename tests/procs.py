@@ -15,7 +15,7 @@ from pathlib import Path
 import httpx
 
 REPO = Path(__file__).resolve().parents[1]
-START_TIMEOUT_S = 60.0  # generous: only there so a broken start cannot hang the suite
+START_TIMEOUT_S = 120.0  # generous: only there so a broken start cannot hang the suite
 
 
 _HANDED: set[int] = set()
