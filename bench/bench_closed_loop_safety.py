@@ -8,7 +8,8 @@ Run: .venv/bin/python bench/bench_closed_loop_safety.py [--runs N] [--workers W]
   beyond, up to two dropouts of 2-10 s, a feed clock off by up to ±3 s (the receiver told only the bound), half the
   controllers publishing their current phase only. Variants: ``amber`` (each green ends in a 4 s amber, published as
   J2735 protected-clearance, as a real controller does) and ``no-amber`` (the stress case: a green turns red at once).
-* Hard brakes: a run's hardest braking above 4 m/s² (the regular driver's hardest).
+* Hard brakes: a run's hardest braking above 4 m/s² (the regular driver's hardest). Stalled runs: the car never
+  reached the zone's end (held at a line until the simulation's 600 s: no red entry, and no drive either).
 * For each red entry and hard brake, whether it was avoidable (:func:`spat_feed.transport.actuated.safety_events`):
   could a car braking at the advisor's firm rate (3 m/s²), from the first reading whose published window admitted
   that red (at the crossing, or at the braking), have stopped at the line? Only the avoidable ones are the advisor's
@@ -16,7 +17,7 @@ Run: .venv/bin/python bench/bench_closed_loop_safety.py [--runs N] [--workers W]
 * The paper's 64 scenarios (fixed-time, exact SPaT), rules only and with the DP tables: red entries, hard brakes.
 
 Targets (issue 31): 0 red entries and 0 hard brakes with an amber and on the paper's scenarios; without an amber, 0
-avoidable ones (the exit status is 1 otherwise). Progress goes
+avoidable ones; no stalled run (the exit status is 1 otherwise). Progress goes
 to stderr. Seeds are ``S .. S + N - 1`` for each variant (the same cases with and without amber).
 """
 
@@ -46,12 +47,14 @@ VARIANTS = {"amber": None, "no-amber": 0.0}
 
 
 def actuated_run(job: tuple[int, str, str]):
-    """One randomized run: (seed, red entries and hard brakes (:func:`safety_events`), advised above the limit, surprises)."""
+    """One randomized run: (seed, red entries and hard brakes (:func:`safety_events`), advised above the limit, surprises,
+    stalled: the car never reached the zone's end, held at a line until the simulation's 600 s)."""
     seed, variant, driver = job
     truth, feed, noise = random_case(seed, amber_s=VARIANTS[variant])
     run = simulate(truth, AdvisorParams(), driver=replace(DRIVERS[driver], noise_mps=noise, seed=seed), feed=feed)
     events = safety_events(run.trajectory, feed, AdvisorParams().firm_decel_mps2, HARD_BRAKE_MPS2)
-    return seed, events, run.max_advised_mps > truth.speed_limit_mps + 1e-9, run.surprises
+    stalled = bool(run.trajectory.x_m[-1] < truth.zone_length_m - 1e-6)
+    return seed, events, run.max_advised_mps > truth.speed_limit_mps + 1e-9, run.surprises, stalled
 
 
 def paper_run(job: tuple[tuple[float, float, float], bool]):
@@ -112,18 +115,20 @@ def report_variant(variant: str, res: list, driver: str, elapsed_s: float) -> di
         counts[kind] = (len(of_kind), sum(e.avoidable for e in of_kind))
     above = sum(r[2] for r in res)
     surprises = sum(r[3] for r in res)
+    stalled = [r[0] for r in res if r[4]]
     amber = "4 s amber (published as protected-clearance)" if VARIANTS[variant] is None else "no amber (a green turns red at once)"
     firm = AdvisorParams().firm_decel_mps2
     (red, red_avoidable), (hard, hard_avoidable) = counts["red_entry"], counts["hard_brake"]
     print(f"{variant}: {len(res):,} randomized actuated runs, {amber}, {driver} driver, ±3 s skew, dropouts: "
           f"{red} red entries ({red_avoidable} avoidable: advisor failures; {red - red_avoidable} unavoidable: told too late to stop at "
           f"{firm:g} m/s²); {hard} hard brakes > {HARD_BRAKE_MPS2:g} m/s² ({hard_avoidable} avoidable, {hard - hard_avoidable} unavoidable); "
-          f"{above} advised speeds above the limit; {surprises} surprises ({elapsed_s:.0f} s)")
+          f"{above} advised speeds above the limit; {surprises} surprises; {len(stalled)} stalled runs{f' (seeds {stalled[:20]})' if stalled else ''} "
+          f"({elapsed_s:.0f} s)")
     for seed, e in events[:40]:
         print(_line(seed, e))
     if len(events) > 40:
         print(f"  ... and {len(events) - 40} more")
-    return {"runs": len(res), "red_entries": red, "avoidable": red_avoidable + hard_avoidable, "hard_brakes": hard, "above_limit": above}
+    return {"runs": len(res), "red_entries": red, "avoidable": red_avoidable + hard_avoidable, "hard_brakes": hard, "above_limit": above, "stalled": len(stalled)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -157,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.perf_counter()
             res = run_variant(variant, seeds, args.driver, pool)
             summary = report_variant(variant, res, args.driver, time.perf_counter() - t0)
-            failures += summary["avoidable"] + summary["above_limit"] + (summary["red_entries"] + summary["hard_brakes"] if variant == "amber" else 0)
+            failures += summary["avoidable"] + summary["above_limit"] + summary["stalled"] + (summary["red_entries"] + summary["hard_brakes"] if variant == "amber" else 0)
     return 1 if failures else 0
 
 

@@ -405,6 +405,33 @@ def test_a_dropout_never_makes_new_speed_advice():
     assert adv.target_speed_mps is None and adv.reason == "stale_spat"
 
 
+def test_through_a_dropout_a_plan_into_a_possible_red_becomes_a_stop_once_due():
+    """The plan followed would reach the line inside a red the last reading admits (issue 31, seeds 361 and 1392 of
+    bench/bench_closed_loop_safety.py, no amber): a lift-off for that red ("coast"), or no plan ("No signal data." for
+    the light before). Through the dropout the advice said only "Signal data delayed." and the driver went on into the
+    red; now, once a stop must begin (within 3 s at the speed of where a 1.5 m/s² stop begins) and while 3 m/s²
+    still stops the car, "Signal data delayed. Prepare to stop."; farther out, past the firm rate, or at a light that
+    shows an amber, as before."""
+    v = 20.0  # [m/s]; a stop is due within v * (1 + 2) + v² / 3 = 193.3 m, possible within v² / 6 = 66.7 m
+    red = ((-1.0, 60.0),)  # a red that may have begun (its window aged)
+    lift_off = AdvisorMemory(last=Advice("coast", "red_ahead", v, False, 20.0, light_id=1))
+    no_plan = AdvisorMemory(last=Advice("none", "no_spat"))
+
+    def held(distance_m, memory, windows=red, amber_s=0.0):
+        return advise(Observation(v, V, (LightView(1, distance_m, False, 1.0, windows, age_s=5.0, amber_s=amber_s),)), memory)[0]
+
+    for memory in (lift_off, no_plan):
+        stop = held(190.0, memory)
+        assert (stop.action, stop.reason, stop.message) == ("stop", "stale_spat", "Signal data delayed. Prepare to stop.")
+        assert held(70.0, memory).action == "stop"
+        for amber_s in (None, 4.0):  # an amber the driver sees (or may: unknown): nothing new on stale data, as before
+            assert (held(190.0, memory, amber_s=amber_s).action, held(190.0, memory, amber_s=amber_s).message) == ("none", "Signal data delayed.")
+        assert held(200.0, memory).action == "none"  # not due yet: the plan goes on (a lift-off sheds speed meanwhile)
+        assert held(60.0, memory).action == "none"  # past the firm rate (3.33 m/s²): no stop asked that cannot be made
+        late = held(190.0, memory, ((15.0, 60.0),))  # the red begins after the car is over the line (9.5-9.7 s)
+        assert (late.action, late.reason) == (memory.last.action, "stale_spat")  # the plan held (kept), or nothing new
+
+
 def test_an_actuated_red_aims_at_its_likely_end_never_before_min_end():
     """A red now whose end is known only as a window: surely not before 20 s (minEnd), likely at 30 s, late at 150 s.
     No speed reaches the line 600 m ahead after 150 s (+2 s), so the advisor aims at the likely end (+2 s margin): a

@@ -104,16 +104,36 @@ def _kept(lines: Lines, usable: tuple[LightView, ...], obs: Observation, params:
 
 
 def _held(obs: Observation, memory: AdvisorMemory, params: AdvisorParams) -> Advice | None:
-    """Through a short dropout: the last advice, re-checked on the last SPaT (its windows, aged); no new advice.
-    ``None`` when the dropout is too long (or nothing was advised): then the plain "out of date"."""
+    """Through a short dropout: the last advice, re-checked on the last SPaT (its windows, aged); no new advice, but a
+    stop at a light known to show no amber (``LightView.amber_s`` 0, where no driver sees a red coming): where the plan
+    the driver follows (driving normally where none) would reach its line inside a red that the last reading admits
+    (its windows widened for the clock and aged, never narrowed: a red that may begin stays possible until data says
+    otherwise), "prepare to stop" once a stop must begin (:func:`_stop_due`) while the firm rate still stops the car.
+    Told only "Signal data delayed.", a driver went on into such a red (issue 31: closed-loop seeds 361 and 1392). Where
+    the light shows an amber (or may: every real feed's unknown amber) the eye decides, and nothing new is said on stale
+    data. ``None`` when the dropout is too long (or nothing was advised and no stop is due): the plain "out of date"."""
     nxt, last = obs.lights[0], memory.last
-    if not nxt.red_windows_s or nxt.age_s > params.hold_stale_s or last is None:
+    if not nxt.red_windows_s or nxt.age_s > params.hold_stale_s:
         return None
     usable = tuple(light for light in obs.lights[:2] if light.red_windows_s)
     red, to_change = light_timing(nxt)
-    if last.action == "stop" or (last.action in KEEP_MODES and last.target_speed_mps is not None and _kept(Lines.of(usable), usable, obs, params, last)):
+    plan = last is not None and last.action in KEEP_MODES and last.target_speed_mps is not None
+    if last is not None and (last.action == "stop" or (plan and _kept(Lines.of(usable), usable, obs, params, last))):
         return Advice(last.action, "stale_spat", last.target_speed_mps, red, to_change, source=last.source)
-    return Advice("none", "stale_spat", light_red=red, seconds_to_change_s=to_change)
+    v, d = float(obs.speed_mps), float(nxt.distance_m)
+    if plan:
+        arrival = crossing_time_s(d, v, last.target_speed_mps, params, KEEP_MODES[last.action], 0.0)
+    else:
+        arrival = normal_crossing_s(d, obs, params)
+    if nxt.amber_s == 0.0 and v > 0.0 and nxt.is_red_at(arrival) and _stop_due(d, v, params) and v * v <= 2.0 * params.firm_decel_mps2 * d:
+        return Advice("stop", "stale_spat", 0.0, red, to_change)
+    return None if last is None else Advice("none", "stale_spat", light_red=red, seconds_to_change_s=to_change)
+
+
+def _stop_due(distance_m: float, v_mps: float, params: AdvisorParams) -> bool:
+    """A stop for a line ``distance_m`` ahead must be said now: within a reaction and ``stop_lead_s`` at ``v_mps`` of
+    where a comfortable stop must begin ("prepare to stop"; farther out, a lift-off or "Red light ahead."). [-]"""
+    return distance_m <= v_mps * (params.reaction_s + params.stop_lead_s) + v_mps * v_mps / (2.0 * params.comfort_decel_mps2)
 
 
 @lru_cache(maxsize=64)
@@ -216,7 +236,7 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)  # a stop to wait a moment: none
         if v < params.min_cruise_speed_mps:  # pulling away at a crawl: what is ahead, said
             return _timed("none", "red_ahead", None, usable, i, first=(red, to_change))
-        if i == 0 and nxt.distance_m <= v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2):
+        if i == 0 and _stop_due(nxt.distance_m, v, params):
             return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_change)
         # lift off only: the words and the driver's motion are a lift-off (the stop, when it comes, is braked then)
         keep_target = last is not None and last.action == "coast" and last.reason == "red_ahead" and last.target_speed_mps is not None
@@ -291,7 +311,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             return Advice("none", reason, light_red=red, seconds_to_change_s=to_change)
         v = obs.speed_mps
         to_green = countdown_view(nxt).seconds_to_green_after(min(arrival, slowest))
-        far = nxt.distance_m > v * (params.reaction_s + params.stop_lead_s) + v * v / (2.0 * params.comfort_decel_mps2)
+        far = not _stop_due(nxt.distance_m, v, params)
         if far and not math.isfinite(to_green):
             # far from a red whose end is unknown: no stop asked for yet (a stop so far out halted the car 220 m
             # short of the line), but lift off: arriving later only helps (the red may end first), and what coasting

@@ -7,7 +7,8 @@ decision point before each stop line, brakes for a light that will be red on arr
 speed (a red showing then must end ``red_end_margin_s`` before that arrival: the advice counts the seconds
 to green), and after deciding to go neither slows down so much that a red catches it nor speeds up while
 the light is still red. Everything else comes from the advice (a "stop": lift off, then brake at the comfortable
-rate, or harder if that no longer stops it at the line, only until its line is behind; "Red light
+rate, or harder if that no longer stops it at the line, only until its line is behind or the car is at rest there with a display: then the
+eye and the display say when to go; "Red light
 ahead." alone: no speeding up towards it; advice that asks nothing new, such as "Signal data delayed.": it goes on
 with what it was told);
 ``overrides`` counts the times the driver's own braking was needed although the advice did not say "stop".
@@ -178,6 +179,8 @@ def simulate(
             _, new, err, line = pending.pop(0)
             if not _silent(new):
                 active, error, stop_line_m = new, err, line
+        if active is not None and active.action == "stop" and v <= 0.0 and any(s.position_m == stop_line_m and d is not None for s, d in zip(scenario.signals, shown)):
+            active = None  # the stop asked for is made: at rest, the eye and the display say when to go (the advice, "too close", is silent)
         # what the advice asks for
         if active is not None and active.action == "none" and active.reason == "red_ahead":
             v_cmd = min(max(v, advisor.min_cruise_speed_mps), v_lim)  # "Red light ahead.": no speeding up towards it (nor a crawl)
