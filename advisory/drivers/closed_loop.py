@@ -14,7 +14,8 @@ with what it was told);
 ``overrides`` counts the times the driver's own braking was needed although the advice did not say "stop".
 What it knows of the lights it sees (issue 31): at a light that shows no amber (:func:`shows_amber`) its eye
 cannot see a red coming, so a green its display says may turn red now (a window open since the driver last saw
-red), or that it is told to stop for, is one it stops for where it still can at 4 m/s²; stopping on advice for a line that shows red now, where even 4 m/s² would roll it over the line,
+red) or before the car is over the line (decided again when the display shows it, the driver having gone on), or that
+it is told to stop for, is one it stops for where it still can at 4 m/s²; stopping on advice for a line that shows red now, where even 4 m/s² would roll it over the line,
 it brakes harder (up to ``emergency_decel_mps2``); and a red that outlasts by a reaction time the green the display
 promised when the driver went on is waited out by the eye (no new countdown is trusted for that red).
 
@@ -270,6 +271,9 @@ def simulate(
                     surprised[n] = light.next_green_start_s(t)
                 if v * v / (2.0 * max(room, 1e-6)) <= (driver.emergency_decel_mps2 if first else rules.brake_max_mps2):
                     committed.discard(n)
+            if (n in committed and not red_now and not shows_amber(light) and next_red <= t + dist / max(v, 0.1)
+                    and v * v <= 2.0 * rules.brake_max_mps2 * max(room, 1e-6)):
+                committed.discard(n)  # went on at a light with no amber, and the display now shows a red that may begin before the car is over the line: it decides again
             promise = promised.get(n)
             if red_now and promise is not None and promise[0] == light.next_green_start_s(t) and t >= promise[1] + driver.reaction_s:
                 green_at = np.inf  # the green the display promised when the driver went on has not come: it waits for the green it sees
