@@ -194,7 +194,7 @@ def test_without_amber_every_red_entry_and_hard_brake_was_told_too_late():
     assert [seed for seed, (_, ended) in runs.items() if not ended] == []
 
 
-@pytest.mark.parametrize("seed", [3, 217, 259, 361, 926, 960, 1392])
+@pytest.mark.parametrize("seed", [3, 217, 259, 361, 926, 960, 1392, 1526])
 def test_without_amber_the_traced_red_entries_no_longer_happen(seed):
     """Red entries of the stress case, each avoidable, traced (the car 250-350 m from a light whose red the feed had
     told of). Seed 3: "Drive normally" into a window open since entry, planned on its likely time (2.1 s into the red):
@@ -206,7 +206,11 @@ def test_without_amber_the_traced_red_entries_no_longer_happen(seed):
     red: a change that the clock's uncertainty may still put ahead is not "no data". Seeds 361 and 1392 (5,000-run
     bench): a dropout while the plan followed (a lift-off far out; "No signal data." for the light before) would reach
     the line in a red the last reading admitted; "Signal data delayed." alone, the car crossed 1.2 s into the red (361)
-    or braked at 7.1 m/s² (1392): the held advice is "prepare to stop" once due (``advisor._held``). Each run ends:
+    or braked at 7.1 m/s² (1392): the held advice is "prepare to stop" once due (``advisor._held``). Seed 1526
+    (issue 31, seeds 1,500-2,499): crawling at 10 mph on "Red light ahead.", the driver went on at light 2's green
+    63 m out; a second later its display showed the next red possibly beginning in 2.4 s, 14 s before the car's
+    arrival, and the committed driver held its speed into it (0.51 s into the red): at a light with no amber, a
+    driver who went on decides again when its display shows such a red and 4 m/s² still stops it. Each run ends:
     a car held at its line for good is no success."""
     assert _events(seed, 0.0) == ([], True)
 
@@ -238,3 +242,51 @@ def test_without_amber_a_dropout_before_the_stop_is_due_still_stops_the_car():
     assert any(a.action == "stop" and a.reason == "stale_spat" for t, a in run.advice if 22.0 < t < 32.0)
     assert not red_light_violations(run.trajectory, truth) and 64.9 <= run.trajectory.crossing_time_s(line_m) < 70.0  # on the green
     assert run.trajectory.accel_mps2.min() >= -AdvisorParams().firm_decel_mps2 - 1e-9
+
+
+def _told_late(line_m: float, amber_s: float):
+    """A light ``line_m`` out, green until the feed, silent so far, says at 9 s that it turns red at 12 s (the amber's
+    start, where it shows ``amber_s`` of amber) until 40 s; the car enters at the limit (55 mph)."""
+    from advisory.advice.views import LightView, Observation
+    from advisory.signals import TimelineSignal
+
+    v_lim = 24.5872
+    truth = Scenario("told late", (TimelineSignal(line_m, ((12.0 + amber_s, 40.0),), ((12.0, 12.0 + amber_s),)),), line_m + 100.0, v_lim, v_lim)
+
+    def feed(t_s, x_m, v_mps):
+        windows = ((max(12.0 - t_s, 0.0), 40.0 - t_s),) if 9.0 <= t_s < 40.0 else ()
+        return Observation(v_mps, v_lim, (LightView(1, line_m - x_m, True, 1.0, windows, amber_s=amber_s),) if x_m < line_m else (), position_m=x_m)
+
+    return truth, simulate(truth, driver=DriverModel(), feed=feed).trajectory
+
+
+def test_a_driver_stopping_for_a_line_goes_on_stopping_at_its_amber_and_goes_on_the_green():
+    """The shape of bench seed 53 (issue 31): "Red in 2 seconds. Prepare to stop." 95 m before a light that shows a
+    4 s amber; the car is braking for the line when the amber comes on 48 m out at 19.4 m/s, which would clear the
+    line before the red at that speed. The lenient driver's amber rule then counted the line as one to clear, while
+    it went on braking for it: it stopped at the line and, its mind made up, never decided again; it stood there
+    through every green until the simulation's end (base b531e7a). A driver already stopping goes on stopping, then
+    goes on the green (at 40 s, with a reaction time)."""
+    truth, tr = _told_late(340.0, 4.0)
+    assert not red_light_violations(tr, truth) and 40.0 <= tr.crossing_time_s(340.0) < 42.0
+    assert tr.x_m[-1] >= truth.zone_length_m - 1e-6 and tr.accel_mps2.min() >= -HARD_BRAKE_MPS2 - 1e-9
+
+
+@pytest.mark.parametrize("line_m", [325.0, 344.0])
+def test_a_car_at_rest_to_rounding_at_its_line_goes_on_the_green(line_m):
+    """The same with no amber: the car stops at the line, where the stop asked for is taken as made once it is at
+    rest. At 325 m it stopped at 2.8e-17 m/s (braking to rest within a step, to rounding); at 344 m it reached its
+    stop point at a crawl and crept on at 2.7 mm/s (the stop-at-the-line rate, v²/2d, vanishes with v). Neither was
+    exactly at rest, so the "stop" stayed in force and held the car there for good (bench seeds 143 and 391; base
+    b531e7a). Below ``REST_MPS`` the car is at rest: it goes on the green."""
+    truth, tr = _told_late(line_m, 0.0)
+    assert not red_light_violations(tr, truth) and 40.0 <= tr.crossing_time_s(line_m) < 42.0
+    assert tr.x_m[-1] >= truth.zone_length_m - 1e-6
+
+
+@pytest.mark.parametrize(("variant", "seed"), [("amber", 53), ("amber", 228)] + [("no-amber", s) for s in (143, 274, 391, 489, 562, 651, 929, 1176)])
+def test_the_runs_that_never_ended_now_end_safely(variant, seed):
+    """The bench's stalled runs in seeds 0-1499 (issue 31): each car stood at a line for good, through later greens
+    (two with an amber: a driver stopping for the line took its amber as one to clear; eight without: a car at rest
+    only to rounding). Each now ends, with no red entry and no hard brake (avoidable or not)."""
+    assert _events(seed, None if variant == "amber" else 0.0) == ([], True)

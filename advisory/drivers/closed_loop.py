@@ -14,14 +14,15 @@ with what it was told);
 ``overrides`` counts the times the driver's own braking was needed although the advice did not say "stop".
 What it knows of the lights it sees (issue 31): at a light that shows no amber (:func:`shows_amber`) its eye
 cannot see a red coming, so a green its display says may turn red now (a window open since the driver last saw
-red), or that it is told to stop for, is one it stops for where it still can at 4 m/s²; stopping on advice for a line that shows red now, where even 4 m/s² would roll it over the line,
+red) or before the car is over the line (decided again when the display shows it, the driver having gone on), or that
+it is told to stop for, is one it stops for where it still can at 4 m/s²; stopping on advice for a line that shows red now, where even 4 m/s² would roll it over the line,
 it brakes harder (up to ``emergency_decel_mps2``); and a red that outlasts by a reaction time the green the display
 promised when the driver went on is waited out by the eye (no new countdown is trusted for that red).
 
 Two named drivers (:data:`DRIVERS`), the same but on amber and at launch: :data:`LENIENT` clears an amber it
-reaches before the red (the regular driver's rule) and speeds up at the regular driver's 2 m/s² when no speed
-is advised; :data:`CAREFUL` stops for any amber it can stop for at the regular driver's hardest braking
-(4 m/s²) and launches at 1.5 m/s². Both follow the advice with a 1 s reaction. :meth:`DriverModel.regular` is
+reaches before the red (the regular driver's rule; already stopping for that line, it goes on stopping) and
+speeds up at the regular driver's 2 m/s² when no speed is advised; :data:`CAREFUL` stops for any amber it can
+stop for at the regular driver's hardest braking (4 m/s²) and launches at 1.5 m/s². Both follow the advice with a 1 s reaction. :meth:`DriverModel.regular` is
 the same person without advice (the regular driver with its amber rule and launch), the fair baseline.
 """
 
@@ -70,6 +71,12 @@ LENIENT = DriverModel()
 CAREFUL = DriverModel(amber="stop", launch_accel_mps2=1.5)
 """Stops for any amber it can stop for at 4 m/s², launches at 1.5 m/s², otherwise follows the advice with a 1 s reaction."""
 DRIVERS = {"lenient": LENIENT, "careful": CAREFUL}
+
+REST_MPS = 0.01
+"""Slower than this a car that stopped is at rest. The stop ends only to rounding: braking to rest within a step can
+leave ~1e-17 m/s, and a car that reaches its stop point at a crawl (inside the stop gap) is braked at the rate that
+stops it at the line, ``v²/2d``, which vanishes with ``v``: a creep of mm/s that lasts for hours. Waiting for an
+exact 0 there kept the stop asked for in force at the line through every later green (issue 31). [m/s]"""
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,7 +186,7 @@ def simulate(
             _, new, err, line = pending.pop(0)
             if not _silent(new):
                 active, error, stop_line_m = new, err, line
-        if active is not None and active.action == "stop" and v <= 0.0 and any(s.position_m == stop_line_m and d is not None for s, d in zip(scenario.signals, shown)):
+        if active is not None and active.action == "stop" and v <= REST_MPS and any(s.position_m == stop_line_m and d is not None for s, d in zip(scenario.signals, shown)):
             active = None  # the stop asked for is made: at rest, the eye and the display say when to go (the advice, "too close", is silent)
         # what the advice asks for
         if active is not None and active.action == "none" and active.reason == "red_ahead":
@@ -238,14 +245,16 @@ def simulate(
             if amber and amber_seen.get(n) != red_at:  # the regular driver's amber rule, wherever it is seen: stop if it
                 amber_seen[n] = red_at  # would not clear the line before the red (any amber: careful) and can stop at its hardest braking
                 late = rules.amber == "stop" or t + dist / max(v, 0.5) > red_at
-                if late and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+                stopping = braking_for == n  # already stopping for this line (told to, or its own decision): it goes on
+                if (late or stopping) and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
                     committed.discard(n)
                     amber_stop.add(n)
-                    surprises += 1
-                else:  # clears it in the amber: no slowing down until over the line
+                    surprises += not stopping
+                else:  # clears it in the amber: no slowing down (nor braking) until over the line
                     amber_stop.discard(n)
                     amber_go.add(n)
                     committed.add(n)
+                    braking_for = None
             overdue = display is None or (not display.is_red(t) and t - green_since.get(n, -np.inf) >= driver.reaction_s)
             # or, rolling on (no stop asked for), still red where a stop at the line needs ``last_call_decel_mps2`` (a
             # red held longer since the driver committed: an actuated controller's late change): nobody rolls on into a
@@ -262,6 +271,9 @@ def simulate(
                     surprised[n] = light.next_green_start_s(t)
                 if v * v / (2.0 * max(room, 1e-6)) <= (driver.emergency_decel_mps2 if first else rules.brake_max_mps2):
                     committed.discard(n)
+            if (n in committed and not red_now and not shows_amber(light) and next_red <= t + dist / max(v, 0.1)
+                    and v * v <= 2.0 * rules.brake_max_mps2 * max(room, 1e-6)):
+                committed.discard(n)  # went on at a light with no amber, and the display now shows a red that may begin before the car is over the line: it decides again
             promise = promised.get(n)
             if red_now and promise is not None and promise[0] == light.next_green_start_s(t) and t >= promise[1] + driver.reaction_s:
                 green_at = np.inf  # the green the display promised when the driver went on has not come: it waits for the green it sees
