@@ -350,7 +350,7 @@ class QueueBoard:
         behind = self._behind.get(trip_id, ()) if trip_id is not None else ()
         for_queue = self._for_queue.get(trip_id, False) if trip_id is not None else False
         at_line = bool(real.lights) and seen_at_line(real.lights[0], advice, for_queue, obs.speed_mps, obs.speed_limit_mps, params, self.model)
-        if at_line or gives_up_green(obs, advice, params, model=self.model, behind=behind, queue=est):
+        if at_line or gives_up_green(obs, advice, params, model=self.model, behind=behind, queue=est, real=real):
             return _normally(advice, params, real, last)
         paced = paced_for_behind(lambda plan: self.lost_behind(real, plan, params, trip_id, est), obs, advice, params)
         if paced is None:

@@ -187,6 +187,50 @@ def test_normal_drive_and_given_up_greens():
     assert not gives_up_green(_obs(distance_m=200.0, speed=5.0, reds=((5.0, 50.0),), limit=24.6), crawl, params)
 
 
+def _actuated_green(distance_m):
+    """A light of uncertain timing green now: surely until its minimum in 4 s, likely 20 s, at the latest 30 s; the
+    red after it of unknown end (the history has no red of it yet)."""
+    return LightView(1, distance_m, red_windows_s=((4.0, math.inf),), likely_red_windows_s=((20.0, math.inf),), late_red_windows_s=((30.0, math.inf),),
+                     scenario_red_windows_s=tuple(((4.0 + 26.0 * (k + 0.5) / 5, math.inf),) for k in range(5)))  # fmt: skip
+
+
+def test_a_queue_discharging_on_an_actuated_green_holds_it_until_its_maximum():
+    """Traced in SUMO (paper_s400 actuated 900 veh/h, 50 %, seed 5, ``main.11``, docs/TRAFFIC.md): the queue in front
+    of the car discharges on a green whose minimum comes before it has crossed. Four cars stand at the line (on a
+    green: one car a headway), a fifth arrives 60 m out at 10 m/s, at the line in (-10 + sqrt(100 + 4 x 60)) / 2 =
+    4.22 s: after the green's minimum (4 s), before its last car has crossed. Before, it waited for the red after the
+    minimum, whose end is unknown: the queue never cleared, and the line was closed to the car behind for ever. The
+    discharge holds the controller's detector busy (headways shorter than its passage time), so the green lasts under
+    it until its maximum (30 s): the fifth joins the queue, over the line at 4 x 1.4 = 5.6 s (fast) to 4 x 2 = 8 s
+    (slow)."""
+    probes = [Probe(100.0 - 1.0 - 7.5 * k, 0.0) for k in range(4)] + [Probe(40.0, 10.0)]  # the car 100 m out
+    est = estimate(Observation(6.0, 24.6, (_actuated_green(100.0),), position_m=100.0), probes)
+    assert est.cars == (5.0,) and est.clear_s[0] == pytest.approx((5.6, 8.0)) and est.after_red_s == (None,)
+    # an exact light turns red when its plan says: the fifth waits for the red's end
+    exact = Observation(6.0, 24.6, (LightView(1, 100.0, red_windows_s=((4.0, 34.0),)),), position_m=100.0)
+    assert min(estimate(exact, probes).clear_s[0]) >= 34.0
+
+
+def test_a_crawl_gives_up_an_actuated_green_that_the_queue_in_front_holds_for_a_normal_drive():
+    """The same queue; this car 100 m out at 6 m/s: a normal drive reaches the line in (-6 + sqrt(36 + 400)) / 2 =
+    7.44 s, within the passage time (2 s) after the queue's last car at the fast end (5.6 s), so the detector never sees
+    a gap and the green lasts for it (:func:`advisory.advice.behind.keeps_green`): it makes the light behind the queue
+    (7.0 s, a fast headway after its last car, before the latest red at 30 s), and a crawl at 4.5 m/s (over the line at
+    22.2 s) gives it up. Before, the sure view's red from 4 s had the normal drive stop too: nothing was weighed, and
+    in SUMO the crawling car let the green end (no car at the detector), it and the cars behind it waiting for the
+    next one. 130 m out (at the line in 9.0 s, 3.4 s after the queue) it leaves the gap: the green may end as the
+    light's timings have it, and the crawl is not weighed against a green the normal drive may not get."""
+    params = AdvisorParams()
+    crawl = Advice("coast", "red_ahead", 4.5)
+    for distance_m, given_up in ((100.0, True), (130.0, False)):
+        probes = [Probe(distance_m - 1.0 - 7.5 * k, 0.0) for k in range(4)] + [Probe(distance_m - 60.0, 10.0)]
+        real = Observation(6.0, 24.6, (_actuated_green(distance_m),), position_m=100.0)
+        est = estimate(real, probes)
+        assert est.clear_s[0] == pytest.approx((5.6, 8.0))
+        assert gives_up_green(apply(real, est), crawl, params, queue=est, real=real) is given_up, distance_m
+        assert not gives_up_green(apply(real, est), Advice("accelerate", "green_wave", 24.6), params, queue=est, real=real)
+
+
 def test_a_plan_slowing_for_a_discharging_queue_is_weighed_against_a_normal_drive_behind_it():
     """Traced in SUMO (paper_s400 fixed 300 veh/h, 50 %, seed 2, ``main.6`` at 105 s): 112.8 m before light 1 at
     23.1 m/s, its red over, two cars of it still to cross (3.4 s fast, 5 s slow), light 2 400 m on, red from 30 s; told
@@ -931,3 +975,24 @@ def test_in_sumo_a_slow_plan_over_the_first_light_does_not_cut_off_the_cars_behi
     red_s = 76.0  # the first light's red (green 46-76 s)
     assert all(t < red_s for t in first["unadvised"].values())
     assert all(t < red_s for t in first["advised"].values()), first
+
+
+def test_in_sumo_cars_follow_a_queue_through_an_actuated_green_that_it_holds(tmp_path):
+    """paper_s400 actuated, 900 veh/h, half the cars connected, seed 5's first two minutes (docs/TRAFFIC.md, "The
+    actuated green held by its queue"): the second light turns green at 71 s with a queue in front of the connected
+    cars ``main.4``-``main.8``. Unadvised, they cross it in that green (79.5-85 s). Before, the service took the
+    queue to wait for the red after the green's minimum, whose end was not yet known (no red of it in the history):
+    the line closed for ever, they crawled on, the green ended for want of a car at the detector and they crossed in
+    the next one (109-117 s). Now the queue holds the green in the estimate, as the controller's detector does: every
+    one of them crosses in the same green as unadvised."""
+    from ecodrive.traffic.network import build_network
+    from ecodrive.traffic.sim import RunSetup, run
+    from spat_feed.road.corridors import load_corridor
+
+    net = build_network(load_corridor("paper_s400"), tmp_path, control="actuated")
+    setup = RunSetup(900.0, 0.5, 5, 120.0, drain_s=60.0, cross_demand_vph=300.0)
+    second = {mode: {vid: car.crossings[1][1] for vid, car in run(net, setup, mode).cars.items() if len(car.crossings) > 1} for mode in ("advised", "unadvised")}
+    cars = [f"main.{k}" for k in range(4, 9)]
+    green_end_s = 90.0  # the green's end, its amber included (unadvised)
+    assert all(second["unadvised"][vid] < green_end_s for vid in cars), second["unadvised"]
+    assert all(second["advised"][vid] < green_end_s for vid in cars), second["advised"]

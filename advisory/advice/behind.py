@@ -75,8 +75,35 @@ def behind_queues_s(crossings_s: Sequence[float], obs: Observation, queue: Queue
     return out
 
 
+def keeps_green(light: LightView, arrive_s: float, fast_clear_s: float, model: QueueModel) -> bool:
+    """An actuated green (the light's timing uncertain: its latest changes known, ``late_red_windows_s``) on now, with
+    a queue in front discharging over its line until ``fast_clear_s`` (its last car's crossing at the fast end of the
+    discharge, from now), is held for a car reaching the line at ``arrive_s`` (its drive on an empty road) no later
+    than the controller's passage time after that car (``model.passage_s``): its detector never sees a gap long enough
+    to end the green, which then lasts for this car until its latest end (the late view). A car arriving later leaves
+    the gap after the queue, and the green may end in it as the light's timings have it.
+
+    Traced in SUMO (paper_s400 actuated 900 veh/h, 50 %, seed 5, ``main.11``, docs/TRAFFIC.md): 218 m before a green
+    that had just begun, five cars discharging in front of it, the sure view red from the green's minimum on (12 s)
+    and the queue's fast clearing past it, so a normal drive "made" no green and the check weighed nothing; the car
+    crawled on at 4.5 m/s, the green ended 16 s after its start (no car at the detector), and it and the five cars
+    behind it waited 26 s for the next one: unadvised, the same cars crossed in that green, which lasted until the
+    last of them was over.
+
+    Examples
+    --------
+    >>> lv = LightView(1, 218.0, red_windows_s=((12.0, math.inf),), likely_red_windows_s=((24.5, math.inf),),
+    ...                late_red_windows_s=((37.0, math.inf),))
+    >>> keeps_green(lv, 13.0, 11.5, QueueModel()), keeps_green(lv, 14.0, 11.5, QueueModel()), keeps_green(lv, 13.0, 0.0, QueueModel())
+    (True, False, False)
+    >>> keeps_green(LightView(1, 218.0, red_windows_s=((12.0, 40.0),)), 13.0, 11.5, QueueModel())  # exact timing: as published
+    False
+    """
+    return light.late_red_windows_s is not None and not light.red_now and 0.0 < fast_clear_s < math.inf and arrive_s <= fast_clear_s + model.passage_s
+
+
 def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S, model: QueueModel | None = None,
-                   behind: Sequence[Probe] = (), queue: QueueEstimate | None = None) -> bool:  # fmt: skip
+                   behind: Sequence[Probe] = (), queue: QueueEstimate | None = None, real: Observation | None = None) -> bool:  # fmt: skip
     """The advised plan gives up green time that a normal drive (speeding up to the limit at the regular driver's
     ``normal_accel_mps2``, no advice to react to) uses: at a light that the normal drive crosses outside its reds (the
     queue's included, :func:`~advisory.advice.queue.apply`), as every light before it, the plan arrives ``late`` after it, and the time lost
@@ -111,7 +138,12 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
     that turned red without amber 8 s later, over that line 0.7 s later than a normal drive, a connected car 2.5 s
     behind it (over the line 0.4 s before the red at its speed) pushed into that red (counted as half a car arriving
     at random, 2 s behind, it was not pushed). On an empty road (no followers) only the first case is checked, as
-    before."""
+    before.
+
+    At the next light, where its timing is uncertain and it is green now (``real``: the lights as they are, before the
+    queue closed them), a normal drive that reaches the line within the passage time after the queue in front holds the
+    green (:func:`keeps_green`): it makes the light unless its latest red comes first, where the sure view, red from
+    the green's minimum on, had it stop."""
     if advice.target_speed_mps is None or advice.action not in KEEP_MODES or not obs.lights:
         return False
     model = model or QueueModel()
@@ -126,7 +158,7 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
     planned = behind_queues_s(plan_alone, obs, queue, params.normal_accel_mps2, model)
     # made: crossed outside the light's reds by the normal drive on its own, so not into a queue surely standing (before its
     # fast clearing: the sure view of :func:`~advisory.advice.queue.apply`), where it would stop too; its time there is the one behind the queue
-    made = next((j for j, (lv, t) in enumerate(zip(obs.lights, alone)) if lv.is_red_at(t) or lv.is_red_at(normal[j])), len(obs.lights))
+    made = next((j for j, (lv, t) in enumerate(zip(obs.lights, alone)) if not _makes(lv, t, normal[j], j, real or obs, queue, model)), len(obs.lights))
     known = tuple(behind)
     for j in range(made):
         line_m = obs.lights[j].distance_m
@@ -145,6 +177,15 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
         if lost > slack_s:
             return True
     return False
+
+
+def _makes(light: LightView, alone_s: float, normal_s: float, j: int, real: Observation, queue: QueueEstimate | None, model: QueueModel) -> bool:
+    """:func:`gives_up_green`'s test of line ``j``: the normal drive (``alone_s`` on its own, ``normal_s`` behind the
+    queue) crosses outside its reds, the green held by the queue for it at the next light (:func:`keeps_green`)."""
+    now = real.lights[j]
+    if j == 0 and keeps_green(now, alone_s, cleared_s(now, queue, j)[0], model):
+        return not any(a <= normal_s < b for a, b in now.late_red_windows_s)
+    return not (light.is_red_at(alone_s) or light.is_red_at(normal_s))
 
 
 def pushed_past(light: LightView, normal_s: float, planned_s: float, behind: Sequence[Probe], limit_mps: float, model: QueueModel | None = None) -> float:

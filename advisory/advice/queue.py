@@ -94,6 +94,11 @@ class QueueModel:
     at a light that shows no amber (``LightView.amber_s`` = 0), this car is to be over the line this long before the
     red, or it stops there: the advisor's ``green_margin_s`` before such a red, for a car whose crossing a car ahead
     sets. [s]"""
+    passage_s: float = 2.0
+    """An actuated green, once past its minimum, ends when no car has reached its detector for this long (the
+    controller's passage time, unit extension or gap: 2-4 s in the field, the short end the snappiest and the one
+    assumed here; SUMO's ``max-gap`` 3 s): the queue in front discharging over its line holds it, and a car reaching
+    the line within this long after the queue's last car holds it too (:func:`~advisory.advice.behind.keeps_green`). [s]"""
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,6 +143,20 @@ def _first_red(light: LightView) -> tuple[float, float] | None:
     return _first_red_of(light.red_windows_s)
 
 
+def _held_red(light: LightView) -> tuple[float, float] | None:
+    """The red that the queue in front meets at the next light: the first one (:func:`_first_red`), but at a light of
+    uncertain timing green now (an actuated one: its latest changes known, ``late_red_windows_s``) the latest one
+    (maxEnd): a queue discharging over the line, and each car that joins it, keeps the controller's detector busy
+    (their headways shorter than any passage time, :attr:`QueueModel.passage_s`), so its green does not end under them
+    before its maximum. The sure view ends it at its minimum, and a queue that had not crossed by then waited for the
+    red after it: traced in SUMO (paper_s400 actuated 900 veh/h, 50 %, seed 5, ``main.11``), five cars discharging
+    on a green just begun, the red after it of unknown end, were taken to clear never, the line closed to the car
+    behind them in every timing, which crawled on at 4.5 m/s and lost the green with the cars behind it."""
+    if light.late_red_windows_s is not None and not light.red_now:
+        return _first_red_of(light.late_red_windows_s)
+    return _first_red(light)
+
+
 def estimate(
     obs: Observation,
     probes: Sequence[Probe],
@@ -164,7 +183,7 @@ def estimate(
     cars, known, free_at, clears, after_reds = [], [], [], [], []
     before, stop_behind = 0.0, False
     for i, light in enumerate(obs.lights):
-        red = _first_red(light)
+        red = _held_red(light) if i == 0 else _first_red(light)
         start, end = red if red is not None else (math.inf, math.inf)
         ahead = sorted((light.distance_m - p.ahead_m, p.speed_mps) for p in probes if before < p.ahead_m < light.distance_m)
         queue_m = light.queue_m if light.fresh else None
@@ -201,6 +220,8 @@ def estimate(
         # amber announces, one it could make alone, the line is closed to it until that red's end (an amber warns the
         # driver behind a car as any other). Decided within the distance the car needs to stop at the others' rate plus a headway's travel: farther out
         # the cars ahead may yet leave it time, and it can still stop when it gets there.
+        sure = _first_red(light)
+        start = sure[0] if sure is not None else math.inf  # (that red as early as it may come, not held by the queue)
         v = obs.speed_mps
         deciding = light.distance_m <= v * v / (2.0 * model.drive_accel_mps2) + v * model.headway_s
         if light.amber_s == 0.0 and 0.0 < start and free < start and light.distance_m / v_free < start and deciding:
