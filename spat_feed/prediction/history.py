@@ -24,6 +24,7 @@ import numpy as np
 from spat_feed.prediction.predictor import (
     EXACT_S,
     SCORE_AHEAD_S,
+    _mixed,
     cycle_period_s,
     durations_given_stage,
     durations_given_state,
@@ -63,6 +64,11 @@ one ends. [-]"""
 RESUMED_KEEP = 300
 """The readings of resumed phases kept per class (and the exact ends, :meth:`PhaseHistory.exact_lags_s`). [-]"""
 
+RECENT_PHASES = 20
+"""The latest phases of a class whose ``state`` law is pooled with that of every phase kept (``keep``, 40), by
+their scored errors (:meth:`PhaseHistory.recent_weight`): an actuated controller's cycle drifts with the traffic
+(Antwerp 2019-05-01: its median 89 s at 16:00, 70 s at 19:00), and 40 phases are an hour of it. [-]"""
+
 EXACT_NEAREST = 20
 """Past exact ends, the nearest in how far ahead they were first published, whose lags to the change a new one
 reads (:meth:`PhaseHistory.exact_lags_s`). [-]"""
@@ -95,6 +101,8 @@ class CycleStats:
     state_spans_s: tuple | None = None
     state_entered_s: float | None = None  # how long after the current phase began the intersection entered its state now
     stage_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # the stage's law's share in ``state``, per class (:meth:`PhaseHistory.stage_weight`)
+    recent_spans_s: tuple | None = None  # ``state_spans_s`` of the latest :data:`RECENT_PHASES` phases of the class only
+    recent_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # their law's share in ``state``, per class (:meth:`PhaseHistory.recent_weight`)
     # the current phase's exact published end (minEndTime = maxEndTime) and how long after such ends its class changed
     # in the past, for ends first published as far ahead (:meth:`PhaseHistory.exact_lags_s`); () until enough are seen
     exact_end_unix_s: float | None = None
@@ -183,7 +191,7 @@ class PhaseHistory:
     """
 
     __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
-                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score", "_stage_score",
+                 "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score", "_stage_score", "_recent_score",
                  "_exact_first", "_after_exact")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
@@ -208,6 +216,7 @@ class PhaseHistory:
         self._laws: dict[PhaseClass, tuple] = {}  # ... and those readings (:meth:`window_law`)
         self._window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, window law's mean squared error, durations'] (:meth:`_score_window`)
         self._stage_score: dict[PhaseClass, list[float]] = {}  # class -> [n, the stage's law's mean squared error, by the phase's start] (:meth:`_given_before`)
+        self._recent_score: dict[PhaseClass, list[float]] = {}  # class -> [n, the recent phases' law's mean squared error, all phases'] (:meth:`_given_before`)
         self._exact_first: list[list[float]] = []  # the phase in progress: [exact end, first reading that published it], in order
         self._after_exact: dict[PhaseClass, deque[tuple[float, float]]] = {}  # class -> (how far ahead an exact end was first published, change - it)
 
@@ -296,6 +305,7 @@ class PhaseHistory:
         return CycleStats(durations, dict(self._following), self._current, self._since, self._resumed, excess, ends_unix_s=ends, window_law_s=law,
                           window_weight={c: self.window_weight(c) for c in self._window_score},
                           stage_weight={c: _share(self._stage_score[c]) for c in self._stage_score},
+                          recent_weight={c: _share(self._recent_score[c]) for c in self._recent_score},
                           exact_end_unix_s=self._exact_first[-1][0] if self._exact_first else None, exact_lags_s=self.exact_lags_s())  # fmt: skip
 
     def exact_lags_s(self) -> tuple[float, ...]:
@@ -384,7 +394,8 @@ class PhaseHistory:
         """The durations ``state`` gave :data:`SCORE_AHEAD_S` before the phase in progress ended at ``end_unix_s``
         (:func:`~spat_feed.prediction.predictor.durations_given_state`), what the cycle is scored against; and the
         score of its two laws then, by the phase's start and by the stage's (their likely ends' squared errors, a
-        running mean over about :data:`METHOD_MEMORY` phases: :meth:`stage_weight`)."""
+        running mean over about :data:`METHOD_MEMORY` phases: :meth:`stage_weight`), and of the law of every phase
+        kept and of the latest :data:`RECENT_PHASES` (:meth:`recent_weight`)."""
         el = max(0.0, end_unix_s - SCORE_AHEAD_S - self._since)
         then = [(at, s) for at, s in self._path if at <= el]
         if not then:
@@ -398,13 +409,25 @@ class PhaseHistory:
         if by_stage is not None:
             errors = [max(el, sample_quantile(np.sort(x), 0.5)) - (end_unix_s - self._since) for x in (by_stage, by_phase)]
             _scored(self._stage_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
-        return durations_given_state(spans, el, entered, self.stage_weight(self._current))
+        every = durations_given_state(spans, el, entered, self.stage_weight(self._current))
+        recent = durations_given_state(self.spans_in(self._current, state, RECENT_PHASES), el, entered, self.stage_weight(self._current))
+        if recent is None:
+            return every
+        errors = [max(el, sample_quantile(np.sort(x), 0.5)) - (end_unix_s - self._since) for x in (recent, every)]
+        _scored(self._recent_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
+        return _mixed(every, recent, self.recent_weight(self._current))
 
     def stage_weight(self, cls: PhaseClass) -> float:
         """The share of the stage's law in the ``state`` law of ``cls``
         (:func:`~spat_feed.prediction.predictor.durations_given_state`): in inverse proportion to its mean squared
         error against the law by the phase's start, as :meth:`window_weight`; half each until scored. [-]"""
         return _share(self._stage_score.get(cls, (0, 0.0, 0.0)))
+
+    def recent_weight(self, cls: PhaseClass) -> float:
+        """The share of the latest :data:`RECENT_PHASES` phases' law in the ``state`` law of ``cls``, pooled with
+        every phase's kept: in inverse proportion to its mean squared error against the latter's, as
+        :meth:`window_weight`; half each until scored. [-]"""
+        return _share(self._recent_score.get(cls, (0, 0.0, 0.0)))
 
     @property
     def entered_s(self) -> float | None:
@@ -416,11 +439,15 @@ class PhaseHistory:
         if self._since is not None and (not self._path or self._path[-1][1] != state):
             self._path.append((t_unix_s - self._since, state))
 
-    def spans_in(self, cls: PhaseClass | None, state: int) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] | None:
-        """The phases of ``cls`` seen whole while the intersection was in ``state``: each one's duration and the span
-        of its own time (from, to) it spent so, as three tuples; None when none was. [s]"""
+    def spans_in(self, cls: PhaseClass | None, state: int, latest: int | None = None) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] | None:
+        """The phases of ``cls`` seen whole (the ``latest`` only, if given) while the intersection was in ``state``:
+        each one's duration and the span of its own time (from, to) it spent so, as three tuples; None when none
+        was. [s]"""
+        paths = self._paths.get(cls, ())
+        if latest is not None and len(paths) > latest:
+            paths = list(paths)[-latest:]
         out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d)
-               for d, path in self._paths.get(cls, ()) for k, (el, s) in enumerate(path) if s == state]  # fmt: skip
+               for d, path in paths for k, (el, s) in enumerate(path) if s == state]  # fmt: skip
         return None if not out else tuple(zip(*out))
 
 
@@ -605,5 +632,6 @@ class IntersectionHistory:
             cycle = self._stats[group] = replace(history.stats(), linked_end_unix_s=linked, linked_ends_unix_s=ends, period_s=self.period_s, period_error_s=self.period_error_s,
                                                  cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset(),
                                                  state_spans_s=history.spans_in(history.current, self._state), state_id=self._state,
+                                                 recent_spans_s=history.spans_in(history.current, self._state, RECENT_PHASES),
                                                  state_entered_s=history.entered_s)  # fmt: skip
         return cycle

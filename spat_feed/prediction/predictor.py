@@ -37,8 +37,9 @@ Where the samples come from, in the order they are trusted (each *method* names 
     (no signal plan, no detectors; :meth:`~spat_feed.prediction.history.PhaseHistory.spans_in`); pooled with the
     *stage's* law, the same phases counted from when the intersection entered that state (those that stayed in it as
     long as this one has: a stage's end is told by how long the stage has run), each with a share in inverse
-    proportion to its scored mean squared error (:func:`durations_given_state`); the plain durations below weigh
-    :data:`PRIOR_PHASES` phases in it.
+    proportion to its scored mean squared error (:func:`durations_given_state`); that law read from the latest
+    phases of the class only (``CycleStats.recent_spans_s``: an actuated controller's cycle drifts with the traffic)
+    pooled with it the same way (``recent_weight``); the plain durations below weigh :data:`PRIOR_PHASES` phases in it.
 ``duration``
     Each past duration of the class from the phase's start, given that it has run this long (the empirical
     conditional distribution: durations it has already outlasted are out).
@@ -547,6 +548,9 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         if given is not None:  # (pooled with the stage's law; the prior is weighed against the phases seen)
             n_given = len(given)
             given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
+            recent = durations_given_state(cycle.recent_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
+            if recent is not None:  # (pooled with the latest phases' law: the traffic drifts)
+                given = _mixed(given, recent, cycle.recent_weight.get(cls, 0.5))
     if cycle is not None and current:
         linked = np.asarray(cycle.linked_ends_unix_s or cycle.linked_end_unix_s or (), dtype=float)  # every lag seen, or (likely, late)
         ahead = linked[linked >= floor_unix_s]  # the link has not failed (the phase went on past its lags, or minEndTime did) while some are ahead

@@ -207,6 +207,33 @@ def test_a_red_that_waits_for_a_stage_is_told_by_how_long_the_stage_has_run(stag
         assert weight < 0.2 and mae <= 2.0, (weight, mae)
 
 
+def test_a_red_whose_length_drifts_with_the_traffic_is_told_by_the_latest_phases():
+    """An actuated controller whose reds grow with the traffic: group 1's red lasts ``20 + 0.5 k`` s (+-1 s, whole
+    seconds) at its ``k``-th cycle, group 2 green from 2 s after it begins to 2 s before it ends; 1's green 25-35 s.
+    Seen 5 s into a red, the law of the 40 phases kept (``PhaseHistory.keep``) lags the drift by half of them, 20
+    phases or 10 s; that of the latest 20 (``RECENT_PHASES``) by 5 s. The two are scored at each red's end and
+    pooled (``recent_weight``): the latter takes most of the pool, and the forecast (method ``state``) errs less than
+    the 10 s of every phase kept."""
+    rng = np.random.default_rng(17)
+    history = IntersectionHistory()
+    t, errors = T0, []
+    for k in range(120):
+        red_s = 20.0 + 0.5 * k + float(rng.integers(-1, 2))
+        start = t
+        while t < start + red_s - 1e-9:
+            s2 = GREEN if 2.0 <= t - start < red_s - 2.0 else RED
+            history.record(t, {1: state_only(RED, t), 2: state_only(s2, t)})
+            if k >= 80 and t - start == 5.0:
+                fc = forecast(state_only(RED, t), t, history.stats(1))[0]
+                errors.append((fc.method, fc.likely_unix_s - (start + red_s)))
+            t += 1.0
+        t = _drive(history, [(GREEN, float(rng.integers(25, 36)))], t)
+    weight = history.stats(1).recent_weight[PhaseClass.RED]
+    mean_error = np.mean([e for _, e in errors])
+    assert len(errors) == 40 and all(m == "state" for m, _ in errors)
+    assert weight > 0.6 and -7.5 <= mean_error <= -4.0, (weight, mean_error)
+
+
 def test_a_pool_gives_each_law_its_share_however_few_its_samples():
     """The linear pool of two laws weighs each by its share of the forecast's samples, not by how many samples it
     has: the ``state`` law of 3 phases with its prior of 3 (``PRIOR_PHASES``) is half and half."""
