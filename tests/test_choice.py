@@ -523,6 +523,20 @@ def test_timings_handed_over_packed_are_packed_the_same():
         assert w0.shape == w1.shape and w0.tobytes() == w1.tobytes() and p0.tobytes() == p1.tobytes()
 
 
+def test_an_exact_light_has_its_windows_in_every_timing_of_the_mixture():
+    """Beside an uncertain light (20 timings and the wide component's 4), an exact light is the same in each of the 24
+    timings of the mixture: its two windows as stated, padded with +inf to the most windows of any timing (here 3)."""
+    from advisory.advice.mixture import mixture_timings
+
+    three = tuple(((0.0, 10.0 + k), (50.0 + k, 80.0), (120.0 + k, 150.0)) for k in range(20))
+    uncertain = LightView(1, 150.0, True, 0.8, ((0.0, 40.0),), ((0.0, 20.0),), scenario_red_windows_s=three)
+    for lights, i in (((uncertain, LightView(2, 450.0, red_windows_s=((5.0, 40.0), (90.0, 130.0)))), 1),
+                      ((LightView(2, 100.0, red_windows_s=((5.0, 40.0), (90.0, 130.0))), uncertain), 0)):  # fmt: skip
+        windows, weights = mixture_timings(lights)
+        assert windows.shape == (2, 24, 3, 2) and weights.size == 24
+        assert windows[i].tolist() == [[[5.0, 40.0], [90.0, 130.0], [np.inf, np.inf]]] * 24
+
+
 def _wide_component_plain(timings: tuple) -> tuple:
     """The plain reading of ``mixture.wide_component`` on tuples (the reference its kernel is checked against): at
     each of ``WIDE_LEVELS`` the forecast's timing with ``WIDE_STRETCH`` times its spread about the median timing, each
