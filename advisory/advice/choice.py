@@ -466,8 +466,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
         if driven:
             cur = 1 - cur
         prev, prev_knots, prev_brake, prev_usd, prev_t_end = c, n_knots, brake, usd, t_end
-        for j in range(n_lines):
-            no_stop[j] = _no_stop_s(path, n_knots, d_m[j], AMBER_STOP_MPS2)
+        no_stop[:] = np.nan  # when the car can no longer stop for each line: found once an amber there needs it
         total, stops = 0.0, 0.0
         plan = usd + lam_usd_per_s * t_end
         tail = (d_m, windows, n_windows, after_red_s, clear_s, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam_usd_per_s)
@@ -490,6 +489,8 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
                 # a plan a second slower than another stops for an amber that the other clears)
                 a = windows[blocked, s, kb, 0]
                 first, last = max(a - amber_max_s[blocked], 0.0) - 0.5 * EDGE_S, max(a - clear_s[blocked], 0.0) + 0.5 * EDGE_S
+                if np.isnan(no_stop[blocked]):
+                    no_stop[blocked] = _no_stop_s(path, n_knots, d_m[blocked], AMBER_STOP_MPS2)
                 w = min(max((no_stop[blocked] - first) / (last - first), 0.0), 1.0)
             early = np.inf  # the recourse of a green that comes early (none for "prepare to stop": it stops whatever)
             if not stop_plan[c] and (w < 1.0 or blocked >= 0):
