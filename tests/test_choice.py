@@ -441,6 +441,44 @@ def test_the_pruned_choice_is_the_choice_of_pricing_every_plan_alone(monkeypatch
     assert seen["choices"] > 150 and seen["pruned"] > seen["choices"] // 2, seen
 
 
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(0.0, V_LIM), st.floats(30.0, 400.0), st.floats(60.0, 300.0), st.lists(st.floats(PARAMS.min_cruise_speed_mps, V_LIM), min_size=2, max_size=6))
+def test_candidates_of_one_motion_by_their_arguments_drive_the_same_motion(v0, line_m, gap_m, targets):
+    """``choice._same_motion`` (the pricing drives a motion once for the candidates it names alike) against the motion
+    itself: wherever it names two candidates alike, ``choice._drive`` gives them the same knots, states where stops must
+    begin, cost and time, to the last bit; and it does name some alike (modes 0, 2 and 3 at a target the car is not
+    above, mode 1 there whatever the target), so the check is not vacuous."""
+    vts = np.repeat(np.array(targets + [v0]), 4)
+    modes = np.tile(np.arange(4), len(targets) + 1)
+    reactions, rows, accels = np.full(vts.size, PARAMS.reaction_s), np.full(vts.size, choice.ACCEL_COMFORT), np.full(vts.size, PARAMS.comfort_accel_mps2)
+    d_m = np.array([line_m, line_m + gap_m])
+    motions = []
+    for c in range(vts.size):
+        path = np.empty((4, choice.MAX_KNOTS + 1))
+        usd, t_end, n, brake = choice._drive(vts[c], modes[c], reactions[c], rows[c], accels[c], v0, d_m, d_m[-1] + 100.0, V_LIM, RATES, COAST,
+                                             PARAMS.comfort_decel_mps2, PARAMS.firm_decel_mps2, PARAMS.normal_accel_mps2, path)  # fmt: skip
+        motions.append((usd, t_end, brake.tobytes(), path[:, :n].tobytes()))
+    alike = [(a, b) for a in range(vts.size) for b in range(a) if choice._same_motion(a, b, vts, modes, reactions, rows, accels, v0)]
+    assert all(motions[a] == motions[b] for a, b in alike)
+    assert len(alike) >= 3  # (the car's own speed as a target: modes 0, 2, 3 alike)
+
+
+def test_the_pricing_order_puts_candidates_of_one_motion_together():
+    """``choice._pricing_order``: the anchor first, every candidate once, and the candidates ``_same_motion`` names alike
+    one after the other (what lets ``expected_costs`` drive each motion once)."""
+    v0 = 8.0
+    speeds = np.arange(PARAMS.min_cruise_speed_mps, V_LIM, 0.44704)
+    vts, modes = np.tile(speeds, 4), np.repeat(np.arange(4), speeds.size)
+    reactions, rows, accels = np.full(vts.size, PARAMS.reaction_s), np.full(vts.size, choice.ACCEL_COMFORT), np.full(vts.size, PARAMS.comfort_accel_mps2)
+    order = choice._pricing_order(vts, modes, v0, 5)
+    assert order[0] == 5 and sorted(order.tolist()) == list(range(vts.size))
+    groups = [c for c in order[1:]]
+    runs = sum(1 for a, b in zip(groups, groups[1:]) if not choice._same_motion(b, a, vts, modes, reactions, rows, accels, v0)) + 1
+    distinct = len({next(i for i in range(vts.size) if choice._same_motion(c, i, vts, modes, reactions, rows, accels, v0)) for c in groups})
+    assert runs == distinct < len(groups)
+
+
 PER_PLAN_ARGS = (0, 1, 2, 3, 4, 13, 24)
 """The arguments of :func:`choice.expected_costs` given per candidate plan (vts, modes, reactions, accel_rows, accels,
 cross_s, stop_plan)."""
@@ -483,6 +521,20 @@ def test_timings_handed_over_packed_are_packed_the_same():
         packed = tuple(replace(v, scenario_red_windows_s=Timings.packed(v.scenario_red_windows_s)) if v.scenario_red_windows_s else v for v in plain)
         (w0, p0), (w1, p1) = mixture_timings(plain), mixture_timings(packed)
         assert w0.shape == w1.shape and w0.tobytes() == w1.tobytes() and p0.tobytes() == p1.tobytes()
+
+
+def test_an_exact_light_has_its_windows_in_every_timing_of_the_mixture():
+    """Beside an uncertain light (20 timings and the wide component's 4), an exact light is the same in each of the 24
+    timings of the mixture: its two windows as stated, padded with +inf to the most windows of any timing (here 3)."""
+    from advisory.advice.mixture import mixture_timings
+
+    three = tuple(((0.0, 10.0 + k), (50.0 + k, 80.0), (120.0 + k, 150.0)) for k in range(20))
+    uncertain = LightView(1, 150.0, True, 0.8, ((0.0, 40.0),), ((0.0, 20.0),), scenario_red_windows_s=three)
+    for lights, i in (((uncertain, LightView(2, 450.0, red_windows_s=((5.0, 40.0), (90.0, 130.0)))), 1),
+                      ((LightView(2, 100.0, red_windows_s=((5.0, 40.0), (90.0, 130.0))), uncertain), 0)):  # fmt: skip
+        windows, weights = mixture_timings(lights)
+        assert windows.shape == (2, 24, 3, 2) and weights.size == 24
+        assert windows[i].tolist() == [[[5.0, 40.0], [90.0, 130.0], [np.inf, np.inf]]] * 24
 
 
 def _wide_component_plain(timings: tuple) -> tuple:

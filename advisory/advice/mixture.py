@@ -160,22 +160,23 @@ def mixture_timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarr
     n_fc = max(len(timings) for timings in forecast)
     forecast = [_resampled(timings, n_fc) for timings in forecast]
     if any(uncertain):  # each light's parts: its forecast as paired, then its wide component
-        per_light = [(_paired_timings(fc, n_fc, j) if u else fc,
-                      wide_component(fc.array_s if isinstance(fc, Timings) else packed_windows_s(fc, _most_windows(fc)), wide_levels(n_fc), WIDE_STRETCH)
-                      if u else fc[:1] * len(WIDE_LEVELS))
+        per_light = [(_paired_timings(fc, n_fc, j),
+                      wide_component(fc.array_s if isinstance(fc, Timings) else packed_windows_s(fc, _most_windows(fc)), wide_levels(n_fc), WIDE_STRETCH))
+                     if u else (fc[:1],)  # an exact light: its one timing (packed once, set in every timing of the mixture)
                      for j, (fc, u) in enumerate(zip(forecast, uncertain))]  # fmt: skip
         stated = min(light.confidence_frac for light, u in zip(lights, uncertain) if u)
         outside = min(max(1.0 - stated, 1.0 / n_fc), 1.0)
         weights = np.concatenate((np.full(n_fc, (1.0 - outside) / n_fc), np.full(len(WIDE_LEVELS), outside / len(WIDE_LEVELS))))
     else:
-        per_light, weights = [(fc,) for fc in forecast], np.full(n_fc, 1.0 / n_fc)
+        per_light, weights = [(fc[:1],) for fc in forecast], np.full(n_fc, 1.0 / n_fc)
     k = max(max(_most_windows(part) for parts in per_light for part in parts), 1)
     out = np.full((len(lights), weights.size, k, 2), np.inf)
-    for i, parts in enumerate(per_light):
+    for i, (parts, u) in enumerate(zip(per_light, uncertain)):
         n = 0
         for part in parts:
             block = part if isinstance(part, np.ndarray) else packed_windows_s(part, k)
-            out[i, n : n + len(block), : block.shape[1]] = block
+            rows = slice(n, n + len(block)) if u else slice(None)
+            out[i, rows, : block.shape[1]] = block
             n += len(block)
     return out, weights
 
