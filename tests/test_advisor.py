@@ -618,3 +618,35 @@ def test_search_is_the_earliest_run_of_green_speeds_of_the_first_mode_that_makes
         ok = green_mask(speeds, lines.distances_m, lines.windows_s, lines.no_amber, 2, P.green_margin_s, v0, code, 0.0, P.comfort_decel_mps2,
                         P.firm_decel_mps2, P.comfort_accel_mps2, *coast)  # fmt: skip
         assert [keeps(lines, obs, P, name, float(s)) for s in speeds] == ok.tolist()
+
+
+def test_at_a_crawl_towards_a_far_red_the_advice_does_not_flip_as_the_car_coasts_and_creeps_back():
+    """A red of unknown end 500 m ahead at a light with no amber, the car at the slowest speed ever advised (10 mph):
+    told to lift off, it coasts a little below that speed, and back (the closed-loop driver keeps a crawl on "Red light
+    ahead."). "Lift off and coast" at 10 mph and "Red light ahead." 0.07 m/s below it flipped every other second for
+    130 s (issue 31, no-amber seed 1526): the words said stay within the hysteresis band of that speed, either way."""
+    v0, band = P.min_cruise_speed_mps, P.hysteresis_mps
+
+    def said(speeds_mps):
+        memory, out = None, []
+        for k, v in enumerate(speeds_mps):
+            lit = LightView(2, 500.0 - 4.4 * k, True, 0.9, ((0.0, 450.0),), likely_red_windows_s=((0.0, 300.0),), amber_s=0.0)
+            adv, memory = advise(Observation(v, 24.5872, (lit,)), memory)
+            out.append((adv.action, adv.reason, adv.speak))
+        return out
+
+    coasting = (v0, v0 - 0.07, v0 - 0.14, v0, v0 - 0.07, v0 - 0.14, v0, v0 - band + 0.1)
+    assert said(coasting) == [("coast", "red_ahead", True)] + [("coast", "red_ahead", False)] * 7
+    pulling_away = (3.0, v0 - 0.1, v0, v0 + 0.1, v0, v0 + band - 0.1)  # a crawl from the light before: what is ahead, said
+    assert said(pulling_away) == [("none", "red_ahead", True)] + [("none", "red_ahead", False)] * 5
+    assert said(coasting + (v0 - band - 0.1,))[-1][:2] == ("none", "red_ahead")  # out of the band, each way: the other words
+    assert said(pulling_away + (v0 + band + 0.1,))[-1][:2] == ("coast", "red_ahead")
+
+
+def test_at_a_crawl_near_a_light_with_no_amber_a_stop_due_is_said():
+    """The car creeps at 4 m/s 16.5 m before a light with no amber whose red may begin in 1 s (the car's arrival, 4 s
+    out, inside it): a comfortable stop must begin now (4 m/s x (1 s reaction + 2 s lead) + v²/2/1.5 m/s² = 17.3 m),
+    so "Prepare to stop.", as the rules say at a crawl; it was "Red light ahead." alone, the crawl's words (issue 31)."""
+    lit = LightView(1, 16.5, True, 0.9, ((1.0, 450.0),), likely_red_windows_s=((1.0, 300.0),), amber_s=0.0)
+    adv = advise(Observation(4.0, 24.5872, (lit,)))[0]
+    assert (adv.action, adv.reason) == ("stop", "red_ahead") and "Prepare to stop" in adv.message

@@ -136,6 +136,20 @@ def _stop_due(distance_m: float, v_mps: float, params: AdvisorParams) -> bool:
     return distance_m <= v_mps * (params.reaction_s + params.stop_lead_s) + v_mps * v_mps / (2.0 * params.comfort_decel_mps2)
 
 
+def _crawling(v_mps: float, last: Advice | None, params: AdvisorParams) -> bool:
+    """Too slow for a lift-off far from a red to ask anything (the car pulls away at a crawl): below the slowest speed
+    ever advised (``min_cruise_speed_mps``), where "Red light ahead." alone is said (on it a driver keeps a crawl, no
+    slower than that speed); above it "Lift off and coast". The words said last (``last``) stay while the speed is
+    within ``hysteresis_mps`` of that bound, on the side they were said from (the band in which the advice holds
+    rather than nudge, section 4). With the bound alone the two words moved the car across it each way: "Lift off and
+    coast" at 10 mph, a coast 0.1 m/s below it, "Red light ahead.", back to 10 mph: they flipped every other second
+    for 130 s (no-amber seed 1526). [-]"""
+    bound_mps = params.min_cruise_speed_mps
+    if last is not None and last.reason == "red_ahead" and last.action in ("none", "coast"):
+        bound_mps += params.hysteresis_mps if last.action == "none" else -params.hysteresis_mps
+    return v_mps < bound_mps
+
+
 @lru_cache(maxsize=64)
 def _candidate_plans(low_mps: float, limit_mps: float, step_mps: float, reaction_s: float, accel_mps2: float, normal_accel_mps2: float) -> tuple:
     """The candidate plans of :func:`_choose`, made once per road and driver (not per fix): targets, modes, reactions,
@@ -234,10 +248,10 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
                   or slowed_into_red(usable[j], float(cross[stop, j]), params.green_margin_s)), _binding(usable, obs, params))  # fmt: skip
         if i == 0 and red and v > 0.0 and nxt.seconds_to_green() - crossing_time_s(nxt.distance_m, v, v, params) < params.short_wait_s:
             return Advice("none", "short_wait", light_red=red, seconds_to_change_s=to_change)  # a stop to wait a moment: none
-        if v < params.min_cruise_speed_mps:  # pulling away at a crawl: what is ahead, said
-            return _timed("none", "red_ahead", None, usable, i, first=(red, to_change))
-        if i == 0 and _stop_due(nxt.distance_m, v, params):
+        if i == 0 and _stop_due(nxt.distance_m, v, params):  # (at a crawl too: the stop is the plan, as the rules say it)
             return Advice("stop", "red_ahead", target_speed_mps=0.0, light_red=red, seconds_to_change_s=to_change)
+        if _crawling(v, last, params):  # pulling away at a crawl: what is ahead, said
+            return _timed("none", "red_ahead", None, usable, i, first=(red, to_change))
         # lift off only: the words and the driver's motion are a lift-off (the stop, when it comes, is braked then)
         keep_target = last is not None and last.action == "coast" and last.reason == "red_ahead" and last.target_speed_mps is not None
         return _timed("coast", "red_ahead", last.target_speed_mps if keep_target else v, usable, i, first=(red, to_change))
@@ -317,7 +331,7 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
             # short of the line), but lift off: arriving later only helps (the red may end first), and what coasting
             # sheds the stop would have braked away anyway. Not at a crawl (launching from the light before): there
             # only what is ahead. A known end keeps the early gentle stop (the advisor re-plans from it)
-            if v < params.min_cruise_speed_mps:
+            if _crawling(v, last, params):
                 return Advice("none", "red_ahead", light_red=red, seconds_to_change_s=to_change)
             keep = last is not None and last.action == "coast" and last.reason == "red_ahead" and last.target_speed_mps is not None
             return Advice("coast", "red_ahead", last.target_speed_mps if keep else v, red, to_change)
