@@ -246,7 +246,7 @@ def simulate(
                 amber_seen[n] = red_at  # would not clear the line before the red (any amber: careful) and can stop at its hardest braking
                 late = rules.amber == "stop" or t + dist / max(v, 0.5) > red_at
                 stopping = braking_for == n  # already stopping for this line (told to, or its own decision): it goes on
-                if (late or stopping) and v * v / (2.0 * max(room, 1e-6)) <= rules.brake_max_mps2:
+                if amber_stops(late, stopping, v * v / (2.0 * max(room, 1e-6)), rules.brake_max_mps2):
                     committed.discard(n)
                     amber_stop.add(n)
                     surprises += not stopping
@@ -357,6 +357,21 @@ def shows_amber(light: Signal) -> bool:
     where it shows an amber before them; a fixed-time light is taken to (the paper's model has no amber; its display,
     exact, counts down to every red)."""
     return not isinstance(light, TimelineSignal) or any(b > a for a, b in light.ambers_s)
+
+
+def amber_stops(late: bool, stopping: bool, need_mps2: float, hardest_mps2: float) -> bool:
+    """Whether a driver who sees an amber stops for its line: where it would not clear the line before the red (or
+    stops for any amber: ``late``), or is already stopping for that line (``stopping``), and a stop at the line needs
+    no more than ``hardest_mps2`` (``need_mps2``: ``v²/2d``). A driver who does not stop clears the amber and is no
+    longer braking for the line: one counted as clearing it while it went on braking stood at the line through the
+    red and the green after it (issue 31; the SUMO driver's copy, issue 28).
+
+    Examples
+    --------
+    >>> amber_stops(False, True, 3.4, 4.0), amber_stops(False, False, 3.4, 4.0), amber_stops(True, True, 4.1, 4.0)
+    (True, False, False)
+    """
+    return (late or stopping) and need_mps2 <= hardest_mps2
 
 
 def _silent(advice: Advice) -> bool:

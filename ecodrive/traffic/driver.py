@@ -31,7 +31,7 @@ import numpy as np
 from advisory.advice.kinematics import coast_decel_mps2
 from advisory.advice.views import Advice, AdvisorParams, LightView
 from advisory.advice.queue import QueueModel
-from advisory.drivers.closed_loop import DriverModel, _silent, _time_to_cover_s, belief
+from advisory.drivers.closed_loop import DriverModel, _silent, _time_to_cover_s, amber_stops, belief
 from advisory.drivers.regular import time_to_cover_s
 from advisory.signals import TimelineSignal
 
@@ -189,14 +189,17 @@ class AdvisedDriver:
                 short = arrival > light.red_at_s  # it would not clear the line before the red
                 late = rules.amber == "stop" or short
                 need = v * v / (2.0 * max(room, 1e-6))
-                if (late and need <= planned) or (short and need <= rules.brake_max_mps2):  # an amber shorter than ITE's: hard, not red
+                stopping = self.braking_for == n  # already stopping for this line by its own decision: it goes on
+                # (at its hardest: an amber shorter than ITE's, or a stop begun, is braked hard, not run red)
+                if amber_stops(late, False, need, planned) or amber_stops(short, stopping, need, rules.brake_max_mps2):
                     self.committed.discard(n)
                     self.amber_stop.add(n)
-                    self.surprises += 1
-                else:
+                    self.surprises += not stopping
+                else:  # clears it: no braking until over the line
                     self.amber_stop.discard(n)
                     self.amber_go.add(n)
                     self.committed.add(n)
+                    self.braking_for = None
             overdue = display is None or (not display.is_red(t) and t - self.green_since.get(n, -np.inf) >= drv.reaction_s)
             overdue = overdue or (red_now and v_cmd > 0.0 and v * v >= 2.0 * drv.last_call_decel_mps2 * max(room - v * dt_s, 1e-6))
             if n in self.committed and red_now and self.surprised.get(n) is None and overdue:
