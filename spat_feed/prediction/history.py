@@ -29,6 +29,7 @@ from spat_feed.prediction.predictor import (
     durations_given_stage,
     durations_given_state,
     ends_given_window,
+    latest_readings,
     period_fit_s,
     sample_quantile,
     says_when,
@@ -103,6 +104,8 @@ class CycleStats:
     stage_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # the stage's law's share in ``state``, per class (:meth:`PhaseHistory.stage_weight`)
     recent_spans_s: tuple | None = None  # ``state_spans_s`` of the latest :data:`RECENT_PHASES` phases of the class only
     recent_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # their law's share in ``state``, per class (:meth:`PhaseHistory.recent_weight`)
+    recent_window_n: Mapping[PhaseClass, int] = field(default_factory=dict)  # the last readings of ``window_law_s`` that are its latest :data:`RECENT_PHASES` phases'
+    recent_window_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # their law's share in the window law, per class (:meth:`PhaseHistory.recent_window_weight`)
     # the current phase's exact published end (minEndTime = maxEndTime) and how long after such ends its class changed
     # in the past, for ends first published as far ahead (:meth:`PhaseHistory.exact_lags_s`); () until enough are seen
     exact_end_unix_s: float | None = None
@@ -162,6 +165,12 @@ def _scored(score: list[float], errors) -> None:
     score[2] += w * (errors[1] ** 2 - score[2])
 
 
+def _scored_pair(score: list[float], laws, floor_s: float, truth_s: float) -> None:
+    """Score two laws given by samples on one phase (:func:`_scored`): the error of each one's likely end (its
+    median, no earlier than ``floor_s``: the phase had not ended then) against ``truth_s``, when it ended. [s]"""
+    _scored(score, [max(floor_s, sample_quantile(np.sort(x), 0.5)) - truth_s for x in laws])
+
+
 def _share(score) -> float:
     """The first law's share in a pool of two scored by :func:`_scored`: in inverse proportion to the mean squared
     errors (Bates and Granger, :meth:`PhaseHistory.window_weight`); half each until :data:`MIN_PHASES_SEEN` phases
@@ -192,6 +201,7 @@ class PhaseHistory:
 
     __slots__ = ("keep", "max_gap_s", "_durations", "_following", "_current", "_since", "_exact", "_last_t", "_min_end", "_held", "_resumed",
                  "_resumed_min_ends", "_excess", "_sorted", "_ends", "ended", "_path", "_paths", "_window", "_windowed", "_laws", "_window_score", "_stage_score", "_recent_score",
+                 "_recent_window_score",
                  "_exact_first", "_after_exact")  # fmt: skip
 
     def __init__(self, keep: int = 40, max_gap_s: float = 5.0) -> None:
@@ -217,6 +227,7 @@ class PhaseHistory:
         self._window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, window law's mean squared error, durations'] (:meth:`_score_window`)
         self._stage_score: dict[PhaseClass, list[float]] = {}  # class -> [n, the stage's law's mean squared error, by the phase's start] (:meth:`_given_before`)
         self._recent_score: dict[PhaseClass, list[float]] = {}  # class -> [n, the recent phases' law's mean squared error, all phases'] (:meth:`_given_before`)
+        self._recent_window_score: dict[PhaseClass, list[float]] = {}  # class -> [n, as ``_recent_score``, of the window law] (:meth:`_score_window`)
         self._exact_first: list[list[float]] = []  # the phase in progress: [exact end, first reading that published it], in order
         self._after_exact: dict[PhaseClass, deque[tuple[float, float]]] = {}  # class -> (how far ahead an exact end was first published, change - it)
 
@@ -306,6 +317,8 @@ class PhaseHistory:
                           window_weight={c: self.window_weight(c) for c in self._window_score},
                           stage_weight={c: _share(self._stage_score[c]) for c in self._stage_score},
                           recent_weight={c: _share(self._recent_score[c]) for c in self._recent_score},
+                          recent_window_n={c: sum(list(n)[-RECENT_PHASES:]) for c, n in self._windowed.items()},
+                          recent_window_weight={c: _share(self._recent_window_score[c]) for c in self._recent_window_score},
                           exact_end_unix_s=self._exact_first[-1][0] if self._exact_first else None, exact_lags_s=self.exact_lags_s())  # fmt: skip
 
     def exact_lags_s(self) -> tuple[float, ...]:
@@ -342,12 +355,17 @@ class PhaseHistory:
         t, lo, hi = self._window[k]
         el, floor = t - self._since, max(t, lo)
         states = [s for a, s in self._path if a <= el]
-        by_window = ends_given_window(law, self._since, t, lo, hi, states[-1] if states else -1)
+        state = states[-1] if states else -1
+        by_window = ends_given_window(law, self._since, t, lo, hi, state)
+        recent = latest_readings(law, before.recent_window_n.get(self._current))
+        recent = None if recent is None else ends_given_window(recent, self._since, t, lo, hi, state)
+        if by_window is not None and recent is not None:
+            _scored_pair(self._recent_window_score.setdefault(self._current, [0, 0.0, 0.0]), (recent, by_window), floor, end_unix_s)
+            by_window = _mixed(by_window, recent, self.recent_window_weight(self._current))
         own = given if given is not None else [d for d in before.durations(self._current) if d > el]
         if by_window is None or not len(own):
             return
-        errors = (sample_quantile(np.sort(by_window), 0.5) - end_unix_s, max(self._since + sample_quantile(np.sort(own), 0.5), floor) - end_unix_s)
-        _scored(self._window_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
+        _scored_pair(self._window_score.setdefault(self._current, [0, 0.0, 0.0]), (by_window, self._since + np.asarray(own)), floor, end_unix_s)
 
     def window_weight(self, cls: PhaseClass) -> float:
         """The window law's share of the forecast of ``cls`` where it is pooled with the durations: the weights of the
@@ -407,14 +425,12 @@ class PhaseHistory:
             return None
         by_stage = durations_given_stage(spans, el, entered)
         if by_stage is not None:
-            errors = [max(el, sample_quantile(np.sort(x), 0.5)) - (end_unix_s - self._since) for x in (by_stage, by_phase)]
-            _scored(self._stage_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
+            _scored_pair(self._stage_score.setdefault(self._current, [0, 0.0, 0.0]), (by_stage, by_phase), el, end_unix_s - self._since)
         every = durations_given_state(spans, el, entered, self.stage_weight(self._current))
         recent = durations_given_state(self.spans_in(self._current, state, RECENT_PHASES), el, entered, self.stage_weight(self._current))
         if recent is None:
             return every
-        errors = [max(el, sample_quantile(np.sort(x), 0.5)) - (end_unix_s - self._since) for x in (recent, every)]
-        _scored(self._recent_score.setdefault(self._current, [0, 0.0, 0.0]), errors)
+        _scored_pair(self._recent_score.setdefault(self._current, [0, 0.0, 0.0]), (recent, every), el, end_unix_s - self._since)
         return _mixed(every, recent, self.recent_weight(self._current))
 
     def stage_weight(self, cls: PhaseClass) -> float:
@@ -422,6 +438,11 @@ class PhaseHistory:
         (:func:`~spat_feed.prediction.predictor.durations_given_state`): in inverse proportion to its mean squared
         error against the law by the phase's start, as :meth:`window_weight`; half each until scored. [-]"""
         return _share(self._stage_score.get(cls, (0, 0.0, 0.0)))
+
+    def recent_window_weight(self, cls: PhaseClass) -> float:
+        """The share of the latest :data:`RECENT_PHASES` phases' readings in the window law of ``cls``, pooled with
+        every phase's kept (:meth:`window_law`), as :meth:`recent_weight`: the same drift moves them. [-]"""
+        return _share(self._recent_window_score.get(cls, (0, 0.0, 0.0)))
 
     def recent_weight(self, cls: PhaseClass) -> float:
         """The share of the latest :data:`RECENT_PHASES` phases' law in the ``state`` law of ``cls``, pooled with

@@ -48,12 +48,14 @@ the window law (pooled into ``resumed``, ``state`` and ``duration``; the method 
     :func:`says_when`), what it says is part of the forecast: of the readings of past phases of the class that
     carried one (and outlasted how long this phase has run), the :data:`WINDOW_NEIGHBOURS` nearest to the reading now, the intersection in the same state first, then by the sum of the differences in
     seconds of how far ahead ``minEndTime`` and ``maxEndTime`` were and how long the phase had run; each says the
-    phase ends as long after ``max(now, minEndTime)`` as that one did after its own (:func:`ends_given_window`).
-    A held ``minEndTime`` (moved later with the clock: the controller extends the phase) and a ``maxEndTime``
-    counting down to a force-off read differently from a duration alone. The two laws are pooled (a linear opinion
-    pool [2]), each with a share in inverse proportion to its mean squared error, scored per (group, class) at each
-    phase end (:meth:`~spat_feed.prediction.history.PhaseHistory.window_weight`; half each until scored): on Antwerp
-    each one's median errs about as much as the other's, on different changes, so the pool beats either.
+    phase ends as long after ``max(now, minEndTime)`` as that one did after its own (:func:`ends_given_window`);
+    read also from the readings of the latest phases of the class only and pooled with it by scored error, as
+    ``state``'s (:func:`window_ends`: the same drift with the traffic). A held ``minEndTime`` (moved later with the
+    clock: the controller extends the phase) and a ``maxEndTime`` counting down to a force-off read differently
+    from a duration alone. The two laws are pooled (a linear opinion pool [2]), each with a share in inverse
+    proportion to its mean squared error, scored per (group, class) at each phase end
+    (:meth:`~spat_feed.prediction.history.PhaseHistory.window_weight`; half each until scored): on Antwerp each
+    one's median errs about as much as the other's, on different changes, so the pool beats either.
 ``published``
     The controller's window is exact (``maxEndTime - minEndTime`` under :data:`EXACT_S`): then.
 ``window``
@@ -495,13 +497,35 @@ def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_
     return floor_unix_s + excess[np.argpartition(d, k - 1)[:k]]
 
 
+def latest_readings(law, n_readings: int | None):
+    """The window law (:func:`ends_given_window`) of a class's latest phases: the last ``n_readings`` of each of its
+    arrays (``CycleStats.recent_window_n``); None where that is all of them (or none): the same law."""
+    if not n_readings or n_readings >= len(law[0]):
+        return None
+    return tuple(a[-n_readings:] for a in law)
+
+
+def window_ends(cycle, cls: PhaseClass, since_unix_s: float, now_unix_s: float, min_end_unix_s: float, max_end_unix_s: float) -> np.ndarray | None:
+    """:func:`ends_given_window` on the readings of every phase of ``cls`` kept, pooled with it on those of its latest
+    phases only (:func:`latest_readings`: an actuated controller's cycle drifts with the traffic), the latter's share
+    the class's ``recent_window_weight`` (half until scored). None where the law says nothing. [s]"""
+    law = cycle.window_law_s.get(cls)
+    if law is None:
+        return None
+    every = ends_given_window(law, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
+    recent = latest_readings(law, cycle.recent_window_n.get(cls))
+    recent = None if recent is None or every is None else ends_given_window(recent, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
+    return every if recent is None else _mixed(every, recent, cycle.recent_window_weight.get(cls, 0.5))
+
+
 def _pooled(samples: np.ndarray, method: str, cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: float,
             min_end_unix_s: float, max_end_unix_s: float) -> tuple[np.ndarray, str]:  # fmt: skip
-    """``samples`` of ``method`` for the phase in progress pooled with :func:`ends_given_window`'s where the window
+    """``samples`` of ``method`` for the phase in progress pooled with :func:`window_ends`'s where the window
     says when (:func:`says_when`) and the class's readings say, the latter's share the class's ``window_weight`` (half until scored). Only
     for the phase in progress: the law is learnt from readings of phases in progress, with how long they had run."""
-    law = cycle.window_law_s.get(cls) if since_unix_s is not None and says_when(min_end_unix_s, max_end_unix_s, now_unix_s) else None
-    by_window = None if law is None else ends_given_window(law, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
+    if since_unix_s is None or not says_when(min_end_unix_s, max_end_unix_s, now_unix_s):
+        return samples, method
+    by_window = window_ends(cycle, cls, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s)
     if by_window is None:
         return samples, method
     return _mixed(samples, by_window, cycle.window_weight.get(cls, 0.5)), method
