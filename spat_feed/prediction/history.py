@@ -28,12 +28,11 @@ from spat_feed.prediction.predictor import (
     cycle_period_s,
     durations_given_stage,
     durations_given_state,
-    ends_given_window,
-    latest_readings,
     period_fit_s,
     sample_quantile,
     says_when,
     scored_errors_s,
+    window_laws,
 )
 from spat_feed.timing.plans import (
     FixedTimePlan,
@@ -356,10 +355,8 @@ class PhaseHistory:
         el, floor = t - self._since, max(t, lo)
         states = [s for a, s in self._path if a <= el]
         state = states[-1] if states else -1
-        by_window = ends_given_window(law, self._since, t, lo, hi, state)
-        recent = latest_readings(law, before.recent_window_n.get(self._current))
-        recent = None if recent is None else ends_given_window(recent, self._since, t, lo, hi, state)
-        if by_window is not None and recent is not None:
+        by_window, recent = window_laws(law, before.recent_window_n.get(self._current), self._since, t, lo, hi, state)
+        if recent is not None:
             _scored_pair(self._recent_window_score.setdefault(self._current, [0, 0.0, 0.0]), (recent, by_window), floor, end_unix_s)
             by_window = _mixed(by_window, recent, self.recent_window_weight(self._current))
         own = given if given is not None else [d for d in before.durations(self._current) if d > el]

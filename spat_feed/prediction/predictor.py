@@ -505,16 +505,25 @@ def latest_readings(law, n_readings: int | None):
     return tuple(a[-n_readings:] for a in law)
 
 
+def window_laws(law, n_recent: int | None, since_unix_s: float, now_unix_s: float, min_end_unix_s: float, max_end_unix_s: float,
+                state_id: int = -1) -> tuple[np.ndarray | None, np.ndarray | None]:  # fmt: skip
+    """:func:`ends_given_window` on the readings of every phase kept and on those of the latest phases only (the last
+    ``n_recent`` readings, :func:`latest_readings`), apart: what :func:`window_ends` pools and the history scores.
+    The second is None where it is the same law or the first says nothing. [s]"""
+    every = ends_given_window(law, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, state_id)
+    recent = latest_readings(law, n_recent)
+    recent = None if recent is None or every is None else ends_given_window(recent, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, state_id)
+    return every, recent
+
+
 def window_ends(cycle, cls: PhaseClass, since_unix_s: float, now_unix_s: float, min_end_unix_s: float, max_end_unix_s: float) -> np.ndarray | None:
     """:func:`ends_given_window` on the readings of every phase of ``cls`` kept, pooled with it on those of its latest
-    phases only (:func:`latest_readings`: an actuated controller's cycle drifts with the traffic), the latter's share
+    phases only (:func:`window_laws`: an actuated controller's cycle drifts with the traffic), the latter's share
     the class's ``recent_window_weight`` (half until scored). None where the law says nothing. [s]"""
     law = cycle.window_law_s.get(cls)
     if law is None:
         return None
-    every = ends_given_window(law, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
-    recent = latest_readings(law, cycle.recent_window_n.get(cls))
-    recent = None if recent is None or every is None else ends_given_window(recent, since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
+    every, recent = window_laws(law, cycle.recent_window_n.get(cls), since_unix_s, now_unix_s, min_end_unix_s, max_end_unix_s, cycle.state_id)
     return every if recent is None else _mixed(every, recent, cycle.recent_window_weight.get(cls, 0.5))
 
 
