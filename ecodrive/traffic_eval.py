@@ -27,6 +27,14 @@ unadvised: does advice slow the traffic behind?), ``glosa_others_time_change_fra
 in those runs), ``cars`` (every car counted), ``spat_messages`` (SUMO's states the store accepted in the advised run),
 ``advice_actions`` (advised cars' fixes by action), ``setup``, ``wall_s``.
 
+``--hindsight`` adds what is reachable (:func:`hindsight_summary`, :mod:`ecodrive.traffic.hindsight`): each connected
+car's hindsight bound (the DP that knows the lights it met, from its insertion, within its own unadvised time, alone
+on the road), ``hindsight_saving_frac`` and ours and GLOSA over the same cars (``hindsight_ours_saving_frac``,
+``hindsight_glosa_saving_frac``), the bound from where the service begins to advise
+(``hindsight_from_approach_saving_frac``) and also 2 s clear of each red's end (``hindsight_advisable_saving_frac``),
+the same car alone on the road against its bound (``hindsight_alone_saving_frac``), the cars whose bound does not run
+into the car ahead (``hindsight_free_saving_frac``), and one row per car (``hindsight_rows``).
+
 A stop: the speed falls to 0.5 m/s or below after having been above 3 m/s since the last stop (a car creeping up in
 a queue stops once). A hard brake: speed falling faster than 3.5 m/s² over a step (:data:`HARD_BRAKE_MPS2`).
 """
@@ -64,8 +72,9 @@ class CarScore:
     red_entries: int
 
 
-def score_car(car, zone_end_m: float, speed_limit_mps: float, params) -> CarScore | None:
-    """One car's score over its run up to the zone's end (None if it never got there)."""
+def zone_trajectory(car, zone_end_m: float) -> Trajectory | None:
+    """One car's run from its first step to the zone's end, the crossing of the end interpolated at constant
+    acceleration within its step (None if it never got there)."""
     t, x, v = (np.asarray(a, dtype=float) for a in (car.t, car.x, car.v))
     k = int(np.searchsorted(x, zone_end_m, side="left"))
     if k >= len(x) or k == 0:
@@ -82,8 +91,18 @@ def score_car(car, zone_end_m: float, speed_limit_mps: float, params) -> CarScor
     if tt[-1] - tt[-2] < 1e-6:
         tt, vv, xx = tt[:-1], vv[:-1], xx[:-1]
         xx[-1] = zone_end_m
-    s = score_in_end_state(Trajectory(tt, xx, vv), params, speed_limit_mps)
-    acc = np.diff(v[:k + 1]) / np.diff(t[:k + 1])
+    return Trajectory(tt, xx, vv)
+
+
+def score_car(car, zone_end_m: float, speed_limit_mps: float, params) -> CarScore | None:
+    """One car's score over its run up to the zone's end (None if it never got there)."""
+    traj = zone_trajectory(car, zone_end_m)
+    if traj is None:
+        return None
+    tt, vv = traj.t_s, traj.v_mps
+    s = score_in_end_state(traj, params, speed_limit_mps)
+    k = int(np.searchsorted(np.asarray(car.x, dtype=float), zone_end_m, side="left"))
+    acc = np.diff(np.asarray(car.v[:k + 1], dtype=float)) / np.diff(np.asarray(car.t[:k + 1], dtype=float))
     return CarScore(s.cost_usd, s.energy_kwh, float(tt[-1] - car.depart_s + (s.time_s - (tt[-1] - tt[0]))), count_stops(vv),
                     bool((acc < -HARD_BRAKE_MPS2 - 1e-6).any()), sum(1 for c in car.crossings if c[2] == "red"))  # fmt: skip
 
@@ -167,10 +186,88 @@ def paired_summary(results: dict, network, params) -> dict:
     return out
 
 
+def hindsight_summary(results: dict, network, params, from_m: float, after_red_s: float = 0.0, alone: dict | None = None) -> dict:
+    """The hindsight bound (:mod:`ecodrive.traffic.hindsight`) of every connected car that reached the zone's end in
+    all the runs, on the lights of the unadvised run, against the same car unadvised, and the other runs (ours,
+    GLOSA: those in ``results``) over the same cars: ``hindsight_*`` keys and one row per car (``hindsight_rows``).
+    ``from_m``: where the service begins to advise (the second bound, ``hindsight_from_approach_saving_frac``, keeps
+    the car's own drive up to there); ``after_red_s``: the third, ``hindsight_advisable_saving_frac``, from there too
+    and no line crossed within this long after a red ends (the advisor's ``green_margin_s``). ``alone``: each car's
+    run alone on the road (:func:`alone_runs`); ``hindsight_alone_*``: its bound against that drive (the empty
+    road's bound, the same lights)."""
+    from advisory.drivers.closed_loop import red_light_violations
+    from advisory.signals import Scenario, TimelineSignal
+    from ecodrive.traffic.hindsight import hindsight_drive, runs_into
+
+    alone = alone or {}
+    base = results["unadvised"]
+    end_m, v_lim, lines = network.corridor.length_m, network.speed_limit_mps, [lt.stop_line_m for lt in network.lights]
+    own = {vid: zone_trajectory(car, end_m) for vid, car in base.cars.items()}
+    order = sorted(base.cars, key=lambda vid: base.cars[vid].depart_s)
+    truth = Scenario("run", tuple(TimelineSignal(line, reds) for line, reds in zip(lines, base.reds)), 2.0 * end_m + 1e4)  # the lines where they are
+    rows = []
+    for n, vid in enumerate(order):
+        scores = {mode: score_car(r.cars[vid], end_m, v_lim, params) if vid in r.cars else None for mode, r in results.items()}
+        if not base.cars[vid].connected or any(s is None for s in scores.values()):
+            continue
+        row = {"vid": vid, **{f"{m}_{k}": getattr(s, k) for m, s in scores.items() for k in ("cost_usd", "stops", "time_s")}}
+        if "advised" in results:
+            row["advice"] = dict(results["advised"].cars[vid].advice)
+        for key, start, late_s in (("hindsight", -np.inf, 0.0), ("hindsight_from_approach", from_m, 0.0), ("hindsight_advisable", from_m, after_red_s)):
+            reds = [[(a, min(b + late_s, nxt)) for (a, b), nxt in zip(light, [a for a, _ in light[1:]] + [np.inf])] for light in base.reds]
+            best = hindsight_drive(own[vid], lines, reds, end_m, v_lim, params, from_m=start)
+            row[f"{key}_cost_usd"] = None if best is None else score_in_end_state(best, params, v_lim).cost_usd
+            if key == "hindsight":
+                ahead = own.get(order[n - 1]) if n > 0 else None
+                row["hindsight_runs_into_car_ahead"] = bool(best is not None and ahead is not None and runs_into(best, ahead))
+                row["hindsight_red_at_true_lines"] = bool(best is not None and red_light_violations(best, truth))
+        if vid in alone:  # the same car alone on the road (SUMO's driver, the same departure)
+            drive = zone_trajectory(alone[vid][0], end_m)
+            best = None if drive is None else hindsight_drive(drive, lines, alone[vid][1], end_m, v_lim, params)
+            row["alone_cost_usd"] = None if drive is None else score_in_end_state(drive, params, v_lim).cost_usd
+            row["hindsight_alone_cost_usd"] = None if best is None else score_in_end_state(best, params, v_lim).cost_usd
+        rows.append(row)
+    out = {"hindsight_rows": rows}
+    others = [("ours", "advised"), ("glosa", "glosa")]
+    for key in ("hindsight", "hindsight_from_approach", "hindsight_advisable"):
+        ok = [r for r in rows if r[f"{key}_cost_usd"] is not None]
+        out[f"{key}_cars"] = len(ok)
+        unadvised = sum(r["unadvised_cost_usd"] for r in ok)
+        out[f"{key}_saving_frac"] = _neg(_frac(sum(r[f"{key}_cost_usd"] for r in ok), unadvised))
+        for name, mode in others:
+            if mode in results:
+                out[f"{key}_{name}_saving_frac"] = _neg(_frac(sum(r[f"{mode}_cost_usd"] for r in ok), unadvised))
+    alone_ok = [r for r in rows if r.get("hindsight_alone_cost_usd") is not None]
+    out["hindsight_alone_cars"] = len(alone_ok)
+    out["hindsight_alone_saving_frac"] = _neg(_frac(sum(r["hindsight_alone_cost_usd"] for r in alone_ok), sum(r["alone_cost_usd"] for r in alone_ok)))
+    free = [r for r in rows if r["hindsight_cost_usd"] is not None and not r["hindsight_runs_into_car_ahead"]]
+    out["hindsight_free_cars"] = len(free)
+    out["hindsight_free_saving_frac"] = _neg(_frac(sum(r["hindsight_cost_usd"] for r in free), sum(r["unadvised_cost_usd"] for r in free)))
+    return out
+
+
+def alone_runs(network, setup, cars: dict, folder) -> dict:
+    """Each of ``cars`` (vid -> its :class:`~ecodrive.traffic.sim.CarTrace`) alone on the road: an unadvised SUMO run
+    with that car's scheduled departure only (the lights of a fixed-time plan are the same; an actuated controller
+    serves that car and the cross streets alone); vid -> (its trace there, that run's reds)."""
+    from dataclasses import replace
+
+    from ecodrive.traffic.sim import run
+
+    out = {}
+    for vid, car in cars.items():
+        r = run(network, replace(setup, departures_s=(car.depart_s,), connected=()), "unadvised", folder)
+        if "main.0" in r.cars:
+            out[vid] = (r.cars["main.0"], r.reds)
+    return out
+
+
 def evaluate(corridor: str, plan: str | None = None, control: str = "fixed", demand_vph_per_lane: float = 600.0, penetration_frac: float = 0.5,
              seed: int = 1, duration_s: float = 900.0, lanes: int = 1, cross_demand_vph: float | None = None, vehicle: str = "paper_54kwh",
-             queue_aware: bool = True, blind: bool = False, spat_queue: bool = False) -> dict:  # fmt: skip
-    """One scenario run three ways (see the module docstring): the summary."""
+             queue_aware: bool = True, blind: bool = False, spat_queue: bool = False, hindsight: bool = False, bound_only: bool = False) -> dict:  # fmt: skip
+    """One scenario run three ways (see the module docstring): the summary; ``hindsight``: with the connected cars'
+    hindsight bound (:func:`hindsight_summary`); ``bound_only``: the unadvised run alone and the bound (the bound
+    needs no other run: ours and GLOSA are left out)."""
     from ecodrive.traffic.network import build_network
     from ecodrive.traffic.sim import RunSetup, run
     from spat_feed.road.corridors import load_corridor
@@ -181,13 +278,23 @@ def evaluate(corridor: str, plan: str | None = None, control: str = "fixed", dem
         cross_demand_vph = 300.0 if control == "actuated" else 0.0
     setup = RunSetup(demand_vph_per_lane, penetration_frac, seed, duration_s, cross_demand_vph=cross_demand_vph, queue_aware=queue_aware,
                      spat_queue=spat_queue)  # fmt: skip
-    modes = ("advised", "blind", "glosa", "unadvised") if blind else ("advised", "glosa", "unadvised")
+    modes = ("unadvised",) if bound_only else ("advised", "blind", "glosa", "unadvised") if blind else ("advised", "glosa", "unadvised")
     with tempfile.TemporaryDirectory(prefix="ecodrive-traffic-") as tmp:
         network = build_network(c, tmp, plan, control, lanes)
         results = {mode: run(network, setup, mode, tmp) for mode in modes}
-    out = paired_summary(results, network, model_params(vehicle))
+        if hindsight or bound_only:
+            alone = alone_runs(network, setup, {vid: car for vid, car in results["unadvised"].cars.items() if car.connected}, tmp)
+    out = {} if bound_only else paired_summary(results, network, model_params(vehicle))
+    if hindsight or bound_only:
+        from advisory.advice.views import AdvisorParams
+        from server.advising import approach_m
+
+        advisor = AdvisorParams()
+        out.update(hindsight_summary(results, network, model_params(vehicle), -approach_m(c, advisor, network.speed_limit_mps), advisor.green_margin_s,
+                                     alone))  # fmt: skip
     out["setup"] = {"corridor": c.name, "plan": plan, "control": control, "lanes": lanes, "vehicle": vehicle, **asdict(setup)}
-    out["queue_held_fixes"] = results["advised"].queue_held
+    if "advised" in results:
+        out["queue_held_fixes"] = results["advised"].queue_held
     out["wall_s"] = round(time.perf_counter() - started, 2)
     return out
 
@@ -207,6 +314,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--queue-blind", action="store_true", help="the advised run without queue-aware advice (the advisor alone)")
     ap.add_argument("--compare-blind", action="store_true", help="a fourth run, queue-blind advice, reported as blind_* keys")
     ap.add_argument("--spat-queue", action="store_true", help="SUMO's lights publish each approach's jam as J2735 queueLength, as a controller with stop-line detectors can; queue-aware advice counts it first")
+    ap.add_argument("--hindsight", action="store_true", help="each connected car's hindsight bound too (hindsight_* keys; a few seconds a car)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if not 0.0 <= args.penetration <= 1.0:
@@ -215,7 +323,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error("--demand must be >= 0")
     try:
         out = evaluate(args.corridor, args.plan, args.control, args.demand, args.penetration, args.seed, args.duration, args.lanes, args.cross_demand,
-                       args.vehicle, not args.queue_blind, args.compare_blind, args.spat_queue)  # fmt: skip
+                       args.vehicle, not args.queue_blind, args.compare_blind, args.spat_queue, args.hindsight)  # fmt: skip
     except (OSError, KeyError, ValueError, RuntimeError) as exc:
         print(f"ecodrive traffic-eval: {exc}", file=sys.stderr)
         return 2
@@ -229,6 +337,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"  stops per car: ecodrive {out['stops_per_advised_car']:.2f}, GLOSA {out['stops_per_glosa_car']:.2f}, unadvised {out['stops_per_unadvised_car']:.2f}")
     print(f"  time: advised cars {pct(out['time_change_frac'])}, the others {pct(out['others_time_change_frac'])} (energy {pct(out['others_energy_change_frac'])})")
     print(f"  red entries {out['red_entries']}, hard brakes {out['hard_brakes']} (advised cars)")
+    if "hindsight_saving_frac" in out:
+        print(f"  hindsight bound over {out['hindsight_cars']} of them: {pct(out['hindsight_saving_frac'])} (ours {pct(out['hindsight_ours_saving_frac'])}, "
+              f"GLOSA {pct(out['hindsight_glosa_saving_frac'])}); from the approach {pct(out['hindsight_from_approach_saving_frac'])}, "
+              f"2 s after each red too {pct(out['hindsight_advisable_saving_frac'])}; alone on the road {pct(out['hindsight_alone_saving_frac'])}")  # fmt: skip
     if "blind_saving_frac" in out:
         print(f"  queue-blind advice: saving {pct(out['blind_saving_frac'])}, stops per car {out['stops_per_blind_car']:.2f}, time {pct(out['blind_time_change_frac'])}, "
               f"the others {pct(out['blind_others_time_change_frac'])}")  # fmt: skip

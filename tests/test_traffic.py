@@ -231,6 +231,36 @@ def test_summary_keys_and_consistency(paired):
     assert out["spat_messages"] > 0 and out["spat_rejected"] == 0
 
 
+def test_a_run_records_its_lights_reds_as_the_plan_and_the_cars_meet_them(paired):
+    """Each run's red intervals (the hindsight bound's lights) are the fixed plan's to the step, in every mode; no car's
+    drive reaches a line within one, and the hindsight summary prices every connected car within its own time."""
+    from advisory.drivers.closed_loop import red_light_violations
+    from advisory.signals import Scenario, TimelineSignal
+    from ecodrive.traffic.sim import LINE_TOL_M
+    from ecodrive.traffic_eval import hindsight_summary, zone_trajectory
+
+    net, setup, results = paired
+    end_s = results["unadvised"].sim_end_s
+    for mode, r in results.items():
+        for light, reds in zip(net.lights, r.reds):
+            p = light.plan  # its reds begin where the Unix time less the offset is a whole number of cycles
+            starts = (p.offset_s - net.t0_unix_s) % p.cycle_s + np.arange(-1, int(end_s // p.cycle_s) + 2) * p.cycle_s
+            want = [(max(a, -STEP_S), min(a + p.red_s, end_s)) for a in starts if a + p.red_s > -STEP_S and a < end_s]
+            assert len(want) > 3 and np.allclose(np.array(reds, dtype=float), np.array(want)), mode
+    # (a front this close past its line has crossed it: SUMO stops a car with its front on the line, to rounding)
+    truth = Scenario("run", tuple(TimelineSignal(lt.stop_line_m + LINE_TOL_M, reds) for lt, reds in zip(net.lights, results["unadvised"].reds)), 1e4)
+    drives = [zone_trajectory(car, net.corridor.length_m) for car in results["unadvised"].cars.values()]
+    assert len(drives) > 20 and not [d for d in drives if d is not None and red_light_violations(d, truth)]
+    out = hindsight_summary(results, net, model_params(), -100.0, 2.0)
+    rows = out["hindsight_rows"]
+    assert len(rows) == paired_summary(results, net, model_params())["advised_cars"] == out["hindsight_cars"]
+    assert all(r["hindsight_cost_usd"] <= r["unadvised_cost_usd"] * (1 + 1e-3) for r in rows)
+    # each bound less free than the one before it: from where the service advises, then 2 s clear of each red's end
+    assert all(r["hindsight_cost_usd"] <= r["hindsight_from_approach_cost_usd"] * (1 + 1e-3) for r in rows)
+    assert all(r["hindsight_from_approach_cost_usd"] <= r["hindsight_advisable_cost_usd"] * (1 + 1e-3) for r in rows if r["hindsight_advisable_cost_usd"])
+    assert out["hindsight_saving_frac"] > out["hindsight_ours_saving_frac"]
+
+
 def test_cli_json(capsys):
     assert traffic_eval_main(["--corridor", "paper_s200", "--demand", "300", "--penetration", "0.3", "--seed", "2", "--duration", "120", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

@@ -105,6 +105,7 @@ class RunResult:
     collisions: list = field(default_factory=list)  # SUMO's (time, collider, victim, type, speeds)
     teleports: int = 0
     queue_held: int = 0  # fixes the service answered "follow the car in front" (queue-aware advice)
+    reds: tuple = ()  # per light, the run's red intervals [start, end) in simulation time: the steps SUMO ran under red (amber is not red)
 
 
 def connected_ids(seed: int, penetration_frac: float, n: int) -> list[str]:
@@ -180,6 +181,7 @@ class _Sim:
         self.shows_amber = [True] * len(self.lights)  # each light's program shows an amber before each red (its source's)
         self.collisions: list[tuple] = []  # (time, collider, victim, type, their speeds)
         self.teleports = 0
+        self.reds: list[list[list[float]]] = [[] for _ in self.lights]  # per light, [start, end) of the steps run under red
 
     def after_step(self) -> float:
         """Read SUMO after a step: new cars, each car's position and speed, lights crossed; the simulation time."""
@@ -191,6 +193,12 @@ class _Sim:
             state, ends = self.source.coming_state(lt)
             self.coming[i] = (phase_class(state), ends)  # what the next step uses: what a driver sees now
             self.shows_amber[i] = self.source.amber_s(lt) != 0.0
+            if self.classes[i] is PhaseClass.RED:  # the step that just ended, (t - step, t], ran under red
+                reds = self.reds[i]
+                if reds and abs(reds[-1][1] - (t - self.setup.step_s)) < 1e-6:
+                    reds[-1][1] = t
+                else:
+                    reds.append([t - self.setup.step_s, t])
         self.source.observe()
         for vid in conn.simulation.getDepartedIDList():
             if not vid.startswith(MAIN_FLOW + "."):
@@ -221,6 +229,11 @@ class _Sim:
             car.v.append(float(r[0x40]))
         return t
 
+    def red_intervals(self) -> tuple[tuple[tuple[float, float], ...], ...]:
+        """Per light, the run's red intervals ``[start, end)`` (simulation time): a front crossing its line within one
+        crossed under red (as ``CarTrace.crossings`` counts it)."""
+        return tuple(tuple((a, b) for a, b in reds) for reds in self.reds)
+
     def leader(self, vid: str) -> tuple[float, float, float] | None:
         """The car in front of ``vid`` within :data:`LOOK_AHEAD_M`, as its driver sees it: (gap beyond the standstill
         gap, speed, acceleration in the last step: negative while it brakes), or None."""
@@ -247,7 +260,7 @@ def _loop(conn, network, setup, connected, mode, hook) -> RunResult:
             hook(sim, t)
         conn.simulationStep()
         t = sim.after_step()
-    return RunResult(mode, setup, sim.cars, dict(sim.source.verdicts), 0, t, sim.collisions, sim.teleports)
+    return RunResult(mode, setup, sim.cars, dict(sim.source.verdicts), 0, t, sim.collisions, sim.teleports, reds=sim.red_intervals())
 
 
 async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connected: set[str], advisor: AdvisorParams | None, queue_aware: bool) -> RunResult:
@@ -330,7 +343,7 @@ async def _loop_advised(conn, network: TrafficNetwork, setup: RunSetup, connecte
     for vid, trip in trips.items():
         await engine.end_trip(trip)
     held = engine.queue.held if engine.queue is not None else 0
-    return RunResult("advised", setup, sim.cars, dict(sim.source.verdicts), mismatches, t, sim.collisions, sim.teleports, held)
+    return RunResult("advised", setup, sim.cars, dict(sim.source.verdicts), mismatches, t, sim.collisions, sim.teleports, held, sim.red_intervals())
 
 
 def _before_entry(corridor, x_m: float) -> tuple[float, float]:
