@@ -635,14 +635,21 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
     return None if not durations else (np.array([inf]), "duration")
 
 
-def next_end(cycle, cls: PhaseClass, start: np.ndarray) -> np.ndarray | None:
-    """Samples of the end of a phase of class ``cls`` that starts at one of ``start`` (sorted samples), or None when
-    no duration of the class is known."""
+def class_model(cycle, cls: PhaseClass) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """:func:`_class_model` of ``cls`` in the group's history ``cycle`` (its durations; its latest ends where the cycle
+    tells it), or None when no duration of the class is known: what :func:`ends_after` adds to a phase's start."""
     durations = cycle.durations(cls) if cycle is not None else ()
     if not durations:
         return None
-    d, cycle_ends = _class_model(durations, cycle.ends(cls), cycle.period_s is not None and cls in cycle.cycle_classes)
-    raw = (_reduced(start, N_PAIRED)[:, None] + d[None, :]).ravel()
+    return _class_model(durations, cycle.ends(cls), cycle.period_s is not None and cls in cycle.cycle_classes)
+
+
+def ends_after(start: np.ndarray, model: tuple[np.ndarray, np.ndarray | None], cycle) -> np.ndarray:
+    """Samples of the end of a phase of a class (``model``: its :func:`class_model` in ``cycle``) that starts at one of
+    ``start`` (sorted samples: their :data:`N_PAIRED` quantiles are paired with its durations)."""
+    d, cycle_ends = model
+    paired = start if len(start) <= N_PAIRED else start[_spread_indices(len(start), N_PAIRED)]
+    raw = (paired[:, None] + d[None, :]).ravel()
     if cycle_ends is not None:
         finite = np.isfinite(raw)
         if finite.all():
@@ -651,6 +658,13 @@ def next_end(cycle, cls: PhaseClass, start: np.ndarray) -> np.ndarray | None:
             moved = _spread_on_cycle(_on_cycle(raw[finite], cycle_ends, cycle.period_s), cycle_ends, cycle.period_s, cycle.period_error_s)
             raw = np.concatenate([moved, raw[~finite]])
     return _reduced(raw)
+
+
+def next_end(cycle, cls: PhaseClass, start: np.ndarray) -> np.ndarray | None:
+    """Samples of the end of a phase of class ``cls`` that starts at one of ``start`` (sorted samples), or None when
+    no duration of the class is known (:func:`ends_after`)."""
+    model = class_model(cycle, cls)
+    return None if model is None else ends_after(start, model, cycle)
 
 
 def forecast(plan: UncertainPlan, t_unix_s: float, cycle, horizon_s: float = 180.0) -> list[ChangeForecast]:

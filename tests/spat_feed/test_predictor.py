@@ -584,8 +584,8 @@ def test_predict_eval_on_every_recording(path, recorded_snapshots, shared_record
 @pytest.mark.parametrize("path", sorted((SHARED_DATA / "spat").glob("*.csv.gz")), ids=lambda p: p.name)
 def test_a_light_view_is_the_same_from_its_shortcuts_as_from_the_plain_path(path, recorded_snapshots):
     """``light_view``'s shortcuts answer as the plain path does: the forecast chained after the phase in progress,
-    cached per group history (``observe._chain``), gives the views of 200 readings (10 min in, two groups each) that
-    the same readings give with the cache emptied before each; and every equally likely timing's windows, read at once
+    cached per group history (``observe._chain``, its steps ``observe._chain_steps``), gives the views of 200 readings
+    (10 min in, two groups each) that the same readings give with both caches emptied before each; and every equally likely timing's windows, read at once
     (``observe._scenario_windows``), are the windows read at that level alone (``observe._windows``)."""
     from spat_feed.prediction import observe as ob
     from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
@@ -605,6 +605,7 @@ def test_a_light_view_is_the_same_from_its_shortcuts_as_from_the_plain_path(path
     cold = []
     for t, r in readings:
         r.cycle.chains.clear()
+        r.cycle.chain_steps.clear()
         cold.append(ob.light_view(spec, r, 0.0, t, speed_mps=12.0))
     assert warm == cold
     assert sum(v.scenario_red_windows_s is not None for v in warm) > len(readings) // 2
