@@ -398,14 +398,21 @@ def durations_given_state(spans, elapsed_s: float, entered_s: float | None = Non
     >>> durations_given_state(spans, 10.0).tolist(), sorted(set(durations_given_state(spans, 25.0, 20.0, 0.5).tolist()))
     ([30.0, 30.0, 30.0], [30.0, 50.0])
     """
+    got = state_law(spans, elapsed_s, entered_s, stage_share)
+    return None if got is None else got[0]
+
+
+def state_law(spans, elapsed_s: float, entered_s: float | None = None, stage_share: float = 0.0) -> tuple[np.ndarray, int] | None:
+    """:func:`durations_given_state` and the number of past phases that were in the state (what the plain durations
+    weigh against, :data:`PRIOR_PHASES`), or None. [s], [-]"""
     if spans is None:
         return None
     d, lo, hi = _as_arrays(spans)
     m = (lo <= elapsed_s) & (elapsed_s < hi)
-    if np.count_nonzero(m) < MIN_SEEN:
+    if (n := int(np.count_nonzero(m))) < MIN_SEEN:
         return None
     by_stage = None if entered_s is None or stage_share <= 0.0 else durations_given_stage(spans, elapsed_s, entered_s)
-    return d[m] if by_stage is None else _mixed(d[m], by_stage, stage_share)
+    return (d[m] if by_stage is None else _mixed(d[m], by_stage, stage_share)), n
 
 
 def durations_given_stage(spans, elapsed_s: float, entered_s: float) -> np.ndarray | None:
@@ -597,10 +604,9 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         return np.maximum(published_max_unix_s + np.asarray(lags or (0.0,)), floor_unix_s), "published"
     given, n_given = None, 0  # the durations of the phases of the class seen in the intersection's state now, this far in
     if cycle is not None and current and since_unix_s is not None:
-        given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s)
-        if given is not None:  # (pooled with the stage's law; the prior is weighed against the phases seen)
-            n_given = len(given)
-            given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
+        got = state_law(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
+        if got is not None:  # (pooled with the stage's law; the prior is weighed against the phases seen)
+            given, n_given = got
             recent = durations_given_state(cycle.recent_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
             if recent is not None:  # (pooled with the latest phases' law: the traffic drifts)
                 given = _mixed(given, recent, cycle.recent_weight.get(cls, 0.5))
