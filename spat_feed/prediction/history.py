@@ -113,6 +113,9 @@ class CycleStats:
     # (:func:`~spat_feed.prediction.observe._chain`); not an init field: each snapshot has its own (``replace`` makes a
     # new one), and it goes with the snapshot
     chains: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    # the classes that chain after each class, with their models (:func:`~spat_feed.prediction.observe._chain_steps`):
+    # the snapshot's alone, made once
+    chain_steps: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def ends(self, cls: PhaseClass) -> tuple[float, ...]:
         """The instants phases of ``cls`` ended at, if enough are seen, else ()."""

@@ -56,7 +56,7 @@ from numba import njit
 
 from advisory.advice.views import AdvisorParams, LightView, Observation, Timings
 from spat_feed.prediction.history import LATE_QUANTILE, CycleStats, _quantile
-from spat_feed.prediction.predictor import EXACT_S, ChangeForecast, current_end, next_end, sample_quantile
+from spat_feed.prediction.predictor import EXACT_S, ChangeForecast, class_model, current_end, ends_after, sample_quantile
 from spat_feed.road.corridors import Corridor, IntersectionSpec
 from spat_feed.timing.plans import (
     STOP_STATES,
@@ -304,8 +304,9 @@ CHAINS_KEPT = 64
 
 def _chain(cycle: CycleStats, cls: PhaseClass, samples: np.ndarray, horizon_s: float) -> tuple[tuple[PhaseClass, float, float, float, np.ndarray], ...]:
     """The phases that follow a phase of class ``cls`` ending at ``samples`` (sorted), as the history ``cycle`` says,
-    while their shortest durations add up to less than the horizon: each one's class, shortest duration, the median
-    and :data:`LATE_QUANTILE` of its end (:func:`~spat_feed.prediction.predictor.next_end`) and its :func:`_levels`.
+    while their shortest durations add up to less than the horizon (:func:`_chain_steps`): each one's class, shortest
+    duration, the median and :data:`LATE_QUANTILE` of its end (:func:`~spat_feed.prediction.predictor.ends_after`)
+    and its :func:`_levels`.
 
     What :func:`_continued` chains after the phase in progress; kept in the snapshot (``CycleStats.chains``, by class,
     samples and horizon): between two changes of a group's history the end of its phase in progress is often the same
@@ -316,22 +317,36 @@ def _chain(cycle: CycleStats, cls: PhaseClass, samples: np.ndarray, horizon_s: f
     if kept is not None:
         return kept
     out = []
-    total_s = 0.0
-    while total_s < horizon_s + CHAIN_MARGIN_S:
-        nxt = cycle.following.get(cls)
-        d = cycle.durations(nxt) if nxt is not None else ()
-        if not d:
-            break
-        cls = nxt
-        samples = next_end(cycle, cls, samples)
+    for cls, shortest_s, model in _chain_steps(cycle, cls, horizon_s):
+        samples = ends_after(samples, model, cycle)
         levels = samples[_level_ranks(len(samples))]
         levels.setflags(write=False)  # (kept: shared by every view)
-        out.append((cls, d[0], sample_quantile(samples, 0.5), sample_quantile(samples, LATE_QUANTILE), levels))
-        total_s += d[0]
+        out.append((cls, shortest_s, sample_quantile(samples, 0.5), sample_quantile(samples, LATE_QUANTILE), levels))
     if len(cycle.chains) >= CHAINS_KEPT:
         cycle.chains.clear()
     cycle.chains[key] = kept = tuple(out)
     return kept
+
+
+def _chain_steps(cycle: CycleStats, cls: PhaseClass, horizon_s: float) -> tuple[tuple[PhaseClass, float, tuple], ...]:
+    """The classes that follow a phase of class ``cls`` in the history ``cycle`` while their shortest durations add up
+    to less than the horizon (and :data:`CHAIN_MARGIN_S`), each with its shortest duration and its model
+    (:func:`~spat_feed.prediction.predictor.class_model`): what :func:`_chain` adds, step by step, to the samples of
+    the phase in progress. The history's alone: made once per snapshot (``CycleStats.chain_steps``). [s]"""
+    key = (cls, horizon_s)
+    steps = cycle.chain_steps.get(key)
+    if steps is None:
+        out, total_s = [], 0.0
+        while total_s < horizon_s + CHAIN_MARGIN_S:
+            nxt = cycle.following.get(cls)
+            model = class_model(cycle, nxt) if nxt is not None else None
+            if model is None:
+                break
+            cls = nxt
+            out.append((cls, cycle.durations(cls)[0], model))
+            total_s += out[-1][1]
+        cycle.chain_steps[key] = steps = tuple(out)
+    return steps
 
 
 def _windows(phases, t_unix_s: float, horizon_s: float, lo, hi, classes=BLOCKING_CLASSES) -> tuple[tuple[float, float], ...]:

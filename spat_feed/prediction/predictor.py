@@ -91,6 +91,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
 from spat_feed.timing.plans import PhaseClass, UncertainPlan, phase_class
 
@@ -397,14 +398,21 @@ def durations_given_state(spans, elapsed_s: float, entered_s: float | None = Non
     >>> durations_given_state(spans, 10.0).tolist(), sorted(set(durations_given_state(spans, 25.0, 20.0, 0.5).tolist()))
     ([30.0, 30.0, 30.0], [30.0, 50.0])
     """
+    got = state_law(spans, elapsed_s, entered_s, stage_share)
+    return None if got is None else got[0]
+
+
+def state_law(spans, elapsed_s: float, entered_s: float | None = None, stage_share: float = 0.0) -> tuple[np.ndarray, int] | None:
+    """:func:`durations_given_state` and the number of past phases that were in the state (what the plain durations
+    weigh against, :data:`PRIOR_PHASES`), or None. [s], [-]"""
     if spans is None:
         return None
     d, lo, hi = _as_arrays(spans)
     m = (lo <= elapsed_s) & (elapsed_s < hi)
-    if np.count_nonzero(m) < MIN_SEEN:
+    if (n := int(np.count_nonzero(m))) < MIN_SEEN:
         return None
     by_stage = None if entered_s is None or stage_share <= 0.0 else durations_given_stage(spans, elapsed_s, entered_s)
-    return d[m] if by_stage is None else _mixed(d[m], by_stage, stage_share)
+    return (d[m] if by_stage is None else _mixed(d[m], by_stage, stage_share)), n
 
 
 def durations_given_stage(spans, elapsed_s: float, entered_s: float) -> np.ndarray | None:
@@ -450,12 +458,39 @@ def says_when(min_end_unix_s: float, max_end_unix_s: float, now_unix_s: float) -
     return math.isfinite(max_end_unix_s) or min_end_unix_s > now_unix_s
 
 
-def _apart_s(to_max_s: np.ndarray, ahead_s: float) -> np.ndarray:
-    """How far apart the past readings' ``maxEndTime`` (``to_max_s`` ahead of each) are from one ``ahead_s`` ahead
-    now: the difference in seconds, 0 where both are unknown, :data:`UNBOUNDED_APART_S` where one is. [s]"""
-    if math.isinf(ahead_s):
-        return np.where(np.isinf(to_max_s), 0.0, UNBOUNDED_APART_S)
-    return np.minimum(np.abs(to_max_s - ahead_s), UNBOUNDED_APART_S)
+@njit(cache=True)
+def _window_distance_s(el_s, to_min_s, to_max_s, state, duration_s, elapsed_s: float, to_floor_s: float, to_max_end_s: float, state_id: int):
+    """How far each past reading of a window law lies from the reading now (:func:`ends_given_window`), and how many
+    speak: ``inf`` for one whose phase this one has outlasted (unless it has outlasted them all: then every one speaks,
+    by its window alone). The sum, in this order, of the differences in seconds of how far ahead ``minEndTime`` was
+    (``to_floor_s``: ``max(now, minEndTime) - now``) and ``maxEndTime`` (``to_max_end_s``; 0 where both are unknown,
+    :data:`UNBOUNDED_APART_S` where one is, at most that), of how long the phase had run (not once outlasted), and
+    :data:`OTHER_STATE_S` for a reading in another intersection state: one pass over the arrays, the numpy
+    expressions' operations in their order (bit for bit). [s]"""
+    n = len(el_s)
+    n_alive = 0
+    for i in range(n):
+        if duration_s[i] > elapsed_s:
+            n_alive += 1
+    outlasted = n_alive == 0
+    d = np.empty(n)
+    for i in range(n):
+        if not outlasted and not duration_s[i] > elapsed_s:
+            d[i] = np.inf
+            continue
+        if math.isinf(to_max_end_s):
+            apart = 0.0 if math.isinf(to_max_s[i]) else UNBOUNDED_APART_S
+        else:
+            apart = abs(to_max_s[i] - to_max_end_s)
+            if apart > UNBOUNDED_APART_S:
+                apart = UNBOUNDED_APART_S
+        v = abs(to_min_s[i] - to_floor_s) + apart
+        if not outlasted:
+            v += abs(el_s[i] - elapsed_s)
+        if state[i] != state_id:
+            v += OTHER_STATE_S
+        d[i] = v
+    return d, n if outlasted else n_alive
 
 
 def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_s: float, max_end_unix_s: float, state_id: int = -1) -> np.ndarray | None:
@@ -465,7 +500,7 @@ def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_
     the readings of phases that outlasted this one's run so far, the :data:`WINDOW_NEIGHBOURS` nearest (the same
     intersection state ``state_id`` first, then by the sum of the differences of how long the phase had run and how far
     ahead ``minEndTime`` and ``maxEndTime`` were, an unknown ``maxEndTime`` :data:`UNBOUNDED_APART_S` from a known one
-    and 0 from another unknown one: :func:`_apart_s`), each moved to now: ``max(now, min_end)`` plus how long after
+    and 0 from another unknown one: :func:`_window_distance_s`), each moved to now: ``max(now, min_end)`` plus how long after
     ``max(its reading, its minEndTime)`` its phase ended. A phase speaks by as many readings as lie near (a kernel weight on how alike its
     course was): on Antwerp 2019-05-01 (first 100 min) one reading per phase, the nearest 16 or 32 phases, erred
     more (ratio to the baseline 0.636 / 0.635 against 0.627). A phase that has outlasted every one seen is read by its
@@ -482,17 +517,9 @@ def ends_given_window(law, since_unix_s: float, now_unix_s: float, min_end_unix_
     """
     el, to_min, to_max, state, excess, duration = law
     elapsed_s, floor_unix_s = now_unix_s - since_unix_s, max(now_unix_s, min_end_unix_s)
-    alive = duration > elapsed_s  # phases this one has outlasted say nothing
-    if outlasted := not alive.any():  # ... unless it has outlasted them all: then the window alone speaks
-        alive = np.ones_like(alive)
-    n = int(np.count_nonzero(alive))
+    d, n = _window_distance_s(el, to_min, to_max, state, duration, elapsed_s, floor_unix_s - now_unix_s, max_end_unix_s - now_unix_s, state_id)
     if n < MIN_SEEN:
         return None
-    d = np.abs(to_min - (floor_unix_s - now_unix_s)) + _apart_s(to_max, max_end_unix_s - now_unix_s)
-    if not outlasted:
-        d += np.abs(el - elapsed_s)
-    d += OTHER_STATE_S * (state != state_id)
-    d[~alive] = np.inf
     k = min(WINDOW_NEIGHBOURS, n)
     return floor_unix_s + excess[np.argpartition(d, k - 1)[:k]]
 
@@ -577,10 +604,9 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         return np.maximum(published_max_unix_s + np.asarray(lags or (0.0,)), floor_unix_s), "published"
     given, n_given = None, 0  # the durations of the phases of the class seen in the intersection's state now, this far in
     if cycle is not None and current and since_unix_s is not None:
-        given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s)
-        if given is not None:  # (pooled with the stage's law; the prior is weighed against the phases seen)
-            n_given = len(given)
-            given = durations_given_state(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
+        got = state_law(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
+        if got is not None:  # (pooled with the stage's law; the prior is weighed against the phases seen)
+            given, n_given = got
             recent = durations_given_state(cycle.recent_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
             if recent is not None:  # (pooled with the latest phases' law: the traffic drifts)
                 given = _mixed(given, recent, cycle.recent_weight.get(cls, 0.5))
@@ -615,14 +641,21 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
     return None if not durations else (np.array([inf]), "duration")
 
 
-def next_end(cycle, cls: PhaseClass, start: np.ndarray) -> np.ndarray | None:
-    """Samples of the end of a phase of class ``cls`` that starts at one of ``start`` (sorted samples), or None when
-    no duration of the class is known."""
+def class_model(cycle, cls: PhaseClass) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """:func:`_class_model` of ``cls`` in the group's history ``cycle`` (its durations; its latest ends where the cycle
+    tells it), or None when no duration of the class is known: what :func:`ends_after` adds to a phase's start."""
     durations = cycle.durations(cls) if cycle is not None else ()
     if not durations:
         return None
-    d, cycle_ends = _class_model(durations, cycle.ends(cls), cycle.period_s is not None and cls in cycle.cycle_classes)
-    raw = (_reduced(start, N_PAIRED)[:, None] + d[None, :]).ravel()
+    return _class_model(durations, cycle.ends(cls), cycle.period_s is not None and cls in cycle.cycle_classes)
+
+
+def ends_after(start: np.ndarray, model: tuple[np.ndarray, np.ndarray | None], cycle) -> np.ndarray:
+    """Samples of the end of a phase of a class (``model``: its :func:`class_model` in ``cycle``) that starts at one of
+    ``start`` (sorted samples: their :data:`N_PAIRED` quantiles are paired with its durations)."""
+    d, cycle_ends = model
+    paired = start if len(start) <= N_PAIRED else start[_spread_indices(len(start), N_PAIRED)]
+    raw = (paired[:, None] + d[None, :]).ravel()
     if cycle_ends is not None:
         finite = np.isfinite(raw)
         if finite.all():
@@ -631,6 +664,13 @@ def next_end(cycle, cls: PhaseClass, start: np.ndarray) -> np.ndarray | None:
             moved = _spread_on_cycle(_on_cycle(raw[finite], cycle_ends, cycle.period_s), cycle_ends, cycle.period_s, cycle.period_error_s)
             raw = np.concatenate([moved, raw[~finite]])
     return _reduced(raw)
+
+
+def next_end(cycle, cls: PhaseClass, start: np.ndarray) -> np.ndarray | None:
+    """Samples of the end of a phase of class ``cls`` that starts at one of ``start`` (sorted samples), or None when
+    no duration of the class is known (:func:`ends_after`)."""
+    model = class_model(cycle, cls)
+    return None if model is None else ends_after(start, model, cycle)
 
 
 def forecast(plan: UncertainPlan, t_unix_s: float, cycle, horizon_s: float = 180.0) -> list[ChangeForecast]:

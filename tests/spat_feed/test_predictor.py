@@ -283,6 +283,46 @@ def test_a_published_window_is_read_by_the_readings_of_past_phases_with_a_like_w
     assert np.mean(pooled) < 0.6 * np.mean(plain), (np.mean(pooled), np.mean(plain), np.mean(inside))
 
 
+def test_the_window_law_distances_are_the_plain_numpy_expressions_bit_for_bit():
+    """``_window_distance_s`` (one pass over a window law's arrays) gives what the plain numpy expressions give, bit
+    for bit, and as many readings that speak: the same ``argpartition`` then picks the same readings. Laws of 0-300
+    random readings (known and unknown ``maxEndTime``, four intersection states, phases outlasted or not, all of
+    them outlasted), read now with a known or an unknown ``maxEndTime``."""
+    from spat_feed.prediction.predictor import OTHER_STATE_S, UNBOUNDED_APART_S, _window_distance_s
+
+    def plain(el, to_min, to_max, state, duration, elapsed, to_floor, to_max_end, state_id):
+        alive = duration > elapsed
+        if outlasted := not alive.any():
+            alive = np.ones_like(alive)
+        if math.isinf(to_max_end):
+            apart = np.where(np.isinf(to_max), 0.0, UNBOUNDED_APART_S)
+        else:
+            apart = np.minimum(np.abs(to_max - to_max_end), UNBOUNDED_APART_S)
+        d = np.abs(to_min - to_floor) + apart
+        if not outlasted:
+            d += np.abs(el - elapsed)
+        d += OTHER_STATE_S * (state != state_id)
+        d[~alive] = np.inf
+        return d, int(np.count_nonzero(alive))
+
+    rng = np.random.default_rng(31)
+    cases = 0
+    for _ in range(300):
+        n = int(rng.integers(0, 300))
+        el, duration = rng.uniform(0.0, 90.0, n), rng.uniform(5.0, 120.0, n)
+        to_min = np.where(rng.random(n) < 0.3, 0.0, rng.uniform(0.0, 60.0, n))
+        to_max = np.where(rng.random(n) < 0.3, np.inf, rng.uniform(0.0, 2000.0, n))
+        state = rng.integers(0, 4, n)
+        for elapsed in (rng.uniform(0.0, 60.0), 200.0):  # (200 s: every phase outlasted)
+            for to_max_end in (rng.uniform(0.0, 90.0), math.inf):
+                args = (el, to_min, to_max, state, duration, elapsed, rng.uniform(0.0, 30.0), to_max_end, int(rng.integers(0, 4)))
+                d, k = _window_distance_s(*args)
+                want, want_k = plain(*args)
+                assert k == want_k and d.tobytes() == want.tobytes()
+                cases += n > 0
+    assert cases > 1000
+
+
 def test_a_min_end_published_without_a_max_end_is_read_by_the_readings_of_past_phases_with_a_like_one():
     """As above, but the controller publishes no ``maxEndTime`` (unknown: an actuated red with no call on K648), only
     ``minEndTime``, a draw ``U`` (0-10 s, evenly) before the real end. While it is ahead it says as much as before:
@@ -544,8 +584,8 @@ def test_predict_eval_on_every_recording(path, recorded_snapshots, shared_record
 @pytest.mark.parametrize("path", sorted((SHARED_DATA / "spat").glob("*.csv.gz")), ids=lambda p: p.name)
 def test_a_light_view_is_the_same_from_its_shortcuts_as_from_the_plain_path(path, recorded_snapshots):
     """``light_view``'s shortcuts answer as the plain path does: the forecast chained after the phase in progress,
-    cached per group history (``observe._chain``), gives the views of 200 readings (10 min in, two groups each) that
-    the same readings give with the cache emptied before each; and every equally likely timing's windows, read at once
+    cached per group history (``observe._chain``, its steps ``observe._chain_steps``), gives the views of 200 readings
+    (10 min in, two groups each) that the same readings give with both caches emptied before each; and every equally likely timing's windows, read at once
     (``observe._scenario_windows``), are the windows read at that level alone (``observe._windows``)."""
     from spat_feed.prediction import observe as ob
     from spat_feed.road.corridors import IntersectionSpec, SignalGroupSpec
@@ -565,6 +605,7 @@ def test_a_light_view_is_the_same_from_its_shortcuts_as_from_the_plain_path(path
     cold = []
     for t, r in readings:
         r.cycle.chains.clear()
+        r.cycle.chain_steps.clear()
         cold.append(ob.light_view(spec, r, 0.0, t, speed_mps=12.0))
     assert warm == cold
     assert sum(v.scenario_red_windows_s is not None for v in warm) > len(readings) // 2
