@@ -535,6 +535,28 @@ def test_a_driver_keeps_behind_a_braking_car_at_the_firm_rate():
     assert vs[-1] == 0.0 and lead_x - 7.5 - 10.0 < xs[-1] <= lead_x - 7.5 + 1e-6  # behind it, not far short
 
 
+@pytest.mark.parametrize("gap_m", [23.29, 30.0, 45.0])
+def test_a_driver_behind_a_car_braking_hard_for_an_amber_brakes_at_once_and_not_hard(gap_m):
+    """An actuated green turns amber (5 s) with the car at 24.4 m/s 109.7 m out, 23.29 m (0.95 s, beyond the standstill
+    gap) behind a car at the limit that can stop for it at 4 m/s² (78.9 m out) and does, as SUMO's driver does. A stop
+    behind where that car stops takes 24.39² / (2 x (23.29 + 24.59² / 8)) = 3.01 m/s², at once: the driver brakes
+    from the first sight of its brake lights at that rate (at least its firm 3 m/s²), never harder than the issue's
+    hard brake (3.5 m/s²), and stops behind it, before the line. Before, it tracked Krauss's safe speed at 3 m/s²
+    (:func:`follow_mps`, which falls faster than 3 m/s² behind a car braking at 4), fell behind it, and SUMO's car
+    following braked it at 3.59 m/s² here (traced in SUMO at 3.56 m/s²: paper_s400 actuated 600 veh/h, 50 %, seed 3,
+    `main.47`; 10 %, seed 7, `main.53`); 30 m back, it waited until it needed more than 3 m/s² and was braked at 3.53 m/s²; 45 m back (1.8 s),
+    neither brakes hard."""
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line, lead_x = 24.5872, 500.0, 500.0 - 78.9
+    light = lambda t, x: LightNow(0, line, t >= 5.0, t < 5.0, 5.0) if x <= line else None  # noqa: E731
+    x0 = lead_x - 7.5 - gap_m
+    xs, vs, lead_end = _drive_behind(AdvisedDriver((line,), vid="main.0"), x0, 24.39, lim, light, lead_x, lim, -4.0, seconds=25.0)
+    assert line - lead_x > lim * lim / 8.0  # that car can stop at 4 m/s²: SUMO's driver stops for the amber
+    assert np.diff(vs).min() / STEP_S >= -3.5  # no hard brake
+    assert vs[-1] < 0.01 and xs[-1] <= lead_end - 7.5 + 1e-6 and xs.max() < line  # stopped behind it, before the line
+
+
 def test_a_driver_rolling_into_its_stop_gap_stops_at_the_line_gently():
     """Told to stop, committed to a red it expected to end first, the car rolls at 1.97 m/s 1.4 m before the red line,
     inside the 1 m short of the line where the regular driver stops (stopping there takes 4.9 m/s²): it brakes for the

@@ -10,9 +10,10 @@ colour (SUMO's) and the phone's display of the countdowns (:func:`advisory.drive
 the advice came from): it brakes for a light that will be red on arrival at its speed or whose red can begin before
 it is over the line, never slows down so much that a red catches it after deciding to go, waits at a line still red,
 and stops for an amber where 3 m/s² suffice (else it clears it: ITE's yellow interval is timed for that rate). It
-sees the car in front: it slows for a queue's standing or crawling tail itself (:func:`follow_mps` at 3 m/s²), and
+sees the car in front: it slows for a queue's standing or crawling tail itself (:func:`follow_mps` at 3 m/s²), stops
+behind a car braking harder than it can follow at once at the rate that suffices (:func:`stop_behind_mps2`), and
 behind a car that sets its pace it judges a green by when it gets to the line behind it. A driver never plans a
-braking harder than 3 m/s² (the issue's hard brake: 3.5 m/s²).
+braking harder than 3 m/s² (the issue's hard brake: 3.5 m/s²); a car braking in front of it may ask more of it.
 
 :meth:`AdvisedDriver.command` returns the speed the car should have one step later, or None where neither the advice
 nor the driver's eyes ask anything (no speed advised, "drive normally", before the zone, past the last light): SUMO's
@@ -101,11 +102,15 @@ class AdvisedDriver:
         SUMO braked at 3.55 m/s²; a car told to stop, 136 m behind one braking from 8.7 m/s into a standing queue,
         seen only once that one was under 2 m/s: 3.51 m/s²). Behind a car that holds or gains speed SUMO's car
         following alone keeps the gap (slowing for every slower car cost 5 points of saving at 600 veh/h, every car
-        connected). Where that car sets the pace (:data:`HELD_MPS`), the driver judges a green by when it reaches the
-        line behind it (:func:`_led_arrival_s`). A driver that has decided to cross the next line before its red and can
-        no longer stop for it at the firm rate does not slow for brake lights ahead (SUMO's car following keeps the
-        gap): slowed so, it could neither stop nor make the green (traced: 0.3 s into a red that no amber announced,
-        behind a car 74 m ahead slowing for the next light's queue)."""
+        connected). Behind a car braking harder than that rate, where the driver's own stop at it after its reaction
+        no longer ends behind where that car stops, it brakes at once at the constant rate that does
+        (:func:`stop_behind_mps2`; traced: 0.95 s behind a car SUMO stopped for an amber at 4 m/s², the safe speed
+        tracked at 3 m/s² fell behind, and SUMO braked the car at 3.56 m/s²). Where that car sets the pace
+        (:data:`HELD_MPS`), the driver judges a green by when it reaches the line behind it (:func:`_led_arrival_s`).
+        A driver that has decided to cross the next line before its red and can no longer stop for it at the firm rate
+        does not slow for brake lights ahead (SUMO's car following keeps the gap): slowed so, it could neither stop
+        nor make the green (traced: 0.3 s into a red that no amber announced, behind a car 74 m ahead slowing for the
+        next light's queue)."""
         self.clearing = False
         firm = self.advisor.firm_decel_mps2
         v_follow = np.inf if leader is None else follow_mps(leader[0], leader[1], firm, self.model.reaction_s)
@@ -113,6 +118,10 @@ class AdvisedDriver:
         braking = leader is not None and len(leader) > 2 and leader[2] < -BRAKING_MPS2
         if braking and self._past_stopping(x_m, v_mps, light):
             braking = False  # going for a green it can no longer stop for: not slowed into its red (above)
+        due = stop_behind_mps2(leader[0], leader[1], -leader[2], v_mps, firm, self.model.reaction_s) if braking else 0.0
+        if due > 0.0 and (cmd is None or cmd > v_mps - due * dt_s):  # behind a car braking: its stop behind that car's, at once
+            self.controlling = True
+            return max(v_mps - min(due, self.model.regular().brake_max_mps2) * dt_s, 0.0)
         if leader is None or (leader[1] >= QUEUED_MPS and not braking) or v_follow >= v_mps - FOLLOW_TOL_MPS or (cmd is not None and cmd <= v_follow):
             return cmd
         self.controlling = True
@@ -341,6 +350,41 @@ def follow_mps(gap_m: float, leader_mps: float, decel_mps2: float, reaction_s: f
     """
     b = decel_mps2
     return float(-b * reaction_s + np.sqrt((b * reaction_s) ** 2 + leader_mps * leader_mps + 2.0 * b * max(gap_m, 0.0)))
+
+
+def stop_behind_mps2(gap_m: float, leader_mps: float, leader_decel_mps2: float, v_mps: float, firm_mps2: float, reaction_s: float) -> float:
+    r"""The braking due now behind a car that brakes harder than the driver's ``firm_mps2`` (a car braking no harder
+    is :func:`follow_mps`'s, which assumes that rate: none due here): none (0) while a stop at ``firm_mps2`` after the
+    driver's ``reaction_s`` still ends behind where that car stops if it goes on braking at ``leader_decel_mps2``
+    (Gipps's safe condition [1]_ with that car's own braking, not the driver's), else the constant braking that stops
+    the car there from now, at least ``firm_mps2``. Braking at once at that rate is the gentlest stop behind it; a
+    driver that tracks Krauss's safe speed at ``firm_mps2`` instead (:func:`follow_mps`, which assumes the car in
+    front brakes no harder) falls behind that speed as it falls behind a car braking at 4 m/s², and SUMO's car
+    following then brakes it harder (traced at 3.56 m/s²). [m/s²]
+
+    .. math:: b = \max\left(b_f, \frac{v^2}{2 (g + v_l^2 / 2 b_l)}\right) \text{ where }
+              v \tau + \frac{v^2}{2 b_f} > g + \frac{v_l^2}{2 b_l}, \text{ else } 0
+
+    ``gap_m``: beyond the standstill gap [m]; ``leader_mps`` [m/s]; ``leader_decel_mps2`` > 0 [m/s²]; ``v_mps`` [m/s].
+
+    References
+    ----------
+    .. [1] P. G. Gipps, "A behavioural car-following model for computer simulation," Transp. Res. B, vol. 15, no. 2,
+       pp. 105-111, 1981, doi:10.1016/0191-2615(81)90037-0.
+
+    Examples
+    --------
+    >>> round(stop_behind_mps2(23.29, 24.59, 4.0, 24.39, 3.0, 1.0), 2)  # 0.95 s behind a car braking at 4 m/s²
+    3.01
+    >>> stop_behind_mps2(100.0, 24.59, 4.0, 24.39, 3.0, 1.0), round(stop_behind_mps2(45.0, 24.59, 4.0, 24.59, 3.0, 1.0), 2)
+    (0.0, 3.0)
+    >>> stop_behind_mps2(20.0, 15.0, 2.0, 20.0, 3.0, 1.0)  # a car slowing at 2 m/s²: Krauss's safe speed's
+    0.0
+    """
+    room_m = gap_m + leader_mps * leader_mps / (2.0 * leader_decel_mps2)
+    if leader_decel_mps2 <= firm_mps2 or v_mps * reaction_s + v_mps * v_mps / (2.0 * firm_mps2) <= room_m:
+        return 0.0
+    return max(firm_mps2, v_mps * v_mps / (2.0 * max(room_m, 1e-6)))
 
 
 def _arrival_s(dist_m: float, v_mps: float, v_lim_mps: float, drv: DriverModel) -> float:
