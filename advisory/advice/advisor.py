@@ -394,6 +394,12 @@ def _meaningful_change(new: Advice, old: Advice | None, params: AdvisorParams) -
     return False
 
 
+DEFAULT_PARAMS = AdvisorParams()
+"""The settings :func:`advise` uses when given none: one instance (frozen), so that the caches keyed by the settings'
+identity (``kinematics._motion``) hit and those keyed by their value find them at once; a fresh one per call was built,
+missed and hashed each time (10-15 us of the ~0.5-0.65 ms a call of ``bench/bench_predictor.py``'s observations)."""
+
+
 def advise(
     obs: Observation, memory: AdvisorMemory | None = None, params: AdvisorParams | None = None, tables=None
 ) -> tuple[Advice, AdvisorMemory]:
@@ -407,7 +413,7 @@ def advise(
     ``tables``: optional :class:`advisory.advice.tables.AdviceTables` (DP lookup); ``None`` uses the rules alone.
     """
     memory = memory or AdvisorMemory()
-    params = params or AdvisorParams()
+    params = params or DEFAULT_PARAMS
     a = _decide(obs, memory, params, tables)
     # (constructor calls, not dataclasses.replace: this runs once a second per car)
     # the light the countdown is about: the next one unless the advice named another (the one after it, ``_timed``)
