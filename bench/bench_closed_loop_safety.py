@@ -14,6 +14,8 @@ Run: .venv/bin/python bench/bench_closed_loop_safety.py [--runs N] [--workers W]
   could a car braking at the advisor's firm rate (3 m/s²), from the first reading whose published window admitted
   that red (at the crossing, or at the braking), have stopped at the line? Only the avoidable ones are the advisor's
   failures; both counts are printed.
+* What the driver hears: advice changes (the (action, reason) differs from the second before's) and advices spoken, in
+  all runs (issue 31: words that flip while the plan stays the same).
 * The paper's 64 scenarios (fixed-time, exact SPaT), rules only and with the DP tables: red entries, hard brakes.
 
 Targets (issue 31): 0 red entries and 0 hard brakes with an amber and on the paper's scenarios; without an amber, 0
@@ -48,13 +50,17 @@ VARIANTS = {"amber": None, "no-amber": 0.0}
 
 def actuated_run(job: tuple[int, str, str]):
     """One randomized run: (seed, red entries and hard brakes (:func:`safety_events`), advised above the limit, surprises,
-    stalled: the car never reached the zone's end, held at a line until the simulation's 600 s)."""
+    stalled: the car never reached the zone's end, held at a line until the simulation's 600 s, advice changes, advices
+    spoken)."""
     seed, variant, driver = job
     truth, feed, noise = random_case(seed, amber_s=VARIANTS[variant])
     run = simulate(truth, AdvisorParams(), driver=replace(DRIVERS[driver], noise_mps=noise, seed=seed), feed=feed)
     events = safety_events(run.trajectory, feed, AdvisorParams().firm_decel_mps2, HARD_BRAKE_MPS2)
     stalled = bool(run.trajectory.x_m[-1] < truth.zone_length_m - 1e-6)
-    return seed, events, run.max_advised_mps > truth.speed_limit_mps + 1e-9, run.surprises, stalled
+    said = [(a.action, a.reason) for _, a in run.advice]
+    changes = sum(a != b for a, b in zip(said, said[1:]))
+    spoken = sum(a.speak for _, a in run.advice)
+    return seed, events, run.max_advised_mps > truth.speed_limit_mps + 1e-9, run.surprises, stalled, changes, spoken
 
 
 def paper_run(job: tuple[tuple[float, float, float], bool]):
@@ -122,8 +128,8 @@ def report_variant(variant: str, res: list, driver: str, elapsed_s: float) -> di
     print(f"{variant}: {len(res):,} randomized actuated runs, {amber}, {driver} driver, ±3 s skew, dropouts: "
           f"{red} red entries ({red_avoidable} avoidable: advisor failures; {red - red_avoidable} unavoidable: told too late to stop at "
           f"{firm:g} m/s²); {hard} hard brakes > {HARD_BRAKE_MPS2:g} m/s² ({hard_avoidable} avoidable, {hard - hard_avoidable} unavoidable); "
-          f"{above} advised speeds above the limit; {surprises} surprises; {len(stalled)} stalled runs{f' (seeds {stalled[:20]})' if stalled else ''} "
-          f"({elapsed_s:.0f} s)")
+          f"{above} advised speeds above the limit; {surprises} surprises; {len(stalled)} stalled runs{f' (seeds {stalled[:20]})' if stalled else ''}; "
+          f"{sum(r[5] for r in res):,} advice changes, {sum(r[6] for r in res):,} advices spoken ({elapsed_s:.0f} s)")
     for seed, e in events[:40]:
         print(_line(seed, e))
     if len(events) > 40:

@@ -650,3 +650,37 @@ def test_at_a_crawl_near_a_light_with_no_amber_a_stop_due_is_said():
     lit = LightView(1, 16.5, True, 0.9, ((1.0, 450.0),), likely_red_windows_s=((1.0, 300.0),), amber_s=0.0)
     adv = advise(Observation(4.0, 24.5872, (lit,)))[0]
     assert (adv.action, adv.reason) == ("stop", "red_ahead") and "Prepare to stop" in adv.message
+
+
+def test_a_driver_at_the_edge_of_the_band_hears_one_word_for_one_plan():
+    """Held 1 m/s above a 16 mph target (the closed-loop driver's drift above low targets: the band's edge), the car
+    heard "Ease off to 16" and "Hold 16" in turn every second, each spoken, the plan (the target) the same (issue 31,
+    no-amber seed 1520, at 14 mph). "Ease off" stays while the car is above the target (still true); "Hold" once it is
+    there, until the speed leaves the band again."""
+    target, band = 16 * 0.44704, P.hysteresis_mps  # (16 mph: the target chosen at 9 m/s, 230 m before a green in 26 s)
+
+    def said(speeds_mps):
+        memory, out = None, []
+        for k, v in enumerate(speeds_mps):
+            lit = LightView(1, 230.0 - 8.15 * k, True, 0.9, ((-k, 36.0 - k),), likely_red_windows_s=((-k, 26.0 - k),))
+            adv, memory = advise(Observation(v, 24.5872, (lit,)), memory)
+            out.append((adv.action, round(adv.target_speed_mps, 3), adv.speak))
+        return out
+
+    edge = [9.0] + [target + band + 0.01, target + band - 0.01] * 4
+    assert said(edge) == [("ease_off", 7.153, True)] + [("ease_off", 7.153, False)] * 8
+    there = said(edge + [target + 0.5, target - 0.01, target + band - 0.01, target + band + 0.01])[-4:]
+    assert there == [("ease_off", 7.153, False), ("cruise", 7.153, True), ("cruise", 7.153, False), ("ease_off", 7.153, True)]
+
+
+@pytest.mark.parametrize("said, v, word", [(None, 5.9, "accelerate"), (None, 6.1, "cruise"), ("accelerate", 6.9, "accelerate"),
+                                           ("accelerate", 7.0, "cruise"), ("cruise", 5.9, "accelerate"), ("cruise", 8.1, "ease_off"),
+                                           ("ease_off", 7.1, "ease_off"), ("ease_off", 7.0, "cruise"), (None, 8.0, "cruise")])  # fmt: skip
+def test_speed_words_for_one_target_by_hand(said, v, word):
+    """Target 7 m/s, band 1 m/s: "Speed up" below 6, "Ease off" above 8, "Hold" within; "Speed up" said stays below 7,
+    "Ease off" above 7 (the same target; another target is a fresh choice)."""
+    from advisory.advice.advisor import _speed_word
+
+    last = None if said is None else Advice(said, "green_wave", 7.0)
+    assert _speed_word(7.0, v, last, P) == word
+    assert _speed_word(7.0, v, replace(last, target_speed_mps=7.5) if last else None, P) == _speed_word(7.0, v, None, P)

@@ -136,18 +136,39 @@ def _stop_due(distance_m: float, v_mps: float, params: AdvisorParams) -> bool:
     return distance_m <= v_mps * (params.reaction_s + params.stop_lead_s) + v_mps * v_mps / (2.0 * params.comfort_decel_mps2)
 
 
+def _said_bound_mps(bound_mps: float, said_above: bool | None, params: AdvisorParams) -> float:
+    """The speed between two words, moved by ``hysteresis_mps`` away from the side the words said last were said from
+    (``said_above``; ``None``: neither was said, the bound as it is): those words stay while the speed is within the band
+    of the bound on their side (the band in which the advice holds rather than nudge, section 4). Without it, a driver
+    who keeps the speed just past a bound (the closed-loop driver drifts 1 m/s above low targets) heard the two words
+    in turn every other second, the plan unchanged. [m/s]"""
+    return bound_mps if said_above is None else bound_mps - params.hysteresis_mps if said_above else bound_mps + params.hysteresis_mps
+
+
 def _crawling(v_mps: float, last: Advice | None, params: AdvisorParams) -> bool:
     """Too slow for a lift-off far from a red to ask anything (the car pulls away at a crawl): below the slowest speed
     ever advised (``min_cruise_speed_mps``), where "Red light ahead." alone is said (on it a driver keeps a crawl, no
-    slower than that speed); above it "Lift off and coast". The words said last (``last``) stay while the speed is
-    within ``hysteresis_mps`` of that bound, on the side they were said from (the band in which the advice holds
-    rather than nudge, section 4). With the bound alone the two words moved the car across it each way: "Lift off and
+    slower than that speed); above it "Lift off and coast", the words said last kept within the band
+    (:func:`_said_bound_mps`). With the bound alone the two words moved the car across it each way: "Lift off and
     coast" at 10 mph, a coast 0.1 m/s below it, "Red light ahead.", back to 10 mph: they flipped every other second
     for 130 s (no-amber seed 1526). [-]"""
-    bound_mps = params.min_cruise_speed_mps
-    if last is not None and last.reason == "red_ahead" and last.action in ("none", "coast"):
-        bound_mps += params.hysteresis_mps if last.action == "none" else -params.hysteresis_mps
-    return v_mps < bound_mps
+    said = last is not None and last.reason == "red_ahead" and last.action in ("none", "coast")
+    return v_mps < _said_bound_mps(params.min_cruise_speed_mps, last.action == "coast" if said else None, params)
+
+
+def _speed_word(target_mps: float, v_mps: float, last: Advice | None, params: AdvisorParams) -> str:
+    """How a plan to hold ``target_mps`` (no braking asked) is said at ``v_mps``: "Ease off to" above the band of
+    ``hysteresis_mps`` around it, "Speed up to" below, "Hold" within. The same target said last as "Ease off to" (or
+    "Speed up to") stays so while the speed is above it (below it): true still, the car not there yet
+    (:func:`_said_bound_mps`: the band's edge moved to the target on the side said). The word changes only where it
+    would no longer be true, or with the target. With the band's edges alone, no-amber seed 1520's driver (1 m/s above
+    a 14 mph target, the band's edge) heard "Hold 14" and "Ease off to 14" in turn for 16 s. [-]"""
+    said = last.action if last is not None and last.reason == "green_wave" and last.target_speed_mps == target_mps else None
+    if v_mps > _said_bound_mps(target_mps + params.hysteresis_mps, True if said == "ease_off" else None, params):
+        return "ease_off"
+    if v_mps < _said_bound_mps(target_mps - params.hysteresis_mps, False if said == "accelerate" else None, params):
+        return "accelerate"
+    return "cruise"
 
 
 @lru_cache(maxsize=64)
@@ -261,12 +282,8 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
         action = "coast"
     elif target < v and mode in ("brake", "firm"):
         action = "slow_down" if mode == "brake" else "brake_to"
-    elif target < v - params.hysteresis_mps:
-        action = "ease_off"
-    elif target > v + params.hysteresis_mps:
-        action = "accelerate"
     else:
-        action = "cruise"
+        action = _speed_word(target, v, last, params)
     return _timed(action, "green_wave", target, usable, _binding(usable, obs, params), first=(red, to_change))
 
 
