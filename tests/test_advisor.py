@@ -684,3 +684,21 @@ def test_speed_words_for_one_target_by_hand(said, v, word):
     last = None if said is None else Advice(said, "green_wave", 7.0)
     assert _speed_word(7.0, v, last, P) == word
     assert _speed_word(7.0, v, replace(last, target_speed_mps=7.5) if last else None, P) == _speed_word(7.0, v, None, P)
+
+
+def test_past_the_last_light_resume_said_stays_until_the_limit():
+    """Past the last light a car held 1 m/s under the limit (the band's edge) heard "Resume 55" and "Hold 55" in turn
+    every other second (no-amber seeds 1500-1599, two runs). "Resume" stays while the car is under the limit (true
+    still); "Hold" once it is there; out of the band again, "Resume"."""
+    limit, band = 24.5872, P.hysteresis_mps
+
+    def said(speeds_mps):
+        memory, out = None, []
+        for v in speeds_mps:
+            adv, memory = advise(Observation(v, limit, ()), memory)
+            out.append((adv.action, adv.speak))
+        return out
+
+    edge = [limit - band - 0.01, limit - band + 0.01] * 3 + [limit - 0.01, limit, limit - band + 0.01, limit - band - 0.01]
+    assert said(edge) == [("resume", True)] + [("resume", False)] * 6 + [("cruise", True), ("cruise", False), ("resume", True)]
+    assert said([limit - band + 0.01])[0][0] == "cruise"  # nothing said before: the band's edge as it is

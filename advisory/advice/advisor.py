@@ -290,9 +290,11 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
 def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tables) -> Advice:
     if not obs.on_route:
         return Advice("none", "past_lights" if obs.zone_exit else "off_route")
-    if not obs.lights:
-        v = obs.speed_limit_mps
-        return Advice("resume" if obs.speed_mps < v - 1.0 else "cruise", "past_lights", target_speed_mps=v)
+    if not obs.lights:  # past the last light: back to the limit ("Resume" said stays while true: section 1b)
+        v, last = obs.speed_limit_mps, memory.last
+        said = last is not None and last.reason == "past_lights" and last.action == "resume" and last.target_speed_mps == v
+        slow = obs.speed_mps < _said_bound_mps(v - params.hysteresis_mps, False if said else None, params)
+        return Advice("resume" if slow else "cruise", "past_lights", target_speed_mps=v)
     nxt = obs.lights[0]
     if not nxt.fresh:
         held = _held(obs, memory, params)
