@@ -798,6 +798,37 @@ def test_a_slow_plan_over_a_green_line_prices_the_cars_it_cuts_off_behind_it():
     assert cut_behind(red, obs, hold, params, four, 900 / 3600, 0.5) == 0.0
 
 
+@pytest.mark.parametrize("next_red_s, met", [(70.0, True), (120.0, False)])
+def test_a_car_cut_off_also_pushes_the_next_platoon_into_the_next_lights_red(next_red_s, met):
+    """The platoon of the previous test, the second light 400 m past the first (393 m ahead): the car cut off at the
+    first light's red (15-45 s) stands first in its queue, which leaves the line from 45 s; on to the second light
+    (24.6 m/s limit, 2 m/s² up), one level of discharge (2 s start-up, 1.4 s a car): the cut car is there 45 + 2 +
+    22.41 s = 69.41 s from now (12.3 s to the limit over 151.29 m, 248.71 m at it), the first car behind it no sooner
+    than a headway later, 70.81 s (alone, from 7.5 m back at 5.48 m/s, 68.38 s); without the cut car that car had
+    the cut car's place. A red there from 70 s meets it (it waits that red, 30 s), one from 120 s meets no place the
+    queue moves (as before). Before, only the first light's red and queue were priced: the second light's red, which
+    the delayed platoon's tail met in SUMO, was not (paper_s400 fixed 600 veh/h 50 %, seed 3: 227 of the others' 309
+    s, docs/TRAFFIC.md)."""
+    one = replace(M, startup_s=M.fast_startup_s, headway_s=M.fast_headway_s)
+    params = AdvisorParams()
+    passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
+    nxt = LightView(2, 393.0, red_windows_s=((0.0, 40.0), (next_red_s, next_red_s + 30.0)))
+    obs = Observation(9.2, 24.6, (nxt,))
+    four = [Probe(-7.0 - 7.5 * k, 0.0) for k in (1, 2, 3, 4)]
+    hold = Advice("cruise", "green_wave", 8.04)
+    to_limit_s, to_limit_m = 24.6 / 2.0, 24.6**2 / 4.0
+    cut_car_s = 45.0 + 2.0 + to_limit_s + (400.0 - to_limit_m) / 24.6
+    v1 = math.sqrt(2.0 * 2.0 * 7.5)
+    alone_s = 45.0 + 2.0 + 1.4 + (24.6 - v1) / 2.0 + (400.0 - (24.6**2 - v1**2) / 4.0) / 24.6
+    assert (cut_car_s, alone_s) == (pytest.approx(69.41, abs=0.01), pytest.approx(68.38, abs=0.01))
+    assert cut_car_s < 70.0 <= max(alone_s, cut_car_s + 1.4)  # the first car behind the cut one: before, after
+    p_ge_5 = 1.0 - sum(math.exp(-4.0) * 4.0**j / math.factorial(j) for j in range(5))
+    queued = 0.25 * 30.0 / (1.0 - 0.25 * M.fast_headway_s)
+    spill = 30.0 * (1.0 - math.exp(-queued)) if met else 0.0  # that car is there: P(N >= 1)
+    want = (30.0 + M.fast_headway_s * queued + spill) * p_ge_5
+    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 0.5, model=one) == pytest.approx(want)
+
+
 def test_a_slow_plan_towards_an_actuated_green_prices_the_timings_in_which_a_normal_drive_makes_it():
     """An actuated light green now, past its minimum: it may turn red any second (the sure view red from now), the
     red's end not known, and its equally likely timings (``scenario_red_windows_s``) turn it red 10 s or 30 s from now.

@@ -9,8 +9,8 @@ gives up at each light a normal drive makes by the cars that lose it, and the re
 end of that green waits out (:func:`pushed_past` for the connected ones, :func:`cut_off` for the others). Past a
 green line the car sets the pace of the platoon behind it (:func:`platoon_through`): :func:`cut_behind` prices the
 cars a slow plan cuts off there before the red, at the line just passed and the next one, each one cut off delaying
-the next queue too (:func:`knock_on_s`), and :func:`paced_for_behind` raises such a plan to the slowest speed that
-does not.
+the next queue too (:func:`knock_on_s`), at this light and at the light after it (:func:`spill_s`), and
+:func:`paced_for_behind` raises such a plan to the slowest speed that does not.
 
 Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 """
@@ -338,7 +338,8 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     queue, told to hold 26-31 km/h for the second light's queue 400 m on, crossed the first at 8-9 m/s instead of
     14-18 m/s; the platoon behind them crossed at their pace and the last two to five cars of the green were cut off
     (a 30 s red each, and the cycle's 30 s green), others' travel time +14 %. Each one cut off also stands first in the
-    next queue (:func:`knock_on_s`).
+    next queue (:func:`knock_on_s`), which it sends on to the light after this one a headway later, where a red may
+    meet a car of it that made that light without it (:func:`spill_s`).
 
     Examples
     --------
@@ -446,7 +447,12 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
                 break
         cut_c, cut_u = float(n_plan_c < k <= n_normal_c), float(n_plan < k <= n_normal)
         cut += cut_c if k <= there else p_at_least * (p_connected * cut_c + (1.0 - p_connected) * cut_u)
-    return cut * (min(end - start, WAIT_CAP_S) + knock_on_s(light, start, end, arrivals_vps, model.fast_headway_s))
+    if cut == 0.0:
+        return 0.0
+    after = next((lv for lv in obs.lights if lv.distance_m > line_m), None)  # the light after this one
+    queued = queued_behind(light, start, end, arrivals_vps, model.fast_headway_s)
+    knock_s = knock_on_s(light, start, end, arrivals_vps, model.fast_headway_s)
+    return cut * (min(end - start, WAIT_CAP_S) + knock_s + spill_s(light, after, end, queued, limit, model))
 
 
 def knock_on_s(light: LightView, start_s: float, end_s: float, arrivals_vps: float | None, headway_s: float) -> float:
@@ -470,13 +476,83 @@ def knock_on_s(light: LightView, start_s: float, end_s: float, arrivals_vps: flo
     >>> round(knock_on_s(lv, 10.0, 40.0, 600 / 3600, 1.4), 2), knock_on_s(lv, 10.0, 40.0, None, 1.4)
     (9.13, 0.0)
     """
+    return headway_s * queued_behind(light, start_s, end_s, arrivals_vps, headway_s)
+
+
+def queued_behind(light: LightView, start_s: float, end_s: float, arrivals_vps: float | None, headway_s: float) -> float:
+    """How many cars queue behind one standing first in the red from ``start_s`` to ``end_s`` [-]: the count of
+    :func:`knock_on_s` (D/D/1, no more than the next green lets over; ``arrivals_vps`` None or no end known: 0)."""
     if not arrivals_vps or not math.isfinite(end_s):
         return 0.0
     windows = light.red_windows_s if light.likely_red_windows_s is None else light.likely_red_windows_s
     green_s = next((a for a, _ in windows if a >= end_s), end_s + (end_s - start_s)) - end_s
     load = arrivals_vps * headway_s
     queued = arrivals_vps * (end_s - start_s) / (1.0 - load) if load < 1.0 else math.inf
-    return headway_s * min(queued, green_s / headway_s)
+    return min(queued, green_s / headway_s)
+
+
+DISCHARGE_LEVELS = 5
+"""How many levels of the discharge, evenly spaced from its fast end to its slow end (:class:`~advisory.advice.queue.QueueModel`),
+:func:`spill_s` averages over: the expectation's quadrature, as :data:`PRICED_TIMINGS` over a light's timings. [-]"""
+
+
+def spill_s(light: LightView, after: LightView | None, end_s: float, queued: float, limit_mps: float, model: QueueModel,
+            levels: int = DISCHARGE_LEVELS) -> float:  # fmt: skip
+    r"""The wait [s] that one car cut off at ``light`` (its red ending at ``end_s``, from now) costs at the light
+    ``after`` it: standing first in that red's queue, it puts each of the ``queued`` cars behind it (a mean,
+    :func:`knock_on_s`'s count; Poisson, ``N``) a place further back in the platoon that the queue sends on to
+    ``after``, a headway later; where a red of ``after`` begins between a car's place without the cut car and its
+    place with it, that car meets the red and waits it out (at most :data:`advisory.advice.choice.WAIT_CAP_S`). The
+    platoon's places at ``after``'s line: the queue's ``i``-th car (the cut one ``0``) crosses ``light`` a start-up
+    and ``i`` headways after ``end_s`` at ``sqrt(2 a i \delta)`` (``i`` jam spacings to speed up in, at
+    ``drive_accel_mps2``, to the limit), drives on normally, and is never less than a headway behind the car before it
+    (Newell's car following: a car starting farther back cannot close in further). The discharge is the field's range,
+    uncertain as the queue's clearing is (:class:`~advisory.advice.queue.QueueEstimate`): the wait is the mean over
+    ``levels`` evenly spaced from its fast end (2 s start-up, 1.4 s a car) to its slow end (3 s, 2.0 s). ``after`` of
+    uncertain timing: its likely timing. None (no light after), or no red end known: 0.
+
+    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/TRAFFIC.md): light 2 is 16.3 s at the limit after
+    light 1, both turning together; a car cut off at light 1's end of green stood first in the next queue, the platoon
+    of the next green crossed light 1 1-2 s later, and its last car met light 2's red: 227 of the others' 309 s (the
+    tenth session), the knock-on that :func:`knock_on_s` prices at light 1 alone.
+
+    Examples
+    --------
+    One level (the fast end and the slow end alike: 2 s start-up, 1.4 s a car), a red ending at 40 s, light 2 400 m
+    on at a 24.6 m/s limit: the cut car is there at 40 + 2 + 22.4 = 64.4 s (from rest), the next one at 65.8 s (alone,
+    from 7.5 m back, it would be there at 63.4 s: a headway behind the cut car instead), the one after at 67.2 s. A
+    red at light 2 from 65 s (for 30 s) meets the first car behind the cut one (its place 64.4 s without the cut car,
+    65.8 s with it), there with P(N >= 1) = 1 - exp(-6.5) (6.5 cars queued on average): 29.95 s; a red from 100 s
+    meets none of the places the queue moves: 0.
+
+    >>> one = QueueModel(startup_s=2.0, headway_s=1.4)
+    >>> light, step = LightView(1, 100.0, red_windows_s=((10.0, 40.0),)), LightView(2, 500.0, red_windows_s=((65.0, 95.0),))
+    >>> round(spill_s(light, step, 40.0, 6.5, 24.6, one), 2), spill_s(light, replace(step, red_windows_s=((100.0, 130.0),)), 40.0, 6.5, 24.6, one)
+    (29.95, 0.0)
+    """
+    if after is None or queued <= 0.0 or not math.isfinite(end_s):
+        return 0.0
+    windows = after.red_windows_s if after.likely_red_windows_s is None else after.likely_red_windows_s
+    gap_m, accel = after.distance_m - light.distance_m, model.drive_accel_mps2
+    lost = 0.0
+    for level in ((j + 0.5) / levels for j in range(levels)):
+        startup_s = model.fast_startup_s + level * (model.startup_s - model.fast_startup_s)
+        headway_s = model.fast_headway_s + level * (model.headway_s - model.fast_headway_s)
+        place_s = end_s + startup_s + normal_drive_s(gap_m, 0.0, limit_mps, accel)  # the cut car's
+        last_s = max((a for a, _ in windows if a > place_s), default=-math.inf)  # no place moves past a later red's start
+        p_at_least, p_k = 1.0, math.exp(-queued)  # P(N >= i - 1), P(N = i - 1)
+        for i in range(1, 200):
+            p_at_least -= p_k  # P(N >= i): the i-th car behind the cut one is there
+            p_k *= queued / i
+            if p_at_least < 1e-4 or place_s >= last_s:
+                break
+            v_mps = min(math.sqrt(2.0 * accel * i * model.jam_spacing_m), limit_mps)
+            own_s = end_s + startup_s + i * headway_s + normal_drive_s(gap_m, v_mps, limit_mps, accel)
+            before_s, place_s = place_s, max(own_s, place_s + headway_s)  # its place without the cut car, and with it
+            red = next(((a, b) for a, b in windows if before_s < a <= place_s), None)
+            if red is not None and not any(a <= before_s < b for a, b in windows):
+                lost += p_at_least * min(red[1] - red[0], WAIT_CAP_S)
+    return lost / levels
 
 
 def paced_for_behind(lost_s, obs: Observation, advice: Advice, params: AdvisorParams, slack_s: float = GIVE_UP_SLACK_S) -> Advice | None:
