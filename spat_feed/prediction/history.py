@@ -69,6 +69,13 @@ RECENT_PHASES = 20
 their scored errors (:meth:`PhaseHistory.recent_weight`): an actuated controller's cycle drifts with the traffic
 (Antwerp 2019-05-01: its median 89 s at 16:00, 70 s at 19:00), and 40 phases are an hour of it. [-]"""
 
+POOL_SCORE_AHEAD_S = (10.0, SCORE_AHEAD_S, 40.0)
+"""How long before each phase end the two laws of each pool (the stage's and the phase's, the latest phases' and
+every phase's, the window law and the durations) are scored (:meth:`PhaseHistory._given_before`,
+:meth:`PhaseHistory._score_window`): across the horizons advice reads a forecast at (an approach takes up to a minute),
+their squared errors averaged per phase. At :data:`SCORE_AHEAD_S` alone a share followed one instant of each of the
+last ~10 phases. [s]"""
+
 EXACT_NEAREST = 20
 """Past exact ends, the nearest in how far ahead they were first published, whose lags to the change a new one
 reads (:meth:`PhaseHistory.exact_lags_s`). [-]"""
@@ -97,9 +104,10 @@ class CycleStats:
     cycle_classes: frozenset = frozenset()  # classes told better by the point of the cycle they end at than by their durations
     period_s: float | None = None  # the controller's fixed cycle, if its changes keep to one (:func:`~spat_feed.prediction.predictor.cycle_period_s`)
     period_error_s: float = 0.0  # ... and its standard error (:func:`~spat_feed.prediction.predictor.period_fit_s`)
-    # (durations, from, to): past phases of the current class while the intersection was in its state now (:meth:`PhaseHistory.spans_in`)
+    # (durations, from, to, visit): past phases of the current class while the intersection was in its state now (:meth:`PhaseHistory.spans_in`)
     state_spans_s: tuple | None = None
     state_entered_s: float | None = None  # how long after the current phase began the intersection entered its state now
+    state_visit: int = 0  # ... for the how-many-th time since the phase began (0: the first)
     stage_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # the stage's law's share in ``state``, per class (:meth:`PhaseHistory.stage_weight`)
     recent_spans_s: tuple | None = None  # ``state_spans_s`` of the latest :data:`RECENT_PHASES` phases of the class only
     recent_weight: Mapping[PhaseClass, float] = field(default_factory=dict)  # their law's share in ``state``, per class (:meth:`PhaseHistory.recent_weight`)
@@ -160,17 +168,25 @@ def _quantile(sorted_s: Sequence[float], q: float) -> float:
 
 def _scored(score: list[float], errors) -> None:
     """Add one phase's errors of two laws to ``score`` = [n, first's mean squared error, second's]: a running mean
-    over about :data:`METHOD_MEMORY` phases. [s²]"""
+    over about :data:`METHOD_MEMORY` phases; ``errors``: pairs (first, second), one per horizon it was scored at
+    (:data:`POOL_SCORE_AHEAD_S`), their squares averaged first. [s²]"""
+    e = np.asarray(errors, dtype=float).reshape(-1, 2)
     score[0] += 1
     w = max(1.0 / score[0], 1.0 / METHOD_MEMORY)
-    score[1] += w * (errors[0] ** 2 - score[1])
-    score[2] += w * (errors[1] ** 2 - score[2])
+    score[1] += w * (float(np.mean(e[:, 0] ** 2)) - score[1])
+    score[2] += w * (float(np.mean(e[:, 1] ** 2)) - score[2])
 
 
-def _scored_pair(score: list[float], laws, floor_s: float, truth_s: float) -> None:
-    """Score two laws given by samples on one phase (:func:`_scored`): the error of each one's likely end (its
-    median, no earlier than ``floor_s``: the phase had not ended then) against ``truth_s``, when it ended. [s]"""
-    _scored(score, [max(floor_s, sample_quantile(np.sort(x), 0.5)) - truth_s for x in laws])
+def _errors(laws, floor_s: float, truth_s: float) -> tuple[float, float]:
+    """The errors of two laws given by samples on one phase: each one's likely end (its median, no earlier than
+    ``floor_s``: the phase had not ended then) against ``truth_s``, when it ended. [s]"""
+    return tuple(max(floor_s, sample_quantile(np.sort(x), 0.5)) - truth_s for x in laws)
+
+
+def _scored_pairs(scores: dict, cls: PhaseClass, errors) -> None:
+    """:func:`_scored` ``cls``'s score in ``scores`` (a class's first) with a phase's ``errors``, if any."""
+    if errors:
+        _scored(scores.setdefault(cls, [0, 0.0, 0.0]), errors)
 
 
 def _share(score) -> float:
@@ -260,11 +276,11 @@ class PhaseHistory:
                 if self._exact:
                     before = self.stats()
                     self.ended = (self._current, self._since, t_unix_s, before.durations(self._current), before.ends(self._current),
-                                  self._given_before(t_unix_s))  # fmt: skip
+                                  (given := self._given_before(t_unix_s)).get(SCORE_AHEAD_S))  # fmt: skip
                     self._durations.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s - self._since)
                     self._paths.setdefault(self._current, deque(maxlen=self.keep)).append((t_unix_s - self._since, tuple(self._path)))
                     if self._window:
-                        self._score_window(t_unix_s, before, self.ended[5])
+                        self._score_window(t_unix_s, before, given)
                         self._add_to_law(self._current, self._window_readings(t_unix_s))
                 self._following[self._current] = cls
                 self._ends.setdefault(self._current, deque(maxlen=self.keep)).append(t_unix_s)
@@ -345,27 +361,34 @@ class PhaseHistory:
         nearest = nearest[off[nearest] <= EXACT_NEAR_S]
         return tuple(np.sort(pairs[nearest, 1]).tolist())
 
-    def _score_window(self, end_unix_s: float, before: CycleStats, given: np.ndarray | None) -> None:
+    def _score_window(self, end_unix_s: float, before: CycleStats, given: Mapping[float, np.ndarray]) -> None:
         """Score the window law and the durations on the phase in progress, which ends at ``end_unix_s``: the likely
-        end each said (on the history ``before`` it) at its last reading with a window :data:`SCORE_AHEAD_S` or more
-        before the end; ``given``: the durations the intersection's state gave then (``state``), else those not yet
-        outlasted. A running mean of each one's squared error over about :data:`METHOD_MEMORY` phases."""
+        end each said (on the history ``before`` it) at its last reading with a window each of
+        :data:`POOL_SCORE_AHEAD_S` or more before the end; ``given``: by those horizons, the durations the
+        intersection's state gave then (``state``), else those not yet outlasted. A running mean of each one's
+        squared error over about :data:`METHOD_MEMORY` phases."""
         law = before.window_law_s.get(self._current)
-        k = bisect.bisect_right([r[0] for r in self._window], max(self._since, end_unix_s - SCORE_AHEAD_S)) - 1
-        if law is None or k < 0:
+        if law is None:
             return
-        t, lo, hi = self._window[k]
-        el, floor = t - self._since, max(t, lo)
-        states = [s for a, s in self._path if a <= el]
-        state = states[-1] if states else -1
-        by_window, recent = window_laws(law, before.recent_window_n.get(self._current), self._since, t, lo, hi, state)
-        if recent is not None:
-            _scored_pair(self._recent_window_score.setdefault(self._current, [0, 0.0, 0.0]), (recent, by_window), floor, end_unix_s)
-            by_window = _mixed(by_window, recent, self.recent_window_weight(self._current))
-        own = given if given is not None else [d for d in before.durations(self._current) if d > el]
-        if by_window is None or not len(own):
-            return
-        _scored_pair(self._window_score.setdefault(self._current, [0, 0.0, 0.0]), (by_window, self._since + np.asarray(own)), floor, end_unix_s)
+        times = [r[0] for r in self._window]
+        by_recent, by_durations = [], []
+        for ahead_s in POOL_SCORE_AHEAD_S:
+            k = bisect.bisect_right(times, max(self._since, end_unix_s - ahead_s)) - 1
+            if k < 0:
+                continue
+            t, lo, hi = self._window[k]
+            el, floor = t - self._since, max(t, lo)
+            states = [s for a, s in self._path if a <= el]
+            by_window, recent = window_laws(law, before.recent_window_n.get(self._current), self._since, t, lo, hi, states[-1] if states else -1)
+            if recent is not None:
+                by_recent.append(_errors((recent, by_window), floor, end_unix_s))
+                by_window = _mixed(by_window, recent, self.recent_window_weight(self._current))
+            own = given.get(ahead_s)
+            own = own if own is not None else [d for d in before.durations(self._current) if d > el]
+            if by_window is not None and len(own):
+                by_durations.append(_errors((by_window, self._since + np.asarray(own)), floor, end_unix_s))
+        _scored_pairs(self._recent_window_score, self._current, by_recent)
+        _scored_pairs(self._window_score, self._current, by_durations)
 
     def window_weight(self, cls: PhaseClass) -> float:
         """The window law's share of the forecast of ``cls`` where it is pooled with the durations: the weights of the
@@ -408,30 +431,26 @@ class PhaseHistory:
         """The class of the phase in progress (None before the first reading)."""
         return self._current
 
-    def _given_before(self, end_unix_s: float) -> np.ndarray | None:
-        """The durations ``state`` gave :data:`SCORE_AHEAD_S` before the phase in progress ended at ``end_unix_s``
-        (:func:`~spat_feed.prediction.predictor.durations_given_state`), what the cycle is scored against; and the
-        score of its two laws then, by the phase's start and by the stage's (their likely ends' squared errors, a
-        running mean over about :data:`METHOD_MEMORY` phases: :meth:`stage_weight`), and of the law of every phase
-        kept and of the latest :data:`RECENT_PHASES` (:meth:`recent_weight`)."""
-        el = max(0.0, end_unix_s - SCORE_AHEAD_S - self._since)
-        then = [(at, s) for at, s in self._path if at <= el]
-        if not then:
-            return None
-        entered, state = then[-1]
-        spans = self.spans_in(self._current, state)
-        by_phase = durations_given_state(spans, el)
-        if by_phase is None:
-            return None
-        by_stage = durations_given_stage(spans, el, entered)
-        if by_stage is not None:
-            _scored_pair(self._stage_score.setdefault(self._current, [0, 0.0, 0.0]), (by_stage, by_phase), el, end_unix_s - self._since)
-        every = durations_given_state(spans, el, entered, self.stage_weight(self._current))
-        recent = durations_given_state(self.spans_in(self._current, state, RECENT_PHASES), el, entered, self.stage_weight(self._current))
-        if recent is None:
-            return every
-        _scored_pair(self._recent_score.setdefault(self._current, [0, 0.0, 0.0]), (recent, every), el, end_unix_s - self._since)
-        return _mixed(every, recent, self.recent_weight(self._current))
+    def _given_before(self, end_unix_s: float) -> dict[float, np.ndarray]:
+        """By each of :data:`POOL_SCORE_AHEAD_S`, the durations ``state`` gave that long before the phase in progress
+        ended at ``end_unix_s`` (:func:`~spat_feed.prediction.predictor.durations_given_state`; at
+        :data:`SCORE_AHEAD_S`, what the cycle is scored against); and the score of its two laws then, by the phase's
+        start and by the stage's (their likely ends' squared errors, a running mean over about :data:`METHOD_MEMORY`
+        phases: :meth:`stage_weight`), and of the law of every phase kept and of the latest :data:`RECENT_PHASES`
+        (:meth:`recent_weight`)."""
+        at = []  # per horizon: (it, how long the phase had run, since when in its state, the spans of every phase and of the latest)
+        for ahead_s in POOL_SCORE_AHEAD_S:
+            el = max(0.0, end_unix_s - ahead_s - self._since)
+            then = [(a, s) for a, s in self._path if a <= el]
+            if then and (spans := self.spans_in(self._current, then[-1][1])) is not None and durations_given_state(spans, el) is not None:
+                at.append((ahead_s, el, then[-1][0], spans, self.spans_in(self._current, then[-1][1], RECENT_PHASES), sum(1 for _, s in then[:-1] if s == then[-1][1])))
+        truth_s = end_unix_s - self._since
+        stage = [(durations_given_stage(spans, el, entered, visit), durations_given_state(spans, el)) for _, el, entered, spans, _, visit in at]
+        _scored_pairs(self._stage_score, self._current, [_errors(laws, el, truth_s) for laws, (_, el, *_) in zip(stage, at) if laws[0] is not None])
+        laws = [(durations_given_state(spans, el, entered, self.stage_weight(self._current), visit),
+                 durations_given_state(recent, el, entered, self.stage_weight(self._current), visit)) for _, el, entered, spans, recent, visit in at]  # fmt: skip
+        _scored_pairs(self._recent_score, self._current, [_errors((recent, every), el, truth_s) for (every, recent), (_, el, *_) in zip(laws, at) if recent is not None])
+        return {ahead_s: every if recent is None else _mixed(every, recent, self.recent_weight(self._current)) for (every, recent), (ahead_s, *_) in zip(laws, at)}
 
     def stage_weight(self, cls: PhaseClass) -> float:
         """The share of the stage's law in the ``state`` law of ``cls``
@@ -451,6 +470,11 @@ class PhaseHistory:
         return _share(self._recent_score.get(cls, (0, 0.0, 0.0)))
 
     @property
+    def visit(self) -> int:
+        """The how-many-th time (from 0) the phase in progress is in the intersection's state now. [-]"""
+        return sum(1 for _, s in self._path[:-1] if s == self._path[-1][1]) if self._path else 0
+
+    @property
     def entered_s(self) -> float | None:
         """How long after the phase in progress began the intersection entered its state now (None: not known). [s]"""
         return self._path[-1][0] if self._path else None
@@ -460,14 +484,14 @@ class PhaseHistory:
         if self._since is not None and (not self._path or self._path[-1][1] != state):
             self._path.append((t_unix_s - self._since, state))
 
-    def spans_in(self, cls: PhaseClass | None, state: int, latest: int | None = None) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] | None:
+    def spans_in(self, cls: PhaseClass | None, state: int, latest: int | None = None) -> tuple[tuple[float, ...], ...] | None:
         """The phases of ``cls`` seen whole (the ``latest`` only, if given) while the intersection was in ``state``:
-        each one's duration and the span of its own time (from, to) it spent so, as three tuples; None when none
-        was. [s]"""
+        each one's duration, the span of its own time (from, to) it spent so, and the how-many-th time (from 0) it
+        entered that state then, as four tuples; None when none was. [s]"""
         paths = self._paths.get(cls, ())
         if latest is not None and len(paths) > latest:
             paths = list(paths)[-latest:]
-        out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d)
+        out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d, sum(1 for _, s2 in path[:k] if s2 == state))
                for d, path in paths for k, (el, s) in enumerate(path) if s == state]  # fmt: skip
         return None if not out else tuple(zip(*out))
 
@@ -654,5 +678,5 @@ class IntersectionHistory:
                                                  cycle_classes=self.cycle_classes(group) if self.period_s is not None else frozenset(),
                                                  state_spans_s=history.spans_in(history.current, self._state), state_id=self._state,
                                                  recent_spans_s=history.spans_in(history.current, self._state, RECENT_PHASES),
-                                                 state_entered_s=history.entered_s)  # fmt: skip
+                                                 state_entered_s=history.entered_s, state_visit=history.visit)  # fmt: skip
         return cycle

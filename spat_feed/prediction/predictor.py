@@ -381,10 +381,11 @@ def _as_arrays(spans: tuple[tuple[float, ...], ...]) -> tuple[np.ndarray, ...]:
     return tuple(np.asarray(x, dtype=float) for x in spans)
 
 
-def durations_given_state(spans, elapsed_s: float, entered_s: float | None = None, stage_share: float = 0.0) -> np.ndarray | None:
+def durations_given_state(spans, elapsed_s: float, entered_s: float | None = None, stage_share: float = 0.0, visit: int = 0) -> np.ndarray | None:
     """The durations of the past phases of the class that, this long after they began, were in the intersection's
     state now (every group's class as now), if :data:`MIN_SEEN` were, else None. ``spans``: :class:`CycleStats`'s
-    ``state_spans_s``, (durations, from, to) tuples. [s]
+    ``state_spans_s``, (durations, from, to[, visit]) tuples; ``visit``: the how-many-th time the phase in progress is
+    in that state (:func:`durations_given_stage`). [s]
 
     With ``entered_s`` (how long after the phase began the intersection entered its state now), pooled with the
     durations the *stage* says, with the share ``stage_share``: each past phase of the class that stayed in that
@@ -398,36 +399,40 @@ def durations_given_state(spans, elapsed_s: float, entered_s: float | None = Non
     >>> durations_given_state(spans, 10.0).tolist(), sorted(set(durations_given_state(spans, 25.0, 20.0, 0.5).tolist()))
     ([30.0, 30.0, 30.0], [30.0, 50.0])
     """
-    got = state_law(spans, elapsed_s, entered_s, stage_share)
+    got = state_law(spans, elapsed_s, entered_s, stage_share, visit)
     return None if got is None else got[0]
 
 
-def state_law(spans, elapsed_s: float, entered_s: float | None = None, stage_share: float = 0.0) -> tuple[np.ndarray, int] | None:
+def state_law(spans, elapsed_s: float, entered_s: float | None = None, stage_share: float = 0.0, visit: int = 0) -> tuple[np.ndarray, int] | None:
     """:func:`durations_given_state` and the number of past phases that were in the state (what the plain durations
     weigh against, :data:`PRIOR_PHASES`), or None. [s], [-]"""
     if spans is None:
         return None
-    d, lo, hi = _as_arrays(spans)
+    d, lo, hi = _as_arrays(spans)[:3]
     m = (lo <= elapsed_s) & (elapsed_s < hi)
     if (n := int(np.count_nonzero(m))) < MIN_SEEN:
         return None
-    by_stage = None if entered_s is None or stage_share <= 0.0 else durations_given_stage(spans, elapsed_s, entered_s)
+    by_stage = None if entered_s is None or stage_share <= 0.0 else durations_given_stage(spans, elapsed_s, entered_s, visit)
     return (d[m] if by_stage is None else _mixed(d[m], by_stage, stage_share)), n
 
 
-def durations_given_stage(spans, elapsed_s: float, entered_s: float) -> np.ndarray | None:
+def durations_given_stage(spans, elapsed_s: float, entered_s: float, visit: int = 0) -> np.ndarray | None:
     """The durations of a phase now ``elapsed_s`` in, whose intersection entered its state now ``entered_s`` after it
     began, that past phases of the class in that state say when counted from their entering it: each one that stayed
     in it at least ``elapsed - entered`` ended ``entered + (duration - from)`` after this one began; None with fewer
-    than :data:`MIN_SEEN`. ``spans``: as :func:`durations_given_state`. [s]
+    than :data:`MIN_SEEN`. ``spans``: as :func:`durations_given_state`, with a fourth tuple where given, the how-many-th
+    time (from 0) the phase entered that state: only their spans of the same ``visit`` count (a red that ends a few
+    seconds after a stage is in its starting state again then; read at its start, those last seconds said "3 s"). [s]
 
     Examples
     --------
     >>> durations_given_stage(((30.0, 30.0, 30.0, 50.0), (0.0, 0.0, 0.0, 20.0), (30.0, 30.0, 30.0, 50.0)), 25.0, 20.0).tolist()
     [50.0, 50.0, 50.0, 50.0]
     """
-    d, lo, hi = _as_arrays(spans)
+    d, lo, hi, *visits = _as_arrays(spans)
     m = hi - lo > elapsed_s - entered_s
+    if visits:
+        m &= visits[0] == visit
     return entered_s + (d - lo)[m] if np.count_nonzero(m) >= MIN_SEEN else None
 
 
@@ -604,10 +609,10 @@ def current_end(cycle, cls: PhaseClass, since_unix_s: float | None, now_unix_s: 
         return np.maximum(published_max_unix_s + np.asarray(lags or (0.0,)), floor_unix_s), "published"
     given, n_given = None, 0  # the durations of the phases of the class seen in the intersection's state now, this far in
     if cycle is not None and current and since_unix_s is not None:
-        got = state_law(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
+        got = state_law(cycle.state_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5), cycle.state_visit)
         if got is not None:  # (pooled with the stage's law; the prior is weighed against the phases seen)
             given, n_given = got
-            recent = durations_given_state(cycle.recent_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5))
+            recent = durations_given_state(cycle.recent_spans_s, now_unix_s - since_unix_s, cycle.state_entered_s, cycle.stage_weight.get(cls, 0.5), cycle.state_visit)
             if recent is not None:  # (pooled with the latest phases' law: the traffic drifts)
                 given = _mixed(given, recent, cycle.recent_weight.get(cls, 0.5))
     if cycle is not None and current:

@@ -202,7 +202,7 @@ def test_a_red_that_waits_for_a_stage_is_told_by_how_long_the_stage_has_run(stag
     mae = np.mean([e for _, e in errors])
     assert len(errors) == 60 and all(m == "state" for m, _ in errors)
     if stage_tells:  # the true law 18-22 s ahead, evenly: mean absolute deviation 1.2 s
-        assert weight > 0.8 and mae <= 2.0, (weight, mae)
+        assert weight > 0.6 and mae <= 2.0, (weight, mae)
     else:  # 40-44 s from the red's start, evenly: 1.2 s
         assert weight < 0.2 and mae <= 2.0, (weight, mae)
 
@@ -232,6 +232,21 @@ def test_a_red_whose_length_drifts_with_the_traffic_is_told_by_the_latest_phases
     mean_error = np.mean([e for _, e in errors])
     assert len(errors) == 40 and all(m == "state" for m, _ in errors)
     assert weight > 0.6 and -7.5 <= mean_error <= -4.0, (weight, mean_error)
+
+
+def test_a_pool_is_scored_at_every_horizon_of_a_phase_once():
+    """Each phase end scores the two laws of a pool at every horizon of ``POOL_SCORE_AHEAD_S`` and counts once: the
+    running mean takes the mean of each law's squared errors over the horizons. By hand: errors (1, 3), (3, 1) and
+    (2, 2) s at three horizons give both laws (1 + 9 + 4) / 3 s², so after three such phases each has half the pool;
+    the first horizon alone would have given the first law 9 / (1 + 9) = 0.9 of it."""
+    from spat_feed.prediction.history import _scored, _share
+
+    score, first_only = [0, 0.0, 0.0], [0, 0.0, 0.0]
+    for _ in range(3):
+        _scored(score, [(1.0, 3.0), (3.0, 1.0), (2.0, 2.0)])
+        _scored(first_only, [(1.0, 3.0)])
+    assert score[0] == 3 and score[1] == pytest.approx(14.0 / 3.0) and score[2] == pytest.approx(14.0 / 3.0)
+    assert _share(score) == pytest.approx(0.5) and _share(first_only) == pytest.approx(0.9)
 
 
 def test_a_pool_gives_each_law_its_share_however_few_its_samples():
