@@ -450,9 +450,8 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     if cut == 0.0:
         return 0.0
     after = next((lv for lv in obs.lights if lv.distance_m > line_m), None)  # the light after this one
-    queued = queued_behind(light, start, end, arrivals_vps, model.fast_headway_s)
-    knock_s = knock_on_s(light, start, end, arrivals_vps, model.fast_headway_s)
-    return cut * (min(end - start, WAIT_CAP_S) + knock_s + spill_s(light, after, end, queued, limit, model))
+    queued = queued_behind(light, start, end, arrivals_vps, model.fast_headway_s)  # (knock_on_s: a headway each)
+    return cut * (min(end - start, WAIT_CAP_S) + model.fast_headway_s * queued + spill_s(light, after, end, queued, limit, model))
 
 
 def knock_on_s(light: LightView, start_s: float, end_s: float, arrivals_vps: float | None, headway_s: float) -> float:

@@ -189,6 +189,12 @@ def _scored_pairs(scores: dict, cls: PhaseClass, errors) -> None:
         _scored(scores.setdefault(cls, [0, 0.0, 0.0]), errors)
 
 
+def _visit(path, k: int) -> int:
+    """The how-many-th time (from 0) a phase's ``path`` ((since the phase began, state) entries) is in the state of its
+    ``k``-th entry there. [-]"""
+    return sum(1 for _, s in path[:k] if s == path[k][1])
+
+
 def _share(score) -> float:
     """The first law's share in a pool of two scored by :func:`_scored`: in inverse proportion to the mean squared
     errors (Bates and Granger, :meth:`PhaseHistory.window_weight`); half each until :data:`MIN_PHASES_SEEN` phases
@@ -443,7 +449,7 @@ class PhaseHistory:
             el = max(0.0, end_unix_s - ahead_s - self._since)
             then = [(a, s) for a, s in self._path if a <= el]
             if then and (spans := self.spans_in(self._current, then[-1][1])) is not None and durations_given_state(spans, el) is not None:
-                at.append((ahead_s, el, then[-1][0], spans, self.spans_in(self._current, then[-1][1], RECENT_PHASES), sum(1 for _, s in then[:-1] if s == then[-1][1])))
+                at.append((ahead_s, el, then[-1][0], spans, self.spans_in(self._current, then[-1][1], RECENT_PHASES), _visit(then, len(then) - 1)))
         truth_s = end_unix_s - self._since
         stage = [(durations_given_stage(spans, el, entered, visit), durations_given_state(spans, el)) for _, el, entered, spans, _, visit in at]
         _scored_pairs(self._stage_score, self._current, [_errors(laws, el, truth_s) for laws, (_, el, *_) in zip(stage, at) if laws[0] is not None])
@@ -472,7 +478,7 @@ class PhaseHistory:
     @property
     def visit(self) -> int:
         """The how-many-th time (from 0) the phase in progress is in the intersection's state now. [-]"""
-        return sum(1 for _, s in self._path[:-1] if s == self._path[-1][1]) if self._path else 0
+        return _visit(self._path, len(self._path) - 1) if self._path else 0
 
     @property
     def entered_s(self) -> float | None:
@@ -491,7 +497,7 @@ class PhaseHistory:
         paths = self._paths.get(cls, ())
         if latest is not None and len(paths) > latest:
             paths = list(paths)[-latest:]
-        out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d, sum(1 for _, s2 in path[:k] if s2 == state))
+        out = [(d, el, path[k + 1][0] if k + 1 < len(path) else d, _visit(path, k))
                for d, path in paths for k, (el, s) in enumerate(path) if s == state]  # fmt: skip
         return None if not out else tuple(zip(*out))
 
