@@ -576,6 +576,28 @@ def test_a_driver_rolling_into_its_stop_gap_stops_at_the_line_gently():
 
 
 
+@pytest.mark.parametrize("dist_m, v", [(2.53, 2.03), (14.93, 6.43), (40.0, 11.0)])
+def test_a_driver_told_to_stop_lifts_off_only_while_a_comfortable_stop_fits_after_the_step(dist_m, v):
+    """Told to stop, committed to a red it expects to end first, the car lifts off while a comfortable stop (1.5 m/s²)
+    at the line still fits. Judged on the room now, it lifted off at 2.03 m/s 1.53 m short of where it stops, SUMO moved
+    it 1 m, and the stop then took 2.0² / (2 x 0.53 m) = 3.8 m/s² (traced: 7th Street actuated 900 veh/h, every car
+    connected, seed 1, `main.45`, -3.72 m/s²). Judged after the step the lift-off takes, it brakes at most at the
+    comfortable rate (1.5 m/s²), or the rate the room asks (11² / (2 x 39 m) = 1.55 m/s² told 40 m out at 11 m/s),
+    give or take the 0.5 s steps, and stands before the line."""
+    from advisory.advice.views import Advice, LightView
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line = 13.4, 379.1
+    x = line - dist_m
+    driver = AdvisedDriver((line,), vid="main.0")
+    driver.heard(-1.0, x, Advice("stop", "red_ahead", 0.0, True, 14.0), {0: LightView(1, line - x, red_windows_s=((0.0, 14.0),))})
+    driver.committed.add(0)
+    xs, vs = _drive(driver, x, v, lim, lambda t, x: LightNow(0, line, t < 14.0) if x <= line else None, seconds=12.0)
+    need = v * v / (2.0 * (dist_m - 1.0))  # the rate that stops it 1 m short of the line, braking from now on
+    assert np.diff(vs).min() / STEP_S >= -max(1.5, need) * 1.3  # at most about that rate: no hard brake
+    assert vs.min() == 0.0 and xs.max() <= line  # stood before the line in the red
+
+
 def test_a_driver_going_for_a_green_it_can_no_longer_stop_for_is_not_slowed_into_the_red_by_a_car_far_ahead():
     """Committed at the limit (24.59 m/s) to a light that shows no amber, 87.6 m out (stopping for its line takes
     3.5 m/s², more than the firm 3 m/s² the driver plans a stop with), over the line 0.3 s before the red at its speed;

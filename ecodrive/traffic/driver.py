@@ -167,7 +167,10 @@ class AdvisedDriver:
         if active is not None and active.action == "stop" and x < self.stop_line_m:
             to_line_m = _stop_room_m(self.stop_line_m - x, v, rules.stop_gap_m, rules.brake_max_mps2)
             at_gap = to_line_m == self.stop_line_m - rules.stop_gap_m - x  # not already rolling into the gap
-            if at_gap and v * v < 2.0 * drv.decel_mps2 * to_line_m:
+            # lift off while a comfortable stop at the line still fits after the step the lift-off takes (SUMO moves
+            # the car v dt first: checked on the room now, a car lifting off at 2.0 m/s 1.5 m short of its stopping
+            # point needed 3.7 m/s² a step later; 7th Street actuated 900 veh/h, every car connected, seed 1)
+            if at_gap and v * v < 2.0 * drv.decel_mps2 * (to_line_m - v * dt_s):
                 rate_down = coast_decel_mps2(v, adv.vehicle)
             else:
                 rate_down = max(rate_down, min(v * v / (2.0 * max(to_line_m, 1e-6)), rules.brake_max_mps2))
