@@ -515,6 +515,37 @@ def test_a_green_a_normal_drive_makes_is_not_given_up_for_the_next_one():
     assert advise(Observation(2.0, V, (light(200.0, (12.0, 42.0)),)))[0].action != "none"
 
 
+def test_a_car_that_cars_follow_is_not_told_to_speed_up_slower_than_the_traffic():
+    """Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 2): pulling away from light 1's queue at 10.9 m/s, the
+    next light 390.5 m on and red in 22 s, a car was told "Speed up to 55 mph", which its driver does at the
+    comfortable 1.5 m/s² after a 1 s reaction: over the line at 1 s + 9.13 s (162.1 m) + 217.5 m / 24.6 m/s = 18.97 s,
+    where a normal drive (2 m/s² at once: 6.85 s, 121.6 m, then 268.9 m at the limit) is there at 17.78 s; the
+    platoon behind it lost that second, its last car the green. With cars behind it (``followers``) the advice is to
+    drive normally; alone, the speed-up as before; and where the normal drive's earlier arrival meets a red (the light
+    after, 600 m on: 26.30 s, within 2 s of a red ending at 25.4 s; the speed-up at 27.49 s), the speed-up stands.
+    Nor is a car nearing the limit told to hold the speed it has (the same run, ``main.27``, 193 m before the light at
+    23.6 m/s: "Hold 53 mph", 0.9 m/s under the limit to the line, with the platoon behind it)."""
+    v0, lit = 10.9, LightView(2, 390.5, red_windows_s=((22.0, 52.0),))
+    obs = Observation(v0, V, (lit,), followers=2.0)
+    assert normal_crossing_s(390.5, obs, P) == pytest.approx(6.85 + (390.5 - 121.5975) / V, abs=1e-3)  # (the motion from tables)
+    assert crossing_time_s(390.5, v0, V, P) == pytest.approx(1.0 + 9.1333 + (390.5 - v0 - 162.1133) / V, abs=1e-3)
+    led = advise(obs)[0]
+    assert (led.action, led.reason, led.message) == ("none", "tight_green", "Red in 22 seconds. Drive normally.")
+    alone = advise(replace(obs, followers=0.0))[0]
+    assert (alone.action, alone.target_speed_mps) == ("accelerate", V)
+    kept = advise(replace(obs, speed_mps=12.4), AdvisorMemory(last=alone, spoken=alone))[0]  # the speed-up followed, now with cars behind
+    assert (kept.action, kept.reason) == ("none", "tight_green")
+    after = LightView(3, 600.0, red_windows_s=((20.0, 25.4),))
+    assert normal_crossing_s(600.0, obs, P) < 25.4 + P.green_margin_s <= crossing_time_s(600.0, v0, V, P)
+    both = advise(Observation(v0, V, (replace(lit, distance_m=200.0, red_windows_s=((30.0, 60.0),)), after), followers=2.0))[0]
+    assert (both.action, both.target_speed_mps) == ("accelerate", V)
+    near = Observation(23.6, V, (LightView(2, 193.0, red_windows_s=((12.0, 42.0),)),))
+    held = advise(near)[0]
+    assert (held.action, held.message) == ("cruise", "Red in 12 seconds. Hold 53 miles per hour.")
+    followed = advise(replace(near, followers=0.3))[0]
+    assert (followed.action, followed.reason) == ("none", "tight_green")
+
+
 @pytest.mark.parametrize("case", [(0, -15, 200), (-15, -30, 200), (-15, 0, 800), (0, 0, 400)])
 def test_no_paper_scenario_ends_far_behind_the_regular_driver(case):
     """The paper scenarios where the advised driver lost a cycle (42 s) or lingered (7 s): within 5 s now (issue 13)."""

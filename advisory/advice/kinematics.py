@@ -392,6 +392,15 @@ def normal_crossing_s(distance_m: float, obs: Observation, params: AdvisorParams
     return time_to_line_s(float(distance_m), float(obs.speed_mps), float(obs.speed_limit_mps), MODE_CODES["auto"], 0.0, *_motion(params)[2])
 
 
+def drives_normally(lines: Lines, obs: Observation, params: AdvisorParams, n_lines: int | None = None) -> bool:
+    """A normal drive (speeding up to the limit at ``normal_accel_mps2`` at once, no advice to react to: the motion of
+    :func:`normal_crossing_s`) makes every green of the first ``n_lines`` lines (all by default), with the margin after
+    a red, as an advised speed-up must (:func:`green_mask`). [-]"""
+    n = lines.distances_m.size if n_lines is None else n_lines
+    return makes_greens(float(obs.speed_limit_mps), lines.distances_m, lines.windows_s, lines.no_amber, n, params.green_margin_s, float(obs.speed_mps),
+                        MODE_CODES["auto"], 0.0, *_motion(params)[2])  # fmt: skip
+
+
 KEEP_MODES = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", "ease_off": "auto", "accelerate": "auto", "cruise": "auto"}
 """How a driver following each action changes speed (the mode its feasibility is re-checked in)."""
 
