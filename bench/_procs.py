@@ -30,6 +30,35 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def counters(pid: int) -> dict[str, float]:
+    """What a process has done so far, from /proc (Linux): ``user_s`` and ``system_s`` of CPU, context switches
+    ``voluntary`` (it slept: waited for I/O) and ``involuntary`` (preempted), system calls ``reads`` and ``writes``
+    (``read``/``recv`` and ``write``/``send`` families: /proc/<pid>/io ``syscr``, ``syscw``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    hz = os.sysconf("SC_CLK_TCK")
+    out = {"user_s": int(fields[11]) / hz, "system_s": int(fields[12]) / hz}
+    names = {"voluntary_ctxt_switches": "voluntary", "nonvoluntary_ctxt_switches": "involuntary", "syscr": "reads", "syscw": "writes"}
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines() + Path(f"/proc/{pid}/io").read_text().splitlines():
+        name, _, value = line.partition(":")
+        if name in names:
+            out[names[name]] = float(value)
+    return out
+
+
+def tree_counters(pid: int) -> dict[str, float]:
+    """:func:`counters` summed over a process and its children (uvicorn's supervisor and its workers); a child gone
+    meanwhile counts nothing."""
+    total = counters(pid)
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            try:
+                for name, value in counters(int(child)).items():
+                    total[name] += value
+            except OSError:
+                pass
+    return total
+
+
 def rss_mib(pid: int) -> float:
     """Resident memory of a process, from /proc (Linux). [MiB]"""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():

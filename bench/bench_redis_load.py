@@ -15,7 +15,10 @@ its own offset, latency counted from the second it was due) run through four pha
 
 Beside each service: the CPU (of one core) of the workers, Redis and the load generator over phase 2, the
 machine's CPU taken by other jobs, and the 1-minute load average. The machine is shared: compare the services
-within one run, not across runs.
+within one run, not across runs. Then what the workers did per fix in phase 2 (/proc): their CPU in user and kernel
+mode, how often they slept (voluntary context switches: one per wake-up) and were preempted (involuntary), their
+read and write system calls, and with Redis the commands Redis ran per fix (``INFO commandstats``): work done per
+connection or per trip in the background (lease renewals, pings, SPaT, metrics) shows there, besides the fix's own.
 
 ``--queue-aware on`` runs each service with queue-aware advice (``ECO_QUEUE_AWARE=1``: every fix a probe of the
 corridor's traffic; with Redis every worker's probes shared, ``server/storage/queue_store.py``), ``both`` each service with it
@@ -48,8 +51,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from bench._procs import cpu_seconds, free_port, machine_cpu_s  # noqa: E402
-from bench.bench_scaleout import bench_redis, running_service, tree_cpu_s  # noqa: E402
+from bench._procs import cpu_seconds, free_port, machine_cpu_s, tree_counters  # noqa: E402
+from bench.bench_scaleout import bench_redis, running_service  # noqa: E402
 from bench.bench_server import CORRIDOR, create_trips  # noqa: E402
 from spat_feed.road.corridors import load_corridor  # noqa: E402
 from tests.procs import RedisServer  # noqa: E402
@@ -107,9 +110,25 @@ def one_service(name: str, env: dict, workers: int, redis: RedisServer, args, fo
             marks = []
             load_avg = os.getloadavg()[0]
             phases = [[3.0, args.low], [args.seconds, args.low], [args.seconds, args.high], [args.seconds, args.low]]
+            commands = redis_commands(redis) if "ECO_STORE_URL" in env else dict
             out = run_phones(port, trips, positions, phases, folder / "phones.json",
-                             lambda: marks.append((tree_cpu_s(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s(), time.perf_counter())), transport)  # fmt: skip
+                             lambda: marks.append((tree_counters(proc.pid), cpu_seconds(redis.proc.pid), machine_cpu_s(), time.perf_counter(), commands())), transport)  # fmt: skip
             report(f"{name}, {'REST' if transport == 'http' else 'WebSocket'}", out, marks, load_avg, workers, args)
+
+
+def redis_commands(redis: RedisServer):
+    """A function giving the commands ``redis`` has run so far, by name (``INFO commandstats``: calls)."""
+    import redis as redis_py
+
+    client = redis_py.Redis.from_url(redis.url)
+    return lambda: {name.removeprefix("cmdstat_"): stats["calls"] for name, stats in client.info("commandstats").items()}
+
+
+def per_fix(before: dict, after: dict, n: int) -> str:
+    """What the workers did per fix between two marks (:func:`bench._procs.tree_counters`, ``n`` fixes)."""
+    d = {k: (after[k] - before[k]) / max(n, 1) for k in before}
+    return (f"user {1e6 * d['user_s']:.0f} us, kernel {1e6 * d['system_s']:.0f} us; woke {d['voluntary']:.2f}, preempted {d['involuntary']:.2f};"
+            f" reads {d['reads']:.2f}, writes {d['writes']:.2f}")
 
 
 def report(name: str, out: dict, marks: list, load_avg: float, workers: int, args) -> None:
@@ -124,7 +143,8 @@ def report(name: str, out: dict, marks: list, load_avg: float, workers: int, arg
         return (t >= m[k]) & (t < m[k + 1])
 
     def usage(k: int) -> tuple[float, float, float, float, float]:
-        (c0, r0, m0, w0), (c1, r1, m1, w1) = marks[k], marks[k + 1]
+        (t0, r0, m0, w0, _), (t1, r1, m1, w1, _) = marks[k], marks[k + 1]
+        c0, c1 = t0["user_s"] + t0["system_s"], t1["user_s"] + t1["system_s"]
         wall = w1 - w0
         gen = (out["cpu_s"][k + 1] - out["cpu_s"][k]) / wall
         others = (m1["busy"] - m0["busy"]) / wall - (c1 - c0) / wall - (r1 - r0) / wall - gen
@@ -137,6 +157,9 @@ def report(name: str, out: dict, marks: list, load_avg: float, workers: int, arg
           f" Redis {100 * r_lo:.0f} %, generator {100 * g_lo:.0f} % of a core)")  # fmt: skip
     print(f"     {args.low:5d} phones: {n_lo / args.seconds:6.0f} fixes/s  p50 {pct_ms(lat[lo], 50):6.1f} ms  p99 {pct_ms(lat[lo], 99):6.1f} ms"
           f"  errors {int((status[lo] != 200).sum())}  worker CPU {1e3 * cpu_lo / max(n_lo, 1):.3f} ms/fix")  # fmt: skip
+    commands = {name: (calls - marks[1][4].get(name, 0)) / max(n_lo, 1) for name, calls in marks[2][4].items()}
+    print(f"       per fix, the workers: {per_fix(marks[1][0], marks[2][0], n_lo)}"
+          + (f"; Redis ran {', '.join(f'{name} {k:.2f}' for name, k in sorted(commands.items(), key=lambda c: -c[1]) if k >= 0.005)}" if commands else ""))  # fmt: skip
     hi = phase(2)
     cpu_hi, w_hi, _, _, o_hi = usage(2)
     acc, shed, unreach = hi & (status == 200), hi & (kind == 1), hi & (kind == 2)

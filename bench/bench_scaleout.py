@@ -53,7 +53,7 @@ from tqdm import tqdm
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from bench._procs import cpu_seconds, free_port, machine_cpu_s  # noqa: E402
+from bench._procs import cpu_seconds, free_port, machine_cpu_s, tree_counters  # noqa: E402
 from bench.bench_server import CORRIDOR, create_trips, pct_ms  # noqa: E402
 from server.advising import Engine  # noqa: E402
 from server.config import Settings  # noqa: E402
@@ -224,12 +224,8 @@ def bench_redis(unix_socket: bool = False) -> Iterator[tuple[Path, RedisServer]]
 
 def tree_cpu_s(pid: int) -> float:
     """CPU seconds of a process and its children (uvicorn's workers)."""
-    total = cpu_seconds(pid)
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            with contextlib.suppress(OSError):
-                total += cpu_seconds(int(child))
-    return total
+    c = tree_counters(pid)
+    return c["user_s"] + c["system_s"]
 
 
 def load(port: int, trips, positions, warmup_s: float, seconds: float, mark, out: Path) -> dict:

@@ -21,12 +21,13 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 from pydantic import ValidationError
 
-from server.advising import parse_fix
+from server.advising import Engine, parse_fix
+from server.config import Settings
 from server.gps import Fix
 from server.admission.overload import RETRY_AFTER_S, Shedder
 from server.deps import EngineDep, MetricsDep, SettingsDep, TripId, bearer_token, client_address
 from server.web.errors import ApiError, clean_errors, validation_summary
-from server.storage.streams import StreamCounts
+from server.storage.streams import StreamCounts, StreamHandle
 
 router = APIRouter(prefix="/v1/trips", tags=["stream"])
 
@@ -77,40 +78,14 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
         await ws.close(code=4000 + exc.status, reason=exc.error)
         return
     metrics.ws_open.inc()
-    limit = settings.ws_max_message_bytes
-    shedder: Shedder = ws.app.state.shedder
     try:
         await ws.accept()
         if handle.replaced:  # replaced before its handshake was done
             handle.on_replaced()
-        while True:
-            message = await ws.receive()
-            if message["type"] == "websocket.disconnect" or handle.replaced:
-                break
-            text = message.get("text")
-            if text is None:
-                data = message.get("bytes") or b""
-                size = len(data)
-                text = data.decode("utf-8", errors="replace") if size <= limit else ""
-            else:  # the limit is in bytes, as uvicorn's ws_max_size (a character is 1 to 4 of them)
-                size = len(text) if len(text) * 4 <= limit else len(text.encode("utf-8", "surrogatepass"))
-            try:
-                if size > limit:
-                    await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
-                    raise ApiError(413, "payload_too_large", f"message of {size} bytes, larger than {limit}")
-                if (reason := shedder.refusal()) is not None:  # overloaded (server.admission.overload): this fix is dropped, the stream goes on
-                    raise ApiError(503, "overloaded", shedder.error_body(reason)["message"], headers={"Retry-After": str(RETRY_AFTER_S)})
-                shedder.in_flight += 1
-                try:
-                    out = await engine.apply_fix_json(trip_id, token, lambda: _parse(text))
-                finally:
-                    shedder.in_flight -= 1
-                await ws.send_text(out.decode())
-            except ApiError as exc:
-                await ws.send_text(_error(exc))
-                if exc.status == 404:
-                    await ws.close(code=4404, reason="trip ended")
-                    break
+        # The messages are served by a task of its own, which this one awaits: a fix wakes the stream twice (its
+        # message, then Redis's reply), and each wake-up of a task resumes every frame it is suspended in, here the
+        # ~20 calls of uvicorn, Starlette, FastAPI and the middlewares above this route (issue 30).
+        await asyncio.ensure_future(_serve(ws, trip_id, token, engine, settings, handle))
     except WebSocketDisconnect:
         pass
     except RuntimeError:  # sending on a stream closed meanwhile as replaced (starlette: "once a close message has been sent")
@@ -119,3 +94,37 @@ async def stream(ws: WebSocket, trip_id: TripId, engine: EngineDep, metrics: Met
     finally:
         await counts.close(handle)
         metrics.ws_open.dec()
+
+
+async def _serve(ws: WebSocket, trip_id: str, token: str | None, engine: Engine, settings: Settings, handle: StreamHandle) -> None:
+    """The stream's messages, each fix answered with its advisory or an error object, until the phone or the trip goes."""
+    limit = settings.ws_max_message_bytes
+    shedder: Shedder = ws.app.state.shedder
+    while True:
+        message = await ws.receive()
+        if message["type"] == "websocket.disconnect" or handle.replaced:
+            break
+        text = message.get("text")
+        if text is None:
+            data = message.get("bytes") or b""
+            size = len(data)
+            text = data.decode("utf-8", errors="replace") if size <= limit else ""
+        else:  # the limit is in bytes, as uvicorn's ws_max_size (a character is 1 to 4 of them)
+            size = len(text) if len(text) * 4 <= limit else len(text.encode("utf-8", "surrogatepass"))
+        try:
+            if size > limit:
+                await engine.trips.authorize(trip_id, token)  # the message keeps the trip alive all the same
+                raise ApiError(413, "payload_too_large", f"message of {size} bytes, larger than {limit}")
+            if (reason := shedder.refusal()) is not None:  # overloaded (server.admission.overload): this fix is dropped, the stream goes on
+                raise ApiError(503, "overloaded", shedder.error_body(reason)["message"], headers={"Retry-After": str(RETRY_AFTER_S)})
+            shedder.in_flight += 1
+            try:
+                out = await engine.apply_fix_json(trip_id, token, lambda: _parse(text))
+            finally:
+                shedder.in_flight -= 1
+            await ws.send_text(out.decode())
+        except ApiError as exc:
+            await ws.send_text(_error(exc))
+            if exc.status == 404:
+                await ws.close(code=4404, reason="trip ended")
+                break

@@ -6,7 +6,9 @@ What needs a real server (timeouts, connection caps, logs) is in ``test_hardenin
 from __future__ import annotations
 
 import ast
+import asyncio
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -319,6 +321,32 @@ def test_websocket_messages_keep_the_trip_alive_and_streams_are_capped():
             ws2.send_json(fix(40.0, NOW + 2))
             assert ws2.receive_json()["seq"] == 3
             assert c.app.state.streams.by_trip[d["trip_id"]] == [c.app.state.streams.by_trip[d["trip_id"]][0]]  # ws2's, still counted
+
+
+def test_a_streamed_fix_wakes_the_streams_own_frames_only():
+    """A streamed fix wakes its task twice (its message, then Redis's reply), and a wake-up resumes every frame the
+    task is suspended in: the messages are served by a task of their own (the route's task awaits it), not under the
+    ~20 frames of uvicorn, Starlette, FastAPI and the middlewares (issue 30). Counted here: the frames resumed by a
+    wake-up inside a fix, up to the event loop's callback, and the answers are the stream's as before."""
+    with make() as c:
+        d, _ = trip(c)
+        engine = c.app.state.engine
+        apply, depths = engine.apply_fix_json, []
+
+        async def woken(*args):
+            await asyncio.sleep(0)  # a wake-up, as for Redis's reply
+            frame, n = sys._getframe(), 0
+            while frame is not None and frame.f_code.co_name != "_run":  # up to asyncio.events.Handle._run, the loop's callback
+                frame, n = frame.f_back, n + 1
+            depths.append(n)
+            return await apply(*args)
+
+        engine.apply_fix_json = woken
+        with c.websocket_connect(f"/v1/trips/{d['trip_id']}/stream?token={d['token']}") as ws:
+            for k in range(3):
+                ws.send_json(fix(20.0 + 14.0 * k, NOW + k))
+                assert ws.receive_json()["seq"] == k + 1
+    assert depths == [2, 2, 2]  # this function and the stream's message loop
 
 
 def test_score_values_are_rounded(client):
