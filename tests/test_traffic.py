@@ -598,6 +598,30 @@ def test_a_driver_told_to_stop_lifts_off_only_while_a_comfortable_stop_fits_afte
     assert vs.min() == 0.0 and xs.max() <= line  # stood before the line in the red
 
 
+@pytest.mark.parametrize("red_until_s", [1.0, 3.0])
+def test_a_driver_committed_to_a_red_ending_now_waits_a_reaction_before_its_last_call(red_until_s):
+    """Committed at 98 m and 24.5 m/s to a red its display ends at 0.5 s (the advice: "accelerate" for the green), the
+    light still red at that step: SUMO shows a change at the step after its instant (paper_s400 actuated 900 veh/h,
+    every car connected, seed 2, `main.117`). The last call (a red still red where a stop needs 3 m/s²) came at once
+    and the driver braked at 600 / (2 x 84.9 m) = 3.54 m/s². It now waits a reaction time after the display's green,
+    as the surprise does: the light green at 1.0 s, it goes on at its speed; a red held on to 3.0 s is a surprise: it
+    brakes, and is not over the line before the red ends."""
+    from advisory.advice.views import Advice, LightView
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line, v = 24.58, 500.0, 24.5
+    x = line - 98.11
+    driver = AdvisedDriver((line,), vid="main.0")
+    driver.heard(-1.0, x, Advice("accelerate", "green_wave", lim, True, 1.5), {0: LightView(1, line - x, red_windows_s=((0.0, 1.5),))})
+    xs, vs = _drive(driver, x, v, lim, lambda t, x: LightNow(0, line, t < red_until_s) if x <= line else None, seconds=8.0)
+    ts = np.arange(xs.size) * STEP_S
+    assert (xs[ts <= red_until_s] <= line).all()  # never over the line in the red
+    if red_until_s == 1.0:
+        assert np.diff(vs).min() >= 0.0 and xs[-1] > line  # no braking: over the line on the green
+    else:
+        assert driver.surprises >= 1 and np.diff(vs).min() < 0.0  # held longer than shown: a surprise, it brakes
+
+
 def test_a_driver_going_for_a_green_it_can_no_longer_stop_for_is_not_slowed_into_the_red_by_a_car_far_ahead():
     """Committed at the limit (24.59 m/s) to a light that shows no amber, 87.6 m out (stopping for its line takes
     3.5 m/s², more than the firm 3 m/s² the driver plans a stop with), over the line 0.3 s before the red at its speed;
