@@ -39,6 +39,7 @@ from advisory.advice.kinematics import (KEEP_MODES, MODE_CODES, MODE_NAMES, Line
                                         drives_normally, green_crossing, kernel_args, keeps, line_speeds_mps, normal_crossing_s, red_crossings, search,
                                         slowed_into_red)
 from advisory.advice.mixture import mixture_timings
+from advisory.advice.screening import screened
 from advisory.advice.views import Advice, AdvisorMemory, AdvisorParams, LightView, Observation, countdown_view, light_timing, time_price
 from advisory.advice.wording import phrase
 
@@ -231,17 +232,21 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     crossed = red_crossings(cross, lines.windows_s, (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9), lines.no_amber, params.green_margin_s)
     # priced as the choice needs them (choice.expected_costs, "pruned"): driving normally first and in full, and the
     # stop plan; a plan that cannot be allowed (through a red, or a stop likelier than driving normally's by more than
-    # ``stop_risk_frac``) is not priced further. The same choice as pricing every plan (tests/test_choice.py)
+    # ``stop_risk_frac``) is not priced further. The same choice as pricing every plan (tests/test_choice.py); screened
+    # (screening.screened): the plans priced on a sample of the timings first, the few best of them on all
     must = np.zeros(vts.size, dtype=np.bool_)
     must[normal] = must[stop] = True
     must[-1] = keep  # (kept where it costs no more than the best: its cost, even inf, counts)
     skip = crossed & ~must
     skip[-1] |= not keep  # (no plan followed now: its slot is not a candidate)
-    cost, p_stop, through = choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim,
-                                                  params.green_margin_s, lam, cross, rates, coast, idle, brake, firm,
-                                                  params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan,
-                                                  np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S for light in usable]),
-                                                  skip, must, normal, params.stop_risk_frac)  # fmt: skip
+    amber_max = np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S for light in usable])
+
+    def price(windows: np.ndarray, weights: np.ndarray, skip: np.ndarray, risk_frac: float) -> tuple:
+        return choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim, params.green_margin_s, lam,
+                                     cross, rates, coast, idle, brake, firm, params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps,
+                                     clear, weights, stop_plan, amber_max, skip, must, normal, risk_frac)  # fmt: skip
+
+    cost, p_stop, through = screened(price, windows, weights, skip, m, n_modes, normal, params.stop_risk_frac)
     through |= crossed
     allowed = (p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9) & ~through
     if not keep:

@@ -191,3 +191,61 @@ def _paired_timings(timings: tuple, n: int, j: int):
     else as a tuple."""
     order = _paired(n, j)
     return timings.array_s[order] if isinstance(timings, Timings) else tuple(timings[i] for i in order)
+
+
+@lru_cache(maxsize=16)
+def _members(n: int, k: int) -> np.ndarray:
+    """Which of ``n`` equally likely timings (sorted by level) stand for ``k`` equal strata of the levels: in stratum
+    ``i``, the timing nearest its middle level ``(i + 0.5) / k`` (of two as near, the one nearer the median), so that
+    the members are symmetric about the median as the timings are.
+
+    Examples
+    --------
+    >>> _members(20, 8).tolist(), _members(20, 10).tolist()
+    ([1, 3, 6, 8, 11, 13, 16, 18], [1, 3, 5, 7, 9, 10, 12, 14, 16, 18])
+    """
+    pos = (np.arange(k) + 0.5) * n / k - 0.5  # the middle level's place among the timings' indices
+    idx = np.where(np.arange(k) < k / 2, np.floor(pos + 0.5), np.ceil(pos - 0.5)).astype(np.int64)
+    idx.setflags(write=False)
+    return idx
+
+
+@lru_cache(maxsize=16)
+def _member_rows(n: int, k: int, n_lines: int) -> np.ndarray:
+    """The rows of :func:`mixture_timings`'s array (``n`` timings of the forecast, then the wide component's) that
+    make the mixture of ``k`` members (:func:`fewer_members`), per line (n_lines, k + len(WIDE_LEVELS)): light ``j``'s
+    members (:func:`_members`) in the order :func:`_paired` gives ``k`` timings, found where ``n`` timings put them."""
+    rows = np.empty((n_lines, k + len(WIDE_LEVELS)), dtype=np.int64)
+    for j in range(n_lines):
+        where = np.argsort(_paired(n, j))  # the row of each level
+        rows[j, :k] = where[_members(n, k)[_paired(k, j)]]
+        rows[j, k:] = n + np.arange(len(WIDE_LEVELS))
+    rows.setflags(write=False)
+    return rows
+
+
+def fewer_members(windows: np.ndarray, weights: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mixture of :func:`mixture_timings` (``windows``, ``weights``; some light uncertain) with each light's forecast
+    stood for by ``k`` of its timings, one per equal stratum of its levels (:func:`_members`: a stratified sample,
+    M. D. McKay, R. J. Beckman and W. J. Conover, Technometrics 21, 1979), paired across lights as ``k`` timings are
+    (:func:`_paired`), the forecast's weight shared by them; the wide component as it is. Every member is one of the
+    forecast's timings, its red windows as they are: fewer timings, none changed. The whole mixture where ``k`` is
+    not fewer."""
+    n = windows.shape[1] - len(WIDE_LEVELS)
+    if k >= n:
+        return windows, weights
+    return _rows_of(windows, weights, _member_rows(n, k, windows.shape[0]), n, k)
+
+
+@njit(cache=True)
+def _rows_of(windows, weights, rows, n, k):
+    """:func:`fewer_members`'s mixture: line ``j``'s timings ``rows[j]`` of ``windows``, the first ``k`` sharing the
+    weight of the ``n`` forecast timings, the rest (the wide component) weighted as they are."""
+    out = np.empty((windows.shape[0], rows.shape[1], windows.shape[2], 2))
+    for j in range(windows.shape[0]):
+        for q in range(rows.shape[1]):
+            out[j, q] = windows[j, rows[j, q]]
+    w = np.empty(rows.shape[1])
+    w[:k] = weights[:n].sum() / k
+    w[k:] = weights[n:]
+    return out, w
