@@ -218,7 +218,8 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     stop_plan = np.zeros(vts.size, dtype=np.bool_)
     stop_plan[stop] = True
     stop_plan[-1] = keep and last.reason == "red_ahead"  # a lift-off for a red, followed now: the same plan
-    d_m = np.array([light.distance_m for light in usable], dtype=float)
+    lines = Lines.of(usable)
+    d_m = lines.distances_m
     cross = cross_matrix(vts, modes, reactions, accels, d_m, v0, brake, firm, *coast_tables)
     rates, coast, idle = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
     x_end = float(d_m[-1]) + v_lim * v_lim / (2.0 * params.normal_accel_mps2)
@@ -228,7 +229,6 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
     # no amber warns of a light's reds: no plan reaches the line where one may be on (the sure windows), nor, slowing the
     # car, within the margin before one may begin (the feasibility of the rules, :func:`advisory.advice.kinematics.green_mask`)
-    lines = Lines.of(usable)
     crossed = red_crossings(cross, lines.windows_s, (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9), lines.no_amber, params.green_margin_s)
     # priced as the choice needs them (choice.expected_costs, "pruned"): driving normally first and in full, and the
     # stop plan; a plan that cannot be allowed (through a red, or a stop likelier than driving normally's by more than
@@ -254,7 +254,7 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     priced = np.where(allowed, cost, np.inf)
     # none allowed at a finite cost (those left stop short of the line: coasting to a halt): a stop comes whatever the
     # plan. (Was ``allowed.any()``: where every allowed plan cost inf, argmin fell on plan 0, through a red of every timing)
-    best = int(np.argmin(priced)) if np.isfinite(priced).any() else stop
+    best = int(priced.argmin()) if np.isfinite(priced).any() else stop
     reaction_usd = lam * params.reaction_s
     if keep and allowed[-1] and cost[-1] <= cost[best] + reaction_usd:
         best = vts.size - 1  # the plan followed now, unless another is better by more than a new reaction costs
@@ -307,8 +307,9 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
         return held if held is not None else Advice("none", "stale_spat" if nxt.red_windows_s else "no_spat")
     if nxt.confidence_frac < params.min_confidence_frac:
         return Advice("none", "low_confidence")
-    red, to_change = light_timing(nxt)
-    if _past_next_green(nxt, obs, params):
+    shown = countdown_view(nxt)  # (once: each change at its likely instant, for the countdown and the horizon)
+    red, to_change = light_timing(shown)
+    if _past_next_green(shown, obs, params):
         # so far out that even a normal drive reaches the line after the light's next green has ended: any speed
         # advised now would aim two greens or more ahead (issue 29: "Green in 24 seconds. Ease off to 43 km/h"
         # 1.8 km out); the countdown stays (it is true), the advice waits until the next green is in reach

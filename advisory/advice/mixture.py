@@ -159,38 +159,54 @@ def mixture_timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarr
     forecast = [light.scenario_red_windows_s or implied_timings(light) if u else implied_timings(light) for light, u in zip(lights, uncertain)]
     n_fc = max(len(timings) for timings in forecast)
     forecast = [_resampled(timings, n_fc) for timings in forecast]
+    packed = tuple(np.require(fc.array_s, float, "CW") if u and isinstance(fc, Timings)  # (one type for the kernel: contiguous, writable)
+                   else packed_windows_s(fc if u else fc[:1], _most_windows(fc if u else fc[:1])) for fc, u in zip(forecast, uncertain))  # fmt: skip
     if any(uncertain):  # each light's parts: its forecast as paired, then its wide component
-        per_light = [(_paired_timings(fc, n_fc, j),
-                      wide_component(fc.array_s if isinstance(fc, Timings) else packed_windows_s(fc, _most_windows(fc)), wide_levels(n_fc), WIDE_STRETCH))
-                     if u else (fc[:1],)  # an exact light: its one timing (packed once, set in every timing of the mixture)
-                     for j, (fc, u) in enumerate(zip(forecast, uncertain))]  # fmt: skip
         stated = min(light.confidence_frac for light, u in zip(lights, uncertain) if u)
         outside = min(max(1.0 - stated, 1.0 / n_fc), 1.0)
-        weights = np.concatenate((np.full(n_fc, (1.0 - outside) / n_fc), np.full(len(WIDE_LEVELS), outside / len(WIDE_LEVELS))))
+        weights = np.empty(n_fc + len(WIDE_LEVELS))
+        weights[:n_fc], weights[n_fc:] = (1.0 - outside) / n_fc, outside / len(WIDE_LEVELS)
     else:
-        per_light, weights = [(fc[:1],) for fc in forecast], np.full(n_fc, 1.0 / n_fc)
-    k = max(max(_most_windows(part) for parts in per_light for part in parts), 1)
-    out = np.full((len(lights), weights.size, k, 2), np.inf)
-    for i, (parts, u) in enumerate(zip(per_light, uncertain)):
-        n = 0
-        for part in parts:
-            block = part if isinstance(part, np.ndarray) else packed_windows_s(part, k)
-            rows = slice(n, n + len(block)) if u else slice(None)
-            out[i, rows, : block.shape[1]] = block
-            n += len(block)
-    return out, weights
+        weights = np.full(n_fc, 1.0 / n_fc)
+    return _stacked(packed, np.array(uncertain), _orders(n_fc, len(lights)), wide_levels(n_fc), WIDE_STRETCH, weights.size), weights
+
+
+@lru_cache(maxsize=16)
+def _orders(n: int, n_lines: int) -> np.ndarray:
+    """:func:`_paired`'s order of ``n`` timings for each of ``n_lines`` lights. (n_lines, n)"""
+    orders = np.stack([_paired(n, j) for j in range(n_lines)])
+    orders.setflags(write=False)
+    return orders
+
+
+@njit(cache=True)
+def _stacked(packed, uncertain, orders, levels, stretch, n_rows):
+    """:func:`mixture_timings`'s array from each light's packed timings (``packed[j]``: (timings, k_j, 2); an exact
+    light's one timing): an uncertain light's forecast in the order ``orders[j]`` gives, then its wide component
+    (:func:`wide_component`); an exact light's timing in every row. (lines, ``n_rows``, k, 2), padded with +inf. [s]"""
+    k = 1
+    for j in range(len(packed)):
+        k = max(k, packed[j].shape[1])
+    out = np.full((len(packed), n_rows, k, 2), np.inf)
+    for j in range(len(packed)):
+        block = packed[j]
+        kj = block.shape[1]
+        if uncertain[j]:
+            n = orders.shape[1]
+            for r in range(n):
+                out[j, r, :kj] = block[orders[j, r]]
+            wide = wide_component(block, levels, stretch)
+            for r in range(wide.shape[0]):
+                out[j, n + r, :kj] = wide[r]
+        else:
+            for r in range(n_rows):
+                out[j, r, :kj] = block[0]
+    return out
 
 
 def _most_windows(timings) -> int:
     """The most windows of one of the timings (tuples, or packed: ``(timings, k, 2)``)."""
     return timings.shape[1] if isinstance(timings, np.ndarray) else max((len(w) for w in timings), default=0)
-
-
-def _paired_timings(timings: tuple, n: int, j: int):
-    """Light ``j``'s ``n`` timings in the order :func:`_paired` gives: packed where they come packed (:class:`Timings`),
-    else as a tuple."""
-    order = _paired(n, j)
-    return timings.array_s[order] if isinstance(timings, Timings) else tuple(timings[i] for i in order)
 
 
 @lru_cache(maxsize=16)
