@@ -212,13 +212,15 @@ class AdvisedDriver:
                     self.amber_go.add(n)
                     self.committed.add(n)
                     self.braking_for = None
-            overdue = display is None or (not display.is_red(t) and t - self.green_since.get(n, -np.inf) >= drv.reaction_s)
+            shown_green = display is not None and not display.is_red(t)
+            waited = t - self.green_since.get(n, -np.inf) >= drv.reaction_s  # a reaction time since the display's green
+            overdue = display is None or (shown_green and waited)
             # the last call (a red still red where a stop needs the firm rate) waits, as the surprise does, a reaction
             # time after the display's green began: SUMO shows a change at the step after its instant (traced: committed
             # at 98 m and 24.5 m/s to a red the display ended 0.5 s later, the last call came at once, the red still on
             # for that half step, and the driver braked at 3.54 m/s²; paper_s400 actuated 900 veh/h, 100 %, seed 2)
-            fresh_green = display is not None and not display.is_red(t) and t - self.green_since.get(n, -np.inf) < drv.reaction_s
-            overdue = overdue or (red_now and v_cmd > 0.0 and not fresh_green and v * v >= 2.0 * drv.last_call_decel_mps2 * max(room - v * dt_s, 1e-6))
+            overdue = overdue or (red_now and v_cmd > 0.0 and not (shown_green and not waited)
+                                  and v * v >= 2.0 * drv.last_call_decel_mps2 * max(room - v * dt_s, 1e-6))  # fmt: skip
             if n in self.committed and red_now and self.surprised.get(n) is None and overdue:
                 self.surprises += 1
                 self.surprised[n] = t
