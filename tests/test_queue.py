@@ -20,6 +20,8 @@ from advisory.advice.wording import published_speed_mps, spoken_speed
 from server.queue import QueueBoard
 
 M = QueueModel()
+ONE = replace(M, startup_s=M.fast_startup_s, headway_s=M.fast_headway_s)
+"""The discharge at its fast end alone: one level of it, where a scene's counts are worked by hand at that end."""
 
 
 def _obs(distance_m=300.0, speed=13.0, reds=((0.0, 20.0), (60.0, 90.0)), limit=13.4, second=None):
@@ -732,14 +734,16 @@ def test_a_platoon_crosses_a_line_behind_a_steady_leader_at_the_congested_flow(l
     assert platoon_through(line_m, red_s, lambda x: x / lead_mps, gap_s, jam_m, first=3) == max(want - 2, 0)  # two places taken
 
 
-@pytest.mark.parametrize("amber_s, lost_s", [(0.0, 30.0), (4.0, 0.0), (None, 0.0)])
-def test_a_connected_car_behind_keeps_its_margin_before_a_red_no_amber_announces(amber_s, lost_s):
+@pytest.mark.parametrize("amber_s, levels_cut", [(0.0, 2), (4.0, 0), (None, 0)])
+def test_a_connected_car_behind_keeps_its_margin_before_a_red_no_amber_announces(amber_s, levels_cut):
     """A connected car behind is told to stop where the car in front leaves it less than ``no_amber_margin_s`` (2 s)
     before a red that no amber announces (:func:`estimate`, ``stop_behind``), so its place is cut off that much earlier.
     50 m before a light turning red in 7 s (for 30 s), at 12 m/s, told to hold it; a connected car 20 m behind (it
     reaches the line on its own in 4.1 s). Behind a normal drive (2 m/s² up) it crosses when the car is a jam spacing
-    past the line, 3.67 s, plus the 1.1 s gap: 4.76 s, 2.2 s before the red; behind the plan at 57.5 / 12 + 1.1 = 5.89 s,
-    1.1 s before it: cut off at a light without amber, the red's 30 s; with an amber (or none known), not cut off.
+    past the line, 3.67 s, plus the gap, 1.16-1.64 s over the discharge's five levels (a car every 1.46-1.94 s behind
+    a leader at the limit): 4.83-5.31 s, 2 s before the red at the two fastest levels; behind the plan at 57.5 / 12 +
+    the gap, 5.95-6.43 s, less than 2 s before it at all five: cut off at a light without amber in two levels of five,
+    0.4 x the red's 30 s; with an amber (or none known), not cut off (before the red at every level).
     (Traced in SUMO, paper_s400 fixed 600 veh/h 50 %, seed 3: a connected car behind a platoon that a connected leader
     held to 11.5 m/s over the first line for the second one's red was told to stop 2 s before the first one's red; it
     and the car behind it lost 33-35 s, and the next red's queue one more car.)"""
@@ -747,8 +751,13 @@ def test_a_connected_car_behind_keeps_its_margin_before_a_red_no_amber_announces
     light = LightView(1, 50.0, red_windows_s=((7.0, 37.0),), amber_s=amber_s)
     obs = Observation(12.0, 24.6, (light,))
     hold = Advice("cruise", "green_wave", 12.0, light_id=1)
-    assert normal_drive_s(57.5, 12.0, 24.6, 2.0) + 1.4 - 7.5 / 24.6 == pytest.approx(4.76, abs=0.01)
-    assert cut_behind(light, obs, hold, params, [Probe(-20.0, 12.0)]) == lost_s
+    gaps = [M.fast_headway_s + (j + 0.5) / 5 * (M.headway_s - M.fast_headway_s) - 7.5 / 24.6 for j in range(5)]
+    normal = [normal_drive_s(57.5, 12.0, 24.6, 2.0) + g for g in gaps]
+    plan = [57.5 / 12.0 + g for g in gaps]
+    assert (normal[0], normal[-1], plan[0], plan[-1]) == pytest.approx((4.83, 5.31, 5.95, 6.43), abs=0.01)
+    red_s = 7.0 - (M.no_amber_margin_s if amber_s == 0.0 else 0.0)  # where its place is cut off
+    assert sum(n < red_s <= p for n, p in zip(normal, plan)) == levels_cut
+    assert cut_behind(light, obs, hold, params, [Probe(-20.0, 12.0)]) == pytest.approx(30.0 * levels_cut / 5)
     assert cut_behind(light, obs, hold, params) == 0.0  # nobody behind
 
 
@@ -775,8 +784,9 @@ def test_the_connected_cars_not_yet_on_the_route_are_expected_from_the_flow():
 
 def test_a_slow_plan_over_a_green_line_prices_the_cars_it_cuts_off_behind_it():
     """A car 7 m past a line turning red in 15 s (for 30 s), at 9.2 m/s, told to hold 29 km/h (8.04 m/s), four
-    connected cars standing behind the line, 900 veh/h, half connected: behind the plan 8 cars cross before the red,
-    behind a normal drive 9 (:func:`platoon_through`); the four take places 1-4 and the cars not connected, K of them,
+    connected cars standing behind the line, 900 veh/h, half connected, one level of the discharge (its fast end, a car
+    every 1.4 s behind a leader at the limit): behind the plan 8 cars cross before the red, behind a normal drive 9
+    (:func:`platoon_through`); the four take places 1-4 and the cars not connected, K of them,
     Poisson with a mean of one per connected car (4, more than the flow's 0.125 x (15 + 0.76) = 2.0), the places from
     5 on: the ninth is taken when K >= 5, and then waits the red, and stands first in its queue: every car queuing
     behind it over the red and its discharge, 0.25 x 30 / (1 - 0.25 x 1.4) = 11.5 cars, crosses 1.4 s later (the next
@@ -788,14 +798,15 @@ def test_a_slow_plan_over_a_green_line_prices_the_cars_it_cuts_off_behind_it():
     hold = Advice("cruise", "green_wave", 8.04)
     p_ge_5 = 1.0 - sum(math.exp(-4.0) * 4.0**j / math.factorial(j) for j in range(5))
     queued = 0.25 * 30.0 / (1.0 - 0.25 * M.fast_headway_s)  # behind the car cut off in the red's queue, a headway each
-    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 0.5) == pytest.approx((30.0 + M.fast_headway_s * queued) * p_ge_5)
-    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 1.0) == 0.0  # every car connected: nobody beyond the four
-    at_limit = replace(obs, speed_mps=24.58)  # holding the limit: as a normal drive
-    assert cut_behind(passed, at_limit, Advice("cruise", "green_wave", 24.58), params, four, 900 / 3600, 0.5) == 0.0
-    waits = [cut_behind(passed, obs, Advice("cruise", "green_wave", 0.44704 * k), params, four, 900 / 3600, 0.5) for k in range(10, 56)]
-    assert all(a >= b for a, b in zip(waits, waits[1:]))  # the faster the plan, the fewer cut off (what the board's search needs)
-    red = LightView(1, -7.0, red_windows_s=((-1.0, 29.0), (59.0, 89.0)))  # red now: its next green is far off
-    assert cut_behind(red, obs, hold, params, four, 900 / 3600, 0.5) == 0.0
+    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 0.5, model=ONE) == pytest.approx((30.0 + M.fast_headway_s * queued) * p_ge_5)
+    for model in (ONE, M):
+        assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 1.0, model=model) == 0.0  # every car connected: nobody beyond the four
+        at_limit = replace(obs, speed_mps=24.58)  # holding the limit: as a normal drive
+        assert cut_behind(passed, at_limit, Advice("cruise", "green_wave", 24.58), params, four, 900 / 3600, 0.5, model=model) == 0.0
+        waits = [cut_behind(passed, obs, Advice("cruise", "green_wave", 0.44704 * k), params, four, 900 / 3600, 0.5, model=model) for k in range(10, 56)]
+        assert all(a >= b for a, b in zip(waits, waits[1:]))  # the faster the plan, the fewer cut off (what the board's search needs)
+        red = LightView(1, -7.0, red_windows_s=((-1.0, 29.0), (59.0, 89.0)))  # red now: its next green is far off
+        assert cut_behind(red, obs, hold, params, four, 900 / 3600, 0.5, model=model) == 0.0
 
 
 @pytest.mark.parametrize("next_red_s, met", [(70.0, True), (120.0, False)])
@@ -809,7 +820,6 @@ def test_a_car_cut_off_also_pushes_the_next_platoon_into_the_next_lights_red(nex
     queue moves (as before). Before, only the first light's red and queue were priced: the second light's red, which
     the delayed platoon's tail met in SUMO, was not (paper_s400 fixed 600 veh/h 50 %, seed 3: 227 of the others' 309
     s, docs/TRAFFIC.md)."""
-    one = replace(M, startup_s=M.fast_startup_s, headway_s=M.fast_headway_s)
     params = AdvisorParams()
     passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
     nxt = LightView(2, 393.0, red_windows_s=((0.0, 40.0), (next_red_s, next_red_s + 30.0)))
@@ -826,7 +836,7 @@ def test_a_car_cut_off_also_pushes_the_next_platoon_into_the_next_lights_red(nex
     queued = 0.25 * 30.0 / (1.0 - 0.25 * M.fast_headway_s)
     spill = 30.0 * (1.0 - math.exp(-queued)) if met else 0.0  # that car is there: P(N >= 1)
     want = (30.0 + M.fast_headway_s * queued + spill) * p_ge_5
-    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 0.5, model=one) == pytest.approx(want)
+    assert cut_behind(passed, obs, hold, params, four, 900 / 3600, 0.5, model=ONE) == pytest.approx(want)
 
 
 def test_a_slow_plan_towards_an_actuated_green_prices_the_timings_in_which_a_normal_drive_makes_it():
@@ -860,11 +870,12 @@ def test_the_board_paces_a_plan_that_would_cut_off_the_cars_behind():
     ``passed``): 7 m past a line turning red in 15 s at 16 m/s, four connected cars standing behind it, 900 veh/h, half
     connected, told to ease off to 29 km/h for the next light's green: that plan, or holding 16 m/s, cuts the ninth car
     off (6.4 s expected, more than the 5 s slack); the board raises the plan to the slowest whole mph that does not
-    (39 mph, the wait shrinking as the speed rises), and keeps it as it is where nobody is behind."""
+    (39 mph, the wait shrinking as the speed rises), and keeps it as it is where nobody is behind. The discharge at its
+    fast end alone (``ONE``; over its levels the cars behind lose more below the limit: drive normally)."""
     params, t = AdvisorParams(units="kmh"), 1000.0
     passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
     obs = Observation(16.0, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),), position_m=107.0)
-    board = QueueBoard(arrivals_vph=900.0, connected_share=0.5)
+    board = QueueBoard(ONE, arrivals_vph=900.0, connected_share=0.5)
     for k in range(1, 5):
         board.see("c", f"q{k}", t, Observation(0.0, 24.6, (LightView(1, 7.5 * k, red_windows_s=((15.0, 45.0),)),), position_m=100.0 - 7.5 * k))
     seen, _ = board.see("c", "car", t, obs, passed=passed)
@@ -874,7 +885,7 @@ def test_the_board_paces_a_plan_that_would_cut_off_the_cars_behind():
 
     def lost(v):
         action = "ease_off" if v < 16.0 - params.hysteresis_mps else ("accelerate" if v > 16.0 + params.hysteresis_mps else "cruise")
-        return cut_behind(passed, obs, replace(slow, action=action, target_speed_mps=v), params, four, 900 / 3600, 0.5)
+        return cut_behind(passed, obs, replace(slow, action=action, target_speed_mps=v), params, four, 900 / 3600, 0.5, model=ONE)
 
     assert lost(8.04) > GIVE_UP_SLACK_S and lost(16.0) > GIVE_UP_SLACK_S
     assert (out.action, out.target_speed_mps) == ("accelerate", published_speed_mps(39 * 0.44704))
@@ -890,10 +901,10 @@ def test_the_board_paces_a_plan_that_would_cut_off_the_cars_behind():
 
 def _paced_scene(units: str, t: float = 1000.0):
     """The scene of the test above, the advisor's own plan asked for: the board and the car's observation (its
-    second light 393 m out, red for 40 s more), four connected cars standing behind the line it passed 7 m back."""
+    second light 393 m out, red for 40 s more), four connected cars standing behind the line it passed 7 m back; the discharge at its fast end alone (``ONE``)."""
     passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
     obs = Observation(16.0, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),), position_m=107.0)
-    board = QueueBoard(arrivals_vph=900.0, connected_share=0.5)
+    board = QueueBoard(ONE, arrivals_vph=900.0, connected_share=0.5)
     for k in range(1, 5):
         board.see("c", f"q{k}", t, Observation(0.0, 24.6, (LightView(1, 7.5 * k, red_windows_s=((15.0, 45.0),)),), position_m=100.0 - 7.5 * k))
     return board, obs, passed, AdvisorParams(units=units)

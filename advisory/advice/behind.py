@@ -282,6 +282,37 @@ def platoon_through(line_m: float, red_s: float, lead_s, gap_s: float, jam_m: fl
     return k - first + 1
 
 
+DISCHARGE_LEVELS = 5
+"""How many levels of the discharge, evenly spaced from its fast end to its slow end (:class:`~advisory.advice.queue.QueueModel`),
+:func:`spill_s` averages over: the expectation's quadrature, as :data:`PRICED_TIMINGS` over a light's timings. [-]"""
+
+
+def _platoon_gaps_s(model: QueueModel, limit_mps: float, levels: int = DISCHARGE_LEVELS) -> list[float]:
+    """The gaps [s] of :func:`platoon_through` at ``levels`` evenly spaced levels of the discharge, from its fast end to
+    its slow end (:class:`~advisory.advice.queue.QueueModel`: a car over the line every ``fast_headway_s`` to every
+    ``headway_s`` behind a leader at the limit ``limit_mps``), as :func:`spill_s` averages over them.
+
+    One level: the fast end alone (a light of uncertain timing, whose timings spread the red over the platoon's places
+    already: :func:`cut_behind`). The headways behind a leader at 25 m/s, each gap plus the jam spacing's 0.3 s:
+
+    >>> [round(g + 7.5 / 25.0, 2) for g in _platoon_gaps_s(QueueModel(), 25.0)]
+    [1.46, 1.58, 1.7, 1.82, 1.94]
+    >>> [round(g + 7.5 / 25.0, 2) for g in _platoon_gaps_s(QueueModel(), 25.0, 1)]
+    [1.4]
+    """
+    fast, slow = model.fast_headway_s, model.headway_s
+    at = [(j + 0.5) / levels for j in range(levels)] if levels > 1 else [0.0]  # one level: the fast end
+    return [max(fast + level * (slow - fast) - model.jam_spacing_m / limit_mps, 0.0) for level in at]
+
+
+def _platoon_counts(line_m: float, red_s: float, margin_s: float, normal, planned, gap_s: float, jam_m: float, first: int) -> tuple[int, int, int, int]:
+    """:func:`platoon_through` behind a normal drive and behind the plan, before the red and ``margin_s`` before it. [-]"""
+    n_normal, n_plan = (platoon_through(line_m, red_s, lead, gap_s, jam_m, first) for lead in (normal, planned))
+    if not margin_s:
+        return n_normal, n_plan, n_normal, n_plan
+    return n_normal, n_plan, *(platoon_through(line_m, red_s - margin_s, lead, gap_s, jam_m, first) for lead in (normal, planned))
+
+
 PRICED_TIMINGS = 5
 """Of a light's equally likely timings (its forecast's quantiles, in order), how many :func:`cut_behind` prices the
 wait behind a plan on, evenly spaced in level: the expectation's quadrature (a light green now, turning red 1-39 s from
@@ -304,19 +335,31 @@ def priced_timings(timings: Sequence, n: int = PRICED_TIMINGS) -> tuple:
 
 def cut_behind(light: LightView, obs: Observation, advice: Advice, params: AdvisorParams, behind: Sequence[Probe] = (),
                arrivals_vps: float | None = None, connected_share: float = 1.0, past: PastRed | None = None,
-               model: QueueModel | None = None, queue: QueueEstimate | None = None, view_m: float = math.inf) -> float:  # fmt: skip
+               model: QueueModel | None = None, queue: QueueEstimate | None = None, view_m: float = math.inf, levels: int = DISCHARGE_LEVELS) -> float:  # fmt: skip
     """The wait [s] that the cars behind lose at ``light``'s line when the car follows ``advice`` instead of driving
     normally: the line the car has just passed (``light.distance_m <= 0``: behind it) or the next one ahead (its
     queue estimate ``queue``), in the green the car crosses it in (issue 28, the traffic behind).
 
     A car driving slowly over a green line holds the platoon behind it to its pace (:func:`platoon_through`: Newell's
-    shift, the gap that lets a car over every ``fast_headway_s`` behind a leader at the limit, the fast end of the
-    measured discharge: this guards the traffic behind, so the normal drive it is weighed against is not taken
-    slower than it may be), so fewer of them cross before the red than behind the same car driving normally (speeding
+    shift), so fewer of them cross before the red than behind the same car driving normally (speeding
     up to the limit at ``normal_accel_mps2``; both held by the queue in front of the car, :func:`behind_queues_s`, and
     at the line ahead by its own red, which a drive reaching it then waits out standing; the plan never faster than
     that drive, and a lift-off for the line ahead not coasting on past it), and each one cut off waits the red out (its likely timing; at most
-    :data:`advisory.advice.choice.WAIT_CAP_S`). The cars there: the connected ones (``behind``, each where it is now,
+    :data:`advisory.advice.choice.WAIT_CAP_S`). How many cross is uncertain as the discharge is: while the light is
+    green, the count is the mean over its levels from the fast end to the slow end (:func:`_platoon_gaps_s`, a car over
+    the line every 1.46-1.94 s behind a leader at the limit, as :func:`spill_s` has them), so a plan that delays the
+    platoon's tail by a fraction of a headway cuts a car off in about that fraction of the levels. Before, at the fast
+    end alone (a car every 1.4 s, to guard the traffic behind), the counts behind both drives were equal or one apart: a
+    plan delaying the tail by 0.3-0.6 s cut nobody off wherever the red fell later in the last gap (traced in SUMO,
+    paper_s400 fixed 900 veh/h, 50 %, seed 2, docs/TRAFFIC.md: connected cars slowing in light 1's stream 0.5-1 s late,
+    the stream's last cars cut off by the red, their places carried over from cycle to cycle at the saturated light).
+    The fast end alone, as before, where the light is red now (the plan then prices the end of the green after it, its
+    car holding its speed at the line over the whole of it: with the levels, a glide to the green 156 m out with twelve
+    cars behind it was priced 60 s and told to drive normally, the traced 7th Street case of item 5 in docs/TRAFFIC.md,
+    fixed 900 veh/h, every car connected, seed 1, ``main.12``) and at
+    a light of uncertain timing (``levels`` 1: the expectation over its timings spreads the red over the platoon's
+    places already; with the levels on top of it paper_s400 actuated 900 veh/h, 50 %, five seeds, saving 17.45 -> 15.98 %
+    and others' time +2.9 -> +5.7 %). The cars there: the connected ones (``behind``, each where it is now,
     negative ``ahead_m``) still before the line that reach it before the red by their own normal drive, the ones
     already past it (they take the first places behind the car), and the cars that are not connected: a Poisson count
     whose mean is the larger of the flow's, ``(1 - connected_share) x arrivals_vps x`` the time from the car's own
@@ -344,18 +387,19 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     Examples
     --------
     A car 7 m past a line turning red in 15 s (for 30 s), at 9.2 m/s, told to hold 29 km/h; four connected cars
-    standing behind the line (7.5-30 m back), 900 veh/h, half of them connected: the plan lets 8 cars through before
-    the red, a normal drive 9; the ninth place is taken with probability P(K >= 5) = 0.37 (K Poisson, mean 4: a car
-    not connected for each connected one), and the car cut off there waits the red's 30 s and delays the 11.5 cars
-    that queue behind it by a headway each (:func:`knock_on_s`, 16.2 s): 17.1 s lost; a tenth of the cars connected,
-    surely taken: 46.2 s. Nobody behind, every car connected: nothing lost.
+    standing behind the line (7.5-30 m back), 900 veh/h, half of them connected: over the discharge's five levels a
+    normal drive lets 9, 8, 7, 7, 6 cars through before the red, the plan 7, 7, 7, 6, 6; a place ``k`` past the fourth
+    is taken with probability P(K >= k - 4) (K Poisson, mean 4: a car not connected for each connected one), 0.45 cars
+    cut off on average, each waiting the red's 30 s and delaying the 11.5 cars that queue behind it by a headway each
+    (:func:`knock_on_s`, 16.2 s): 20.9 s lost; a tenth of the cars connected, every place surely taken (0.8 cars):
+    36.9 s. Nobody behind, every car connected: nothing lost.
 
     >>> from advisory.advice.views import Advice, AdvisorParams
     >>> passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
     >>> obs = Observation(9.2, 24.6, (LightView(2, 393.0, red_windows_s=((0.0, 40.0),)),))
     >>> four, hold = [Probe(-7.0 - 7.5 * k, 0.0) for k in (1, 2, 3, 4)], Advice("cruise", "green_wave", 8.04)
     >>> [round(cut_behind(passed, obs, hold, AdvisorParams(), four, 900 / 3600, share), 1) for share in (0.5, 0.1)]
-    [17.1, 46.2]
+    [20.9, 36.9]
     >>> cut_behind(passed, obs, hold, AdvisorParams())
     0.0
     """
@@ -365,12 +409,11 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     if light.scenario_red_windows_s:  # uncertain timing: the expected wait over the light's timings
         timings = Counter(priced_timings(light.scenario_red_windows_s))
         return sum(n * cut_behind(replace(light, red_windows_s=w, likely_red_windows_s=None, late_red_windows_s=None, scenario_red_windows_s=None),
-                                  obs, advice, params, behind, arrivals_vps, connected_share, past, model, queue, view_m)
+                                  obs, advice, params, behind, arrivals_vps, connected_share, past, model, queue, view_m, levels=1)
                    for w, n in timings.items()) / sum(timings.values())  # fmt: skip
     model = model or QueueModel()
     v, limit, line_m = obs.speed_mps, max(obs.speed_limit_mps, 1.0), light.distance_m
     mode, pace = KEEP_MODES[advice.action], max(obs.speed_mps, model.queued_mps)
-    gap_s = max(model.fast_headway_s - model.jam_spacing_m / limit, 0.0)
     windows = light.red_windows_s if light.likely_red_windows_s is None else light.likely_red_windows_s
     held_s, v_held = -math.inf, limit  # the queue in front holds both drives at the line ahead until then, at that speed
     if line_m > 0.0:
@@ -418,16 +461,14 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
         return 0.0  # no red known: nobody is cut off by this green's end
     over = sum(1 for p in behind if line_m < p.ahead_m < 0.0)  # connected, already over the line: the first places
     there = sum(1 for p in behind if p.ahead_m <= min(line_m, 0.0) and normal_drive_s(line_m - p.ahead_m, p.speed_mps, limit, model.drive_accel_mps2) < start)
-    n_normal = platoon_through(line_m, start, normal, gap_s, model.jam_spacing_m, over + 1)
-    n_plan = platoon_through(line_m, start, planned, gap_s, model.jam_spacing_m, over + 1)
     # a connected car behind, at a light that shows no amber, is to be over the line ``no_amber_margin_s`` before the red
     # where the car in front sets its crossing, or it is told to stop (:func:`~advisory.advice.queue.estimate`, ``stop_behind``): its place is
     # cut off that much earlier (traced: a connected car 4.5 s behind a platoon held to 11.5 m/s, over the line 2 s
     # before a red that no amber announces at its own pace, was told to stop; it and the car behind it lost 33-35 s)
     margin_s = model.no_amber_margin_s if light.amber_s == 0.0 else 0.0
-    n_normal_c = platoon_through(line_m, start - margin_s, normal, gap_s, model.jam_spacing_m, over + 1) if margin_s else n_normal
-    n_plan_c = platoon_through(line_m, start - margin_s, planned, gap_s, model.jam_spacing_m, over + 1) if margin_s else n_plan
-    if n_plan >= n_normal and n_plan_c >= n_normal_c:
+    spread = levels if not light.is_red_at(0.0) else 1  # (red now: the fast end alone, as the docstring says)
+    counts = [_platoon_counts(line_m, start, margin_s, normal, planned, gap_s, model.jam_spacing_m, over + 1) for gap_s in _platoon_gaps_s(model, limit, spread)]
+    if all(n_plan >= n_normal and n_plan_c >= n_normal_c for n_normal, n_plan, n_normal_c, n_plan_c in counts):
         return 0.0
     share = min(max(connected_share, 0.0), 1.0)
     not_connected, connected = unseen_behind(arrivals_vps, share, crossed_s, start, (line_m + view_m) / limit)
@@ -437,16 +478,17 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     unseen = max(flow, (there + over) * (1.0 - share) / share if share > 0.0 else 0.0)
     p_connected = connected / unseen if unseen > 0.0 else 0.0  # an unseen car in a place is a connected one not yet on the route
     # the k-th place behind the line is taken with probability P(there + K >= k), K Poisson with mean ``unseen``; the
-    # first ``there`` by the connected cars known
+    # first ``there`` by the connected cars known; the cut the mean over the discharge's levels (``counts``)
     cut, p_k, p_at_least = 0.0, math.exp(-unseen), 1.0
-    for k in range(1, n_normal + 1):
+    for k in range(1, max(c[0] for c in counts) + 1):
         if k > there:
             p_at_least -= p_k  # P(K >= j + 1) from P(K >= j), j = k - there - 1
             p_k *= unseen / (k - there)
             if p_at_least < 1e-4:
                 break
-        cut_c, cut_u = float(n_plan_c < k <= n_normal_c), float(n_plan < k <= n_normal)
-        cut += cut_c if k <= there else p_at_least * (p_connected * cut_c + (1.0 - p_connected) * cut_u)
+        for n_normal, n_plan, n_normal_c, n_plan_c in counts:
+            cut_c, cut_u = float(n_plan_c < k <= n_normal_c), float(n_plan < k <= n_normal)
+            cut += (cut_c if k <= there else p_at_least * (p_connected * cut_c + (1.0 - p_connected) * cut_u)) / len(counts)
     if cut == 0.0:
         return 0.0
     after = next((lv for lv in obs.lights if lv.distance_m > line_m), None)  # the light after this one
@@ -488,11 +530,6 @@ def queued_behind(light: LightView, start_s: float, end_s: float, arrivals_vps: 
     load = arrivals_vps * headway_s
     queued = arrivals_vps * (end_s - start_s) / (1.0 - load) if load < 1.0 else math.inf
     return min(queued, green_s / headway_s)
-
-
-DISCHARGE_LEVELS = 5
-"""How many levels of the discharge, evenly spaced from its fast end to its slow end (:class:`~advisory.advice.queue.QueueModel`),
-:func:`spill_s` averages over: the expectation's quadrature, as :data:`PRICED_TIMINGS` over a light's timings. [-]"""
 
 
 def spill_s(light: LightView, after: LightView | None, end_s: float, queued: float, limit_mps: float, model: QueueModel,
