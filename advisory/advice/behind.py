@@ -17,6 +17,7 @@ Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import Counter
 from collections.abc import Sequence
@@ -429,6 +430,7 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
         if red_end_s is not None:
             held_s, v_held = red_end_s, 0.0
 
+    @functools.cache  # (each place's time is asked once per level of the discharge: :func:`_platoon_counts`)
     def normal(x):
         if x <= 0.0:
             return x / pace
@@ -448,6 +450,7 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
         at_line_s = float(crossing_time_s(line_m, v, target, params, mode))
         v_line = max(line_speed_mps(line_m, v, target, params, mode), model.queued_mps) if at_line_s >= normal(line_m) else None
 
+    @functools.cache
     def planned(x):
         if x <= 0.0:
             return x / pace
