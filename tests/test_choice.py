@@ -55,7 +55,7 @@ def test_a_plan_that_holds_the_limit_with_no_light_in_the_way_costs_cruising():
     """Hand answer: at the limit already, to a point 500 m on, the motion is a cruise: 500 / v seconds at the cruise rate."""
     d = np.array([300.0])
     path = np.empty((4, choice.MAX_KNOTS + 1))
-    usd, t_end, n, brake = choice._drive(V_LIM, 0, 1.0, choice.ACCEL_COMFORT, 1.5, V_LIM, d, 500.0, V_LIM, RATES, COAST, 1.5, 3.0, 2.0, path)
+    usd, t_end, n, brake, _ = choice._drive(V_LIM, 0, 1.0, choice.ACCEL_COMFORT, 1.5, V_LIM, d, 500.0, V_LIM, RATES, COAST, 1.5, 3.0, 2.0, path)
     cruise = np.interp(V_LIM, np.arange(RATES.shape[1]) * choice.RATE_DV_MPS, RATES[choice.CRUISE])
     assert t_end == pytest.approx(500.0 / V_LIM, rel=1e-3)
     assert usd == pytest.approx(cruise * 500.0 / V_LIM, rel=1e-3)
@@ -146,7 +146,7 @@ def test_a_red_that_ends_while_the_car_brakes_for_it_is_rolled_through():
     stop at the line must begin and, when the green comes, reacts and speeds up from the speed it has then (8.5 m/s,
     above the slowest advised speed: no stop). And if the red lasts, a stop."""
     path = np.empty((4, choice.MAX_KNOTS + 1))
-    *_, brake = choice._drive(V_LIM, 0, 0.0, choice.ACCEL_NORMAL, 2.0, V_LIM, np.array([LINE_M]), END_M, V_LIM, RATES, COAST, 1.5, 3.0, 2.0, path)
+    *_, brake, _ = choice._drive(V_LIM, 0, 0.0, choice.ACCEL_NORMAL, 2.0, V_LIM, np.array([LINE_M]), END_M, V_LIM, RATES, COAST, 1.5, 3.0, 2.0, path)
     t_b, x_b = brake[0, 0], brake[0, 1]
     v_r = V_LIM - 1.5 * (20.0 - t_b)
     cost, p_stop, through = _priced(V_LIM, 0, 0.0, 2.0, (((0.0, 20.0),),) * 4)
@@ -523,20 +523,47 @@ def test_candidates_of_one_motion_by_their_arguments_drive_the_same_motion(v0, l
     """``choice._same_motion`` (the pricing drives a motion once for the candidates it names alike) against the motion
     itself: wherever it names two candidates alike, ``choice._drive`` gives them the same knots, states where stops must
     begin, cost and time, to the last bit; and it does name some alike (modes 0, 2 and 3 at a target the car is not
-    above, mode 1 there whatever the target), so the check is not vacuous."""
+    above, mode 1 there whatever the target), so the check is not vacuous. The same for ``choice._lower_free`` where the
+    motion it compares with came back free of its target (a lower target of the same mode of slowing, a coast whatever
+    the target after a lift-off that never reached its own)."""
     vts = np.repeat(np.array(targets + [v0]), 4)
     modes = np.tile(np.arange(4), len(targets) + 1)
     reactions, rows, accels = np.full(vts.size, PARAMS.reaction_s), np.full(vts.size, choice.ACCEL_COMFORT), np.full(vts.size, PARAMS.comfort_accel_mps2)
     d_m = np.array([line_m, line_m + gap_m])
-    motions = []
+    motions, free = [], []
     for c in range(vts.size):
         path = np.empty((4, choice.MAX_KNOTS + 1))
-        usd, t_end, n, brake = choice._drive(vts[c], modes[c], reactions[c], rows[c], accels[c], v0, d_m, d_m[-1] + 100.0, V_LIM, RATES, COAST,
+        usd, t_end, n, brake, is_free = choice._drive(vts[c], modes[c], reactions[c], rows[c], accels[c], v0, d_m, d_m[-1] + 100.0, V_LIM, RATES, COAST,
                                              PARAMS.comfort_decel_mps2, PARAMS.firm_decel_mps2, PARAMS.normal_accel_mps2, path)  # fmt: skip
         motions.append((usd, t_end, brake.tobytes(), path[:, :n].tobytes()))
+        free.append(is_free)
     alike = [(a, b) for a in range(vts.size) for b in range(a) if choice._same_motion(a, b, vts, modes, reactions, rows, accels, v0)]
     assert all(motions[a] == motions[b] for a, b in alike)
     assert len(alike) >= 3  # (the car's own speed as a target: modes 0, 2, 3 alike)
+    lower = [(a, b) for a in range(vts.size) for b in range(vts.size) if free[b] and choice._lower_free(a, b, vts, modes, reactions, rows, accels, v0)]
+    assert all(motions[a] == motions[b] for a, b in lower)
+
+
+def test_a_lift_off_that_never_reaches_its_target_is_the_motion_of_every_lower_one():
+    """The bench's car at 12 m/s, lines 300 and 600 m ahead: a lift-off (mode 0) coasts about 0.1 m/s² and is at 6.6
+    m/s at the last line, so to 4.5 and 5.4 m/s it never reaches its target (free), to 10 m/s it does; ``_lower_free``
+    names the lower targets of a free motion alike (and a coast whatever the target, mode 1 at 12 m/s), and the motions
+    are the same to the last bit; not below a motion that reached its target, nor to a target of another mode."""
+    d_m, v0 = np.array([300.0, 600.0]), 12.0
+    vts, modes = np.array([10.0, 5.364, 4.47, 12.0, 4.47]), np.array([0, 0, 0, 1, 2])
+    reactions, rows, accels = np.full(5, PARAMS.reaction_s), np.full(5, choice.ACCEL_COMFORT), np.full(5, PARAMS.comfort_accel_mps2)
+    motions, free = [], []
+    for c in range(vts.size):
+        path = np.empty((4, choice.MAX_KNOTS + 1))
+        usd, t_end, n, brake, is_free = choice._drive(vts[c], modes[c], reactions[c], rows[c], accels[c], v0, d_m, 650.0, V_LIM, RATES, COAST,
+                                                      PARAMS.comfort_decel_mps2, PARAMS.firm_decel_mps2, PARAMS.normal_accel_mps2, path)  # fmt: skip
+        assert np.isfinite(t_end)
+        motions.append((usd, t_end, brake.tobytes(), path[:, :n].tobytes()))
+        free.append(is_free)
+    assert free[:3] == [False, True, True]
+    alike = [(a, b) for a in range(5) for b in range(5) if choice._lower_free(a, b, vts, modes, reactions, rows, accels, v0)]
+    assert {(2, 1), (3, 1), (3, 2)} <= set(alike) and (4, 1) not in alike
+    assert motions[1] == motions[2] == motions[3] != motions[0]
 
 
 def test_the_pricing_order_puts_candidates_of_one_motion_together():
@@ -685,10 +712,12 @@ def test_a_steady_hold_is_one_segment_of_the_same_motion():
     drawn at random (seeded: every mode, targets, start speeds, reactions, one or two lines), the cost, time and the
     states where stops must begin are those of the motion with every 0.5 s knot, to the last bit; each knot kept is one
     of those knots; and the motion read between knots (position, speed, cost so far; when the car can no longer stop
-    for a line) is the same to rounding. The segments are not vacuous: fewer than two thirds of the knots are kept."""
+    for a line) is the same to rounding. The segments are not vacuous: fewer than two thirds of the knots are kept.
+    A plan that coasts to a halt short of the last line is cut where its farthest roll is seen to end short: a plan
+    (inf) exactly where the motion of every step stops short, and some are cut."""
     rng = np.random.default_rng(7)
     sparse, dense = np.empty((4, choice.MAX_KNOTS + 1)), np.empty((4, choice.MAX_KNOTS + 1))
-    kept = every = 0
+    kept = every = cut = 0
     for _ in range(300):
         v_lim = float(rng.choice([V_LIM, 45 * 0.44704]))
         d = np.sort(rng.uniform(30.0, 700.0, size=int(rng.integers(1, 3))))
@@ -696,9 +725,13 @@ def test_a_steady_hold_is_one_segment_of_the_same_motion():
         plan = (float(rng.uniform(PARAMS.min_cruise_speed_mps, v_lim)), int(rng.integers(0, 4)), float(rng.choice([0.0, 1.0])),
                 *[(choice.ACCEL_COMFORT, 1.5), (choice.ACCEL_NORMAL, 2.0)][int(rng.integers(0, 2))], float(rng.uniform(0.0, v_lim)))  # fmt: skip
         args = (*plan, d, x_end, v_lim, RATES, COAST, 1.5, 3.0, 2.0)
-        usd, t_end, n, brake = choice._drive(*args, sparse)
-        usd_d, t_end_d, n_d, brake_d = choice._drive(*args, dense, True)
-        assert (usd, t_end) == (usd_d, t_end_d) and np.array_equal(brake, brake_d)
+        usd, t_end, n, brake, free = choice._drive(*args, sparse)
+        usd_d, t_end_d, n_d, brake_d, free_d = choice._drive(*args, dense, True)
+        assert np.isfinite(t_end) == np.isfinite(t_end_d)
+        if not np.isfinite(t_end):
+            cut += n < n_d
+            continue
+        assert (usd, t_end, free) == (usd_d, t_end_d, free_d) and np.array_equal(brake, brake_d)
         at = np.searchsorted(dense[0, :n_d], sparse[0, :n])
         assert np.array_equal(sparse[:, :n], dense[:, np.minimum(at, n_d - 1)])
         for tau in dense[0, :n_d]:
@@ -708,6 +741,7 @@ def test_a_steady_hold_is_one_segment_of_the_same_motion():
             assert choice._no_stop_s(sparse, n, line, choice.AMBER_STOP_MPS2) == pytest.approx(no_stop_s, abs=1e-9)
         kept, every = kept + n, every + n_d
     assert kept < 2 * every / 3, (kept, every)
+    assert cut >= 5, cut
 
 
 def test_a_forecast_sure_of_a_change_20_s_ahead_leaves_seconds_of_doubt():

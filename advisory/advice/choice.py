@@ -125,9 +125,11 @@ def _drive(vt, mode, reaction_s, accel_row, accel_mps2, v0, d_stop_m, x_end_m, v
     kernels: 0 coast down or speed up, 1 brake gently then coast, 2 brake gently, 3 firmly; speeding up in row
     ``accel_row`` at ``accel_mps2``), then hold; past ``d_stop_m[-1]`` speed up at ``normal`` to ``v_lim``, to
     ``x_end_m``. Writes the motion's knots into ``path`` (4, n): time [s], position [m], speed [m/s] and cost so far
-    [$]. Returns (cost, time) to ``x_end_m`` (inf: the plan stops short of the lines), the number of knots, and per
-    line ``j`` the state (time, position, speed, cost) where a comfortable stop at it must begin (inf where the plan
-    never is that far from it: too close to stop comfortably).
+    [$]. Returns (cost, time) to ``x_end_m`` (inf: the plan stops short of the lines), the number of knots, per line
+    ``j`` the state (time, position, speed, cost) where a comfortable stop at it must begin (inf where the plan never
+    is that far from it: too close to stop comfortably), and whether the motion is free of its target: slowing towards
+    it (modes 0, 2, 3) until past the last line, never within 1e-9 m/s of it, so that the motion to any lower target is
+    this one, step for step (:func:`_lower_free`).
 
     A steady hold (the speed held after the reaction, or the limit past the lines) is one straight segment of
     ``path`` (unless ``dense``: every step's knot): its steps are taken as every other step (the same sums, so the
@@ -138,11 +140,18 @@ def _drive(vt, mode, reaction_s, accel_row, accel_mps2, v0, d_stop_m, x_end_m, v
     knots (14,500 -> 7,000 a fix), and the pricing searches through fewer.
 
     The mode acts only while the speed is above the target: a motion that starts at or below it is the same in modes
-    0, 2 and 3 (speeding up, then holding), and in mode 1 a coast whatever the target (:func:`_same_motion`)."""
+    0, 2 and 3 (speeding up, then holding), and in mode 1 a coast whatever the target (:func:`_same_motion`).
+
+    A coast in mode 1 lasts until the last line is passed; where the farthest it can roll before stopping (at the least
+    coasting deceleration of the table, ``v² / 2 min(coast)``, more than any sum of its steps, 1e-9 of it and a micrometre
+    spare for rounding) ends short of that line, the plan stops short and no further step is taken (unless ``dense``):
+    a quarter of the steps on the bench observations were those of plans that coast to a halt."""
     n = d_stop_m.size
     brake = np.full((n, 4), np.inf)
     t, x, v, usd = 0.0, 0.0, v0, 0.0
     coasting = False
+    reached = False  # the target acted before the last line (not free of it)
+    floor_mps2 = np.nan  # the least coasting deceleration (found once the car coasts)
     j = 0
     k = 0
     steps = 0
@@ -164,24 +173,31 @@ def _drive(vt, mode, reaction_s, accel_row, accel_mps2, v0, d_stop_m, x_end_m, v
         elif t < reaction_s:
             a, row = 0.0, CRUISE
         elif coasting or (mode == 1 and v <= vt + 1e-9):
-            coasting = True
+            if not coasting:
+                floor_mps2 = coast.min()
+            coasting = reached = True
             a, row = -_at(coast, v), COAST
+            if not dense and x + v * v / (2.0 * floor_mps2) * (1.0 + 1e-9) + 1e-6 < d_stop_m[n - 1] and steps + v / (floor_mps2 * STEP_S) + 2.0 < MAX_KNOTS:
+                return np.inf, np.inf, k, brake, False  # it coasts to a halt short of the last line: not a plan
         elif v > vt + 1e-9:
             a, row = (-_at(coast, v), COAST) if mode == 0 else (-firm, BRAKE_FIRM) if mode == 3 else (-comfort, BRAKE_COMFORT)
         elif v < vt - 1e-9:
             a, row = accel_mps2, accel_row
+            reached = True
         else:
             a, row = 0.0, CRUISE
+            reached = True
         h = STEP_S
         v1 = v + a * h
         if a > 0.0 and v1 > target:
             v1, h = target, (target - v) / a
         elif a < 0.0 and not coasting and v1 < target < v:
             v1, h = target, (v - target) / -a
+            reached = True  # (only before the last line: past it the target is the limit, reached speeding up)
         if v1 < 0.0:
             v1, h = 0.0, v / -a
         if v1 <= 0.0 and v <= 0.0 and t >= reaction_s:
-            return np.inf, np.inf, k, brake  # stopped short of the lines: not a plan
+            return np.inf, np.inf, k, brake, False  # stopped short of the lines: not a plan
         if x + 0.5 * (v + v1) * h > x_end_m:  # the last step ends at x_end_m (a whole step past it priced time not driven)
             d = x_end_m - x
             disc = v * v + 2.0 * a * d
@@ -206,7 +222,7 @@ def _drive(vt, mode, reaction_s, accel_row, accel_mps2, v0, d_stop_m, x_end_m, v
                 t += STEP_S
                 steps += 1
     path[0, k], path[1, k], path[2, k], path[3, k] = t, x, v, usd
-    return usd, t, k + 1, brake
+    return usd, t, k + 1, brake, not reached
 
 
 @njit(cache=True, error_model="numpy")
@@ -428,6 +444,7 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     up, down = _ramps(rates, comfort, normal)
     paths = np.empty((2, 4, MAX_KNOTS + 1))  # this candidate's motion, and the last priced one's
     cur, prev, prev_knots, prev_brake, prev_usd, prev_t_end = 0, -1, 0, np.empty((n_lines, 4)), 0.0, 0.0
+    held, held_free = -1, False  # the last candidate whose motion paths[1 - cur] holds (prev's, or one found the same), free of its target
     no_stop = np.empty(n_lines)
     stop_cap = np.inf
     for c in _pricing_order(vts, modes, v0, anchor):
@@ -448,10 +465,11 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
         if prune and sure_through:
             cost[c], p_stop[c], through[c] = np.inf, 1.0, True
             continue
-        driven = prev < 0 or not _same_motion(c, prev, vts, modes, reactions, accel_rows, accels, v0)
+        driven = held < 0 or not (_same_motion(c, held, vts, modes, reactions, accel_rows, accels, v0)
+                                  or (held_free and _lower_free(c, held, vts, modes, reactions, accel_rows, accels, v0)))
         if driven:
             path = paths[cur]
-            usd, t_end, n_knots, brake = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast,
+            usd, t_end, n_knots, brake, free = _drive(vts[c], modes[c], reactions[c], accel_rows[c], accels[c], v0, d_m, x_end_m, v_lim, rates, coast,
                                                 comfort, firm, normal, path)  # fmt: skip
             if not np.isfinite(t_end):
                 cost[c], p_stop[c] = np.inf, 1.0
@@ -462,9 +480,13 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
         if (prev >= 0 and _same_flags(c, prev, cross_s, stop_plan, reactions, must)
                 and (not driven or _same_path(path, n_knots, brake, paths[1 - cur], prev_knots, prev_brake))):  # fmt: skip
             cost[c], p_stop[c] = cost[prev], p_stop[prev]
+            if driven:
+                held, held_free = c, free
             continue
         if driven:
             cur = 1 - cur
+            held_free = free
+        held = c
         prev, prev_knots, prev_brake, prev_usd, prev_t_end = c, n_knots, brake, usd, t_end
         no_stop[:] = np.nan  # when the car can no longer stop for each line: found once an amber there needs it
         total, stops = 0.0, 0.0
@@ -601,6 +623,21 @@ def _same_motion(c, last, vts, modes, reactions, accel_rows, accels, v0):
     if below_c and below_last and (modes[c] == 1) == (modes[last] == 1):
         return modes[c] == 1 or vts[c] == vts[last]
     return modes[c] == modes[last] and vts[c] == vts[last]
+
+
+@njit(cache=True, inline="always")
+def _lower_free(c, last, vts, modes, reactions, accel_rows, accels, v0):
+    """Candidate ``c`` makes the motion of ``last`` where that motion is free of its target (:func:`_drive`: slowing
+    towards it until past the last line, never reaching it), by their arguments: the same reaction and speeding up, and
+    either the same mode of slowing (0, 2 or 3) and a lower target (the car slows the same way, and does not reach that
+    one either), or ``last`` coasting down (mode 0) and ``c`` a coast whatever its target (mode 1 at a target the car
+    is not above: the same steps). On the bench observations a lift-off coasts past the lines above the slowest third
+    of its targets."""
+    if reactions[c] != reactions[last] or accel_rows[c] != accel_rows[last] or accels[c] != accels[last] or not vts[last] < v0 - 1e-9:
+        return False
+    if modes[c] == 1:
+        return modes[last] == 0 and v0 <= vts[c] + 1e-9
+    return modes[c] == modes[last] and modes[c] != 1 and vts[c] < vts[last]
 
 
 @njit(cache=True, inline="always")
