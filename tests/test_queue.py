@@ -398,6 +398,28 @@ def test_board_keeps_the_last_red_and_its_queue_after_the_green():
     assert late._red_ended[1][:2] == (t, t + 30.0)  # when the last fix in the red had it end, not 8 s later
 
 
+def test_board_counts_a_red_from_its_own_start_when_no_fix_saw_the_green_before_it():
+    """With few connected cars no fix may see a light's green: a red seen 60 s after one that the last fix in it had
+    surely end 30 s after it is another red (elapsed 0 at its first fix, the one before kept as ended), not 60 s of one
+    red; an actuated green past its minimum (the sure view red from now, the late view green: it may end any second
+    but shows green) is no red either. Traced: paper_s400 actuated 900 veh/h, 10 %, seed 5, ``main.91``, 19 cars
+    counted in a queue of 5 (the red counted from a fix 70 s before, on the green before the red before it)."""
+    t = 1000.0
+    red = Observation(13.4, 13.4, (LightView(1, 500.0, red_windows_s=((0.0, 30.0),)),), position_m=-300.0)
+    board = QueueBoard(arrivals_vph=720.0, connected_share=0.5)
+    assert board.red_elapsed(red, t) == 0.0 and board.red_elapsed(red, t + 20.0) == 20.0  # one red, seen twice
+    assert board.red_elapsed(red, t + 60.0) == 0.0  # the red before surely ended at t + 50 (its last fix's view)
+    assert board._red_ended[1][:2] == (t, t + 50.0)
+    endless = Observation(13.4, 13.4, (LightView(1, 500.0, red_windows_s=((0.0, math.inf),)),), position_m=-300.0)
+    board = QueueBoard(arrivals_vph=720.0, connected_share=0.5)
+    assert board.red_elapsed(endless, t) == 0.0 and board.red_elapsed(endless, t + 60.0) == 60.0  # no end known: one red
+    past_min = LightView(1, 500.0, red_windows_s=((0.0, math.inf),), late_red_windows_s=((12.0, 40.0),))
+    board = QueueBoard(arrivals_vph=720.0, connected_share=0.5)
+    assert board.red_elapsed(Observation(13.4, 13.4, (past_min,), position_m=-300.0), t) is None and board._red_since == {}
+    shown = LightView(1, 400.0, red_windows_s=((0.0, math.inf),), late_red_windows_s=((0.0, 28.0),))
+    assert board.red_elapsed(Observation(13.4, 13.4, (shown,), position_m=-200.0), t + 15.0) == 0.0
+
+
 def test_board_holds_a_queued_car_until_it_is_over_the_line_then_plans_afresh():
     board = QueueBoard()
     t = 1000.0
