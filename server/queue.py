@@ -40,7 +40,7 @@ from bisect import bisect_left, insort
 from dataclasses import replace
 
 from advisory.advice.behind import PACED_REASON, cut_behind, gives_up_green, paced_for_behind
-from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, estimate, followers, held_up, normal_drive_s
+from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, estimate, followers_held_up, normal_drive_s
 from advisory.advice.queue_words import drive_normally, ease_to_car_ahead, said_truly, seen_at_line, tail_glide
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
 from server.storage.queue_store import SharedBoard
@@ -66,11 +66,18 @@ class Lane:
     Every change to the table goes through :meth:`put`, :meth:`drop` and :meth:`expire`; a table replaced as a whole
     (the shared board's sync: its ``loads`` counter moved) is indexed again at the next call (:meth:`fresh`)."""
 
-    __slots__ = ("table", "loads", "order", "entry", "seq", "next_seq", "by_time", "top_mps")
+    __slots__ = ("table", "loads", "order", "entry", "seq", "next_seq", "by_time", "top_mps", "memo", "memo_from", "memo_at")
 
     def __init__(self, table: dict) -> None:
         self.table = table
         self.loads = -1
+        self.memo: list[Probe] = []
+        """The probes of ``order[memo_from:memo_from + len(memo)]`` for the fix at ``memo_at`` (``(here_m, t_unix_s)``,
+        None: none): a fix's calls to :meth:`near` cover overlapping runs of ``order`` (the cars behind for
+        :meth:`QueueBoard.note_behind` and for the followers, the ones ahead), each car is made a probe once. Every
+        change to the table drops it."""
+        self.memo_from = 0
+        self.memo_at: tuple[float, float] | None = None
         self.fresh()
 
     def fresh(self) -> None:
@@ -79,6 +86,7 @@ class Lane:
         if loads == self.loads:
             return
         self.loads = loads
+        self.memo_at = None
         self.seq = {tid: k for k, tid in enumerate(self.table)}
         self.next_seq = len(self.seq)
         self.entry = {tid: (s, self.seq[tid], tid, v) for tid, (_, s, v) in self.table.items()}
@@ -96,6 +104,7 @@ class Lane:
     def put(self, trip_id: str, probe: tuple[float, float, float]) -> None:
         """The trip's probe replaces its last one (in the table and the index)."""
         t, s, v = probe
+        self.memo_at = None
         old = self.entry.get(trip_id)
         if old is not None:
             del self.order[bisect_left(self.order, old)]
@@ -112,6 +121,7 @@ class Lane:
 
     def drop(self, trip_id: str) -> None:
         """The trip is no probe any more (off the route, ended)."""
+        self.memo_at = None
         self.table.pop(trip_id, None)
         self._unindex(trip_id)
 
@@ -123,17 +133,43 @@ class Lane:
             t, trip_id = heapq.heappop(heap)
             probe = self.table.get(trip_id)
             if probe is not None and probe[0] == t:
+                self.memo_at = None
                 del self.table[trip_id]
                 self._unindex(trip_id)
 
     def near(self, here_m: float, t_unix_s: float, lo_m: float, hi_m: float) -> list[Probe]:
         """The cars that were, at their last fix, between ``lo_m - top_mps x MAX_AGE_S`` and ``hi_m`` ahead of station
         ``here_m`` (a superset of those that can be in ``[lo_m, hi_m)`` now, rather a few too many), each where it is at
-        ``t_unix_s`` (:func:`probe_at`); none at ``here_m`` itself (this car)."""
-        order, table = self.order, self.table
+        ``t_unix_s`` (:func:`probe_at`, made once per car and fix: ``memo``); none at ``here_m`` itself (this car)."""
+        order = self.order
         first = bisect_left(order, (here_m + lo_m - self.top_mps * MAX_AGE_S - 1e-6,))
         end = bisect_left(order, (here_m + hi_m + 1e-6,), first)
-        return [probe_at(table[tid], here_m, t_unix_s) for s, _, tid, _ in order[first:end] if s != here_m]
+        probes = self.probes(first, end, here_m, t_unix_s)
+        mine = bisect_left(order, (here_m,), first, end)  # the cars at here_m (this one), a run of the order: left out
+        past = mine
+        while past < end and order[past][0] == here_m:
+            past += 1
+        return probes[: mine - first] + probes[past - first :] if past > mine else probes
+
+    def probes(self, first: int, end: int, here_m: float, t_unix_s: float) -> list[Probe]:
+        """The cars ``order[first:end]`` as probes for the fix at ``here_m`` at ``t_unix_s`` (:func:`probe_at`), those
+        made for this fix already taken from ``memo``, the others added to it (the runs of one fix's calls overlap or
+        touch: each is one run around ``here_m``)."""
+        memo, have = self.memo, self.memo_from
+        if self.memo_at != (here_m, t_unix_s) or end < have or first > have + len(memo):
+            memo = self.memo = self._probe(first, end, here_m, t_unix_s)
+            self.memo_from, self.memo_at = first, (here_m, t_unix_s)
+            return memo
+        if first < have:
+            memo[:0] = self._probe(first, have, here_m, t_unix_s)
+            self.memo_from = have = first
+        if end > have + len(memo):
+            memo += self._probe(have + len(memo), end, here_m, t_unix_s)
+        return memo[first - have : end - have]
+
+    def _probe(self, first: int, end: int, here_m: float, t_unix_s: float) -> list[Probe]:
+        table = self.table
+        return [probe_at(table[tid], here_m, t_unix_s) for _, _, tid, _ in self.order[first:end]]
 
 
 def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) -> Probe:
@@ -141,7 +177,8 @@ def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) 
     it is now, its last fix (up to a second older, as a corridor's fixes arrive one after the other; never moved
     back for one stamped later) advanced at its speed (a car 2.5 s behind is not read 3.5 s behind)."""
     t, s, v = probe
-    return Probe(s + v * max(t_unix_s - t, 0.0) - here_m, v)
+    dt_s = t_unix_s - t
+    return Probe(s + v * (0.0 if 0.0 > dt_s else dt_s) - here_m, v)  # max(dt_s, 0.0), without the call (a fix makes hundreds)
 
 
 def _normally(advice: Advice, params: AdvisorParams, real: Observation, last: dict | None) -> Advice:
@@ -328,8 +365,8 @@ class QueueBoard:
         mine_s = normal_drive_s(line_m, obs.speed_mps, limit_mps, m.drive_accel_mps2)
         window_m = (max(est.free_at_s[0], mine_s) + m.follow_gap_s) * max(lane.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6
         behind = [p for p in lane.near(here_m, t_unix_s, line_m - window_m, 0.0) if p.ahead_m < 0.0]
-        return replace(est, followers=followers(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share, view_m),
-                       behind=held_up(obs, behind, est.free_at_s[0], m))
+        n_behind, held = followers_held_up(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share, view_m)
+        return replace(est, followers=n_behind, behind=held)
 
     def check(self, obs: Observation, advice: Advice, params: AdvisorParams, trip_id: str | None = None, last: dict | None = None) -> Advice:
         """The advisor's advice (planned on ``obs``, the lights as the queue holds them), or:
