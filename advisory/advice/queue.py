@@ -494,12 +494,17 @@ def _held_until(windows, until_s: float):
     """
     if windows is None or until_s <= 0.0:
         return windows
-    merged: list[tuple[float, float]] = []
-    for a, b in sorted([(0.0, until_s), *((max(a, 0.0), b) for a, b in windows if b > 0.0)]):
-        if merged and a <= merged[-1][1]:
-            merged[-1] = (merged[-1][0], max(merged[-1][1], b))
+    spans = sorted([(0.0, until_s)] + [(0.0 if 0.0 > a else a, b) for a, b in windows if b > 0.0])  # (a fix makes dozens:
+    merged: list[tuple[float, float]] = []  # max() and the last span's indexing spelled out)
+    start, end = spans[0]
+    for a, b in spans[1:]:
+        if a <= end:
+            if b > end:
+                end = b
         else:
-            merged.append((a, b))
+            merged.append((start, end))
+            start, end = a, b
+    merged.append((start, end))
     return tuple(merged)
 
 
@@ -547,7 +552,12 @@ def _held(light: LightView, clear_s: tuple[float, float], after_red_s: tuple[flo
 
 def _first_red_of(windows) -> tuple[float, float] | None:
     """The red of ``windows`` (relative, sorted; None: no view) still to end first."""
-    return None if windows is None else next(((a, b) for a, b in windows if b > 0.0), None)
+    if windows is None:
+        return None
+    for a, b in windows:  # a loop, not next() over a generator: a fix makes dozens
+        if b > 0.0:
+            return a, b
+    return None
 
 
 def normal_drive_s(distance_m: float, v_mps: float, limit_mps: float, accel_mps2: float) -> float:
