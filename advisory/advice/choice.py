@@ -437,17 +437,28 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     car never coasts down to before the lines: the same motion whatever the target) gets its results. On the recorded
     controllers' bench observations (``bench/bench_predictor.py``'s) that is 66 motions driven and 1,007 timings priced
     a fix, against 74 and 1,202 in the candidates' own order."""
+    up, down = _ramps(rates, comfort, normal)
+    return priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
+                  idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac, up,
+                  down, _pricing_order(vts, modes, v0, anchor), np.empty((2, 4, MAX_KNOTS + 1)))  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
+           idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac, up, down,
+           order, paths):  # fmt: skip
+    """:func:`expected_costs`, given what depends on the candidates alone: the ramps (:func:`_ramps`), the pricing order
+    (:func:`_pricing_order`) and room for two motions, ``paths`` (2, 4, :data:`MAX_KNOTS` + 1), overwritten (a caller
+    that prices the same candidates twice makes them once: :func:`advisory.advice.screening.screened`)."""
     m, n_lines, n_sc = vts.size, d_m.size, windows.shape[1]
     cost = np.empty(m)
     p_stop = np.empty(m)
     through = np.zeros(m, dtype=np.bool_)
-    up, down = _ramps(rates, comfort, normal)
-    paths = np.empty((2, 4, MAX_KNOTS + 1))  # this candidate's motion, and the last priced one's
     cur, prev, prev_knots, prev_brake, prev_usd, prev_t_end = 0, -1, 0, np.empty((n_lines, 4)), 0.0, 0.0
     held, held_free = -1, False  # the last candidate whose motion paths[1 - cur] holds (prev's, or one found the same), free of its target
     no_stop = np.empty(n_lines)
     stop_cap = np.inf
-    for c in _pricing_order(vts, modes, v0, anchor):
+    for c in order:
         if skip is not None and skip[c]:
             cost[c], p_stop[c], through[c] = np.inf, 1.0, True
             continue
@@ -594,6 +605,34 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
         if c == anchor:
             stop_cap = stops + risk_frac + 1e-9
     return cost, p_stop, through
+
+
+@njit(cache=True)
+def least_cost(cost, p_stop, through, anchor, stop, risk_frac, keep, margin_usd):
+    """The plan chosen (index into the candidates (m,), as :func:`expected_costs` priced them; ``through``: a red met,
+    the hard constraint): of the plans allowed (not through a red, a chance of a stop at most ``risk_frac`` above
+    driving normally's, candidate ``anchor``; the last, the plan followed now, only where ``keep``), the least expected
+    cost, the first of equals (a NaN cost, the first such, as ``np.argmin`` finds it); none allowed at a finite cost
+    (those left stop short of the line, coasting to a halt), ``stop`` (a stop comes whatever the plan; where every plan
+    allowed cost inf, the least fell on plan 0, through a red of every timing). Then the plan followed now where allowed
+    and it costs no more than that one by ``margin_usd`` (a new reaction's worth), else the plan ``stop`` so."""
+    m = cost.size
+    cap = p_stop[anchor] + risk_frac + 1e-9
+    best, least, nan_at, finite = 0, np.inf, -1, False
+    for c in range(m):
+        if p_stop[c] <= cap and not through[c] and (keep or c < m - 1):
+            if np.isnan(cost[c]):
+                nan_at = c if nan_at < 0 else nan_at
+            else:
+                finite = finite or np.isfinite(cost[c])
+                if cost[c] < least:
+                    best, least = c, cost[c]
+    best = stop if not finite else nan_at if nan_at >= 0 else best
+    if keep and p_stop[m - 1] <= cap and not through[m - 1] and cost[m - 1] <= cost[best] + margin_usd:
+        return m - 1  # the plan followed now, unless another is better by more than a new reaction costs
+    if p_stop[stop] <= cap and not through[stop] and cost[stop] <= cost[best] + margin_usd:
+        return stop  # as good a plan as any (within a reaction's worth): the stop it comes to, said
+    return best
 
 
 @njit(cache=True)
