@@ -58,7 +58,7 @@ def _screened(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_win
     order, paths = _pricing_order(vts, modes, v0, anchor), np.empty((2, 4, MAX_KNOTS + 1))
     cost, p_stop, through = priced(vts, modes, reactions, accel_rows, accels, v0, d_m, few, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s,
                                    rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, few_weights, stop_plan, amber_max_s,
-                                   _coarse_skip(skip, m, n_modes, SCREEN_STRIDE), must, anchor, risk_frac + slack, up, down, order, paths)  # fmt: skip
+                                   _coarse_skip(skip, m, n_modes, SCREEN_STRIDE, anchor), must, anchor, risk_frac + slack, up, down, order, paths)  # fmt: skip
     kept = _kept_skip(skip, cost, p_stop, through, p_stop[anchor] + risk_frac + slack + 1e-9, m, n_modes, SCREEN_STRIDE, SCREEN_KEEP)
     return priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
                   idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, kept, must, anchor, risk_frac, up,
@@ -66,14 +66,17 @@ def _screened(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_win
 
 
 @njit(cache=True)
-def _coarse_skip(skip, m, n_modes, stride):
+def _coarse_skip(skip, m, n_modes, stride, anchor):
     """The screening's ``skip`` (:func:`screened`): ``skip``, and in each mode's ``m`` speeds every speed but each
-    ``stride``-th, the fastest, and those next to a skipped one."""
+    ``stride``-th, the fastest, and those next to a skipped one; after the grid, every plan but ``anchor`` (its chance of
+    a stop sets the screen's chance constraint; the others are priced on the whole mixture whatever the screen finds)."""
     out = skip.copy()
     for c in range(n_modes * m):
         i = c % m
         if i % stride != 0 and i != m - 1 and not skip[c - 1] and not skip[c + 1]:
             out[c] = True
+    for c in range(n_modes * m, skip.size):
+        out[c] = out[c] or c != anchor
     return out
 
 
