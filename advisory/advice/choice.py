@@ -643,12 +643,19 @@ def _pricing_order(vts, modes, v0, anchor):
     the same to every target it never reaches, the slowest ones, and so a coast in mode 1 to a target at or above the
     car's speed, which follows them). Any order gives the same results."""
     m = vts.size
-    by_mode = np.empty(m)
+    by_mode = np.empty(m, dtype=np.int64)
     for c in range(m):
         below = v0 <= vts[c] + 1e-9
-        by_mode[c] = -1.0 if c == anchor else 0.0 if below and modes[c] != 1 else modes[c]
-    order = np.argsort(-vts, kind="mergesort")
-    return order[np.argsort(by_mode[order], kind="mergesort")]
+        by_mode[c] = -1 if c == anchor else 0 if below and modes[c] != 1 else modes[c]
+    by_target = np.argsort(-vts, kind="mergesort")
+    order = np.empty(m, dtype=np.int64)
+    k = 0
+    for g in range(by_mode.min() if m else 0, by_mode.max() + 1 if m else 0):  # (a stable sort by mode of the targets' order, as a second argsort was)
+        for c in by_target:
+            if by_mode[c] == g:
+                order[k] = c
+                k += 1
+    return order
 
 
 @njit(cache=True, inline="always")
