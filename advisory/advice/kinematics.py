@@ -1,8 +1,8 @@
 """The car's motion under advice: the coast-down profile, the time to reach a stop line and the speed there in each way
 of changing speed (:data:`MODE_CODES`), which candidate cruise speeds cross the lines ahead on green
 (:func:`green_mask`, :func:`first_feasible`, :func:`feasible_speeds_mps`), and every candidate plan's crossing times
-(:func:`cross_matrix`). numba kernels take arrays (:class:`Lines` packs the lights for them); the wrappers unpack
-:class:`~advisory.advice.views.AdvisorParams`.
+(:func:`crossings`, with the plans a red of a light that shows no amber bars). numba kernels take arrays
+(:class:`Lines` packs the lights for them); the wrappers unpack :class:`~advisory.advice.views.AdvisorParams`.
 """
 
 from __future__ import annotations
