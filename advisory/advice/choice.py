@@ -437,19 +437,26 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     car never coasts down to before the lines: the same motion whatever the target) gets its results. On the recorded
     controllers' bench observations (``bench/bench_predictor.py``'s) that is 66 motions driven and 1,007 timings priced
     a fix, against 74 and 1,202 in the candidates' own order."""
-    up, down = _ramps(rates, comfort, normal)
+    up, down, order, paths = prepared(vts, modes, v0, anchor, rates, comfort, normal)
     return priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
                   idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac, up,
-                  down, _pricing_order(vts, modes, v0, anchor), np.empty((2, 4, MAX_KNOTS + 1)))  # fmt: skip
+                  down, order, paths)  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def prepared(vts, modes, v0, anchor, rates, comfort, normal):
+    """What :func:`priced` needs of the candidates alone, made once for any number of pricings of them: the ramps
+    (:func:`_ramps`), the pricing order (:func:`_pricing_order`) and room for two motions (2, 4, :data:`MAX_KNOTS` + 1)."""
+    up, down = _ramps(rates, comfort, normal)
+    return up, down, _pricing_order(vts, modes, v0, anchor), np.empty((2, 4, MAX_KNOTS + 1))
 
 
 @njit(cache=True, error_model="numpy")
 def priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
            idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac, up, down,
            order, paths):  # fmt: skip
-    """:func:`expected_costs`, given what depends on the candidates alone: the ramps (:func:`_ramps`), the pricing order
-    (:func:`_pricing_order`) and room for two motions, ``paths`` (2, 4, :data:`MAX_KNOTS` + 1), overwritten (a caller
-    that prices the same candidates twice makes them once: :func:`advisory.advice.screening.screened`)."""
+    """:func:`expected_costs`, given what :func:`prepared` makes of the candidates (``paths`` is overwritten): a caller
+    that prices the same candidates twice makes it once (:func:`advisory.advice.screening.screened`)."""
     m, n_lines, n_sc = vts.size, d_m.size, windows.shape[1]
     cost = np.empty(m)
     p_stop = np.empty(m)

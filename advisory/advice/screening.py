@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from advisory.advice.choice import MAX_KNOTS, _pricing_order, _ramps, priced
+from advisory.advice.choice import prepared, priced
 from advisory.advice.mixture import WIDE_LEVELS, member_rows, rows_of
 
 SCREEN_MEMBERS = 8
@@ -54,8 +54,7 @@ def _screened(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_win
     if rows.shape[1] > 0:
         few, few_weights = rows_of(windows, weights, rows, windows.shape[1] - len(WIDE_LEVELS), rows.shape[1] - len(WIDE_LEVELS))
     slack = few_weights[0]  # one member's more of a stop than the choice allows
-    up, down = _ramps(rates, comfort, normal)  # (the same for both passes, as are the order and the room for motions)
-    order, paths = _pricing_order(vts, modes, v0, anchor), np.empty((2, 4, MAX_KNOTS + 1))
+    up, down, order, paths = prepared(vts, modes, v0, anchor, rates, comfort, normal)  # (the same for both passes)
     cost, p_stop, through = priced(vts, modes, reactions, accel_rows, accels, v0, d_m, few, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s,
                                    rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, few_weights, stop_plan, amber_max_s,
                                    _coarse_skip(skip, m, n_modes, SCREEN_STRIDE, anchor), must, anchor, risk_frac + slack, up, down, order, paths)  # fmt: skip
