@@ -433,9 +433,10 @@ def test_the_pruned_choice_is_the_choice_of_pricing_every_plan_alone(monkeypatch
     assert seen["choices"] > 150 and seen["pruned"] > seen["choices"] // 2, seen
 
 
-def _unscreened(price, windows, weights, skip, m, n_modes, normal, risk_frac):
-    """``advisory.advice.screening.screened`` without the screening: every candidate priced on the whole mixture."""
-    return price(windows, weights, skip, risk_frac)
+def _unscreened(args, m, n_modes):
+    """``advisory.advice.screening.screened`` without the screening: every candidate priced on the whole mixture
+    (``args``: :func:`choice.expected_costs`'s arguments)."""
+    return choice.expected_costs(*args)
 
 
 def _random_cases(rng, n):
@@ -467,9 +468,10 @@ def test_the_screened_choice_is_made_on_prices_of_the_whole_mixture(monkeypatch)
     real = advisor.screened
     seen = {"calls": 0, "left_out": 0, "plans": 0}
 
-    def checked(price, windows, weights, skip, m, n_modes, normal, risk_frac):
-        cost, p_stop, through = real(price, windows, weights, skip, m, n_modes, normal, risk_frac)
-        full_cost, full_p_stop, full_through = price(windows, weights, skip, np.inf)  # every plan not in skip, in full
+    def checked(args, m, n_modes):
+        cost, p_stop, through = real(args, m, n_modes)
+        skip, normal, risk_frac = args[26], args[28], args[29]
+        full_cost, full_p_stop, full_through = choice.expected_costs(*args[:29], np.inf)  # every plan not in skip, in full
         priced = np.isfinite(cost)
         assert np.array_equal(cost[priced], full_cost[priced]) and np.array_equal(p_stop[priced], full_p_stop[priced])
         assert np.array_equal(through[priced], full_through[priced]) and not (priced & skip).any()
@@ -487,6 +489,40 @@ def test_the_screened_choice_is_made_on_prices_of_the_whole_mixture(monkeypatch)
     same = np.mean([a == b for a, b in zip(screened, unscreened)])
     assert same >= 0.9, same
     assert seen["calls"] > 150 and seen["left_out"] > seen["plans"] // 3, seen
+
+
+def test_the_plan_chosen_is_the_least_allowed_cost_as_numpy_finds_it():
+    """``choice.least_cost`` against the same choice written with numpy (``advisor._choose``'s own before it moved into
+    the compiled code): on 3,000 random candidate sets (costs with ties, inf and NaN; chances of a stop either side of
+    the anchor's cap; plans through a red; the plan followed now kept or not; a margin of 0 or more), the same plan.
+    Not vacuous: each way of choosing (the least, the plan followed, the stop plan, none allowed at a finite cost, a NaN
+    first) happens."""
+    rng = np.random.default_rng(11)
+
+    def by_numpy(cost, p_stop, through, anchor, stop, risk_frac, keep, margin_usd):
+        allowed = (p_stop <= p_stop[anchor] + risk_frac + 1e-9) & ~through
+        if not keep:
+            allowed[-1] = False
+        priced = np.where(allowed, cost, np.inf)
+        best = int(priced.argmin()) if np.isfinite(priced).any() else stop
+        if keep and allowed[-1] and cost[-1] <= cost[best] + margin_usd:
+            return cost.size - 1, "followed"
+        if allowed[stop] and cost[stop] <= cost[best] + margin_usd:
+            return stop, "stop"
+        return best, "nan" if np.isnan(priced).any() else "none allowed" if best == stop else "least"
+
+    seen = set()
+    for _ in range(3000):
+        m = int(rng.integers(4, 10))
+        cost = rng.choice([1.0, 1.01, 1.02, np.inf, np.nan], size=m, p=[0.3, 0.3, 0.25, 0.13, 0.02])
+        p_stop = rng.choice([0.0, 0.1, 0.2, 0.5], size=m)
+        through = rng.random(m) < 0.2
+        anchor, stop = m - 3, m - 2
+        args = (cost, p_stop, through, anchor, stop, float(rng.choice([0.0, 0.1])), bool(rng.random() < 0.5), float(rng.choice([0.0, 0.015])))
+        want, how = by_numpy(*args)
+        assert choice.least_cost(*args) == want, args
+        seen.add(how)
+    assert seen == {"least", "followed", "stop", "none allowed", "nan"}, seen
 
 
 def test_fewer_members_are_the_forecast_at_the_strata_middles_paired_as_so_many_timings():

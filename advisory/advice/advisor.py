@@ -35,8 +35,8 @@ from functools import lru_cache
 import numpy as np
 
 from advisory.advice import choice
-from advisory.advice.kinematics import (KEEP_MODES, MODE_CODES, MODE_NAMES, Lines, candidates_mps, cross_matrix, crossing_time_s, crossing_times_s,
-                                        drives_normally, green_crossing, kernel_args, keeps, line_speeds_mps, normal_crossing_s, red_crossings, search,
+from advisory.advice.kinematics import (KEEP_MODES, MODE_CODES, MODE_NAMES, Lines, candidates_mps, crossing_time_s, crossing_times_s, crossings,
+                                        drives_normally, green_crossing, kernel_args, keeps, line_speeds_mps, normal_crossing_s, search,
                                         slowed_into_red)
 from advisory.advice.mixture import mixture_timings
 from advisory.advice.screening import screened
@@ -220,7 +220,6 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     stop_plan[-1] = keep and last.reason == "red_ahead"  # a lift-off for a red, followed now: the same plan
     lines = Lines.of(usable)
     d_m = lines.distances_m
-    cross = cross_matrix(vts, modes, reactions, accels, d_m, v0, brake, firm, *coast_tables)
     rates, coast, idle = choice.rate_tables(params.vehicle, params.comfort_decel_mps2, params.normal_accel_mps2, params.firm_decel_mps2)
     x_end = float(d_m[-1]) + v_lim * v_lim / (2.0 * params.normal_accel_mps2)
     windows, weights = mixture_timings(usable)
@@ -229,7 +228,7 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
     # no amber warns of a light's reds: no plan reaches the line where one may be on (the sure windows), nor, slowing the
     # car, within the margin before one may begin (the feasibility of the rules, :func:`advisory.advice.kinematics.green_mask`)
-    crossed = red_crossings(cross, lines.windows_s, (modes == MODE_CODES["brake_coast"]) | (vts < v - 1e-9), lines.no_amber, params.green_margin_s)
+    cross, crossed = crossings(vts, modes, reactions, accels, d_m, v0, brake, firm, *coast_tables, lines.windows_s, lines.no_amber, params.green_margin_s)
     # priced as the choice needs them (choice.expected_costs, "pruned"): driving normally first and in full, and the
     # stop plan; a plan that cannot be allowed (through a red, or a stop likelier than driving normally's by more than
     # ``stop_risk_frac``) is not priced further. The same choice as pricing every plan (tests/test_choice.py); screened
@@ -241,25 +240,11 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     skip[-1] |= not keep  # (no plan followed now: its slot is not a candidate)
     amber_max = np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S for light in usable])
 
-    def price(windows: np.ndarray, weights: np.ndarray, skip: np.ndarray, risk_frac: float) -> tuple:
-        return choice.expected_costs(vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim, params.green_margin_s, lam,
-                                     cross, rates, coast, idle, brake, firm, params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps,
-                                     clear, weights, stop_plan, amber_max, skip, must, normal, risk_frac)  # fmt: skip
-
-    cost, p_stop, through = screened(price, windows, weights, skip, m, n_modes, normal, params.stop_risk_frac)
-    through |= crossed
-    allowed = (p_stop <= p_stop[normal] + params.stop_risk_frac + 1e-9) & ~through
-    if not keep:
-        allowed[-1] = False
-    priced = np.where(allowed, cost, np.inf)
-    # none allowed at a finite cost (those left stop short of the line: coasting to a halt): a stop comes whatever the
-    # plan. (Was ``allowed.any()``: where every allowed plan cost inf, argmin fell on plan 0, through a red of every timing)
-    best = int(priced.argmin()) if np.isfinite(priced).any() else stop
-    reaction_usd = lam * params.reaction_s
-    if keep and allowed[-1] and cost[-1] <= cost[best] + reaction_usd:
-        best = vts.size - 1  # the plan followed now, unless another is better by more than a new reaction costs
-    elif allowed[stop] and cost[stop] <= cost[best] + reaction_usd:
-        best = stop  # as good a plan as any (within a reaction's worth): the stop it comes to, said
+    args = (vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim, params.green_margin_s, lam, cross, rates, coast, idle,
+            brake, firm, params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan, amber_max, skip, must, normal,
+            params.stop_risk_frac)  # (choice.expected_costs's arguments)
+    cost, p_stop, through = screened(args, m, n_modes)
+    best = choice.least_cost(cost, p_stop, through | crossed, normal, stop, params.stop_risk_frac, keep, lam * params.reaction_s)
     if best == normal:  # nothing does better than driving on as the driver would (the red may come late): no speed advice
         arrival = float(cross[normal, 0])
         reason = "tight_green" if not red and to_change is not None and arrival < to_change else "low_confidence"

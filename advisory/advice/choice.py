@@ -437,17 +437,35 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     car never coasts down to before the lines: the same motion whatever the target) gets its results. On the recorded
     controllers' bench observations (``bench/bench_predictor.py``'s) that is 66 motions driven and 1,007 timings priced
     a fix, against 74 and 1,202 in the candidates' own order."""
+    up, down, order, paths = prepared(vts, modes, v0, anchor, rates, comfort, normal)
+    return priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
+                  idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac, up,
+                  down, order, paths)  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def prepared(vts, modes, v0, anchor, rates, comfort, normal):
+    """What :func:`priced` needs of the candidates alone, made once for any number of pricings of them: the ramps
+    (:func:`_ramps`), the pricing order (:func:`_pricing_order`) and room for two motions (2, 4, :data:`MAX_KNOTS` + 1)."""
+    up, down = _ramps(rates, comfort, normal)
+    return up, down, _pricing_order(vts, modes, v0, anchor), np.empty((2, 4, MAX_KNOTS + 1))
+
+
+@njit(cache=True, error_model="numpy")
+def priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
+           idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac, up, down,
+           order, paths):  # fmt: skip
+    """:func:`expected_costs`, given what :func:`prepared` makes of the candidates (``paths`` is overwritten): a caller
+    that prices the same candidates twice makes it once (:func:`advisory.advice.screening.screened`)."""
     m, n_lines, n_sc = vts.size, d_m.size, windows.shape[1]
     cost = np.empty(m)
     p_stop = np.empty(m)
     through = np.zeros(m, dtype=np.bool_)
-    up, down = _ramps(rates, comfort, normal)
-    paths = np.empty((2, 4, MAX_KNOTS + 1))  # this candidate's motion, and the last priced one's
     cur, prev, prev_knots, prev_brake, prev_usd, prev_t_end = 0, -1, 0, np.empty((n_lines, 4)), 0.0, 0.0
     held, held_free = -1, False  # the last candidate whose motion paths[1 - cur] holds (prev's, or one found the same), free of its target
     no_stop = np.empty(n_lines)
     stop_cap = np.inf
-    for c in _pricing_order(vts, modes, v0, anchor):
+    for c in order:
         if skip is not None and skip[c]:
             cost[c], p_stop[c], through[c] = np.inf, 1.0, True
             continue
@@ -597,6 +615,34 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
 
 
 @njit(cache=True)
+def least_cost(cost, p_stop, through, anchor, stop, risk_frac, keep, margin_usd):
+    """The plan chosen (index into the candidates (m,), as :func:`expected_costs` priced them; ``through``: a red met,
+    the hard constraint): of the plans allowed (not through a red, a chance of a stop at most ``risk_frac`` above
+    driving normally's, candidate ``anchor``; the last, the plan followed now, only where ``keep``), the least expected
+    cost, the first of equals (a NaN cost, the first such, as ``np.argmin`` finds it); none allowed at a finite cost
+    (those left stop short of the line, coasting to a halt), ``stop`` (a stop comes whatever the plan; where every plan
+    allowed cost inf, the least fell on plan 0, through a red of every timing). Then the plan followed now where allowed
+    and it costs no more than that one by ``margin_usd`` (a new reaction's worth), else the plan ``stop`` so."""
+    m = cost.size
+    cap = p_stop[anchor] + risk_frac + 1e-9
+    best, least, nan_at, finite = 0, np.inf, -1, False
+    for c in range(m):
+        if p_stop[c] <= cap and not through[c] and (keep or c < m - 1):
+            if np.isnan(cost[c]):
+                nan_at = c if nan_at < 0 else nan_at
+            else:
+                finite = finite or np.isfinite(cost[c])
+                if cost[c] < least:
+                    best, least = c, cost[c]
+    best = stop if not finite else nan_at if nan_at >= 0 else best
+    if keep and p_stop[m - 1] <= cap and not through[m - 1] and cost[m - 1] <= cost[best] + margin_usd:
+        return m - 1  # the plan followed now, unless another is better by more than a new reaction costs
+    if p_stop[stop] <= cap and not through[stop] and cost[stop] <= cost[best] + margin_usd:
+        return stop  # as good a plan as any (within a reaction's worth): the stop it comes to, said
+    return best
+
+
+@njit(cache=True)
 def _pricing_order(vts, modes, v0, anchor):
     """The order in which :func:`expected_costs` prices the candidates (m,): ``anchor`` first (none: -1), then by motion,
     so that the candidates of one motion come one after the other: by the mode that acts (:func:`_same_motion`: modes
@@ -604,12 +650,19 @@ def _pricing_order(vts, modes, v0, anchor):
     the same to every target it never reaches, the slowest ones, and so a coast in mode 1 to a target at or above the
     car's speed, which follows them). Any order gives the same results."""
     m = vts.size
-    by_mode = np.empty(m)
+    by_mode = np.empty(m, dtype=np.int64)
     for c in range(m):
         below = v0 <= vts[c] + 1e-9
-        by_mode[c] = -1.0 if c == anchor else 0.0 if below and modes[c] != 1 else modes[c]
-    order = np.argsort(-vts, kind="mergesort")
-    return order[np.argsort(by_mode[order], kind="mergesort")]
+        by_mode[c] = -1 if c == anchor else 0 if below and modes[c] != 1 else modes[c]
+    by_target = np.argsort(-vts, kind="mergesort")
+    order = np.empty(m, dtype=np.int64)
+    k = 0
+    for g in range(by_mode.min() if m else 0, by_mode.max() + 1 if m else 0):  # (a stable sort by mode of the targets' order, as a second argsort was)
+        for c in by_target:
+            if by_mode[c] == g:
+                order[k] = c
+                k += 1
+    return order
 
 
 @njit(cache=True, inline="always")

@@ -1,8 +1,8 @@
 """The car's motion under advice: the coast-down profile, the time to reach a stop line and the speed there in each way
 of changing speed (:data:`MODE_CODES`), which candidate cruise speeds cross the lines ahead on green
 (:func:`green_mask`, :func:`first_feasible`, :func:`feasible_speeds_mps`), and every candidate plan's crossing times
-(:func:`cross_matrix`). numba kernels take arrays (:class:`Lines` packs the lights for them); the wrappers unpack
-:class:`~advisory.advice.views.AdvisorParams`.
+(:func:`crossings`, with the plans a red of a light that shows no amber bars). numba kernels take arrays
+(:class:`Lines` packs the lights for them); the wrappers unpack :class:`~advisory.advice.views.AdvisorParams`.
 """
 
 from __future__ import annotations
@@ -169,18 +169,6 @@ def _in_red(tc, windows_s, j, slowing, no_amber, after_red_s):
         if (a - before_red_s if a > 0.0 else a) <= tc < windows_s[j, k, 1] + after_red_s:
             return True
     return False
-
-
-@njit(cache=True)
-def red_crossings(cross, windows_s, slowing, no_amber, after_red_s):
-    """Which plans (m,) reach a line that shows no amber inside a red of ``windows_s`` or its margins (:func:`_in_red`;
-    ``cross``: time to each line (m, lines), ``slowing``: the plans that slow the car (m,)). bool (m,)"""
-    out = np.zeros(cross.shape[0], dtype=np.bool_)
-    for c in range(cross.shape[0]):
-        for j in range(cross.shape[1]):
-            if no_amber[j] and _in_red(cross[c, j], windows_s, j, slowing[c], no_amber, after_red_s):
-                out[c] = True
-    return out
 
 
 @njit(cache=True)
@@ -406,10 +394,16 @@ KEEP_MODES = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", 
 
 
 @njit(cache=True)
-def cross_matrix(vts, modes, reactions, accels, d_m, v0, brake_mps2, firm_mps2, x_of_v, t_of_v, t_of_x):
-    """Time to each line (m, lines) of each candidate plan, in the motion of :func:`crossing_time_s`. [s]"""
-    out = np.empty((vts.size, d_m.size))
+def crossings(vts, modes, reactions, accels, d_m, v0, brake_mps2, firm_mps2, x_of_v, t_of_v, t_of_x, windows_s, no_amber, after_red_s):
+    """Time to each line (m, lines) of each candidate plan, in the motion of :func:`crossing_time_s` [s], and which
+    plans (m,) reach a line that shows no amber (``no_amber``, (lines,)) inside a red of ``windows_s`` or its margins
+    (:func:`_in_red`; a plan slows the car in mode 1, or to a target below ``v0``). bool (m,)"""
+    cross = np.empty((vts.size, d_m.size))
+    crossed = np.zeros(vts.size, dtype=np.bool_)
     for c in range(vts.size):
+        slowing = modes[c] == 1 or vts[c] < v0 - 1e-9
         for j in range(d_m.size):
-            out[c, j] = time_to_line_s(d_m[j], v0, vts[c], modes[c], reactions[c], brake_mps2, firm_mps2, accels[c], x_of_v, t_of_v, t_of_x)
-    return out
+            cross[c, j] = time_to_line_s(d_m[j], v0, vts[c], modes[c], reactions[c], brake_mps2, firm_mps2, accels[c], x_of_v, t_of_v, t_of_x)
+            if no_amber[j] and _in_red(cross[c, j], windows_s, j, slowing, no_amber, after_red_s):
+                crossed[c] = True
+    return cross, crossed

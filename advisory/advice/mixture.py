@@ -247,14 +247,25 @@ def fewer_members(windows: np.ndarray, weights: np.ndarray, k: int) -> tuple[np.
     (:func:`_paired`), the forecast's weight shared by them; the wide component as it is. Every member is one of the
     forecast's timings, its red windows as they are: fewer timings, none changed. The whole mixture where ``k`` is
     not fewer."""
-    n = windows.shape[1] - len(WIDE_LEVELS)
-    if k >= n:
+    rows = member_rows(windows.shape[1] - len(WIDE_LEVELS), k, windows.shape[0])
+    if rows.shape[1] == 0:
         return windows, weights
-    return _rows_of(windows, weights, _member_rows(n, k, windows.shape[0]), n, k)
+    return rows_of(windows, weights, rows, windows.shape[1] - len(WIDE_LEVELS), k)
+
+
+_NO_ROWS = np.empty((0, 0), dtype=np.int64)
+_NO_ROWS.setflags(write=False)
+
+
+def member_rows(n: int, k: int, n_lines: int) -> np.ndarray:
+    """The rows of :func:`mixture_timings`'s array (``n`` timings of the forecast, then the wide component's) that
+    :func:`fewer_members` takes for ``k`` members, per line (n_lines, k + len(WIDE_LEVELS)); none (n_lines, 0) where
+    ``k`` is not fewer than ``n``."""
+    return _member_rows(n, k, n_lines) if k < n else _NO_ROWS.reshape(n_lines, 0)
 
 
 @njit(cache=True)
-def _rows_of(windows, weights, rows, n, k):
+def rows_of(windows, weights, rows, n, k):
     """:func:`fewer_members`'s mixture: line ``j``'s timings ``rows[j]`` of ``windows``, the first ``k`` sharing the
     weight of the ``n`` forecast timings, the rest (the wide component) weighted as they are."""
     out = np.empty((windows.shape[0], rows.shape[1], windows.shape[2], 2))

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from advisory.advice.mixture import fewer_members
+from advisory.advice.choice import prepared, priced
+from advisory.advice.mixture import WIDE_LEVELS, member_rows, rows_of
 
 SCREEN_MEMBERS = 8
 """Timings of each light's forecast (of its 20) that the screening prices the plans on (:func:`screened`). At 4 the
@@ -22,11 +23,11 @@ SCREEN_KEEP = 5
 """Plans the screening keeps, the cheapest of those allowed on its timings (:func:`screened`). [-]"""
 
 
-def screened(price, windows: np.ndarray, weights: np.ndarray, skip: np.ndarray, m: int, n_modes: int, normal: int, risk_frac: float) -> tuple:
-    """The candidates' expected costs, chances of a stop and hard-constraint flags as ``price(windows, weights, skip,
-    risk_frac)`` (:func:`advisory.advice.choice.expected_costs` on the lights' mixture, pruned: ``skip`` not priced;
-    plans past the chance constraint ``risk_frac`` above driving normally, candidate ``normal``, not priced further)
-    gives them, for the plans that can be chosen; the rest come back not priced (cost inf, through a red).
+def screened(args: tuple, m: int, n_modes: int) -> tuple:
+    """The candidates' expected costs, chances of a stop and hard-constraint flags as
+    :func:`advisory.advice.choice.expected_costs` gives them on ``args`` (its arguments: the lights' mixture, ``skip``
+    not priced, ``must``, ``anchor`` driving normally, plans past the chance constraint ``risk_frac`` above it not priced
+    further), for the plans that can be chosen; the rest come back not priced (cost inf, through a red).
 
     The grid (``n_modes`` modes of ``m`` advised speeds each, first in the candidates; the plans after it, driving
     normally, stop and the plan followed, are always priced in full) is screened: every :data:`SCREEN_STRIDE`-th
@@ -38,23 +39,43 @@ def screened(price, windows: np.ndarray, weights: np.ndarray, skip: np.ndarray, 
     the hard constraint on the whole mixture, exactly as unscreened; what the screening can miss is a cheaper plan it
     ranked out: on the 10,200 recorded observations of ``bench/bench_predictor.py`` the advice changed in 4.9 %, the
     plan chosen costlier on the whole mixture by 0.09 % on average (docs/ADVISOR.md, "The choice on the distribution",
-    *Screening*)."""
-    few, few_weights = fewer_members(windows, weights, SCREEN_MEMBERS)
-    slack = float(few_weights[0])  # one member's more of a stop than the choice allows
-    cost, p_stop, through = price(few, few_weights, _coarse_skip(skip, m, n_modes, SCREEN_STRIDE), risk_frac + slack)
-    kept = _kept_skip(skip, cost, p_stop, through, p_stop[normal] + risk_frac + slack + 1e-9, m, n_modes, SCREEN_STRIDE, SCREEN_KEEP)
-    return price(windows, weights, kept, risk_frac)
+    *Screening*). Both passes and what lies between them run in one compiled call (:func:`_screened`)."""
+    windows = args[7]
+    return _screened(*args, member_rows(windows.shape[1] - len(WIDE_LEVELS), SCREEN_MEMBERS, windows.shape[0]), m, n_modes)
 
 
 @njit(cache=True)
-def _coarse_skip(skip, m, n_modes, stride):
+def _screened(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
+              idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac,
+              rows, m, n_modes):  # fmt: skip
+    """:func:`screened`: :func:`advisory.advice.choice.expected_costs`'s arguments, then the screen's members of the
+    mixture (``rows``: :func:`advisory.advice.mixture.member_rows`, none where the forecast has no more timings)."""
+    few, few_weights = windows, weights
+    if rows.shape[1] > 0:
+        few, few_weights = rows_of(windows, weights, rows, windows.shape[1] - len(WIDE_LEVELS), rows.shape[1] - len(WIDE_LEVELS))
+    slack = few_weights[0]  # one member's more of a stop than the choice allows
+    up, down, order, paths = prepared(vts, modes, v0, anchor, rates, comfort, normal)  # (the same for both passes)
+    cost, p_stop, through = priced(vts, modes, reactions, accel_rows, accels, v0, d_m, few, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s,
+                                   rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, few_weights, stop_plan, amber_max_s,
+                                   _coarse_skip(skip, m, n_modes, SCREEN_STRIDE, anchor), must, anchor, risk_frac + slack, up, down, order, paths)  # fmt: skip
+    kept = _kept_skip(skip, cost, p_stop, through, p_stop[anchor] + risk_frac + slack + 1e-9, m, n_modes, SCREEN_STRIDE, SCREEN_KEEP)
+    return priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
+                  idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, kept, must, anchor, risk_frac, up,
+                  down, order, paths)  # fmt: skip
+
+
+@njit(cache=True)
+def _coarse_skip(skip, m, n_modes, stride, anchor):
     """The screening's ``skip`` (:func:`screened`): ``skip``, and in each mode's ``m`` speeds every speed but each
-    ``stride``-th, the fastest, and those next to a skipped one."""
+    ``stride``-th, the fastest, and those next to a skipped one; after the grid, every plan but ``anchor`` (its chance of
+    a stop sets the screen's chance constraint; the others are priced on the whole mixture whatever the screen finds)."""
     out = skip.copy()
     for c in range(n_modes * m):
         i = c % m
         if i % stride != 0 and i != m - 1 and not skip[c - 1] and not skip[c + 1]:
             out[c] = True
+    for c in range(n_modes * m, skip.size):
+        out[c] = out[c] or c != anchor
     return out
 
 
@@ -70,11 +91,15 @@ def _kept_skip(skip, cost, p_stop, through, cap, m, n_modes, stride, keep):
             ranked[c] = cost[c]
     out = np.ones(skip.size, dtype=np.bool_)
     out[grid:] = skip[grid:]
-    order = np.argsort(ranked, kind="mergesort")  # (ties: the first, as np.argmin)
-    for r in range(min(keep, grid)):
-        c = order[r]
-        if not np.isfinite(ranked[c]):
+    taken = np.zeros(grid, dtype=np.bool_)
+    for _ in range(min(keep, grid)):
+        c = -1  # the cheapest finite one not taken yet (ties: the first, as np.argmin; a sort of the grid cost 5 us)
+        for d in range(grid):
+            if not taken[d] and np.isfinite(ranked[d]) and (c < 0 or ranked[d] < ranked[c]):
+                c = d
+        if c < 0:
             break
+        taken[c] = True
         row, i = c - c % m, c % m
         for q in range(max(i - stride + 1, 0), min(i + stride, m)):
             out[row + q] = skip[row + q]

@@ -76,12 +76,12 @@ def test_start_up_compiles_the_choice_under_uncertain_timing():
     blocked: a fresh clone's MQTT test timed out on it). In a fresh interpreter, so nothing else ran it before."""
     code = (
         "from fastapi.testclient import TestClient\n"
-        "from advisory.advice import choice\n"
+        "from advisory.advice import screening\n"
         "from server.app import create_app\n"
         "from server.config import Settings\n"
-        "before = len(choice.expected_costs.signatures)\n"
+        "before = len(screening._screened.signatures)\n"
         "with TestClient(create_app(Settings(corridors=('paper_s200',), default_corridor='paper_s200', tables=False, speech=False))):\n"
-        "    print(before, len(choice.expected_costs.signatures))\n"
+        "    print(before, len(screening._screened.signatures))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parents[2])
     assert out.stdout.split()[-2:] == ["0", "1"], out.stdout + out.stderr
