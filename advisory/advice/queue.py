@@ -400,7 +400,8 @@ def released(reds_s: Sequence[tuple[float, float]], gap_m: float, from_s: float,
     to ``b``, start-up ``s``, headway ``h``: the ``i``-th car leaves at ``b + s + i h``), no more than leave before the
     next red, each at its place at this line (:func:`platoon_places_s`); then the flow again, ``q`` a second, each
     car ``gap_m / limit_mps`` later at this line. Before the first red known, the flow. The mean over ``levels`` of
-    the discharge from its fast to its slow end (:meth:`QueueModel.at_level`), as the queue's clearing.
+    the discharge from its fast to its slow end (:meth:`QueueModel.at_level`), as the queue's clearing. The platoon
+    does not disperse between the lines (Robertson's platoon dispersion would spread it over a longer gap).
 
     Examples
     --------
