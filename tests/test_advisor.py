@@ -733,3 +733,31 @@ def test_past_the_last_light_resume_said_stays_until_the_limit():
     edge = [limit - band - 0.01, limit - band + 0.01] * 3 + [limit - 0.01, limit, limit - band + 0.01, limit - band - 0.01]
     assert said(edge) == [("resume", True)] + [("resume", False)] * 6 + [("cruise", True), ("cruise", False), ("resume", True)]
     assert said([limit - band + 0.01])[0][0] == "cruise"  # nothing said before: the band's edge as it is
+
+
+AMBER_7TH_S = 4.0  # the amber of 7th Street's fixed-time lights in SUMO (docs/TRAFFIC.md, "What remains")
+
+
+@pytest.mark.parametrize("before_red_s", [1.2, 2.7])
+def test_an_amber_the_driver_stops_for_is_not_planned_through_at_an_exact_light(before_red_s):
+    """Helper wt-al's trace (docs/TRAFFIC.md, "What remains", ``main.97``): 7th Street, fixed time, a 4 s amber; the car
+    at the 30 mph limit, 379 m out, was told "Hold 30 mph" for a crossing 1.2 s before the red, 2.8 s into the amber.
+    By hand: the amber shows at 379 / 13.41 - 2.8 = 25.5 s, 2.8 x 13.41 = 37.5 m out, where 13.41² / (2 x 4) = 22.5 m
+    stop the car at ``choice.AMBER_STOP_MPS2``: the driver stops and stands the red (42 s). The rules count an amber as
+    green; the choice on the one timing prices the stop, and the advice no longer crosses in that amber. A crossing 2.7
+    s before the red (the amber shows 1.3 s out, 17.4 m: no stop at 4 m/s²) is cleared, and holding the limit stays."""
+    v = 30 * 0.44704
+    cross_s = 379.0 / v
+    red_s = cross_s + before_red_s
+    light = LightView(1, 379.0, red_windows_s=((red_s, red_s + 42.0), (red_s + 90.0, red_s + 132.0)), amber_s=AMBER_7TH_S)
+    adv, _ = advise(Observation(v, v, (light,)))
+    if before_red_s == 2.7:
+        assert (adv.action, adv.reason, adv.target_speed_mps) == ("cruise", "green_wave", pytest.approx(v))
+        return
+    assert (red_s - AMBER_7TH_S) * v < 379.0 - v * v / (2.0 * 4.0)  # (the amber shows where the car can stop: by hand above)
+    mode = KEEP_MODES.get(adv.action)
+    if mode is not None and adv.target_speed_mps is not None and adv.reason == "green_wave":
+        t = crossing_time_s(379.0, v, adv.target_speed_mps, P, mode)
+        assert not red_s - AMBER_7TH_S <= t < red_s + P.green_margin_s
+    else:  # no speed plan: a lift-off or a stop for the red, never "drive normally" into the amber
+        assert adv.action in ("coast", "stop") and adv.reason == "red_ahead"

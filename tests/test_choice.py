@@ -86,7 +86,7 @@ def _priced(vt, mode, reaction_s, accel_mps2, timings, line_m=LINE_M, clear_s=0.
                                                   V_LIM, np.array([line_m]), windows, k, END_M, V_LIM, PARAMS.green_margin_s, LAM,
                                                   np.array([[cross]]), RATES, COAST, IDLE, 1.5, 3.0, 2.0, PARAMS.reaction_s, PARAMS.min_cruise_speed_mps,
                                                   np.array([clear_s]), np.full(len(timings), 1.0 / len(timings)), np.array([stop_plan]),
-                                                  np.array([amber_max_s]))  # fmt: skip
+                                                  np.array([amber_max_s]), np.array([choice.EDGE_S]))  # fmt: skip
     return float(cost[0]), float(p_stop[0]), bool(through[0])
 
 
@@ -205,7 +205,7 @@ def test_a_stop_at_the_first_light_is_priced_through_the_next(red_2):
         cost, p_stop, _ = choice.expected_costs(np.array([V_LIM]), np.array([0]), np.array([0.0]), np.array([choice.ACCEL_NORMAL]), np.array([2.0]),
                                                 V_LIM, d, windows, 1, end_m, V_LIM, PARAMS.green_margin_s, LAM, cross, RATES, COAST, IDLE, 1.5,
                                                 3.0, 2.0, PARAMS.reaction_s, PARAMS.min_cruise_speed_mps, np.zeros(2), np.ones(1),
-                                                np.zeros(1, dtype=np.bool_), np.zeros(2))  # fmt: skip
+                                                np.zeros(1, dtype=np.bool_), np.zeros(2), np.full(2, choice.EDGE_S))  # fmt: skip
         return float(cost[0]), float(p_stop[0])
 
     alone, p_alone = price((np.inf, np.inf))
@@ -268,7 +268,8 @@ def _stop_share(advice, obs):
                                          obs.speed_mps, np.array([light.distance_m]), windows, windows.shape[2], light.distance_m + 100.0, V_LIM,
                                          PARAMS.green_margin_s, LAM, np.array([[cross]]), RATES, COAST, IDLE, 1.5, 3.0, 2.0, PARAMS.reaction_s,
                                          PARAMS.min_cruise_speed_mps, np.array([0.0 if light.amber_s == 0.0 else choice.AMBER_MIN_S]), weights,
-                                         np.array([False]), np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S]))  # fmt: skip
+                                         np.array([False]), np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S]),
+                                         np.array([choice.EDGE_S]))  # fmt: skip
     return float(p_stop[0])
 
 
@@ -415,7 +416,7 @@ def test_the_pruned_choice_is_the_choice_of_pricing_every_plan_alone(monkeypatch
 
     def each_alone(*args):
         m = args[0].size
-        alone = [kernel(*(a[c : c + 1] if isinstance(a, np.ndarray) and i in PER_PLAN_ARGS else a for i, a in enumerate(args[:26]))) for c in range(m)]
+        alone = [kernel(*(a[c : c + 1] if isinstance(a, np.ndarray) and i in PER_PLAN_ARGS else a for i, a in enumerate(args[:27]))) for c in range(m)]
         cost, p_stop, through = (np.array([r[i][0] for r in alone]) for i in range(3))
         fast = kernel(*args)
         priced = np.isfinite(fast[0])
@@ -470,8 +471,8 @@ def test_the_screened_choice_is_made_on_prices_of_the_whole_mixture(monkeypatch)
 
     def checked(args, m, n_modes):
         cost, p_stop, through = real(args, m, n_modes)
-        skip, normal, risk_frac = args[26], args[28], args[29]
-        full_cost, full_p_stop, full_through = choice.expected_costs(*args[:29], np.inf)  # every plan not in skip, in full
+        skip, normal, risk_frac = args[27], args[29], args[30]
+        full_cost, full_p_stop, full_through = choice.expected_costs(*args[:30], np.inf)  # every plan not in skip, in full
         priced = np.isfinite(cost)
         assert np.array_equal(cost[priced], full_cost[priced]) and np.array_equal(p_stop[priced], full_p_stop[priced])
         assert np.array_equal(through[priced], full_through[priced]) and not (priced & skip).any()
@@ -801,3 +802,41 @@ def test_a_forecast_sure_of_a_change_20_s_ahead_leaves_seconds_of_doubt():
                       late_red_windows_s=((21.2, math.inf),), age_s=0.6, scenario_red_windows_s=timings)  # fmt: skip
     advice, _ = advise(Observation(50 / 3.6, 50 / 3.6, (light,), position_m=13.9))
     assert advice.action == "cruise" and advice.target_speed_mps == pytest.approx(50 / 3.6)
+
+
+@pytest.mark.parametrize("distance_m, before_red_s", [(379.0, 1.2), (300.0, 1.2), (200.0, 0.5), (379.0, 3.5)])
+def test_at_an_exact_light_the_choice_is_the_best_plan_priced_one_by_one(monkeypatch, distance_m, before_red_s):
+    """An exact light (one timing, weight 1) whose amber (4 s) the rules' plan, holding the limit, would cross in
+    (``before_red_s`` before its red): the advisor hands it to the choice (``advisor._into_amber``), and the plan advised
+    is the brute-force best over the candidates: every one priced on its own on the one timing (no pruning, no
+    screening), the cheapest of those clear of a red and no likelier to stop than driving normally by more than
+    ``stop_risk_frac``, "prepare to stop" where it is as cheap within a reaction's worth of time."""
+    kernel, seen = choice.expected_costs, {}
+
+    def spied(*args):
+        m = args[0].size
+        alone = [kernel(*(a[c : c + 1] if isinstance(a, np.ndarray) and i in PER_PLAN_ARGS else a for i, a in enumerate(args[:27]))) for c in range(m)]
+        seen["args"], seen["alone"] = args, [np.array([r[i][0] for r in alone]) for i in range(3)]
+        return kernel(*args)
+
+    monkeypatch.setattr(choice, "expected_costs", spied)
+    red_s = distance_m / V_LIM + before_red_s
+    light = LightView(1, distance_m, red_windows_s=((red_s, red_s + 42.0), (red_s + 90.0, red_s + 132.0)), amber_s=4.0)
+    adv, _ = advise(Observation(V_LIM, V_LIM, (light,)), params=PARAMS)
+    args = seen["args"]
+    vts, modes, lam, windows, weights, stop_plan, normal = args[0], args[1], args[12], args[7], args[23], args[24], args[29]
+    assert windows.shape[:2] == (1, 1) and weights.tolist() == [1.0]  # the one timing
+    cost, p_stop, through = seen["alone"]
+    allowed = ~through & (p_stop <= p_stop[normal] + PARAMS.stop_risk_frac + 1e-9)
+    allowed[-1] = False  # (no plan followed now)
+    best = int(np.argmin(np.where(allowed, cost, np.inf)))
+    stop = int(np.flatnonzero(stop_plan)[0])
+    if allowed[stop] and cost[stop] <= cost[best] + lam * PARAMS.reaction_s:
+        best = stop
+    if stop_plan[best]:
+        assert adv.reason == "red_ahead" and adv.action in ("coast", "stop", "none")
+    elif best == normal:
+        assert adv.action == "none" or adv.target_speed_mps == pytest.approx(V_LIM)
+    else:
+        assert adv.reason == "green_wave" and adv.target_speed_mps == pytest.approx(min(vts[best], V_LIM))
+        assert MODE_CODES[KEEP_MODES[adv.action]] == modes[best] or (adv.action in ("cruise", "accelerate", "ease_off") and modes[best] != 1)

@@ -225,7 +225,11 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     windows, weights = mixture_timings(usable)
     lam_road = _road_time_value_usd_per_s(params, v_lim) if params.time_value_usd_per_s is None else params.time_value_usd_per_s
     lam = lam_road * time_price(obs)  # the car's time and its followers' (Observation.followers)
-    clear = np.array([0.0 if light.amber_s == 0.0 else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S) for light in usable])
+    exact = np.array([light.likely_red_windows_s is None and light.scenario_red_windows_s is None for light in usable])
+    edge = np.where(exact, choice.EXACT_EDGE_S, choice.EDGE_S)  # (an exact light's changes come when it says)
+    # the amber before each red: at least ``clear``, at most ``amber_max`` (an exact light's stated one: that long)
+    clear = np.array([0.0 if light.amber_s == 0.0 else light.amber_s if e and light.amber_s else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S)
+                      for light, e in zip(usable, exact)])
     # no amber warns of a light's reds: no plan reaches the line where one may be on (the sure windows), nor, slowing the
     # car, within the margin before one may begin (the feasibility of the rules, :func:`advisory.advice.kinematics.green_mask`)
     cross, crossed = crossings(vts, modes, reactions, accels, d_m, v0, brake, firm, *coast_tables, lines.windows_s, lines.no_amber, params.green_margin_s)
@@ -241,10 +245,15 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     amber_max = np.array([0.0 if light.amber_s == 0.0 else light.amber_s or choice.AMBER_MAX_S for light in usable])
 
     args = (vts, modes, reactions, rows, accels, v0, d_m, windows, windows.shape[2], x_end, v_lim, params.green_margin_s, lam, cross, rates, coast, idle,
-            brake, firm, params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan, amber_max, skip, must, normal,
-            params.stop_risk_frac)  # (choice.expected_costs's arguments)
-    cost, p_stop, through = screened(args, m, n_modes)
-    best = choice.least_cost(cost, p_stop, through | crossed, normal, stop, params.stop_risk_frac, keep, lam * params.reaction_s)
+            brake, firm, params.normal_accel_mps2, params.reaction_s, params.min_cruise_speed_mps, clear, weights, stop_plan, amber_max, edge, skip, must,
+            normal, params.stop_risk_frac)  # (choice.expected_costs's arguments)
+    # exact timing (:func:`_into_amber`): its one timing, every plan priced on it; else screened
+    cost, p_stop, through = choice.expected_costs(*args) if weights.size == 1 else screened(args, m, n_modes)
+    through |= crossed
+    best = choice.least_cost(cost, p_stop, through, normal, stop, params.stop_risk_frac, keep, lam * params.reaction_s)
+    limit_allowed = p_stop[m - 1] <= p_stop[normal] + params.stop_risk_frac + 1e-9 and not through[m - 1]
+    if best == normal and weights.size == 1 and limit_allowed and not (not red and to_change is not None and float(cross[normal, 0]) < to_change):
+        best = m - 1  # exact timing, driving normally the best plan and no red before it: the limit, said as the rules say it
     if best == normal:  # nothing does better than driving on as the driver would (the red may come late): no speed advice
         arrival = float(cross[normal, 0])
         reason = "tight_green" if not red and to_change is not None and arrival < to_change else "low_confidence"
@@ -307,6 +316,36 @@ def _decide(obs: Observation, memory: AdvisorMemory, params: AdvisorParams, tabl
     last = memory.last
     if any(light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in usable):
         return _choose(obs, usable, last, params, red, to_change)  # uncertain timing: the plan of least expected cost
+    ruled = _ruled(obs, usable, last, params, tables, red, to_change)  # exact timing: the rules, unless their plan meets an amber
+    return _choose(obs, usable, last, params, red, to_change) if _into_amber(ruled, usable, obs, params) else ruled
+
+
+def _into_amber(a: Advice, usable: tuple[LightView, ...], obs: Observation, params: AdvisorParams) -> bool:
+    """The rules' plan ``a`` (a speed for a green, or driving normally, ``tight_green``) reaches a line inside the amber
+    before a red still to come, at a light that states its amber (``LightView.amber_s``): then the choice decides, on the
+    light's one timing, weight 1 (:func:`_choose`; docs/ADVISOR.md, section 2, "An amber the driver stops for"). The rules
+    count an amber as green (:func:`advisory.advice.kinematics.green_mask`, the ``tight_green`` rule); the choice prices
+    it as the driver meets it (:func:`advisory.advice.choice.expected_costs`: stopped for where it shows while the car
+    can still stop at ``choice.AMBER_STOP_MPS2``, else cleared). Traced in SUMO (7th Street, fixed time, 600 veh/h, 10 %,
+    seed 1, ``main.97``; docs/TRAFFIC.md, "What remains"): "Hold 30 mph" for a crossing 1.2 s before the red, 2.8 s into
+    its 4 s amber, which showed 38 m out: the driver stopped and stood the red (42 s). [-]"""
+    speed_plan = a.action in KEEP_MODES and a.target_speed_mps is not None and a.reason == "green_wave"
+    if not (speed_plan or (a.action == "none" and a.reason == "tight_green")):
+        return False
+    for light in usable:
+        if light.amber_s:  # (stated: None is an amber of unknown length, 0 none)
+            d = light.distance_m
+            t = crossing_time_s(d, obs.speed_mps, a.target_speed_mps, params, KEEP_MODES[a.action]) if speed_plan else normal_crossing_s(d, obs, params)
+            if any(0.0 < start and start - light.amber_s <= t < start for start, _ in light.red_windows_s):
+                return True
+    return False
+
+
+def _ruled(obs: Observation, usable: tuple[LightView, ...], last: Advice | None, params: AdvisorParams, tables, red: bool, to_change: float | None) -> Advice:
+    """The rules on exact timing (section 2 of docs/ADVISOR.md): the plan followed kept while it makes every green, else
+    the speeds that make the greens (:func:`advisory.advice.kinematics.search`), the DP tables' pick among them, a stop or
+    a lift-off where none does, no advice where only a normal drive does (``tight_green``)."""
+    nxt = usable[0]
     if not _plan_ahead(last, obs):  # the rules keep a plan while it is feasible: not one made for a light now behind
         last = None
     both = Lines.of(usable)

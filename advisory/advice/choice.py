@@ -115,6 +115,10 @@ def _at(table, v):
     return lerp_uniform(table, RATE_DV_MPS, v)
 
 
+EXACT_EDGE_S = 1e-3
+""":data:`EDGE_S` of an exact light (fixed-time plans, exact SPaT: one timing, weight 1): its changes come when it says,
+and a crossing a millisecond before its red (or its amber) does not meet it; not 0, so that no edge divides by 0. [s]"""
+
 MAX_KNOTS = 4000
 """Steps of one priced motion at most (:data:`STEP_S` each, fewer where a speed is reached mid-step). [-]"""
 
@@ -306,14 +310,14 @@ def _later_usd(x_m, t_s, v_mps, reaction_s, j, s, lines):
     the limit, it often waits there too (2019-05-01 groups 8-9: a lift-off for light 1's amber priced as waiting at
     light 1 alone, where the regular driver waited at light 2; the car waited at both, 65 s lost). ``lines``: the
     lines and their timings as :func:`expected_costs` has them (``d_m``, ``windows``, ``n_windows``, ``after_red_s``,
-    ``clear_s``, ``v_lim``, ``rates``, ``up``, ``down``, ``idle_usd_per_s``, ``comfort``, ``normal``, ``lam``)."""
-    d_m, windows, n_windows, after_red_s, clear_s, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam = lines
+    ``clear_s``, ``edge_s``, ``v_lim``, ``rates``, ``up``, ``down``, ``idle_usd_per_s``, ``comfort``, ``normal``, ``lam``)."""
+    d_m, windows, n_windows, after_red_s, clear_s, edge_s, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam = lines
     for i in range(j + 1, d_m.size):
         dist = d_m[i] - x_m
         if dist <= 0.0:
             continue
         ti = t_s + _go_s(dist, v_mps, reaction_s, v_lim, normal)
-        k, w = _met(ti, windows, i, s, n_windows, after_red_s, -1, clear_s[i])
+        k, w = _met(ti, windows, i, s, n_windows, after_red_s, -1, clear_s[i], edge_s[i])
         if k < 0:
             continue
         vi = min(np.sqrt(v_mps * v_mps + 2.0 * normal * max(dist - v_mps * reaction_s, 0.0)), v_lim)
@@ -330,8 +334,8 @@ def _later_usd(x_m, t_s, v_mps, reaction_s, j, s, lines):
 
 
 @njit(cache=True, inline="always")
-def _early_green_usd(c, s, n_first, path, n_knots, cross_s, windows, n_windows, after_red_s, d_m, reaction_s, v_lim, normal, clear_s, x_end_m, rates,
-                     up, lam, followed_s):  # fmt: skip
+def _early_green_usd(c, s, n_first, path, n_knots, cross_s, windows, n_windows, after_red_s, d_m, reaction_s, v_lim, normal, clear_s, edge_s, x_end_m,
+                     rates, up, lam, followed_s):  # fmt: skip
     """Cost [$] (time priced at ``lam``) of plan ``c`` in timing ``s`` where a red of one of the first ``n_first`` lines ends
     before the plan reaches that line (its green comes early) and once the driver follows the plan (``followed_s`` on,
     its reaction: before, the car drives as it did, and driving on is a candidate of its own): the plan until then, a
@@ -350,7 +354,8 @@ def _early_green_usd(c, s, n_first, path, n_knots, cross_s, windows, n_windows, 
             ok = True
             for i in range(d_m.size):
                 if d_m[i] > x:
-                    ki, _ = _met(b + _go_s(d_m[i] - x, v, reaction_s, v_lim, normal), windows, i, s, n_windows, after_red_s, k if i == j else -1, clear_s[i])
+                    ki, _ = _met(b + _go_s(d_m[i] - x, v, reaction_s, v_lim, normal), windows, i, s, n_windows, after_red_s, k if i == j else -1, clear_s[i],
+                                 edge_s[i])
                     if ki >= 0:
                         ok = False
             if ok:
@@ -360,18 +365,18 @@ def _early_green_usd(c, s, n_first, path, n_knots, cross_s, windows, n_windows, 
 
 
 @njit(cache=True, inline="always")
-def _met(tc, windows, j, s, n_windows, after_red_s, skip, amber_s):
+def _met(tc, windows, j, s, n_windows, after_red_s, skip, amber_s, edge_s):
     """Window index (and the chance [-] of meeting it) of timing ``s`` at line ``j`` that a crossing at ``tc`` meets:
-    inside a red, the margin after it or the amber (``amber_s``) before a red still to come, or within :data:`EDGE_S`
-    before that (likelier the closer); -1 if none."""
+    inside a red, the margin after it or the amber (``amber_s``) before a red still to come, or within ``edge_s`` before
+    that (likelier the closer: :data:`EDGE_S`, or :data:`EXACT_EDGE_S` at an exact light); -1 if none."""
     for k in range(n_windows):
         if k == skip:
             continue
         a, b = windows[j, s, k, 0], windows[j, s, k, 1]
         if a > 0.0:
             a = max(a - amber_s, 0.0)
-        if a - EDGE_S < tc < b + after_red_s:
-            return k, 1.0 if tc >= a else (tc - (a - EDGE_S)) / EDGE_S
+        if a - edge_s < tc < b + after_red_s:
+            return k, 1.0 if tc >= a else (tc - (a - edge_s)) / edge_s
     return -1, 0.0
 
 
@@ -393,13 +398,15 @@ def _stop_usd(tb, xb, vb, ub, usd, tc, green_s, d_line, x_end_m, v_lim, rates, u
 @njit(cache=True, error_model="numpy")
 def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s,
                    cross_s, rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan,
-                   amber_max_s, skip=None, must=None, anchor=-1, risk_frac=np.inf):  # fmt: skip
+                   amber_max_s, edge_s, skip=None, must=None, anchor=-1, risk_frac=np.inf):  # fmt: skip
     """Expected cost [$] (motion plus ``lam_usd_per_s`` per second to ``x_end_m``), chance of a stop [-], and whether
     the plan crosses a red of every timing (the hard constraint) of each candidate plan (m,), over the timings
     ``windows`` (lines, timings, k, 2: red windows, padded with +inf), of probability ``weights`` (timings,: summing to
     1), of the lines ``d_m`` (lines,), reached at
     ``cross_s`` (m, lines) as the plans go. The amber before a red still to come (``clear_s`` (lines,): how long at
-    least, 0 where the light shows none; ``amber_max_s`` (lines,): how long at most) comes before its window.
+    least, 0 where the light shows none; ``amber_max_s`` (lines,): how long at most) comes before its window; ``edge_s``
+    (lines,): how well a line's changes are known (:func:`_met`: :data:`EDGE_S`, or :data:`EXACT_EDGE_S` where its
+    timing is exact).
 
     **With recourse**: the advice is made again every second, so in each timing the car follows the plan only until
     the light shows what that timing is, then does the best it can knowing it (module docstring):
@@ -439,8 +446,8 @@ def expected_costs(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, 
     a fix, against 74 and 1,202 in the candidates' own order."""
     up, down, order, paths = prepared(vts, modes, v0, anchor, rates, comfort, normal)
     return priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
-                  idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac, up,
-                  down, order, paths)  # fmt: skip
+                  idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, edge_s, skip, must, anchor,
+                  risk_frac, up, down, order, paths)  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -453,8 +460,8 @@ def prepared(vts, modes, v0, anchor, rates, comfort, normal):
 
 @njit(cache=True, error_model="numpy")
 def priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
-           idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac, up, down,
-           order, paths):  # fmt: skip
+           idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, edge_s, skip, must, anchor, risk_frac, up,
+           down, order, paths):  # fmt: skip
     """:func:`expected_costs`, given what :func:`prepared` makes of the candidates (``paths`` is overwritten): a caller
     that prices the same candidates twice makes it once (:func:`advisory.advice.screening.screened`)."""
     m, n_lines, n_sc = vts.size, d_m.size, windows.shape[1]
@@ -474,7 +481,7 @@ def priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_window
         for j in range(n_lines):  # the hard constraint: a crossing inside a red of every timing
             sure = True
             for s in range(n_sc):
-                k, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, 0.0)
+                k, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, 0.0, edge_s[j])
                 if k < 0 or w < 1.0 or cross_s[c, j] < windows[j, s, k, 0] or (windows[j, s, k, 0] > 0.0 and clear_s[j] > 0.0):
                     sure = False
                     break
@@ -509,33 +516,33 @@ def priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_window
         no_stop[:] = np.nan  # when the car can no longer stop for each line: found once an amber there needs it
         total, stops = 0.0, 0.0
         plan = usd + lam_usd_per_s * t_end
-        tail = (d_m, windows, n_windows, after_red_s, clear_s, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam_usd_per_s)
+        tail = (d_m, windows, n_windows, after_red_s, clear_s, edge_s, v_lim, rates, up, down, idle_usd_per_s, comfort, normal, lam_usd_per_s)
         for s in range(n_sc):
             if prune and stops > stop_cap:
                 total = np.inf  # not to be allowed: not priced further
                 break
             blocked, kb, w = -1, -1, 0.0
             for j in range(n_lines):
-                kb, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, clear_s[j])
+                kb, w = _met(cross_s[c, j], windows, j, s, n_windows, after_red_s, -1, clear_s[j], edge_s[j])
                 if kb >= 0:
                     blocked = j
                     break
             amber = blocked >= 0 and windows[blocked, s, kb, 0] > 0.0 and clear_s[blocked] > 0.0 and cross_s[c, blocked] < windows[blocked, s, kb, 0]
             if amber:
                 # a red still to come, after an amber, that the car would be over the line before: the amber's onset is
-                # known to within EDGE_S as the red's start is (_met), and to within its length (``clear_s`` to
+                # known to within edge_s as the red's start is (_met), and to within its length (``clear_s`` to
                 # ``amber_max_s``), uniform between; where it shows while the car can still stop for it at
                 # AMBER_STOP_MPS2 the car stops, where it shows later the car clears it (a knife edge priced as a chance:
                 # a plan a second slower than another stops for an amber that the other clears)
                 a = windows[blocked, s, kb, 0]
-                first, last = max(a - amber_max_s[blocked], 0.0) - 0.5 * EDGE_S, max(a - clear_s[blocked], 0.0) + 0.5 * EDGE_S
+                first, last = max(a - amber_max_s[blocked], 0.0) - 0.5 * edge_s[blocked], max(a - clear_s[blocked], 0.0) + 0.5 * edge_s[blocked]
                 if np.isnan(no_stop[blocked]):
                     no_stop[blocked] = _no_stop_s(path, n_knots, d_m[blocked], AMBER_STOP_MPS2)
                 w = min(max((no_stop[blocked] - first) / (last - first), 0.0), 1.0)
             early = np.inf  # the recourse of a green that comes early (none for "prepare to stop": it stops whatever)
             if not stop_plan[c] and (w < 1.0 or blocked >= 0):
                 early = _early_green_usd(c, s, n_lines if blocked < 0 else blocked + 1, path, n_knots, cross_s, windows, n_windows, after_red_s, d_m,
-                                         reaction_s, v_lim, normal, clear_s, x_end_m, rates, up, lam_usd_per_s, reactions[c])  # fmt: skip
+                                         reaction_s, v_lim, normal, clear_s, edge_s, x_end_m, rates, up, lam_usd_per_s, reactions[c])  # fmt: skip
             if w < 1.0 and stop_plan[c]:
                 # told to stop, the car stops at the line however the light shows (braked from where a comfortable stop
                 # must begin), then pulls away: dear wherever the light is likely green

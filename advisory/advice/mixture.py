@@ -145,7 +145,8 @@ def _paired(n: int, j: int) -> np.ndarray:
 
 def mixture_timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The lights' timings packed for :func:`advisory.advice.choice.expected_costs`: red windows (lines, timings, k, 2),
-    padded with +inf, and each timing's weight (timings,), summing to 1. An exact light has one timing in all of them.
+    padded with +inf, and each timing's weight (timings,), summing to 1. An exact light has one timing in all of them;
+    where every light is exact, there is that one timing, of weight 1.
 
     The mixture of each uncertain light: its forecast (equally likely timings, ``LightView.scenario_red_windows_s`` or
     read off its windows, :func:`implied_timings`), and the wide component (:func:`wide_component`) weighted by the
@@ -157,7 +158,7 @@ def mixture_timings(lights: tuple[LightView, ...]) -> tuple[np.ndarray, np.ndarr
     The wide components pair up as they are."""
     uncertain = [light.likely_red_windows_s is not None or light.scenario_red_windows_s is not None for light in lights]
     forecast = [light.scenario_red_windows_s or implied_timings(light) if u else implied_timings(light) for light, u in zip(lights, uncertain)]
-    n_fc = max(len(timings) for timings in forecast)
+    n_fc = max(len(timings) for timings in forecast) if any(uncertain) else 1  # (every light exact: one timing, weight 1)
     forecast = [_resampled(timings, n_fc) for timings in forecast]
     packed = tuple(np.require(fc.array_s, float, "CW") if u and isinstance(fc, Timings)  # (one type for the kernel: contiguous, writable)
                    else packed_windows_s(fc if u else fc[:1], _most_windows(fc if u else fc[:1])) for fc, u in zip(forecast, uncertain))  # fmt: skip

@@ -46,8 +46,8 @@ def screened(args: tuple, m: int, n_modes: int) -> tuple:
 
 @njit(cache=True)
 def _screened(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
-              idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, skip, must, anchor, risk_frac,
-              rows, m, n_modes):  # fmt: skip
+              idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, edge_s, skip, must, anchor,
+              risk_frac, rows, m, n_modes):  # fmt: skip
     """:func:`screened`: :func:`advisory.advice.choice.expected_costs`'s arguments, then the screen's members of the
     mixture (``rows``: :func:`advisory.advice.mixture.member_rows`, none where the forecast has no more timings)."""
     few, few_weights = windows, weights
@@ -57,11 +57,11 @@ def _screened(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_win
     up, down, order, paths = prepared(vts, modes, v0, anchor, rates, comfort, normal)  # (the same for both passes)
     cost, p_stop, through = priced(vts, modes, reactions, accel_rows, accels, v0, d_m, few, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s,
                                    rates, coast, idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, few_weights, stop_plan, amber_max_s,
-                                   _coarse_skip(skip, m, n_modes, SCREEN_STRIDE, anchor), must, anchor, risk_frac + slack, up, down, order, paths)  # fmt: skip
+                                   edge_s, _coarse_skip(skip, m, n_modes, SCREEN_STRIDE, anchor), must, anchor, risk_frac + slack, up, down, order, paths)  # fmt: skip
     kept = _kept_skip(skip, cost, p_stop, through, p_stop[anchor] + risk_frac + slack + 1e-9, m, n_modes, SCREEN_STRIDE, SCREEN_KEEP)
     return priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_windows, x_end_m, v_lim, after_red_s, lam_usd_per_s, cross_s, rates, coast,
-                  idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, kept, must, anchor, risk_frac, up,
-                  down, order, paths)  # fmt: skip
+                  idle_usd_per_s, comfort, firm, normal, reaction_s, min_speed_mps, clear_s, weights, stop_plan, amber_max_s, edge_s, kept, must, anchor, risk_frac,
+                  up, down, order, paths)  # fmt: skip
 
 
 @njit(cache=True)
