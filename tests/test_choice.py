@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from advisory.advice import advisor, choice
 from advisory.advice.advisor import advise
-from advisory.advice.kinematics import KEEP_MODES, MODE_CODES, crossing_time_s
+from advisory.advice.kinematics import KEEP_MODES, MODE_CODES, crossing_time_s, kernel_args, line_speeds_mps
 from advisory.advice.views import Advice, AdvisorMemory, AdvisorParams, LightView, Observation
 from advisory.evaluation.scoring import score_trace
 from advisory.physics.params import model_params
@@ -840,3 +840,27 @@ def test_at_an_exact_light_the_choice_is_the_best_plan_priced_one_by_one(monkeyp
     else:
         assert adv.reason == "green_wave" and adv.target_speed_mps == pytest.approx(min(vts[best], V_LIM))
         assert MODE_CODES[KEEP_MODES[adv.action]] == modes[best] or (adv.action in ("cruise", "accelerate", "ease_off") and modes[best] != 1)
+
+
+@pytest.mark.parametrize("before_red_s", [2.9, 3.5])
+def test_a_lift_off_that_never_reaches_its_target_is_said_at_the_speed_it_comes_to(before_red_s):
+    """Targets a lift-off never slows to before the line are one plan (the same motion, priced alike to the bit): the
+    advice names the highest of them still below the band around the car's speed, not the lowest. Traced (helper
+    wt-at): a car at a 30 mph limit 120 m before an exact light whose 4 s amber the limit would cross was told "Ease
+    off to 10 mph" and coasts over the line at ~27 mph. Checked against the coast itself (``kinematics.line_speeds_mps``,
+    independent of the choice): the car is at or above the target said when it reaches the line, and one advised step
+    higher would no longer be below the band or would be reached before the line."""
+    v = 30 * 0.44704
+    red_s = 120.0 / v + before_red_s
+    light = LightView(1, 120.0, red_windows_s=((red_s, red_s + 42.0), (red_s + 90.0, red_s + 132.0)), amber_s=4.0)
+    obs = Observation(v, v, (light,))
+    adv, _ = advise(obs, params=PARAMS)
+    assert adv.action == "ease_off"
+    _, v0, reaction, *rest = kernel_args(obs, PARAMS, None)
+    step = PARAMS.speed_step_mps
+    said, higher = np.array([adv.target_speed_mps]), np.array([adv.target_speed_mps + step])
+    at_line = float(line_speeds_mps(120.0, v0, said, MODE_CODES["auto"], reaction, *rest)[0])
+    assert at_line > adv.target_speed_mps  # the lift-off never slows to it: the whole coast is what is said
+    higher_at_line = float(line_speeds_mps(120.0, v0, higher, MODE_CODES["auto"], reaction, *rest)[0])
+    assert higher[0] >= v - PARAMS.hysteresis_mps or higher_at_line <= higher[0] + 1e-6
+    assert adv.target_speed_mps > 20 * 0.44704  # (was 10 mph: the slowest advised speed)

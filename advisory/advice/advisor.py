@@ -254,6 +254,13 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     limit_allowed = p_stop[m - 1] <= p_stop[normal] + params.stop_risk_frac + 1e-9 and not through[m - 1]
     if best == normal and weights.size == 1 and limit_allowed and not (not red and to_change is not None and float(cross[normal, 0]) < to_change):
         best = m - 1  # exact timing, driving normally the best plan and no red before it: the limit, said as the rules say it
+    while (best < n_modes * m and best % m < m - 1 and vts[best + 1] < v - params.hysteresis_mps and cost[best + 1] == cost[best]
+           and p_stop[best + 1] == p_stop[best] and not through[best + 1]):  # fmt: skip
+        # of one motion's targets, the highest still said as a slowing (below the band around the car's speed): a
+        # lift-off over the lines before it slows to its target is the same plan to every target below the speed it
+        # comes to (choice.expected_costs prices them alike, to the bit); the first of equals said "Ease off to 10 mph"
+        # to a car that coasts from 30 to 27 mph over the line
+        best += 1
     if best == normal:  # nothing does better than driving on as the driver would (the red may come late): no speed advice
         arrival = float(cross[normal, 0])
         reason = "tight_green" if not red and to_change is not None and arrival < to_change else "low_confidence"
