@@ -244,7 +244,7 @@ class QueueBoard:
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
         lane.expire(t_unix_s, MAX_AGE_S)
         self.note_behind(lane, trip_id, here, t_unix_s, obs, passed)
-        est = self.estimate(lane, here, t_unix_s, obs, self.red_elapsed(obs, t_unix_s), self._view_m[trip_id], passed)
+        est = self.estimate(lane, here, t_unix_s, obs, self.red_elapsed(obs, t_unix_s), self._view_m[trip_id])
         return self.answer(trip_id, obs, est, last_reason, params, told_mps)
 
     def red_elapsed(self, obs: Observation, t_unix_s: float) -> float | None:
@@ -346,7 +346,7 @@ class QueueBoard:
         return lane
 
     def estimate(self, lane: Lane, here_m: float, t_unix_s: float, obs: Observation, red_elapsed_s: float | None,
-                 view_m: float = math.inf, passed: LightView | None = None) -> QueueEstimate:  # fmt: skip
+                 view_m: float = math.inf) -> QueueEstimate:  # fmt: skip
         """:func:`advisory.advice.queue.estimate` over the cars that can change it, the same answer as over every car of
         the corridor, each where it is at the fix (``tests/server/test_queue_index.py``): the cars ahead up to the
         farthest light of ``obs`` plus what one following them across it keeps behind them (a jam spacing and a
@@ -355,13 +355,12 @@ class QueueBoard:
         :func:`~advisory.advice.queue.followers` counts them in (this car's own normal drive to it or the instant the
         queue ahead lets it cross, whichever is later, plus ``follow_gap_s``): none farther than that window at the
         faster of the limit and the fastest car (a normal drive is never faster); the connected ones behind the route's
-        start (``view_m`` behind this car) expected from the flow; the cars not connected arriving at the next light,
-        where the car ``passed`` a light before it, the ones that light released (:func:`~advisory.advice.queue.arriving`)."""
+        start (``view_m`` behind this car) expected from the flow."""
         m = self.model
         far_m = max(light.distance_m for light in obs.lights) + m.jam_spacing_m + m.headway_s * lane.top_mps
         reach_m = max(far_m, obs.speed_mps * m.follow_gap_s + m.jam_spacing_m)
         ahead = [p for p in lane.near(here_m, t_unix_s, 0.0, reach_m) if p.ahead_m > 0.0]
-        est = estimate(obs, ahead, m, self.arrivals_vps, self.connected_share, red_elapsed_s, self.past_red(obs, t_unix_s), passed)
+        est = estimate(obs, ahead, m, self.arrivals_vps, self.connected_share, red_elapsed_s, self.past_red(obs, t_unix_s))
         line_m, limit_mps = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
         mine_s = normal_drive_s(line_m, obs.speed_mps, limit_mps, m.drive_accel_mps2)
         window_m = (max(est.free_at_s[0], mine_s) + m.follow_gap_s) * max(lane.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6

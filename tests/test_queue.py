@@ -13,7 +13,7 @@ from advisory.advice.advisor import advise
 from advisory.advice.behind import GIVE_UP_SLACK_S, cut_behind, cut_off, gives_up_green, platoon_through, pushed_past
 from advisory.advice.choice import WAIT_CAP_S
 from advisory.advice.kinematics import KEEP_MODES, crossing_time_s
-from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, estimate, followers, normal_drive_s, released, reds_around_s
+from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, estimate, followers, normal_drive_s
 from advisory.advice.queue_words import said_truly, tail_glide
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation, time_price
 from advisory.advice.wording import published_speed_mps, spoken_speed
@@ -66,52 +66,6 @@ def test_unconnected_cars_from_the_arrival_rate():
     est = estimate(_obs(), [], arrivals_vps=0.2, connected_share=0.5, red_elapsed_s=10.0)
     assert est.cars == (3.0,) and est.known == (0,)
     assert estimate(_obs(), [], arrivals_vps=0.2, connected_share=1.0, red_elapsed_s=10.0).cars == (0.0,)
-
-
-def _second_light(upstream_seen, light_reds=((0.0, 20.0), (90.0, 120.0)), upstream_reds=((40.0, 80.0),)):
-    """A car at the limit 100 m before light 2 (there in 7.46 s), 73 m past light 1 (173 m before light 2: 12.91 s at
-    the limit), over which it crossed 5.4 s ago; light 1's reds seen by its feed ``upstream_seen``."""
-    obs = Observation(13.4, 13.4, (LightView(2, 100.0, red_windows_s=light_reds),), position_m=250.0)
-    return obs, LightView(1, -73.0, red_windows_s=upstream_reds, seen_red_windows_s=upstream_seen)
-
-
-def test_unconnected_cars_at_a_light_behind_another_are_the_ones_it_released():
-    """Arrivals at a light behind another are platoons, not a steady flow. 900 veh/h (0.25 a second), half of them
-    connected; light 2 red for 10 s, this car there in 7.46 s: the flow counts 0.5 x 0.25 x 17.46 = 2.18 cars, two.
-
-    * Light 1 red from 60 s ago until 7.5 s ago: the cars at light 2 over [-10, 7.46] s left light 1 12.91 s earlier
-      (at the limit), in its red; its queue's first car leaves 2 s after the red (this car) and is at light 2 16.26 s
-      later (from rest), at 10.8 s: none stand in front of this car. (wt-al's trace: a past red at light 2 counted
-      the flow's arrivals where light 1's red had released none.)
-    * Light 1 red from 51.4 s ago until 26 s ago: its queue is 0.25 x (25.4 + 0.6) / (1 - 0.25 x 1.4) = 10 cars
-      (fast end alone: 2 s start-up, 1.4 s a car), at light 2 from -26 + 18.26 = -7.74 s, a headway apart, the last at
-      4.86 s; then the flow, leaving light 1 from -11.4 s on, at light 2 from 1.51 s: 0.25 x 5.95 = 1.49 cars.
-      0.5 x 11.49 = 5.74: six stand in front of this car.
-    * No red of light 1 seen: the flow."""
-    kw = {"arrivals_vps": 0.25, "connected_share": 0.5, "red_elapsed_s": 10.0, "model": ONE}
-    obs, _ = _second_light(())
-    assert estimate(obs, [], **kw).cars == (2.0,)
-    obs, upstream = _second_light(((-60.0, -7.5),))
-    assert estimate(obs, [], **kw, upstream=upstream).cars == (0.0,)
-    assert released(reds_around_s(upstream), 173.0, -10.0, 100.0 / 13.4, 0.25, 13.4, ONE) == 0.0
-    obs, upstream = _second_light(((-51.4, -26.0),))
-    assert released(reds_around_s(upstream), 173.0, -10.0, 100.0 / 13.4, 0.25, 13.4, ONE) == pytest.approx(10.0 + 0.25 * (100.0 / 13.4 + 11.4 - 173.0 / 13.4))
-    assert estimate(obs, [], **kw, upstream=upstream).cars == (6.0,)
-    obs, upstream = _second_light(())
-    assert estimate(obs, [], **kw, upstream=upstream) == estimate(obs, [], **kw)
-    ahead = LightView(3, 50.0, red_windows_s=((0.0, 10.0),))  # a light ahead is no light behind: the flow
-    assert estimate(obs, [], **kw, upstream=ahead) == estimate(obs, [], **kw)
-
-
-def test_the_last_reds_queue_at_a_light_behind_another_is_what_that_light_released():
-    """Light 2 green now, its last red from 40 s ago until 5 s ago; 900 veh/h, half connected. From the flow 0.5 x
-    0.25 x 35 = 4.4 cars stood in it, four, discharging until -5 + 2 + 3 x 1.4 = 1.2 s (fast end). Light 1 red from
-    60 s ago until 18 s ago: the cars it let go before its red were at light 2 by -47 s, those after it from -16 +
-    16.26 = 0.26 s: none arrived in light 2's red, and nothing holds this car."""
-    kw = {"arrivals_vps": 0.25, "connected_share": 0.5, "model": ONE, "past_red": PastRed(-40.0, -5.0)}
-    obs, upstream = _second_light(((-60.0, -18.0),), light_reds=((50.0, 80.0),))
-    assert estimate(obs, [], **kw).clear_s[0] == pytest.approx((1.2, 1.2))
-    assert estimate(obs, [], **kw, upstream=upstream).clear_s[0] == (0.0, 0.0)
 
 
 def test_a_published_queue_length_counts_first():

@@ -25,8 +25,7 @@ from dataclasses import replace
 
 from advisory.advice.choice import WAIT_CAP_S
 from advisory.advice.kinematics import KEEP_MODES, crossing_time_s, line_speed_mps
-from advisory.advice.queue import (DISCHARGE_LEVELS, PastRed, Probe, QueueEstimate, QueueModel, cleared_s, normal_drive_s, past_queue, platoon_places_s,
-                                   unseen_behind)  # fmt: skip
+from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, cleared_s, normal_drive_s, past_queue, unseen_behind
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
 from advisory.advice.wording import phrase, published_speed_mps
 
@@ -284,6 +283,11 @@ def platoon_through(line_m: float, red_s: float, lead_s, gap_s: float, jam_m: fl
     return k - first + 1
 
 
+DISCHARGE_LEVELS = 5
+"""How many levels of the discharge, evenly spaced from its fast end to its slow end (:class:`~advisory.advice.queue.QueueModel`),
+:func:`spill_s` averages over: the expectation's quadrature, as :data:`PRICED_TIMINGS` over a light's timings. [-]"""
+
+
 def _platoon_gaps_s(model: QueueModel, limit_mps: float, levels: int = DISCHARGE_LEVELS) -> list[float]:
     """The gaps [s] of :func:`platoon_through` at ``levels`` evenly spaced levels of the discharge, from its fast end to
     its slow end (:class:`~advisory.advice.queue.QueueModel`: a car over the line every ``fast_headway_s`` to every
@@ -297,8 +301,9 @@ def _platoon_gaps_s(model: QueueModel, limit_mps: float, levels: int = DISCHARGE
     >>> [round(g + 7.5 / 25.0, 2) for g in _platoon_gaps_s(QueueModel(), 25.0, 1)]
     [1.4]
     """
+    fast, slow = model.fast_headway_s, model.headway_s
     at = [(j + 0.5) / levels for j in range(levels)] if levels > 1 else [0.0]  # one level: the fast end
-    return [max(model.at_level(level)[1] - model.jam_spacing_m / limit_mps, 0.0) for level in at]
+    return [max(fast + level * (slow - fast) - model.jam_spacing_m / limit_mps, 0.0) for level in at]
 
 
 def _platoon_counts(line_m: float, red_s: float, margin_s: float, normal, planned, gap_s: float, jam_m: float, first: int) -> tuple[int, int, int, int]:
@@ -537,8 +542,10 @@ def spill_s(light: LightView, after: LightView | None, end_s: float, queued: flo
     :func:`knock_on_s`'s count; Poisson, ``N``) a place further back in the platoon that the queue sends on to
     ``after``, a headway later; where a red of ``after`` begins between a car's place without the cut car and its
     place with it, that car meets the red and waits it out (at most :data:`advisory.advice.choice.WAIT_CAP_S`). The
-    platoon's places at ``after``'s line: :func:`~advisory.advice.queue.platoon_places_s`, the cut car the queue's
-    first (``0``). The discharge is the field's range,
+    platoon's places at ``after``'s line: the queue's ``i``-th car (the cut one ``0``) crosses ``light`` a start-up
+    and ``i`` headways after ``end_s`` at ``sqrt(2 a i \delta)`` (``i`` jam spacings to speed up in, at
+    ``drive_accel_mps2``, to the limit), drives on normally, and is never less than a headway behind the car before it
+    (Newell's car following: a car starting farther back cannot close in further). The discharge is the field's range,
     uncertain as the queue's clearing is (:class:`~advisory.advice.queue.QueueEstimate`): the wait is the mean over
     ``levels`` evenly spaced from its fast end (2 s start-up, 1.4 s a car) to its slow end (3 s, 2.0 s). ``after`` of
     uncertain timing: its likely timing. None (no light after), or no red end known: 0.
@@ -565,11 +572,12 @@ def spill_s(light: LightView, after: LightView | None, end_s: float, queued: flo
     if after is None or queued <= 0.0 or not math.isfinite(end_s):
         return 0.0
     windows = after.red_windows_s if after.likely_red_windows_s is None else after.likely_red_windows_s
-    gap_m = after.distance_m - light.distance_m
+    gap_m, accel = after.distance_m - light.distance_m, model.drive_accel_mps2
     lost = 0.0
     for level in ((j + 0.5) / levels for j in range(levels)):
-        places = platoon_places_s(end_s, gap_m, limit_mps, model, *model.at_level(level))
-        place_s = next(places)  # the cut car's
+        startup_s = model.fast_startup_s + level * (model.startup_s - model.fast_startup_s)
+        headway_s = model.fast_headway_s + level * (model.headway_s - model.fast_headway_s)
+        place_s = end_s + startup_s + normal_drive_s(gap_m, 0.0, limit_mps, accel)  # the cut car's
         last_s = max((a for a, _ in windows if a > place_s), default=-math.inf)  # no place moves past a later red's start
         p_at_least, p_k = 1.0, math.exp(-queued)  # P(N >= i - 1), P(N = i - 1)
         for i in range(1, 200):
@@ -577,7 +585,9 @@ def spill_s(light: LightView, after: LightView | None, end_s: float, queued: flo
             p_k *= queued / i
             if p_at_least < 1e-4 or place_s >= last_s:
                 break
-            before_s, place_s = place_s, next(places)  # its place without the cut car, and with it
+            v_mps = min(math.sqrt(2.0 * accel * i * model.jam_spacing_m), limit_mps)
+            own_s = end_s + startup_s + i * headway_s + normal_drive_s(gap_m, v_mps, limit_mps, accel)
+            before_s, place_s = place_s, max(own_s, place_s + headway_s)  # its place without the cut car, and with it
             red = next(((a, b) for a, b in windows if before_s < a <= place_s), None)
             if red is not None and not any(a <= before_s < b for a, b in windows):
                 lost += p_at_least * min(red[1] - red[0], WAIT_CAP_S)

@@ -15,11 +15,10 @@ Where the count comes from, in order of trust (issue 28):
 2. The connected cars ahead on the approach (:class:`Probe`: the service knows where every trip on the corridor is,
    to the second): between this car and the line, each one that will reach the line during the red (or stands
    before it) is in the queue.
-3. An arrival-rate estimate for the cars that are not connected: ``(1 - share) x`` the cars arriving from the red's
+3. An arrival-rate estimate for the cars that are not connected: ``(1 - share) x flow x`` the time from the red's
    start to this car's own unimpeded arrival at the line (every car arriving at the line in that time is ahead of it
-   and stands), only at the next light, never more than fit between the car and the line. The cars arriving: the
-   flow over that time, or, at a light behind another one (the one the car passed last), the platoons that light
-   released (:func:`arriving`, :func:`released`): none in its red, its queue after it, then the flow.
+   and stands), only at the next light (at the one after it, arrivals are platoons released by the first), never more
+   than fit between the car and the line.
 
 After a red has ended its queue goes on discharging (:func:`past_queue`: the jam last published in it, else the
 cars not connected arriving over it), the connected cars ahead behind it: it is not forgotten at the green.
@@ -55,9 +54,8 @@ Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 
 from __future__ import annotations
 
-import itertools
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from advisory.advice.mixture import implied_timings
@@ -101,22 +99,6 @@ class QueueModel:
     controller's passage time, unit extension or gap: 2-4 s in the field, the short end the snappiest and the one
     assumed here; SUMO's ``max-gap`` 3 s): the queue in front discharging over its line holds it, and a car reaching
     the line within this long after the queue's last car holds it too (:func:`~advisory.advice.behind.keeps_green`). [s]"""
-
-    def at_level(self, level: float) -> tuple[float, float]:
-        """The discharge's start-up and headway [s] at ``level`` of its range: 0 the fast end (``fast_startup_s``,
-        ``fast_headway_s``), 1 the slow end (``startup_s``, ``headway_s``), linear between.
-
-        >>> QueueModel().at_level(0.0), QueueModel().at_level(0.5), QueueModel().at_level(1.0)
-        ((2.0, 1.4), (2.5, 1.7), (3.0, 2.0))
-        """
-        return (self.fast_startup_s + level * (self.startup_s - self.fast_startup_s),
-                self.fast_headway_s + level * (self.headway_s - self.fast_headway_s))  # fmt: skip
-
-
-DISCHARGE_LEVELS = 5
-"""How many levels of the discharge, evenly spaced from its fast end to its slow end (:meth:`QueueModel.at_level`),
-the counts over it average (:func:`released`, :func:`advisory.advice.behind.spill_s`): the expectation's quadrature,
-as :data:`advisory.advice.behind.PRICED_TIMINGS` over a light's timings. [-]"""
 
 
 @dataclass(frozen=True, slots=True)
@@ -183,7 +165,6 @@ def estimate(
     connected_share: float = 1.0,
     red_elapsed_s: float | None = None,
     past_red: PastRed | None = None,
-    upstream: LightView | None = None,
 ) -> QueueEstimate:
     """The cars in front of the car of ``obs`` at each light and when it can cross behind them (module docstring).
 
@@ -196,13 +177,9 @@ def estimate(
     lane [veh/s] (None: the connected cars alone); ``connected_share``: the share of those cars that are connected;
     ``red_elapsed_s``: how long the next light's current red has been on (None: unknown, counted from now);
     ``past_red``: the next light's last red, where it is not red now: the queue that formed in it goes on
-    discharging after its end (:func:`past_queue`), and the cars ahead join it; ``upstream``: the light the car passed
-    last, before the next one: the cars not connected arriving at the next light over a red are the ones it released
-    (:func:`arriving`), not the flow."""
+    discharging after its end (:func:`past_queue`), and the cars ahead join it."""
     model = model or QueueModel()
     v_free = max(obs.speed_limit_mps, 1.0)
-    upstream = upstream if upstream is not None and obs.lights and upstream.distance_m <= 0.0 else None
-    gap_m = obs.lights[0].distance_m - upstream.distance_m if upstream is not None else 0.0  # from its line to the next one
     cars, known, free_at, clears, after_reds = [], [], [], [], []
     before, stop_behind = 0.0, False
     for i, light in enumerate(obs.lights):
@@ -223,12 +200,11 @@ def estimate(
         if i == 0 and queue_m is None and arrivals_vps is not None and arrivals_vps > 0.0 and connected_share < 1.0 and red is not None:
             began = -(red_elapsed_s or 0.0) if start <= 0.0 else start
             mine = light.distance_m / v_free  # this car's unimpeded arrival at the line
-            n_unseen = (1.0 - connected_share) * arriving(began, min(end, mine), arrivals_vps, v_free, model, upstream, gap_m)
+            n_unseen = (1.0 - connected_share) * arrivals_vps * max(0.0, min(end, mine) - began)
             n_unseen = min(n_unseen, max(light.distance_m / model.jam_spacing_m - 1.0 - len(ahead), 0.0))
             arrivals = [max(start, 0.0)] * int(round(n_unseen)) + arrivals  # they arrived first: ahead in the queue
         # the past red's queue still discharging (fast, slow: its last car's crossing), the cars ahead behind it
-        (prev_fast, prev), n_prev = (past_queue(past, model, arrivals_vps, connected_share, light.distance_m, len(ahead), upstream, gap_m, v_free) if past
-                                     else ((-math.inf,) * 2, 0))  # fmt: skip
+        (prev_fast, prev), n_prev = past_queue(past, model, arrivals_vps, connected_share, light.distance_m, len(ahead)) if past else ((-math.inf,) * 2, 0)
         # the discharge, slow and fast, counted from the red's end (one whose end is unknown: from after every arrival)
         ref = end if math.isfinite(end) else max([max(start, 0.0), *arrivals]) + 1.0
         crossed, holding = _discharge(arrivals, start, ref, model.startup_s, model.headway_s, prev)
@@ -322,15 +298,13 @@ class PastRed:
 
 
 def past_queue(past: PastRed, model: QueueModel, arrivals_vps: float | None, connected_share: float, line_m: float,
-               n_ahead: int, upstream: LightView | None = None, gap_m: float = 0.0, limit_mps: float = 1.0) -> tuple[tuple[float, float], int]:  # fmt: skip
+               n_ahead: int) -> tuple[tuple[float, float], int]:  # fmt: skip
     """The queue that formed in the last red of a light green now, discharging since its end: when its last car
     crosses the line (fast, slow: :class:`QueueModel`, from now) [s], and how many of its cars are still to cross [-].
 
     Its cars: the jam the controller last published in the red (one car per jam spacing; the connected cars in it are
-    among them), else the cars that are not connected arriving over the red, ``1 - connected_share`` of the flow's
-    ``arrivals_vps x`` its length, or of what the light ``upstream`` (``gap_m`` before it, at ``limit_mps``) released
-    in time to arrive in it (:func:`arriving`) (the connected ones are probes: :func:`estimate` has them join it where
-    they are). The first crosses
+    among them), else the cars that are not connected arriving over the red, ``(1 - connected_share) x arrivals_vps x``
+    its length (the connected ones are probes: :func:`estimate` has them join it where they are). The first crosses
     ``startup_s`` after the red's end, each next one ``headway_s`` later; no more are still to cross than fit between
     this car (``line_m`` from the line, ``n_ahead`` connected cars in front of it) and the line. Before, the queue was
     forgotten at the green (the red's start dropped, the published jam gone when its first car moves): a car at the
@@ -351,7 +325,7 @@ def past_queue(past: PastRed, model: QueueModel, arrivals_vps: float | None, con
     if past.queue_m is not None:
         n = round(max(min(past.queue_m, line_m - model.jam_spacing_m), 0.0) / model.jam_spacing_m)
     elif arrivals_vps and connected_share < 1.0:
-        n = round((1.0 - connected_share) * arriving(past.start_s, past.end_s, arrivals_vps, limit_mps, model, upstream, gap_m))
+        n = round((1.0 - connected_share) * arrivals_vps * max(past.end_s - past.start_s, 0.0))
     else:
         n = 0
     if n == 0:
@@ -360,132 +334,6 @@ def past_queue(past: PastRed, model: QueueModel, arrivals_vps: float | None, con
     fast = min(past.end_s + model.fast_startup_s + (n - 1) * model.fast_headway_s, fit * model.fast_headway_s)
     slow = min(past.end_s + model.startup_s + (n - 1) * model.headway_s, fit * model.headway_s)
     return (fast, slow), max(math.ceil(slow / model.headway_s - 1e-9), 0) if slow > 0.0 else 0
-
-
-def platoon_places_s(end_s: float, gap_m: float, limit_mps: float, model: QueueModel, startup_s: float, headway_s: float) -> Iterator[float]:
-    r"""When the cars of the queue that a red ending at ``end_s`` (from now) released reach a line ``gap_m`` past the
-    one they stood at, in their order [s], without end: the queue's ``i``-th car (from 0) leaves its line ``startup_s``
-    and ``i`` headways after ``end_s`` at ``sqrt(2 a i \delta)`` (``i`` jam spacings to speed up in, at
-    ``drive_accel_mps2``, to the limit ``limit_mps``), drives on normally, and is never less than a headway behind
-    the car before it (Newell's car following: a car starting farther back cannot close in further).
-
-    Examples
-    --------
-    A red ending now, a line 173 m on at 13.4 m/s: the first car leaves 2 s after it from rest and is there 16.26 s
-    later (6.7 s to the limit over 44.9 m, 9.56 s the rest); the next ones, leaving 1.4 s apart with a running start
-    (the second at 5.5 m/s, there 17.48 s from now on its own), are each a headway behind the one before.
-
-    >>> places = platoon_places_s(0.0, 173.0, 13.4, QueueModel(), 2.0, 1.4)
-    >>> [round(next(places), 2) for _ in range(3)]
-    [18.26, 19.66, 21.06]
-    """
-    place_s = -math.inf
-    for i in itertools.count():
-        v_mps = min(math.sqrt(2.0 * model.drive_accel_mps2 * i * model.jam_spacing_m), limit_mps)
-        own_s = end_s + startup_s + i * headway_s + normal_drive_s(gap_m, v_mps, limit_mps, model.drive_accel_mps2)
-        place_s = max(own_s, place_s + headway_s)
-        yield place_s
-
-
-def released(reds_s: Sequence[tuple[float, float]], gap_m: float, from_s: float, to_s: float, arrivals_vps: float, limit_mps: float,
-             model: QueueModel, levels: int = DISCHARGE_LEVELS) -> float:  # fmt: skip
-    r"""The cars expected to reach a line between ``from_s`` and ``to_s`` (from now) that a light ``gap_m`` before it
-    released, its reds ``reds_s`` (from now, sorted, the past ones too: :func:`reds_around_s`), the flow arriving at
-    that light ``arrivals_vps`` per lane [veh/s] (Poisson, mean) [-].
-
-    Arrivals at a light behind another are not a steady flow (issue 28: arrivals at a second light are platoons):
-    during the first light's red it releases none; after it, its queue: the cars that arrived over the red and while
-    it discharges, ``n = q (g - a) / (1 - q h)`` with ``g = b + s - h`` the effective green's start (the red from ``a``
-    to ``b``, start-up ``s``, headway ``h``: the ``i``-th car leaves at ``b + s + i h``), no more than leave before the
-    next red, each at its place at this line (:func:`platoon_places_s`); then the flow again, ``q`` a second, each
-    car ``gap_m / limit_mps`` later at this line. Before the first red known, the flow. The mean over ``levels`` of
-    the discharge from its fast to its slow end (:meth:`QueueModel.at_level`), as the queue's clearing. The platoon
-    does not disperse between the lines (Robertson's platoon dispersion would spread it over a longer gap).
-
-    Examples
-    --------
-    One level (the fast end and the slow end alike: 2 s start-up, 2 s a car), 900 veh/h (0.25 a second), the first
-    light's red from 30 s ago to now and again from 30 s to 60 s, the line 173 m on (12.9 s at 13.4 m/s). Its queue:
-    ``0.25 x 30 / (1 - 0.5)`` = 15 cars, leaving 2, 4, ..., 30 s from now, the green's whole length, here from 18.26 s
-    (16.26 s from rest) to 46.26 s, each a headway behind the one before: over the next 78 s, the platoon's size, 15
-    (the flow: 19.5). A red at this line from 47 s to 78 s coincides with the first light's red (the next platoon's
-    first car is here 62 + 16.26 s from now): none arrive in it (the flow: 7.75).
-
-    >>> one = QueueModel(startup_s=2.0, headway_s=2.0, fast_startup_s=2.0, fast_headway_s=2.0)
-    >>> reds = ((-30.0, 0.0), (30.0, 60.0))
-    >>> released(reds, 173.0, 0.0, 78.0, 0.25, 13.4, one), released(reds, 173.0, 47.0, 78.0, 0.25, 13.4, one)
-    (15.0, 0.0)
-
-    A light green for long (no red known): the flow, 0.25 x 31 s.
-
-    >>> released((), 173.0, 47.0, 78.0, 0.25, 13.4, one)
-    7.75
-    """
-    if to_s <= from_s or not arrivals_vps or arrivals_vps <= 0.0:
-        return 0.0
-    travel_s = gap_m / max(limit_mps, 0.1)  # the fastest: at the limit all the way
-    slowest_s = normal_drive_s(gap_m, 0.0, limit_mps, model.drive_accel_mps2)  # from rest: no place is later (Newell)
-
-    def flow(lo_s: float, hi_s: float) -> float:  # the flow leaving the first line from lo_s to hi_s, at this line in [from_s, to_s)
-        return arrivals_vps * max(min(hi_s + travel_s, to_s) - max(lo_s + travel_s, from_s), 0.0)
-
-    total = 0.0
-    for level in ((j + 0.5) / levels for j in range(levels)):
-        startup_s, headway_s = model.at_level(level)
-        count, flow_from = 0.0, -math.inf
-        for k, (a, b) in enumerate(reds_s):
-            count += flow(flow_from, a)
-            if not math.isfinite(b) or b + travel_s >= to_s:  # (nothing it releases is at the line before to_s)
-                flow_from = math.inf
-                break
-            nxt = reds_s[k + 1][0] if k + 1 < len(reds_s) else math.inf
-            g = b + startup_s - headway_s
-            load = arrivals_vps * headway_s
-            n = min(arrivals_vps * (g - a) / (1.0 - load) if load < 1.0 else math.inf, max(nxt - g, 0.0) / headway_s,
-                    max(to_s - g, 0.0) / headway_s + 1.0)  # (a car leaving after to_s is not at the line before it)  # fmt: skip
-            if g + math.ceil(n) * headway_s + slowest_s >= from_s:  # (its last car, at the latest, in time to count)
-                for i, place_s in zip(range(math.ceil(n)), platoon_places_s(b, gap_m, limit_mps, model, startup_s, headway_s)):
-                    if place_s >= to_s:
-                        break
-                    if place_s >= from_s:
-                        count += min(n - i, 1.0)
-            flow_from = g + n * headway_s
-        total += count + flow(flow_from, math.inf)
-    return total / levels
-
-
-def reds_around_s(light: LightView) -> tuple[tuple[float, float], ...]:
-    """``light``'s reds from now, the past ones too: the ones its feed's history saw end (``LightView.seen_red_windows_s``),
-    the one on now from its start as seen (from now, where no history saw it begin), then the coming ones as each
-    change is likely. [s]
-
-    Examples
-    --------
-    >>> lv = LightView(1, -20.0, red_windows_s=((0.0, 12.0), (60.0, 90.0)), seen_red_windows_s=((-120.0, -90.0), (-30.0, math.inf)))
-    >>> reds_around_s(lv)
-    ((-120.0, -90.0), (-30.0, 12.0), (60.0, 90.0))
-    """
-    coming = light.red_windows_s if light.likely_red_windows_s is None else light.likely_red_windows_s
-    seen = [(a, b) for a, b in light.seen_red_windows_s if a <= 0.0]
-    ended = [(a, b) for a, b in seen if b <= 0.0]
-    began = next((a for a, b in seen if b > 0.0), 0.0)
-    return (*ended, *((min(a, began) if a <= 0.0 else a, b) for a, b in coming if b > 0.0))
-
-
-def arriving(from_s: float, to_s: float, arrivals_vps: float | None, limit_mps: float, model: QueueModel, upstream: LightView | None = None,
-             gap_m: float = 0.0) -> float:  # fmt: skip
-    """The cars expected to reach a line between ``from_s`` and ``to_s`` from now [-]: what the light ``upstream``
-    (``gap_m`` before it: the one the car passed last) released (:func:`released`), or, where there is none, the flow,
-    ``arrivals_vps x (to_s - from_s)``.
-
-    >>> arriving(-10.0, 20.0, 0.25, 13.4, QueueModel()), arriving(-10.0, 20.0, None, 13.4, QueueModel())
-    (7.5, 0.0)
-    """
-    if not arrivals_vps or to_s <= from_s:
-        return 0.0
-    if upstream is None:
-        return arrivals_vps * (to_s - from_s)
-    return released(reds_around_s(upstream), gap_m, from_s, to_s, arrivals_vps, limit_mps, model)
 
 
 def _close(obs: Observation, ahead_m: float, model: QueueModel) -> bool:

@@ -92,12 +92,6 @@ class LightView:
     """The queue standing back from the stop line that the controller published with a fresh reading (J2735
     ``queueLength``; queue-aware advice counts its cars first, :func:`advisory.advice.queue.estimate`); None: not said. [m]"""
 
-    seen_red_windows_s: tuple[tuple[float, float], ...] = ()
-    """The reds that began before now as the light's feed (its history, or its fixed plan) saw them, relative to now,
-    in order: the ended ones, and the one on now (its end inf: the windows above say it), over the last few minutes;
-    () where nothing saw them. Queue-aware advice counts the platoons this light released to the one after it
-    (:func:`advisory.advice.queue.released`). [s]"""
-
     def likely_red_at(self, t_s: float) -> bool:
         """Red at ``t_s`` seconds from now if every change comes at its likely time (exact plans: :meth:`is_red_at`);
         a phase of unknown state is not a red."""

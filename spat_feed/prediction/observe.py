@@ -46,7 +46,6 @@ Conversion of one light (:func:`light_view`):
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -492,49 +491,6 @@ def _fixed_red_windows_s(plan: FixedTimePlan, t_unix_s: float, horizon_s: float)
     return tuple(out)
 
 
-SEEN_S = 240.0
-"""How far back :func:`seen_red_windows_s` looks: a cycle or two of a light, the platoons its past reds still send
-to the next light (:func:`advisory.advice.queue.released`). [s]"""
-
-
-def seen_red_windows_s(plan: Plan, cycle: CycleStats | None, t_unix_s: float, back_s: float = SEEN_S) -> tuple[tuple[float, float], ...]:
-    """The reds that began before ``t_unix_s`` (within ``back_s``), relative to it, in order (``LightView.seen_red_windows_s``):
-    a fixed plan's own; else the ones the group's history saw (``cycle``): each red that ended (its start the end of
-    the phase before it, the class its history saw followed by red), and the one on now from when it was first seen
-    (its end inf). () where neither says. [s]
-
-    Examples
-    --------
-    >>> seen_red_windows_s(FixedTimePlan(30, 30, offset_s=1000.0), None, 1100.0, back_s=100.0)
-    ((-100.0, -70.0), (-40.0, -10.0))
-    >>> seen_red_windows_s(FixedTimePlan(30, 30, offset_s=1000.0), None, 1070.0, back_s=100.0)
-    ((-70.0, -40.0), (-10.0, inf))
-    >>> stats = CycleStats(following={PhaseClass.GREEN: PhaseClass.AMBER, PhaseClass.AMBER: PhaseClass.RED, PhaseClass.RED: PhaseClass.GREEN},
-    ...                    current=PhaseClass.RED, since_unix_s=990.0,
-    ...                    ends_unix_s={PhaseClass.AMBER: (904.0, 964.0), PhaseClass.RED: (934.0,), PhaseClass.GREEN: (900.0, 960.0)})
-    >>> seen_red_windows_s(None, stats, 1000.0)
-    ((-96.0, -66.0), (-10.0, inf))
-    """
-    if isinstance(plan, FixedTimePlan):
-        windows = _fixed_red_windows_s(plan, t_unix_s - back_s, back_s)
-        return tuple((a - back_s, b - back_s if b <= back_s else math.inf) for a, b in windows)
-    if cycle is None:
-        return ()
-    red, lo = PhaseClass.RED, t_unix_s - back_s
-    ends = cycle.ends_unix_s.get(red, ())  # (each in time order)
-    ends = ends[bisect.bisect_right(ends, lo):]
-    starts = sorted(e for c, before in cycle.ends_unix_s.items() if c is not red and cycle.following.get(c) is red
-                    for e in before[bisect.bisect_right(before, lo - back_s):])  # fmt: skip
-    out: list[tuple[float, float]] = []
-    for end in ends:
-        k = bisect.bisect_left(starts, end)
-        if k > 0 and (not out or starts[k - 1] - t_unix_s >= out[-1][1]):
-            out.append((starts[k - 1] - t_unix_s, end - t_unix_s))
-    if cycle.current is red and cycle.since_unix_s is not None:
-        out.append((cycle.since_unix_s - t_unix_s, math.inf))
-    return tuple(out)
-
-
 def confidence_frac(plan: Plan, t_unix_s: float, horizon_s: float = HORIZON_S) -> float:
     """Lowest confidence of the changes into or out of red whose window overlaps ``[t, t + horizon]``. [-]"""
     if isinstance(plan, FixedTimePlan):
@@ -669,7 +625,6 @@ def light_view(
         scenario_red_windows_s=scenarios if likely != windows else None,
         queue_m=reading.queue_m if reading.fresh else None,
         amber_s=reading.amber_s,
-        seen_red_windows_s=seen_red_windows_s(plan, reading.cycle, t_feed),
     )
 
 
