@@ -251,8 +251,8 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     cost, p_stop, through = choice.expected_costs(*args) if weights.size == 1 else screened(args, m, n_modes)
     through |= crossed
     best = choice.least_cost(cost, p_stop, through, normal, stop, params.stop_risk_frac, keep, lam * params.reaction_s)
-    limit_allowed = p_stop[m - 1] <= p_stop[normal] + params.stop_risk_frac + 1e-9 and not through[m - 1]
-    if best == normal and weights.size == 1 and limit_allowed and not (not red and to_change is not None and float(cross[normal, 0]) < to_change):
+    if (best == normal and weights.size == 1 and choice.allowed(m - 1, p_stop, through, normal, params.stop_risk_frac)
+            and not (not red and to_change is not None and float(cross[normal, 0]) < to_change)):  # fmt: skip
         best = m - 1  # exact timing, driving normally the best plan and no red before it: the limit, said as the rules say it
     while (best < n_modes * m and best % m < m - 1 and vts[best + 1] < v - params.hysteresis_mps and cost[best + 1] == cost[best]
            and p_stop[best + 1] == p_stop[best] and not through[best + 1]):  # fmt: skip

@@ -622,6 +622,13 @@ def priced(vts, modes, reactions, accel_rows, accels, v0, d_m, windows, n_window
 
 
 @njit(cache=True)
+def allowed(c, p_stop, through, anchor, risk_frac):
+    """Whether plan ``c`` may be chosen: not through a red (``through``, the hard constraint) and a chance of a stop at
+    most ``risk_frac`` above driving normally's (candidate ``anchor``: the chance constraint). [-]"""
+    return p_stop[c] <= p_stop[anchor] + risk_frac + 1e-9 and not through[c]
+
+
+@njit(cache=True)
 def least_cost(cost, p_stop, through, anchor, stop, risk_frac, keep, margin_usd):
     """The plan chosen (index into the candidates (m,), as :func:`expected_costs` priced them; ``through``: a red met,
     the hard constraint): of the plans allowed (not through a red, a chance of a stop at most ``risk_frac`` above
@@ -631,10 +638,9 @@ def least_cost(cost, p_stop, through, anchor, stop, risk_frac, keep, margin_usd)
     allowed cost inf, the least fell on plan 0, through a red of every timing). Then the plan followed now where allowed
     and it costs no more than that one by ``margin_usd`` (a new reaction's worth), else the plan ``stop`` so."""
     m = cost.size
-    cap = p_stop[anchor] + risk_frac + 1e-9
     best, least, nan_at, finite = 0, np.inf, -1, False
     for c in range(m):
-        if p_stop[c] <= cap and not through[c] and (keep or c < m - 1):
+        if allowed(c, p_stop, through, anchor, risk_frac) and (keep or c < m - 1):
             if np.isnan(cost[c]):
                 nan_at = c if nan_at < 0 else nan_at
             else:
@@ -642,9 +648,9 @@ def least_cost(cost, p_stop, through, anchor, stop, risk_frac, keep, margin_usd)
                 if cost[c] < least:
                     best, least = c, cost[c]
     best = stop if not finite else nan_at if nan_at >= 0 else best
-    if keep and p_stop[m - 1] <= cap and not through[m - 1] and cost[m - 1] <= cost[best] + margin_usd:
+    if keep and allowed(m - 1, p_stop, through, anchor, risk_frac) and cost[m - 1] <= cost[best] + margin_usd:
         return m - 1  # the plan followed now, unless another is better by more than a new reaction costs
-    if p_stop[stop] <= cap and not through[stop] and cost[stop] <= cost[best] + margin_usd:
+    if allowed(stop, p_stop, through, anchor, risk_frac) and cost[stop] <= cost[best] + margin_usd:
         return stop  # as good a plan as any (within a reaction's worth): the stop it comes to, said
     return best
 
