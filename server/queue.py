@@ -258,7 +258,8 @@ class QueueBoard:
         red kept had it surely end before now is a new one: a green came between that no fix saw (with few connected
         cars the next fix on a light can come a cycle later), and the red kept has ended. Before, a red was counted
         from a fix on such a green and kept from cycle to cycle, and the cars not connected arriving "over the red"
-        with it: 19 cars where 5 stood (paper_s400 actuated 900 veh/h, 10 %, seed 5, ``main.91``, docs/TRAFFIC.md)."""
+        with it: 19 cars where 5 stood (paper_s400 actuated 900 veh/h, 10 %, seed 5, ``main.91``,
+        docs/history/TRAFFIC.md)."""
         nxt = obs.lights[0]
         key = nxt.intersection_id
         shown = nxt.red_now and (nxt.late_red_windows_s is None or any(a <= 0.0 < b for a, b in nxt.late_red_windows_s))

@@ -735,17 +735,19 @@ def test_past_the_last_light_resume_said_stays_until_the_limit():
     assert said([limit - band + 0.01])[0][0] == "cruise"  # nothing said before: the band's edge as it is
 
 
-AMBER_7TH_S = 4.0  # the amber of 7th Street's fixed-time lights in SUMO (docs/TRAFFIC.md, "What remains")
+# the amber of 7th Street's fixed-time lights in SUMO (docs/history/TRAFFIC.md, "What remains, as the sessions left it")
+AMBER_7TH_S = 4.0
 
 
 @pytest.mark.parametrize("before_red_s", [1.2, 2.7])
 def test_an_amber_the_driver_stops_for_is_not_planned_through_at_an_exact_light(before_red_s):
-    """Helper wt-al's trace (docs/TRAFFIC.md, "What remains", ``main.97``): 7th Street, fixed time, a 4 s amber; the car
-    at the 30 mph limit, 379 m out, was told "Hold 30 mph" for a crossing 1.2 s before the red, 2.8 s into the amber.
-    By hand: the amber shows at 379 / 13.41 - 2.8 = 25.5 s, 2.8 x 13.41 = 37.5 m out, where 13.41² / (2 x 4) = 22.5 m
-    stop the car at ``choice.AMBER_STOP_MPS2``: the driver stops and stands the red (42 s). The rules count an amber as
-    green; the choice on the one timing prices the stop, and the advice no longer crosses in that amber. A crossing 2.7
-    s before the red (the amber shows 1.3 s out, 17.4 m: no stop at 4 m/s²) is cleared, and holding the limit stays."""
+    """Helper wt-al's trace (docs/history/TRAFFIC.md, "What remains, as the sessions left it", ``main.97``): 7th
+    Street, fixed time, a 4 s amber; the car at the 30 mph limit, 379 m out, was told "Hold 30 mph" for a crossing
+    1.2 s before the red, 2.8 s into the amber. By hand: the amber shows at 379 / 13.41 - 2.8 = 25.5 s, 2.8 x 13.41 =
+    37.5 m out, where 13.41² / (2 x 4) = 22.5 m stop the car at ``choice.AMBER_STOP_MPS2``: the driver stops and
+    stands the red (42 s). The rules count an amber as green; the choice on the one timing prices the stop, and the
+    advice no longer crosses in that amber. A crossing 2.7 s before the red (the amber shows 1.3 s out, 17.4 m: no
+    stop at 4 m/s²) is cleared, and holding the limit stays."""
     v = 30 * 0.44704
     cross_s = 379.0 / v
     red_s = cross_s + before_red_s

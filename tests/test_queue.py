@@ -197,8 +197,8 @@ def _actuated_green(distance_m):
 
 
 def test_a_queue_discharging_on_an_actuated_green_holds_it_until_its_maximum():
-    """Traced in SUMO (paper_s400 actuated 900 veh/h, 50 %, seed 5, ``main.11``, docs/TRAFFIC.md): the queue in front
-    of the car discharges on a green whose minimum comes before it has crossed. Four cars stand at the line (on a
+    """Traced in SUMO (paper_s400 actuated 900 veh/h, 50 %, seed 5, ``main.11``, docs/history/TRAFFIC.md): the queue in
+    front of the car discharges on a green whose minimum comes before it has crossed. Four cars stand at the line (on a
     green: one car a headway), a fifth arrives 60 m out at 10 m/s, at the line in (-10 + sqrt(100 + 4 x 60)) / 2 =
     4.22 s: after the green's minimum (4 s), before its last car has crossed. Before, it waited for the red after the
     minimum, whose end is unknown: the queue never cleared, and the line was closed to the car behind for ever. The
@@ -841,7 +841,7 @@ def test_a_car_cut_off_also_pushes_the_next_platoon_into_the_next_lights_red(nex
     the cut car's place. A red there from 70 s meets it (it waits that red, 30 s), one from 120 s meets no place the
     queue moves (as before). Before, only the first light's red and queue were priced: the second light's red, which
     the delayed platoon's tail met in SUMO, was not (paper_s400 fixed 600 veh/h 50 %, seed 3: 227 of the others' 309
-    s, docs/TRAFFIC.md)."""
+    s, docs/history/TRAFFIC.md)."""
     params = AdvisorParams()
     passed = LightView(1, -7.0, red_windows_s=((15.0, 45.0),))
     nxt = LightView(2, 393.0, red_windows_s=((0.0, 40.0), (next_red_s, next_red_s + 30.0)))
@@ -1042,10 +1042,10 @@ def test_in_sumo_a_slow_plan_over_the_first_light_does_not_cut_off_the_cars_behi
 
 
 def test_in_sumo_cars_follow_a_queue_through_an_actuated_green_that_it_holds(tmp_path):
-    """paper_s400 actuated, 900 veh/h, half the cars connected, seed 5's first two minutes (docs/TRAFFIC.md, "The
-    actuated green held by its queue"): the second light turns green at 71 s with a queue in front of the connected
-    cars ``main.4``-``main.8``. Unadvised, they cross it in that green (79.5-85 s). Before, the service took the
-    queue to wait for the red after the green's minimum, whose end was not yet known (no red of it in the history):
+    """paper_s400 actuated, 900 veh/h, half the cars connected, seed 5's first two minutes (docs/history/TRAFFIC.md,
+    "The actuated green held by its queue"): the second light turns green at 71 s with a queue in front of the
+    connected cars ``main.4``-``main.8``. Unadvised, they cross it in that green (79.5-85 s). Before, the service took
+    the queue to wait for the red after the green's minimum, whose end was not yet known (no red of it in the history):
     the line closed for ever, they crawled on, the green ended for want of a car at the detector and they crossed in
     the next one (109-117 s). Now the queue holds the green in the estimate, as the controller's detector does: every
     one of them crosses in the same green as unadvised."""

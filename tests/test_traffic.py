@@ -153,7 +153,7 @@ def test_an_actuated_reading_at_a_due_switch_names_the_phase_after_it(oakland_ac
     """A phase due to end at a publication (its maxDur reached: SUMO switches at the start of the coming step) is
     published with the event after it, so every reading says the state SUMO shows from its stamp on, and its window
     holds that state's end. (Before, such a reading published the ended phase alone: past all its events, the
-    service had no state for the light that second, 2 % of the readings; docs/TRAFFIC.md, "What remains".)"""
+    service had no state for the light that second, 2 % of the readings; docs/TRAFFIC.md, "How it works".)"""
     net = oakland_actuated
     states, plans = _run_source(net, 300.0, cross_vph=400.0)
     by_t = dict(states)

@@ -334,8 +334,9 @@ def _into_amber(a: Advice, usable: tuple[LightView, ...], obs: Observation, para
     count an amber as green (:func:`advisory.advice.kinematics.green_mask`, the ``tight_green`` rule); the choice prices
     it as the driver meets it (:func:`advisory.advice.choice.expected_costs`: stopped for where it shows while the car
     can still stop at ``choice.AMBER_STOP_MPS2``, else cleared). Traced in SUMO (7th Street, fixed time, 600 veh/h, 10 %,
-    seed 1, ``main.97``; docs/TRAFFIC.md, "What remains"): "Hold 30 mph" for a crossing 1.2 s before the red, 2.8 s into
-    its 4 s amber, which showed 38 m out: the driver stopped and stood the red (42 s). [-]"""
+    seed 1, ``main.97``; docs/history/TRAFFIC.md, "What remains, as the sessions left it"): "Hold 30 mph" for a
+    crossing 1.2 s before the red, 2.8 s into its 4 s amber, which showed 38 m out: the driver stopped and stood the
+    red (42 s). [-]"""
     speed_plan = a.action in KEEP_MODES and a.target_speed_mps is not None and a.reason == "green_wave"
     if not (speed_plan or (a.action == "none" and a.reason == "tight_green")):
         return False

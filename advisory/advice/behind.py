@@ -84,10 +84,10 @@ def keeps_green(light: LightView, arrive_s: float, fast_clear_s: float, model: Q
     to end the green, which then lasts for this car until its latest end (the late view). A car arriving later leaves
     the gap after the queue, and the green may end in it as the light's timings have it.
 
-    Traced in SUMO (paper_s400 actuated 900 veh/h, 50 %, seed 5, ``main.11``, docs/TRAFFIC.md): 218 m before a green
-    that had just begun, five cars discharging in front of it, the sure view red from the green's minimum on (12 s)
-    and the queue's fast clearing past it, so a normal drive "made" no green and the check weighed nothing; the car
-    crawled on at 4.5 m/s, the green ended 16 s after its start (no car at the detector), and it and the five cars
+    Traced in SUMO (paper_s400 actuated 900 veh/h, 50 %, seed 5, ``main.11``, docs/history/TRAFFIC.md): 218 m before a
+    green that had just begun, five cars discharging in front of it, the sure view red from the green's minimum on
+    (12 s) and the queue's fast clearing past it, so a normal drive "made" no green and the check weighed nothing; the
+    car crawled on at 4.5 m/s, the green ended 16 s after its start (no car at the detector), and it and the five cars
     behind it waited 26 s for the next one: unadvised, the same cars crossed in that green, which lasted until the
     last of them was over.
 
@@ -131,7 +131,7 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
     is advised again after it, with the distance to the next one to slow down in. Alike, past the light the plan is for
     (``advice.light_ahead``) the car is advised again: it drives on from that line as a normal drive from the plan's
     speed, not at the plan's speed to the last light (a plan slowing for the first light's queue was counted 4.5 s
-    late at the second light, 400 m on at 69 km/h). Traced in SUMO (docs/TRAFFIC.md): a car
+    late at the second light, 400 m on at 69 km/h). Traced in SUMO (docs/history/TRAFFIC.md): a car
     launching from a queue at the first light, told to crawl 400 m to the second light's green after next (the advisor
     plans with comfortable accelerations, and its own ``tight_green`` rule looks at the next light); seven connected
     cars told to crawl through the first light towards the second one's queue having cleared, the cars behind them cut
@@ -352,12 +352,12 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     platoon's tail by a fraction of a headway cuts a car off in about that fraction of the levels. Before, at the fast
     end alone (a car every 1.4 s, to guard the traffic behind), the counts behind both drives were equal or one apart: a
     plan delaying the tail by 0.3-0.6 s cut nobody off wherever the red fell later in the last gap (traced in SUMO,
-    paper_s400 fixed 900 veh/h, 50 %, seed 2, docs/TRAFFIC.md: connected cars slowing in light 1's stream 0.5-1 s late,
-    the stream's last cars cut off by the red, their places carried over from cycle to cycle at the saturated light).
-    The fast end alone, as before, where the light is red now (the plan then prices the end of the green after it, its
-    car holding its speed at the line over the whole of it: with the levels, a glide to the green 156 m out with twelve
-    cars behind it was priced 60 s and told to drive normally, the traced 7th Street case of item 5 in docs/TRAFFIC.md,
-    fixed 900 veh/h, every car connected, seed 1, ``main.12``) and at
+    paper_s400 fixed 900 veh/h, 50 %, seed 2, docs/history/TRAFFIC.md: connected cars slowing in light 1's stream
+    0.5-1 s late, the stream's last cars cut off by the red, their places carried over from cycle to cycle at the
+    saturated light). The fast end alone, as before, where the light is red now (the plan then prices the end of the
+    green after it, its car holding its speed at the line over the whole of it: with the levels, a glide to the green
+    156 m out with twelve cars behind it was priced 60 s and told to drive normally, the traced 7th Street case of
+    item 5 in docs/TRAFFIC.md, fixed 900 veh/h, every car connected, seed 1, ``main.12``) and at
     a light of uncertain timing (``levels`` 1: the expectation over its timings spreads the red over the platoon's
     places already; with the levels on top of it paper_s400 actuated 900 veh/h, 50 %, five seeds, saving 17.45 -> 15.98 %
     and others' time +2.9 -> +5.7 %). The cars there: the connected ones (``behind``, each where it is now,
@@ -378,12 +378,12 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     told to coast and crawled on at 10 -> 5 m/s through the rest of that green, the red and the next green, which the
     controller ended before the car reached its loop; the cars behind lost the cycle with it.
 
-    Traced in SUMO (paper_s400 fixed 900 veh/h, 50 %, seed 1, docs/TRAFFIC.md): cars in the first light's discharging
-    queue, told to hold 26-31 km/h for the second light's queue 400 m on, crossed the first at 8-9 m/s instead of
-    14-18 m/s; the platoon behind them crossed at their pace and the last two to five cars of the green were cut off
-    (a 30 s red each, and the cycle's 30 s green), others' travel time +14 %. Each one cut off also stands first in the
-    next queue (:func:`knock_on_s`), which it sends on to the light after this one a headway later, where a red may
-    meet a car of it that made that light without it (:func:`spill_s`).
+    Traced in SUMO (paper_s400 fixed 900 veh/h, 50 %, seed 1, docs/history/TRAFFIC.md): cars in the first light's
+    discharging queue, told to hold 26-31 km/h for the second light's queue 400 m on, crossed the first at 8-9 m/s
+    instead of 14-18 m/s; the platoon behind them crossed at their pace and the last two to five cars of the green were
+    cut off (a 30 s red each, and the cycle's 30 s green), others' travel time +14 %. Each one cut off also stands first
+    in the next queue (:func:`knock_on_s`), which it sends on to the light after this one a headway later, where a red
+    may meet a car of it that made that light without it (:func:`spill_s`).
 
     Examples
     --------
@@ -550,10 +550,10 @@ def spill_s(light: LightView, after: LightView | None, end_s: float, queued: flo
     ``levels`` evenly spaced from its fast end (2 s start-up, 1.4 s a car) to its slow end (3 s, 2.0 s). ``after`` of
     uncertain timing: its likely timing. None (no light after), or no red end known: 0.
 
-    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/TRAFFIC.md): light 2 is 16.3 s at the limit after
-    light 1, both turning together; a car cut off at light 1's end of green stood first in the next queue, the platoon
-    of the next green crossed light 1 1-2 s later, and its last car met light 2's red: 227 of the others' 309 s (the
-    tenth session), the knock-on that :func:`knock_on_s` prices at light 1 alone.
+    Traced in SUMO (paper_s400 fixed 600 veh/h, 50 %, seed 3, docs/history/TRAFFIC.md): light 2 is 16.3 s at the limit
+    after light 1, both turning together; a car cut off at light 1's end of green stood first in the next queue, the
+    platoon of the next green crossed light 1 1-2 s later, and its last car met light 2's red: 227 of the others' 309 s
+    (the tenth session), the knock-on that :func:`knock_on_s` prices at light 1 alone.
 
     Examples
     --------
