@@ -266,7 +266,7 @@ def period_fit_s(ends_unix_s: Sequence[Sequence[float]], period_s: float) -> tup
     of every cycle (residuals 0; 1e-9 s² keeps the division finite) fixes the period to the readings' clock: on US
     1136 75.000 s, standard error ~1e-6 s. (A reading's quantization, 1/12 s², as the least residual variance put it a
     few ms off, and forecasts of an instant that the same 1 s readings date then came after the reading that saw
-    the change: US 1136's 80 % intervals 82 -> 79 %, docs/PREDICTION.md.)
+    the change: US 1136's 80 % intervals 82 -> 79 %, docs/history/PREDICTION.md.)
 
     A period is known only as well as the changes that gave it: on US 1136 the search's 0.1 s grid and the changes'
     jitter (a few seconds) put it at 75.1 s 34 minutes in, 75.0 s later; a change 40 cycles back, moved to now by
