@@ -230,9 +230,12 @@ def _choose(obs: Observation, usable: tuple[LightView, ...], last: Advice | None
     # the amber before each red: at least ``clear``, at most ``amber_max`` (an exact light's stated one: that long)
     clear = np.array([0.0 if light.amber_s == 0.0 else light.amber_s if e and light.amber_s else min(light.amber_s or choice.AMBER_MIN_S, choice.AMBER_MIN_S)
                       for light, e in zip(usable, exact)])
-    # no amber warns of a light's reds: no plan reaches the line where one may be on (the sure windows), nor, slowing the
-    # car, within the margin before one may begin (the feasibility of the rules, :func:`advisory.advice.kinematics.green_mask`)
-    cross, crossed = crossings(vts, modes, reactions, accels, d_m, v0, brake, firm, *coast_tables, lines.windows_s, lines.no_amber, params.green_margin_s)
+    # where no amber warns of a light's reds, or its timing is exact (a red published is never planned as green: the
+    # amber before it is priced, the red is not driven into), no plan reaches the line where one may be on (the sure
+    # windows), nor, slowing the car at a light without amber, within the margin before one may begin (the feasibility
+    # of the rules, :func:`advisory.advice.kinematics.green_mask`); "prepare to stop" stops at the red it meets
+    cross, crossed = crossings(vts, modes, reactions, accels, d_m, v0, brake, firm, *coast_tables, lines.windows_s, lines.no_amber, exact, stop_plan,
+                               params.green_margin_s)  # fmt: skip
     # priced as the choice needs them (choice.expected_costs, "pruned"): driving normally first and in full, and the
     # stop plan; a plan that cannot be allowed (through a red, or a stop likelier than driving normally's by more than
     # ``stop_risk_frac``) is not priced further. The same choice as pricing every plan (tests/test_choice.py); screened

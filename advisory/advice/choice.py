@@ -26,7 +26,8 @@ forecast) and chooses the cheapest in expectation (docs/ADVISOR.md, "Under uncer
 * **Chance constraint**: a plan may make a stop likelier than driving normally only up to ``stop_risk_frac``.
   The safety rule is a hard constraint: a published red is red in every timing (``spat_feed.prediction.observe
   .red_hold_s``), and a plan that reaches the line inside it (in every timing) is never advised; nor, at a light that
-  shows no amber, one that reaches the line where a red may be on.
+  shows no amber, or whose timing is exact, one that reaches the line where a red may be on (the caller's, from
+  :func:`advisory.advice.kinematics.crossings`; "prepare to stop" stops there).
 
 Pure numerics; no advice wording here (:mod:`advisory.advice.advisor` words the choice). The kernels divide only by
 what cannot be 0 (a speed where it is held above 0, a step, a deceleration, a window's edge of at least

@@ -1,7 +1,7 @@
 """The car's motion under advice: the coast-down profile, the time to reach a stop line and the speed there in each way
 of changing speed (:data:`MODE_CODES`), which candidate cruise speeds cross the lines ahead on green
 (:func:`green_mask`, :func:`first_feasible`, :func:`feasible_speeds_mps`), and every candidate plan's crossing times
-(:func:`crossings`, with the plans a red of a light that shows no amber bars). numba kernels take arrays
+(:func:`crossings`, with the plans a red bars: one no amber announces, or any of an exact light). numba kernels take arrays
 (:class:`Lines` packs the lights for them); the wrappers unpack :class:`~advisory.advice.views.AdvisorParams`.
 """
 
@@ -394,16 +394,18 @@ KEEP_MODES = {"slow_down": "brake", "brake_to": "firm", "coast": "brake_coast", 
 
 
 @njit(cache=True)
-def crossings(vts, modes, reactions, accels, d_m, v0, brake_mps2, firm_mps2, x_of_v, t_of_v, t_of_x, windows_s, no_amber, after_red_s):
+def crossings(vts, modes, reactions, accels, d_m, v0, brake_mps2, firm_mps2, x_of_v, t_of_v, t_of_x, windows_s, no_amber, exact, stop_plan, after_red_s):
     """Time to each line (m, lines) of each candidate plan, in the motion of :func:`crossing_time_s` [s], and which
-    plans (m,) reach a line that shows no amber (``no_amber``, (lines,)) inside a red of ``windows_s`` or its margins
-    (:func:`_in_red`; a plan slows the car in mode 1, or to a target below ``v0``). bool (m,)"""
+    plans (m,) reach a line whose reds bar a crossing inside a red of ``windows_s`` or its margins (:func:`_in_red`; a
+    plan slows the car in mode 1, or to a target below ``v0``): a line that shows no amber (``no_amber``, (lines,)), or
+    one whose timing is exact (``exact``, (lines,)) for any plan but "prepare to stop" (``stop_plan``, (m,): it stops
+    at the red it meets). bool (m,)"""
     cross = np.empty((vts.size, d_m.size))
     crossed = np.zeros(vts.size, dtype=np.bool_)
     for c in range(vts.size):
         slowing = modes[c] == 1 or vts[c] < v0 - 1e-9
         for j in range(d_m.size):
             cross[c, j] = time_to_line_s(d_m[j], v0, vts[c], modes[c], reactions[c], brake_mps2, firm_mps2, accels[c], x_of_v, t_of_v, t_of_x)
-            if no_amber[j] and _in_red(cross[c, j], windows_s, j, slowing, no_amber, after_red_s):
+            if (no_amber[j] or (exact[j] and not stop_plan[c])) and _in_red(cross[c, j], windows_s, j, slowing, no_amber, after_red_s):
                 crossed[c] = True
     return cross, crossed
