@@ -68,6 +68,34 @@ def test_unconnected_cars_from_the_arrival_rate():
     assert estimate(_obs(), [], arrivals_vps=0.2, connected_share=1.0, red_elapsed_s=10.0).cars == (0.0,)
 
 
+@pytest.mark.parametrize("mean, counts", [
+    (2.0, [0] * 3 + [1] * 5 + [2] * 6 + [3] * 3 + [4] * 2 + [5]),
+    (10.0, [4, 6, 6, 7, 8, 8, 8, 9, 9, 10, 10, 10, 11, 11, 12, 12, 13, 14, 15, 17]),
+])
+def test_the_unseen_count_is_poisson_and_each_timing_clears_at_its_level(mean, counts):
+    """No car connected ahead, the cars not connected arriving over the red (0 to 20 s) of an exact light 300 m out,
+    as many as ``mean`` on average (2: half of 720 veh/h over 20 s; 10: 1,800 veh/h, none connected): their count is
+    Poisson, and the k-th of the light's 20 equally likely timings (level q = (k + 1/2) / 20) is closed until the
+    clearing of the count at that level (the fewest n with P(N <= n) >= q) at the discharge at that level: 20 + 2 +
+    1.4 (n - 1) + (1 + 0.6 (n - 1)) q for n cars (fast 2 s + 1.4 s a car, slow 3 s + 2 s a car), the red's end for
+    none. By hand, mean 2: P(N <= n) = e^-2 (1, 3, 5, 19/3, 7, 109/15) = 0.135, 0.406, 0.677, 0.857, 0.947, 0.983;
+    mean 10 (``counts``): 0.029 at 4, 0.067 at 5, 0.130 at 6, ..., 0.951 at 15, 0.973 at 16, 0.986 at 17 (the sums
+    e^-10 10^i / i! written out below, not the module's recurrence). The sure view holds the mean's count at the
+    fast end, as before (the hard constraint); ``cars`` is the mean."""
+    rate, share = (0.2, 0.5) if mean == 2.0 else (0.5, 0.0)
+    est = estimate(_obs(), [], arrivals_vps=rate, connected_share=share, red_elapsed_s=0.0)
+    assert est.cars == (mean,)
+    law = lambda n: sum(math.exp(-mean) * mean**i / math.factorial(i) for i in range(n + 1))  # noqa: E731
+    assert counts == [next(n for n in range(40) if law(n) >= (k + 0.5) / 20) for k in range(20)]
+    held = apply(_obs(), est).lights[0]
+    until = [20.0 if n == 0 else 22.0 + 1.4 * (n - 1) + (1.0 + 0.6 * (n - 1)) * (k + 0.5) / 20 for k, n in enumerate(counts)]
+    assert [w[0][1] for w in held.scenario_red_windows_s] == pytest.approx(until)
+    assert all(w[1:] == ((60.0, 90.0),) for w in held.scenario_red_windows_s)
+    assert held.red_windows_s[0][1] == pytest.approx(22.0 + 1.4 * (mean - 1))  # the mean's, fast: surely standing
+    # no flow, or every car connected: no law, the count sure, as before
+    assert estimate(_obs(), [Probe(299.0, 0.0)]).law == estimate(_obs(), [], arrivals_vps=rate, connected_share=1.0).law == ((),)
+
+
 def test_a_published_queue_length_counts_first():
     """The controller's detectors publish a 30 m queue (J2735 ``queueLength``): 30 / 7.5 = 4 cars stand at the red
     ending in 20 s, so the line is closed to this car for 20 + 2 + 3 x 2 + 2 = 30 s, as four connected cars standing
