@@ -124,7 +124,13 @@ def test_malformed_messages_are_rejected_and_logged(start_feed, caplog):
             for ix_id in (1, 2):
                 for movement in client.reading(ix_id).intersection.states:
                     assert all(ev.event_state in MovementPhaseState for ev in movement.state_time_speed)
-            assert client.stats.intersections >= 2 * client.stats.rejected  # good data keeps flowing
+            # good data keeps flowing after the bad: more good intersections arrive (not a ratio of the two counts: the
+            # feed serves each subscriber its latest message, and a subscriber slowed by a loaded machine skips some,
+            # good or bad; CI read 7 good against 4 rejected once, at load ~5 on 2 cores)
+            good, bad = client.stats.intersections, client.stats.rejected
+            more = lambda: client.stats.intersections >= good + 4 and client.stats.rejected > bad  # noqa: E731
+            await wait_for(more, what="good data after bad")
+            assert client.fresh(1) is not None and client.fresh(2) is not None
             assert client.stats.connects == 1  # bad data does not drop the connection
 
     asyncio.run(run())
