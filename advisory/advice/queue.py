@@ -313,7 +313,9 @@ def count_law(mean: float, cap: int, levels: Sequence[float]) -> tuple[tuple[int
 
 
 def _levels(light: LightView) -> tuple[float, ...]:
-    """The levels of ``light``'s equally likely timings (:func:`apply`): ``(k + 1/2) / n`` for the k-th of n."""
+    """The levels of ``light``'s equally likely timings (its own, or :func:`~advisory.advice.mixture.implied_timings`'
+    :data:`~advisory.advice.mixture.IMPLIED_TIMINGS`): ``(k + 1/2) / n`` for the k-th of n (:func:`count_law`,
+    :func:`apply`). [-]"""
     n = len(light.scenario_red_windows_s) if light.scenario_red_windows_s else IMPLIED_TIMINGS
     return tuple((k + 0.5) / n for k in range(n))
 
@@ -615,10 +617,9 @@ def _held(light: LightView, clear_s: tuple[float, float], after_red_s: tuple[flo
         return _held_until(windows, fast + (slow - fast) * level if math.isfinite(slow) else (fast if level == 0.0 else slow))
 
     timings = light.scenario_red_windows_s or implied_timings(light)
-    n = len(timings)
     return replace(light, red_windows_s=until(light.red_windows_s, 0.0, (mean,)), likely_red_windows_s=until(light.likely_red_windows_s, 0.5),
                    late_red_windows_s=until(light.late_red_windows_s, 1.0),
-                   scenario_red_windows_s=tuple(until(w, (k + 0.5) / n) for k, w in enumerate(timings)))  # fmt: skip
+                   scenario_red_windows_s=tuple(until(w, q) for w, q in zip(timings, _levels(light))))  # fmt: skip
 
 
 def _first_red_of(windows) -> tuple[float, float] | None:
