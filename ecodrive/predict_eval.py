@@ -26,6 +26,12 @@ Calibration where the advisor relies on it: ``coverage_by_width`` (the forecasts
 width of their central 80 % interval, :data:`WIDTH_BINS_S`) and ``coverage_by_method`` (by ``method``), each bin's
 ``predictions_frac`` (its share of ours), ``interval_coverage`` (as above) and ``mae_s`` (of all ours in it). A
 calibrated forecast holds its levels in every bin; a narrow bin that holds much less is a forecast sure and wrong.
+``late_tail`` (:func:`late_tail`): by the class of the phase that ended, then by method and by how far ahead the forecast
+put it, the share of changes that came after the forecast's 90 % and 97.5 % quantiles (``after``: the advisor's late
+view and last timing; calibrated 10 % and 2.5 %, by the randomized PIT) and, of the readings with a known
+``maxEndTime``, the share that came after it (``past_max_end_frac``) against the forecast's own mass there
+(``past_max_end_stated_frac``); over every prediction, however far ahead its change came (a cut at 60 s would keep
+the early ends of long phases and drop their late ones).
 """
 
 from __future__ import annotations
@@ -39,7 +45,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from spat_feed.prediction.history import IntersectionHistory, past_its_events
+from spat_feed.prediction.history import LATE_QUANTILE, IntersectionHistory, past_its_events
+from spat_feed.prediction.observe import SCENARIO_LEVELS
 from spat_feed.prediction.predictor import forecast
 from spat_feed.timing.messages import plan_from_movement, to_unix_s
 from spat_feed.timing.plans import PhaseClass, phase_class
@@ -48,6 +55,11 @@ MAX_GAP_S = 2.0
 """Snapshots further apart than this around a change leave it unscored. [s]"""
 
 HORIZONS_S = {"0-10": (0.0, 10.0), "10-30": (10.0, 30.0), "30-60": (30.0, 60.0)}
+SCORED_AHEAD_S = 60.0
+"""The error and coverage keys score predictions of changes at most this far ahead (``late_tail`` every one). [s]"""
+LIKELY_AHEAD_S = {**HORIZONS_S, ">60": (60.0, math.inf)}
+"""Bins of how far ahead a forecast puts its likely time (``late_tail``'s ``by_likely_ahead``: known when it is made,
+unlike how far ahead the change was, which picks late changes in the far bins). [s]"""
 LEVELS = (0.5, 0.8, 0.9)
 
 WIDTH_BINS_S = {"0-2": (0.0, 2.0), "2-5": (2.0, 5.0), "5-10": (5.0, 10.0), ">10": (10.0, math.inf)}
@@ -57,7 +69,8 @@ ones are the forecasts the advisor takes as sure. [s]"""
 
 def predictions(snapshots) -> dict[tuple[int, int], list[tuple]]:
     """Per (intersection, group): one row per snapshot, ``(t, class, forecast of the current phase's end or None,
-    baseline likely end or None)``, each made from the snapshots up to it."""
+    baseline likely end or None, the published maxEndTime of the current phase (``inf``: unknown))``, each made from
+    the snapshots up to it."""
     histories: dict[int, IntersectionHistory] = {}
     rows: dict[tuple[int, int], list[tuple]] = {}
     for ix in snapshots:
@@ -71,17 +84,21 @@ def predictions(snapshots) -> dict[tuple[int, int], list[tuple]]:
             if past_its_events(plan, t):  # no reading of the phase now, as the history takes it
                 continue
             stats = history.stats(g)
-            cls = phase_class(plan.states[sum(1 for c in plan.changes if c.max_end_s <= t)])
+            i = sum(1 for c in plan.changes if c.max_end_s <= t)
+            cls = phase_class(plan.states[i])
             fc = forecast(plan, t, stats)
             durations = stats.durations(cls) if stats is not None else ()
             since = stats.since_unix_s if stats is not None and stats.current is cls else None
             base = max(since + float(np.median(durations)), t) if durations and since is not None else None
-            rows.setdefault((ix.id, g), []).append((t, cls, fc[0] if fc else None, base))
+            max_end = plan.changes[i].max_end_s if i < len(plan.changes) else math.inf
+            rows.setdefault((ix.id, g), []).append((t, cls, fc[0] if fc else None, base, max_end))
     return rows
 
 
 def scored(rows: dict[tuple[int, int], list[tuple]]) -> list[dict]:
-    """One dict per prediction of a change that was seen (no gap around it) 0-60 s ahead."""
+    """One dict per prediction of a change that was seen (no gap around it), however far ahead (:func:`summarize`
+    scores those :data:`SCORED_AHEAD_S` ahead at most, but for ``late_tail``: a cut by the outcome would drop late
+    changes)."""
     out = []
     for key, items in rows.items():
         start = 0
@@ -91,17 +108,18 @@ def scored(rows: dict[tuple[int, int], list[tuple]]) -> list[dict]:
             t_change, cls_before, cls_after = items[k][0], items[k - 1][1], items[k][1]
             if t_change - items[k - 1][0] <= MAX_GAP_S:
                 for j in range(start, k):
-                    t, cls, fc, base = items[j]
+                    t, cls, fc, base, max_end = items[j]
                     ahead = t_change - t
-                    if ahead > 60.0 or cls is not cls_before or (j > start and items[j][0] - items[j - 1][0] > MAX_GAP_S):
+                    if cls is not cls_before or (j > start and items[j][0] - items[j - 1][0] > MAX_GAP_S):
                         continue
-                    row = {"key": key, "t": t, "ahead_s": ahead, "change_unix_s": t_change, "last_before_unix_s": items[k - 1][0], "to": cls_after, "base": base}
+                    row = {"key": key, "t": t, "ahead_s": ahead, "change_unix_s": t_change, "last_before_unix_s": items[k - 1][0], "from": cls_before, "to": cls_after, "base": base, "max_end": max_end}
                     if fc is not None:
                         s = fc.samples_unix_s
                         intervals = {lv: fc.interval(lv) for lv in LEVELS}
                         row.update(likely=fc.likely_unix_s, earliest=fc.earliest_unix_s, method=fc.method, intervals=intervals,
                                    width_s=intervals[0.8][1] - intervals[0.8][0],
-                                   pit=tuple(np.searchsorted(s, x + 1e-6, side="right") / len(s) for x in (items[k - 1][0], t_change)))  # fmt: skip
+                                   pit=tuple(np.searchsorted(s, x + 1e-6, side="right") / len(s) for x in (items[k - 1][0], t_change)),
+                                   past_max_end=float(np.count_nonzero(s > max_end + 1e-6)) / len(s))  # fmt: skip
                     out.append(row)
             start = k
     return out
@@ -124,11 +142,34 @@ def pit_coverage(pit: tuple[float, float], level: float) -> float:
     >>> pit_coverage((0.0, 1.0), 0.8), pit_coverage((0.5, 0.5), 0.8), pit_coverage((0.0, 0.05), 0.8)
     (0.8, 1.0, 0.0)
     """
+    return pit_share(pit, 0.5 - level / 2.0, 0.5 + level / 2.0)
+
+
+def pit_share(pit: tuple[float, float], lo: float, hi: float) -> float:
+    """The chance that the randomized PIT of a change (uniform on ``pit``, :func:`pit_coverage`) lies in ``[lo, hi]``:
+    ``pit_share(pit, q, 1)`` is the chance that the change came after the forecast's ``q`` quantile. [-]
+
+    Examples
+    --------
+    >>> pit_share((0.8, 1.0), 0.9, 1.0), pit_share((1.0, 1.0), 0.975, 1.0), pit_share((0.0, 0.5), 0.9, 1.0)
+    (0.5, 1.0, 0.0)
+    """
     a, b = pit
-    lo, hi = 0.5 - level / 2.0, 0.5 + level / 2.0
     if b - a < 1e-12:
         return float(lo <= a <= hi)
     return max(0.0, min(b, hi) - max(a, lo)) / (b - a)
+
+
+def span_after(last_s: float, first_s: float, t_s: float) -> float:
+    """The share of ``(last_s, first_s]`` (the last snapshot before a change and the first after it) later than
+    ``t_s``: the chance that the change came after ``t_s``, the change evenly likely in its span. [-]
+
+    Examples
+    --------
+    >>> span_after(10.0, 11.0, 10.25), span_after(10.0, 11.0, 12.0), span_after(10.0, 11.0, 9.0)
+    (0.75, 0.0, 1.0)
+    """
+    return min(1.0, max(0.0, (first_s - max(last_s, t_s)) / (first_s - last_s)))
 
 
 def _mae(errors: list[float]) -> float | None:
@@ -145,10 +186,7 @@ def _calibration(rows: list[dict]) -> dict:
 def calibration_by(rows: list[dict], key) -> dict:
     """``{bin: {"predictions_frac", "interval_coverage", "mae_s"}}`` of ``rows`` (ours) grouped by ``key(row)``; bins
     with no row are left out."""
-    groups: dict = {}
-    for r in rows:
-        groups.setdefault(key(r), []).append(r)
-    return {k: {"predictions_frac": len(g) / len(rows), **_calibration(g)} for k, g in groups.items()}
+    return {k: {"predictions_frac": len(g) / len(rows), **_calibration(g)} for k, g in _groups(rows, key).items()}
 
 
 def width_bin(width_s: float) -> str:
@@ -162,8 +200,50 @@ def width_bin(width_s: float) -> str:
     return next(name for name, (lo, hi) in WIDTH_BINS_S.items() if lo <= width_s < hi or (hi == math.inf and width_s >= lo))
 
 
+TAIL_LEVELS = {f"{100 * q:g}": q for q in (LATE_QUANTILE, SCENARIO_LEVELS[-1])}
+"""The upper quantiles the advisor plans to (``late_tail``): its late view (:data:`~spat_feed.prediction.history.LATE_QUANTILE`,
+``"90"``) and the last of its 20 timings (:data:`~spat_feed.prediction.observe.SCENARIO_LEVELS`, ``"97.5"``). [-]"""
+
+
+def _tail(rows: list[dict]) -> dict:
+    """The share of ``rows`` (ours) whose change came after each :data:`TAIL_LEVELS` quantile of its forecast
+    (calibrated: 1 - the level), and of those read with a known ``maxEndTime``, the share whose change came after it
+    against the share the forecast put there."""
+    known = [r for r in rows if math.isfinite(r["max_end"])]
+    return {"after": {k: float(np.mean([pit_share(r["pit"], q, 1.0) for r in rows])) for k, q in TAIL_LEVELS.items()},
+            "max_end_known_frac": len(known) / len(rows),
+            "past_max_end_frac": float(np.mean([span_after(r["last_before_unix_s"], r["change_unix_s"], r["max_end"]) for r in known])) if known else None,
+            "past_max_end_stated_frac": float(np.mean([r["past_max_end"] for r in known])) if known else None}  # fmt: skip
+
+
+def late_tail(rows: list[dict]) -> dict:
+    """``{class the change ends: {"predictions_frac", "after", ..., "by_method": {method: {...}}, "by_likely_ahead":
+    {bin: {...}}}}`` (:func:`_tail`) of ``rows`` (ours, every horizon): whether the forecast's upper tail, which the
+    advisor's late view and last timings read, is calibrated for greens and reds apart, by method and by how far
+    ahead the forecast put the change (:data:`LIKELY_AHEAD_S`)."""
+
+    def split(mine: list[dict], key) -> dict:
+        return {k: {"predictions_frac": len(g) / len(mine), **_tail(g)} for k, g in _groups(mine, key).items()}
+
+    def ahead(r: dict) -> str:
+        return next(name for name, (lo, hi) in LIKELY_AHEAD_S.items() if r["likely"] - r["t"] < hi)
+
+    return {cls.value: {"predictions_frac": len(mine) / len(rows), **_tail(mine), "by_method": split(mine, lambda r: r["method"]), "by_likely_ahead": split(mine, ahead)}
+            for cls, mine in _groups(rows, lambda r: r["from"]).items()}  # fmt: skip
+
+
+def _groups(rows: list[dict], key) -> dict:
+    """``rows`` grouped by ``key(row)``, the keys sorted."""
+    out: dict = {}
+    for r in rows:
+        out.setdefault(key(r), []).append(r)
+    return dict(sorted(out.items(), key=lambda kv: str(kv[0].value if hasattr(kv[0], "value") else kv[0])))
+
+
 def summarize(rows: list[dict]) -> dict:
     """The keys of the module docstring from :func:`scored` rows."""
+    tail = late_tail([r for r in rows if math.isfinite(r.get("likely", math.inf))])
+    rows = [r for r in rows if r["ahead_s"] <= SCORED_AHEAD_S]
     ours = [r for r in rows if math.isfinite(r.get("likely", math.inf))]
     both = [r for r in ours if r["base"] is not None]
     err = [abs(r["likely"] - r["change_unix_s"]) for r in ours]
@@ -189,6 +269,7 @@ def summarize(rows: list[dict]) -> dict:
         "method_frac": {m: n / len(rows) for m, n in sorted(methods.items())},
         "coverage_by_width": {k: v for k, v in sorted(calibration_by(ours, lambda r: width_bin(r["width_s"])).items(), key=lambda kv: list(WIDTH_BINS_S).index(kv[0]))},
         "coverage_by_method": dict(sorted(calibration_by(ours, lambda r: r["method"]).items())),
+        "late_tail": tail,
     }
 
 

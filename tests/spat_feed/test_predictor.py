@@ -463,8 +463,8 @@ def test_predict_eval_bins_forecasts_by_their_stated_spread_and_method():
         d = law[k % 40]
         fc = ChangeForecast(PhaseClass.RED, PhaseClass.GREEN, t, t + law, "duration") if k < 40 else \
             ChangeForecast(PhaseClass.RED, PhaseClass.GREEN, t, np.array([t + d - 5.0]), "linked")  # fmt: skip
-        items += [(t + s, PhaseClass.RED, fc if s == 0 else None, None) for s in range(int(d))]
-        items += [(t + d + s, PhaseClass.GREEN, None, None) for s in range(10)]
+        items += [(t + s, PhaseClass.RED, fc if s == 0 else None, None, math.inf) for s in range(int(d))]
+        items += [(t + d + s, PhaseClass.GREEN, None, None, math.inf) for s in range(10)]
         t += d + 10.0
     summary = summarize(scored({(1, 1): items}))
     assert summary["interval_coverage"]["80"] == pytest.approx(2 / 3 * 0.8)
@@ -474,6 +474,34 @@ def test_predict_eval_bins_forecasts_by_their_stated_spread_and_method():
     assert wide["interval_coverage"] == pytest.approx({"50": 0.5, "80": 0.8, "90": 0.9})
     assert wide["mae_s"] == pytest.approx(np.mean(np.abs(law - 29.0)))  # the median of 10..49 (the 20th of 40) is 29
     assert summary["coverage_by_method"]["linked"] == narrow and summary["coverage_by_method"]["duration"] == wide
+
+
+def test_predict_eval_tells_whether_the_late_tail_holds_for_greens_and_reds_apart():
+    """Forty greens that end at every whole second of 10..49 s, forecast at their first reading by that law (calibrated;
+    ``maxEndTime`` published 45 s after their start: 4 of 40 outlast it, and the law puts 4 of its 40 samples past
+    it), each followed by a red of 20 s forecast sure of an instant 15 s early (``linked``). The greens' changes come
+    after the 90 % and 97.5 % quantiles exactly 10 % and 2.5 % of the time (the randomized PIT of a discrete law),
+    past ``maxEndTime`` 10 % as stated; every red's comes after both."""
+    from ecodrive.predict_eval import scored, summarize
+
+    items, t = [], T0
+    law = np.arange(10.0, 50.0)
+    for d in law:
+        green = ChangeForecast(PhaseClass.GREEN, PhaseClass.RED, t, t + law, "duration")
+        items += [(t + s, PhaseClass.GREEN, green if s == 0 else None, None, t + 45.0) for s in range(int(d))]
+        t += d
+        red = ChangeForecast(PhaseClass.RED, PhaseClass.GREEN, t, np.array([t + 5.0]), "linked")
+        items += [(t + s, PhaseClass.RED, red if s == 0 else None, None, math.inf) for s in range(20)]
+        t += 20.0
+    items.append((t, PhaseClass.GREEN, None, None, math.inf))
+    tail = summarize(scored({(1, 1): items}))["late_tail"]
+    assert set(tail) == {"green", "red"} and tail["green"]["predictions_frac"] == pytest.approx(0.5)
+    assert tail["green"]["after"] == pytest.approx({"90": 0.1, "97.5": 0.025})
+    assert tail["green"]["max_end_known_frac"] == 1.0
+    assert tail["green"]["past_max_end_frac"] == pytest.approx(0.1) and tail["green"]["past_max_end_stated_frac"] == pytest.approx(0.1)
+    assert tail["red"]["after"] == {"90": 1.0, "97.5": 1.0} and tail["red"]["max_end_known_frac"] == 0.0 and tail["red"]["past_max_end_frac"] is None
+    assert set(tail["green"]["by_method"]) == {"duration"} and tail["red"]["by_method"]["linked"]["after"] == tail["red"]["after"]
+    assert tail["red"]["by_likely_ahead"]["0-10"]["predictions_frac"] == 1.0  # (the reds said "in 5 s")
 
 
 def test_a_link_that_failed_no_longer_says_the_phase_ends_now():
