@@ -57,8 +57,10 @@ Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
+
+import numpy as np
 
 from advisory.advice.mixture import IMPLIED_TIMINGS, implied_timings
 from advisory.advice.views import LightView, Observation
@@ -111,6 +113,52 @@ class Probe:
     speed_mps: float
 
 
+class Probes(Sequence[Probe]):
+    """Many connected cars at once, as two arrays of equal length (the service makes a lane's run of them in one go:
+    ``server.queue.Lane``): how far ahead of the one asking (negative: behind) [m] and their speeds [m/s]. A sequence of
+    :class:`Probe` to code that reads them one at a time; the functions here that look at every car read the arrays
+    (:meth:`of`: any sequence of probes as arrays)."""
+
+    __slots__ = ("ahead_m", "speed_mps")
+
+    def __init__(self, ahead_m: np.ndarray, speed_mps: np.ndarray) -> None:
+        self.ahead_m = ahead_m
+        self.speed_mps = speed_mps
+
+    @staticmethod
+    def of(probes: Sequence[Probe]) -> Probes:
+        """``probes`` as arrays (itself where it is :class:`Probes` already)."""
+        if isinstance(probes, Probes):
+            return probes
+        return Probes(np.array([p.ahead_m for p in probes], dtype=float), np.array([p.speed_mps for p in probes], dtype=float))
+
+    def where(self, keep: np.ndarray) -> Probes:
+        """The cars where ``keep`` (a mask or indices) says, in its order."""
+        return Probes(self.ahead_m[keep], self.speed_mps[keep])
+
+    def __len__(self) -> int:
+        return len(self.ahead_m)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return self.where(k)
+        return Probe(float(self.ahead_m[k]), float(self.speed_mps[k]))
+
+    def __iter__(self) -> Iterator[Probe]:
+        return map(Probe, self.ahead_m.tolist(), self.speed_mps.tolist())
+
+    def __repr__(self) -> str:
+        return f"Probes({list(self)!r})"
+
+    def __eq__(self, other: object) -> bool:  # the same cars in the same order, as a tuple of them is
+        if not isinstance(other, (Probes, tuple, list)):
+            return NotImplemented
+        return len(self) == len(other) and all(a == b for a, b in zip(self, other))
+
+    def __hash__(self) -> int:
+        return hash(tuple(self))
+
+
 @dataclass(frozen=True, slots=True)
 class QueueEstimate:
     """Per light ahead (as in the observation): the cars that cross its line before this car and hold it up (known +
@@ -124,7 +172,7 @@ class QueueEstimate:
     follow_mps: float | None = None
     followers: float = 0.0
     """Cars expected behind this one that a slower plan holds up (:func:`followers`). [-]"""
-    behind: tuple[Probe, ...] = ()
+    behind: Sequence[Probe] = ()
     """The connected ones among them, nearest first (:func:`held_up`): where each is, for :func:`~advisory.advice.behind.gives_up_green`."""
     stop_behind: bool = False
     """At the next light, whose red no amber announces, the connected cars ahead let this car cross no sooner than that
@@ -190,18 +238,24 @@ def estimate(
     v_free = max(obs.speed_limit_mps, 1.0)
     cars, known, free_at, clears, after_reds, laws = [], [], [], [], [], []
     before, stop_behind = 0.0, False
+    probes = Probes.of(probes)
+    ahead_m, speed_mps = probes.ahead_m, probes.speed_mps
     for i, light in enumerate(obs.lights):
         red = _held_red(light) if i == 0 else _first_red(light)
         start, end = red if red is not None else (math.inf, math.inf)
-        ahead = sorted((light.distance_m - p.ahead_m, p.speed_mps) for p in probes if before < p.ahead_m < light.distance_m)
+        between = (before < ahead_m) & (ahead_m < light.distance_m)  # the cars ahead before this line, by distance to it
+        to_line, v = light.distance_m - ahead_m[between], speed_mps[between]
+        by_line = np.lexsort((v, to_line))
+        to_line, v = to_line[by_line], v[by_line]
         queue_m = light.queue_m if light.fresh else None
         past = past_red if i == 0 and past_red is not None and start > 0.0 and past_red.end_s <= 0.0 else None
         if past is not None and past.queue_m is not None:  # the jam published in the red: the cars in it (connected
-            ahead = [(to_line, v) for to_line, v in ahead if to_line > max(past.queue_m, queue_m or 0.0)]  # ones too) discharge
-            queue_m = None  # from its end; the one published now is its tail, still standing
+            keep = to_line > max(past.queue_m, queue_m or 0.0)  # ones too) discharge from its end; the one published
+            to_line, v, queue_m = to_line[keep], v[keep], None  # now is its tail, still standing
         if queue_m is not None:  # the detectors' count: connected cars standing inside the published queue are in it
-            ahead = [(to_line, v) for to_line, v in ahead if to_line > queue_m or v >= model.queued_mps]
-        arrivals = [0.0 if v < model.queued_mps else normal_drive_s(to_line, v, obs.speed_limit_mps, model.drive_accel_mps2) for to_line, v in ahead]
+            keep = (to_line > queue_m) | (v >= model.queued_mps)
+            to_line, v = to_line[keep], v[keep]
+        arrivals = np.where(v < model.queued_mps, 0.0, normal_drives_s(to_line, v, obs.speed_limit_mps, model.drive_accel_mps2)).tolist()
         if queue_m is not None:  # standing: one car per jam spacing, as many as fit between the line and this car
             arrivals = [0.0] * int(round(max(min(queue_m, light.distance_m - model.jam_spacing_m), 0.0) / model.jam_spacing_m)) + arrivals
         unseen, cap = 0.0, 0  # the cars not connected: their count's mean and the most that fit
@@ -209,9 +263,9 @@ def estimate(
             began = -(red_elapsed_s or 0.0) if start <= 0.0 else start
             mine = light.distance_m / v_free  # this car's unimpeded arrival at the line
             unseen = (1.0 - connected_share) * arrivals_vps * max(0.0, min(end, mine) - began)
-            cap = round(max(light.distance_m / model.jam_spacing_m - 1.0 - len(ahead), 0.0))
+            cap = round(max(light.distance_m / model.jam_spacing_m - 1.0 - len(to_line), 0.0))
         # the past red's queue still discharging (fast, slow: its last car's crossing), the cars ahead behind it
-        prev, n_prev = past_queue(past, model, arrivals_vps, connected_share, light.distance_m, len(ahead)) if past else ((-math.inf,) * 2, 0)
+        prev, n_prev = past_queue(past, model, arrivals_vps, connected_share, light.distance_m, len(to_line)) if past else ((-math.inf,) * 2, 0)
         holding, free, clear, after_red = _clearing(round(min(unseen, cap)), arrivals, start, end, prev, n_prev, model)
         law = tuple((p, *_clearing(k, arrivals, start, end, prev, n_prev, model)[2:]) for k, p in count_law(unseen, cap, _levels(light)))
         # behind the cars ahead (:func:`behind_s`): where they leave this car no time to cross before a red that no
@@ -223,7 +277,7 @@ def estimate(
         v = obs.speed_mps
         deciding = light.distance_m <= v * v / (2.0 * model.drive_accel_mps2) + v * model.headway_s
         if light.amber_s == 0.0 and 0.0 < start and free < start and light.distance_m / v_free < start and deciding:
-            lead_cars = [(p.ahead_m, p.speed_mps) for p in probes if before < p.ahead_m]
+            lead_cars = list(zip(ahead_m[before < ahead_m].tolist(), speed_mps[before < ahead_m].tolist()))
             lead = behind_s(light.distance_m, lead_cars, model)
             nearest = min(lead_cars, default=None)
             # the margin where the cars ahead set its crossing (later than its own drive, or closing in on a slower car):
@@ -239,14 +293,14 @@ def estimate(
         clears.append(clear)
         after_reds.append(after_red)
         laws.append(law)
-        known.append(len(ahead))
+        known.append(len(to_line))
         free_at.append(free)
         before = light.distance_m
     in_queue = bool(obs.lights) and obs.speed_mps < model.queued_mps and obs.lights[0].distance_m > model.jam_spacing_m + 1.0
     follow = None
-    ahead_cars = [p for p in probes if p.ahead_m > 0.0]
-    if ahead_cars:
-        nearest = min(ahead_cars, key=lambda p: p.ahead_m)
+    ahead_cars = np.flatnonzero(ahead_m > 0.0)
+    if len(ahead_cars):
+        nearest = probes[int(ahead_cars[np.argmin(ahead_m[ahead_cars])])]  # (the first of the nearest, as min() finds it)
         if _close(obs, nearest.ahead_m, model) and _closing(obs, nearest.speed_mps):  # closing in on a slower car
             follow = nearest.speed_mps
     n_behind, behind = followers_held_up(obs, probes, free_at[0] if free_at else 0.0, model, arrivals_vps, connected_share)
@@ -518,8 +572,9 @@ def followers(
 def followers_held_up(
     obs: Observation, probes: Sequence[Probe], free_at_s: float = 0.0, model: QueueModel | None = None, arrivals_vps: float | None = None,
     connected_share: float = 1.0, view_m: float = math.inf,
-) -> tuple[float, tuple[Probe, ...]]:
-    """:func:`followers` and :func:`held_up` together, of one pass over ``probes`` (a fix's estimate needs both)."""
+) -> tuple[float, Sequence[Probe]]:
+    """:func:`followers` and :func:`held_up` (as :class:`Probes`) together, of one pass over ``probes`` (a fix's estimate
+    needs both)."""
     model = model or QueueModel()
     if not obs.lights:
         return 0.0, ()
@@ -537,17 +592,19 @@ def held_up(obs: Observation, probes: Sequence[Probe], free_at_s: float = 0.0, m
     >>> held_up(Observation(20.0, 20.0, (LightView(1, 200.0),)), [Probe(-100.0, 20.0), Probe(-30.0, 20.0), Probe(10.0, 20.0)])
     (Probe(ahead_m=-30.0, speed_mps=20.0),)
     """
-    return followers_held_up(obs, probes, free_at_s, model)[1]
+    return tuple(followers_held_up(obs, probes, free_at_s, model)[1])
 
 
-def _held_up(obs: Observation, probes: Sequence[Probe], free_at_s: float, model: QueueModel) -> tuple[tuple[Probe, ...], float, float]:
+def _held_up(obs: Observation, probes: Sequence[Probe], free_at_s: float, model: QueueModel) -> tuple[Probes, float, float]:
     """:func:`held_up`, the window [s] after this car's normal arrival at the next line that it counts them in, and
     that arrival [s]."""
     d, lim = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
     mine = normal_drive_s(d, obs.speed_mps, lim, model.drive_accel_mps2)
     window = max(free_at_s - mine, 0.0) + model.follow_gap_s
-    known = (p for p in probes if p.ahead_m < 0.0 and normal_drive_s(d - p.ahead_m, p.speed_mps, lim, model.drive_accel_mps2) - mine < window)
-    return tuple(sorted(known, key=lambda p: (-p.ahead_m, p.speed_mps))), window, mine
+    probes = Probes.of(probes)
+    behind = probes.where(probes.ahead_m < 0.0)
+    known = behind.where(normal_drives_s(d - behind.ahead_m, behind.speed_mps, lim, model.drive_accel_mps2) - mine < window)
+    return known.where(np.lexsort((known.speed_mps, -known.ahead_m))), window, mine
 
 
 def _held_until(windows, until_s: float):
@@ -648,6 +705,18 @@ def normal_drive_s(distance_m: float, v_mps: float, limit_mps: float, accel_mps2
     if distance_m <= d_acc:
         return (math.sqrt(v * v + 2.0 * accel_mps2 * distance_m) - v) / accel_mps2
     return (lim - v) / accel_mps2 + (distance_m - d_acc) / lim
+
+
+def normal_drives_s(distance_m: np.ndarray, v_mps: np.ndarray, limit_mps: float, accel_mps2: float) -> np.ndarray:
+    """:func:`normal_drive_s` of many cars at once (their distances and speeds as arrays): the same operations in the
+    same order, so the same floats (``tests/test_queue.py``). [s]"""
+    v = np.where(0.0 > v_mps, 0.0, v_mps)
+    lim = 0.1 if 0.1 > limit_mps else limit_mps
+    at_limit = v >= lim
+    d_acc = (lim * lim - v * v) / (2.0 * accel_mps2)
+    speeding_up = np.where(distance_m <= d_acc, (np.sqrt(v * v + 2.0 * accel_mps2 * distance_m) - v) / accel_mps2,
+                           (lim - v) / accel_mps2 + (distance_m - d_acc) / lim)  # fmt: skip
+    return np.where(at_limit, distance_m / np.where(at_limit, v, 1.0), speeding_up)  # (each car's branch; no division by 0 in the others)
 
 
 def cleared_s(light: LightView, queue: QueueEstimate | None, j: int) -> tuple[float, float]:
