@@ -40,6 +40,7 @@ from bisect import bisect_left
 from dataclasses import replace
 
 import numpy as np
+from numba import njit
 
 from advisory.advice.behind import PACED_REASON, cut_behind, gives_up_green, paced_for_behind
 from advisory.advice.queue import PastRed, Probe, Probes, QueueEstimate, QueueModel, apply, estimate, followers_held_up, normal_drive_s
@@ -148,7 +149,7 @@ class Lane:
     def near(self, here_m: float, t_unix_s: float, lo_m: float, hi_m: float) -> Probes:
         """The cars that were, at their last fix, between ``lo_m - top_mps x MAX_AGE_S`` and ``hi_m`` ahead of station
         ``here_m`` (a superset of those that can be in ``[lo_m, hi_m)`` now, rather a few too many), each where it is at
-        ``t_unix_s`` (:func:`probe_at`, over the run at once); none at ``here_m`` itself (this car)."""
+        ``t_unix_s`` (:func:`probe_at`, the run at once: :func:`_probes_at`); none at ``here_m`` itself (this car)."""
         order = self.order
         first = bisect_left(order, (here_m + lo_m - self.top_mps * MAX_AGE_S - 1e-6,))
         end = bisect_left(order, (here_m + hi_m + 1e-6,), first)
@@ -156,10 +157,24 @@ class Lane:
         past = mine
         while past < end and order[past][0] == here_m:
             past += 1
-        rows = self.rows
-        station_m, t_s, speed_mps = rows[:, first:end] if past == mine else np.concatenate((rows[:, first:mine], rows[:, past:end]), axis=1)
-        dt_s = t_unix_s - t_s
-        return Probes(station_m + speed_mps * np.where(0.0 > dt_s, 0.0, dt_s) - here_m, speed_mps)
+        return Probes(*_probes_at(self.rows, first, mine, past, end, here_m, t_unix_s))
+
+
+@njit(cache=True)
+def _probes_at(rows: np.ndarray, first: int, mine: int, past: int, end: int, here_m: float, t_unix_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cars of columns ``first:end`` of a lane's ``rows`` but ``mine:past`` (this car) as probes for the fix at
+    ``here_m`` at ``t_unix_s``, compiled: how far ahead each is and its speed, as :func:`probe_at` has them."""
+    n = (mine - first) + (end - past)
+    ahead_m, speed_mps = np.empty(n), np.empty(n)
+    k = 0
+    for j in range(first, end):
+        if mine <= j < past:
+            continue
+        dt_s = t_unix_s - rows[1, j]
+        ahead_m[k] = rows[0, j] + rows[2, j] * (0.0 if 0.0 > dt_s else dt_s) - here_m
+        speed_mps[k] = rows[2, j]
+        k += 1
+    return ahead_m, speed_mps
 
 
 def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) -> Probe:

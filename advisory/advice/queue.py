@@ -256,9 +256,10 @@ def estimate(
         if queue_m is not None:  # the detectors' count: connected cars standing inside the published queue are in it
             keep = (to_line > queue_m) | (v >= model.queued_mps)
             to_line, v = to_line[keep], v[keep]
-        arrivals = np.where(v < model.queued_mps, 0.0, normal_drives_s(to_line, v, obs.speed_limit_mps, model.drive_accel_mps2)).tolist()
+        arrivals = np.where(v < model.queued_mps, 0.0, normal_drives_s(to_line, v, obs.speed_limit_mps, model.drive_accel_mps2))
         if queue_m is not None:  # standing: one car per jam spacing, as many as fit between the line and this car
-            arrivals = [0.0] * int(round(max(min(queue_m, light.distance_m - model.jam_spacing_m), 0.0) / model.jam_spacing_m)) + arrivals
+            standing = int(round(max(min(queue_m, light.distance_m - model.jam_spacing_m), 0.0) / model.jam_spacing_m))
+            arrivals = np.concatenate((np.zeros(standing), arrivals))
         unseen, cap = 0.0, 0  # the cars not connected: their count's mean and the most that fit
         if i == 0 and queue_m is None and arrivals_vps is not None and arrivals_vps > 0.0 and connected_share < 1.0 and red is not None:
             began = -(red_elapsed_s or 0.0) if start <= 0.0 else start
@@ -309,7 +310,7 @@ def estimate(
                          tuple(clears), tuple(after_reds), tuple(laws))  # fmt: skip
 
 
-def _clearing(unseen: int, arrivals: list[float], start: float, end: float, prev: tuple[float, float], n_prev: int,
+def _clearing(unseen: int, arrivals: np.ndarray, start: float, end: float, prev: tuple[float, float], n_prev: int,
               model: QueueModel) -> tuple[int, float, tuple[float, float], tuple[float, float] | None]:  # fmt: skip
     """The queue in front at one line, for a red from ``start`` to ``end``, with ``unseen`` cars not connected arriving
     first (at the red's start) and then the connected ones at ``arrivals``, behind the past red's queue (``prev``:
@@ -317,12 +318,17 @@ def _clearing(unseen: int, arrivals: list[float], start: float, end: float, prev
     hold this car up, when it can cross behind them, when the last of them crosses at the fast and at the slow end of
     the discharge (:attr:`QueueEstimate.clear_s`) and, where they wait for the red's end, the same counted from it
     (:attr:`QueueEstimate.after_red_s`)."""
-    arrivals = [max(start, 0.0)] * unseen + arrivals
+    if unseen:
+        arrivals = np.concatenate((np.full(unseen, max(start, 0.0)), arrivals))
     # the discharge, slow and fast, counted from the red's end (one whose end is unknown: from after every arrival)
-    ref = end if math.isfinite(end) else max([max(start, 0.0), *arrivals]) + 1.0
-    crossed, holding = _discharge(arrivals, start, ref, model.startup_s, model.headway_s, prev[1])
-    crossed_fast, holding_fast = _discharge(arrivals, start, ref, model.fast_startup_s, model.fast_headway_s, prev[0])
-    waits = holding > 0 and any(start <= a < ref for a in arrivals)  # the queue waits for the red's end
+    if math.isfinite(end):
+        ref = end
+    else:  # (max() over the list [max(start, 0), *arrivals]: the first of them unless an arrival is later)
+        first, last = max(start, 0.0), float(arrivals.max()) if len(arrivals) else -math.inf
+        ref = (last if last > first else first) + 1.0
+    crossed, holding = _discharged(arrivals, start, ref, model.startup_s, model.headway_s, prev[1])
+    crossed_fast, holding_fast = _discharged(arrivals, start, ref, model.fast_startup_s, model.fast_headway_s, prev[0])
+    waits = holding > 0 and bool(np.any((start <= arrivals) & (arrivals < ref)))  # the queue waits for the red's end
     after_red = (crossed_fast - ref, crossed - ref) if waits else None
     if waits:
         crossed, crossed_fast = crossed - ref + end, crossed_fast - ref + end
@@ -393,8 +399,14 @@ def _discharge(arrivals: Sequence[float], start: float, end: float, startup_s: f
     >>> _discharge([0.0, 3.0, 12.0], 40.0, 70.0, 3.0, 2.0, 5.0)  # behind an earlier red's queue crossing until 5 s
     (9.0, 2)
     """
+    return _discharged(np.asarray(arrivals, dtype=float), start, end, startup_s, headway_s, crossed)
+
+
+@njit(cache=True)
+def _discharged(arrivals: np.ndarray, start: float, end: float, startup_s: float, headway_s: float, crossed: float) -> tuple[float, int]:
+    """:func:`_discharge` compiled, ``arrivals`` an array (a fix runs it over every car ahead, twice a light)."""
     holding = 0
-    for a in arrivals:  # (max() spelled out: max(x, y) is y where y > x, else x; a fix runs this loop over every car ahead)
+    for a in arrivals:  # (max() spelled out: max(x, y) is y where y > x, else x)
         if start <= a < end:  # waits for the red's end
             at_end, behind = end + (startup_s if holding == 0 else 0.0), crossed + headway_s
             crossed = behind if behind > at_end else at_end
