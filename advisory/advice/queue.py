@@ -57,6 +57,7 @@ Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 
@@ -646,6 +647,45 @@ def _held_until(windows, until_s: float):
     return tuple(merged)
 
 
+def _held_untils(windows):
+    """:func:`_held_until` of ``windows`` as a function of ``until_s``, the same tuples, for a light's views and
+    timings that share windows (an exact light's 20 timings: one): the spans from now are clamped and swept once, and
+    each instant merges the first of them into its span from now and takes the sweep of the rest as it was.
+
+    Examples
+    --------
+    >>> held = _held_untils(((-3.0, 27.0), (57.0, 87.0)))
+    >>> [held(u) for u in (0.0, 10.0, 30.0, 60.0)] == [_held_until(((-3.0, 27.0), (57.0, 87.0)), u) for u in (0.0, 10.0, 30.0, 60.0)]
+    True
+    """
+    if windows is None:
+        return lambda until_s: None
+    spans = [(0.0 if 0.0 > a else a, b) for a, b in windows if b > 0.0]
+    if spans != sorted(spans) or any(a != a or b != b for a, b in spans):  # (not as a light's windows are: as it was)
+        return lambda until_s: _held_until(windows, until_s)
+    rest: list[tuple] = [()] * (len(spans) + 1)  # rest[j]: the sweep of spans[j:] on its own
+    for j in range(len(spans) - 1, -1, -1):
+        (start, end), after = spans[j], rest[j + 1]
+        while after and after[0][0] <= end:  # the runs after it that it reaches
+            if after[0][1] > end:
+                end = after[0][1]
+            after = after[1:]
+        rest[j] = ((start, end), *after)
+
+    def held(until_s: float):
+        if until_s <= 0.0:
+            return windows
+        first = bisect_left(spans, (0.0, until_s))  # the spans before (0, until_s) as sorted() puts it (from 0, ending sooner)
+        start, end, j = spans[0][0] if first else 0.0, until_s, first
+        while j < len(spans) and spans[j][0] <= end:
+            if spans[j][1] > end:
+                end = spans[j][1]
+            j += 1
+        return ((start, end), *rest[j])
+
+    return held
+
+
 def apply(obs: Observation, est: QueueEstimate) -> Observation:
     """``obs`` as the car meets the lights in traffic: each line closed to this car until the queue in front of it has
     crossed, a distribution between the fast and the slow discharge (``est.clear_s``), not one instant:
@@ -681,7 +721,7 @@ def _held(light: LightView, clear_s: tuple[float, float], after_red_s: tuple[flo
     if all(slow <= 0.0 and fast <= 0.0 for _, (fast, slow), _ in (*law, mean)):
         return light
 
-    made: dict[tuple[int, float], tuple | None] = {}  # (windows, until): the views and timings share windows (an exact light's: all)
+    made: dict = {}  # windows -> _held_untils: the views and timings share windows (an exact light's: all)
 
     def until(windows, level, rows=law):  # the count at this level (the law's tail past the slowest timing's: no view's)
         _, (fast, slow), after = rows[0] if len(rows) == 1 else next((row for row in rows if row[0] >= level), rows[-1])
@@ -690,10 +730,10 @@ def _held(light: LightView, clear_s: tuple[float, float], after_red_s: tuple[flo
             until_s = red[1] + after[0] + (after[1] - after[0]) * level
         else:
             until_s = fast + (slow - fast) * level if math.isfinite(slow) else (fast if level == 0.0 else slow)
-        key = (id(windows), until_s)
-        if key not in made:
-            made[key] = _held_until(windows, until_s)
-        return made[key]
+        held = made.get(id(windows))
+        if held is None:
+            held = made[id(windows)] = _held_untils(windows)
+        return held(until_s)
 
     timings = light.scenario_red_windows_s or implied_timings(light)
     return replace(light, red_windows_s=until(light.red_windows_s, 0.0, (mean,)), likely_red_windows_s=until(light.likely_red_windows_s, 0.5),
