@@ -721,19 +721,17 @@ def _held(light: LightView, clear_s: tuple[float, float], after_red_s: tuple[flo
     if all(slow <= 0.0 and fast <= 0.0 for _, (fast, slow), _ in (*law, mean)):
         return light
 
-    made: dict = {}  # windows -> _held_untils: the views and timings share windows (an exact light's: all)
+    made: dict = {}  # windows -> (_held_untils, first red): the views and timings share windows (an exact light's: all)
 
     def until(windows, level, rows=law):  # the count at this level (the law's tail past the slowest timing's: no view's)
         _, (fast, slow), after = rows[0] if len(rows) == 1 else next((row for row in rows if row[0] >= level), rows[-1])
-        red = _first_red_of(windows) if after is not None else None
-        if red is not None and math.isfinite(red[1]):  # counted from this view's own red end
-            until_s = red[1] + after[0] + (after[1] - after[0]) * level
-        else:
-            until_s = fast + (slow - fast) * level if math.isfinite(slow) else (fast if level == 0.0 else slow)
-        held = made.get(id(windows))
-        if held is None:
-            held = made[id(windows)] = _held_untils(windows)
-        return held(until_s)
+        known = made.get(id(windows))
+        if known is None:
+            known = made[id(windows)] = (_held_untils(windows), _first_red_of(windows))
+        held, red = known
+        if after is not None and red is not None and math.isfinite(red[1]):  # counted from this view's own red end
+            return held(red[1] + after[0] + (after[1] - after[0]) * level)
+        return held(fast + (slow - fast) * level if math.isfinite(slow) else (fast if level == 0.0 else slow))
 
     timings = light.scenario_red_windows_s or implied_timings(light)
     return replace(light, red_windows_s=until(light.red_windows_s, 0.0, (mean,)), likely_red_windows_s=until(light.likely_red_windows_s, 0.5),
