@@ -5,7 +5,9 @@ About 2,000 fixes of 8 trips on two corridors (the shared SPaT and trips' own ti
 speed, weak and off-route fixes, duplicates, late fixes, jumps, W3C names, bad bodies) go through the app
 (``TestClient``, clock injected) over REST and over each trip's WebSocket stream, on the in-process store and on a
 real ``redis-server`` (REST, queue-aware advice on, in process too); every answer (status, body with the trip's id
-replaced by ``ID``) is written as one JSON line. Run it on both versions and compare the files::
+replaced by ``ID``) is written as one JSON line. Then queue-aware advice in a crowd (:func:`crowd`: 150 trips on one
+corridor through the engine, 9,000 fixes, without and with the flow of the cars not connected), each answer and the
+queue board's state at the end. Run it on both versions and compare the files::
 
     PYTHONPATH=. .venv/bin/python bench/same_answers.py --out /tmp/new.jsonl
     cd <other tree> && PYTHONPATH=. .venv/bin/python bench/same_answers.py --out /tmp/old.jsonl && cmp /tmp/old.jsonl /tmp/new.jsonl
@@ -140,6 +142,69 @@ def answers(store_url: str | None, transport: str, queue_aware: bool, tables_dir
     return lines
 
 
+CROWDS = ((150, 60, None, False), (150, 60, (720.0, 0.5), False), (200, 30, None, True))
+"""(trips, seconds, the flow per lane [veh/h] and the connected share the board is told (None: the connected cars
+alone), whether they drive as the load benches' phones)."""
+
+
+def crowd(n_cars: int, seconds: int, flow: tuple[float, float] | None, stream: bool, seed: int = 7) -> list[str]:
+    """Queue-aware answers in a crowd: ``n_cars`` trips on paper_s400 (its 15_15 plans published as SPaT each second)
+    fixing once a second each at its own phase, through the engine (no tables): at random places and cruising speeds
+    (one fix in seven nearly standing), or with ``stream`` as the load benches' phones drive (there and back at 15 m/s,
+    each 7 s behind the one before: ``bench/_phones.py``); every answer (JSON, without the trip's id), then the queue
+    board's state (each trip's probe, queue, cars held up, lights passed with the cars behind them, estimate; trips by
+    their index)."""
+    import asyncio
+    import random
+    from dataclasses import replace
+
+    from server.advising import Engine
+    from server.gps import Fix
+    from server.schemas import TripCreate
+    from server.spat import SpatHub
+    from spat_feed.transport.scenarios import make_scenario, spat_message_at
+
+    corridor = load_corridor("paper_s400")
+    clock = [NOW]
+    extra = {} if flow is None else {"queue_arrivals_vph": flow[0], "queue_connected_share": flow[1]}
+    settings = Settings(spat_simulate=False, tables=False, speech=False, queue_aware=True, **extra)
+    hub = SpatHub(settings, {corridor.name: corridor}, lambda: clock[0])
+    engine = Engine(settings, {corridor.name: corridor}, spat=hub, clock=lambda: clock[0])
+    plans = make_scenario(corridor, "15_15", 0.0)
+    rng = random.Random(seed)
+    cars = [[rng.uniform(-50.0, corridor.length_m - 20.0), rng.uniform(5.0, 16.0), i / n_cars if stream else rng.uniform(0.0, 1.0)] for i in range(n_cars)]
+
+    async def drive() -> list[str]:
+        trips = [await engine.create_trip(TripCreate(corridor=corridor.name), client=f"c{i}") for i in range(n_cars)]
+        lines = []
+        for second in range(seconds):
+            for ix in spat_message_at(plans, NOW + second).intersections:
+                hub.store.offer(ix)
+            for i in sorted(range(n_cars), key=lambda i: cars[i][2]):
+                station_m, cruise_mps, phase_s = cars[i]
+                clock[0] = max(clock[0], NOW + second + phase_s)
+                speed_mps = cruise_mps if rng.random() > 0.15 else rng.uniform(0.0, 2.0)
+                if stream:  # (there and back: the way back read as the way there, as the phones' positions are)
+                    speed_mps, station_m = 15.0, 15.0 * (second + phase_s + 7.0 * i) % (2.0 * corridor.length_m)
+                    station_m = min(station_m, 2.0 * corridor.length_m - station_m)
+                where = corridor.position(min(max(station_m, 0.0), corridor.length_m - 1.0))
+                out = engine.on_fix(trips[i], Fix(NOW + second + phase_s, *where, speed_mps=speed_mps))
+                lines.append(json.dumps({k: v for k, v in out.items() if k != "trip_id"}, sort_keys=True))
+                cars[i][0] = station_m + speed_mps if station_m + speed_mps < corridor.length_m - 5.0 else rng.uniform(-50.0, 50.0)
+        board, index = engine.queue, {trip.id: i for i, trip in enumerate(trips)}
+        state = {"held": board.held, "cars": {c: sorted((index[t], p) for t, p in probes.items()) for c, probes in board._cars.items()},
+                 "queued": sorted((index[t], v) for t, v in board._queued.items()),
+                 "behind": sorted((index[t], repr(tuple(v))) for t, v in board._behind.items()),
+                 "passed": sorted((index[t], repr([(light, tuple(behind), past) for light, behind, past in v])) for t, v in board._passed.items()),
+                 "seen": sorted((index[t], repr(replace(est, behind=tuple(est.behind)))) for t, (_, est) in board._seen.items()),
+                 "for_queue": sorted((index[t], v) for t, v in board._for_queue.items()), "view_m": sorted((index[t], v) for t, v in board._view_m.items()),
+                 "red_since": sorted(board._red_since.items()), "red_ended": sorted(board._red_ended.items())}  # fmt: skip
+        await engine.trips.close()
+        return [*lines, json.dumps(state, sort_keys=True, default=str)]
+
+    return asyncio.run(drive())
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="JSON lines: one answer per message, per configuration")
@@ -162,6 +227,16 @@ def main() -> int:
                           f"{hashlib.sha256(''.join(lines).encode()).hexdigest()[:16]}, {dict(sorted(counts.items()))}")  # fmt: skip
         finally:
             redis.kill()
+    with args.out.open("a") as out:
+        for n_cars, seconds, flow, stream in CROWDS:
+            lines = crowd(n_cars, seconds, flow, stream)
+            out.write("".join(f"{line}\n" for line in lines))
+            reasons: dict[str, int] = {}
+            for line in lines[:-1]:
+                reason = json.loads(line).get("reason")
+                reasons[reason] = reasons.get(reason, 0) + 1
+            print(f"crowd  {n_cars} trips, {seconds} s, flow {flow}, stream {stream}: {len(lines) - 1} answers and the board, sha256 "
+                  f"{hashlib.sha256(''.join(lines).encode()).hexdigest()[:16]}, {dict(sorted(reasons.items()))}")  # fmt: skip
     return 0
 
 

@@ -36,11 +36,14 @@ from __future__ import annotations
 
 import heapq
 import math
-from bisect import bisect_left, insort
+from bisect import bisect_left
 from dataclasses import replace
 
+import numpy as np
+from numba import njit
+
 from advisory.advice.behind import PACED_REASON, cut_behind, gives_up_green, paced_for_behind
-from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, estimate, followers_held_up, normal_drive_s
+from advisory.advice.queue import PastRed, Probe, Probes, QueueEstimate, QueueModel, apply, estimate, followers_held_up, normal_drive_s
 from advisory.advice.queue_words import drive_normally, ease_to_car_ahead, said_truly, seen_at_line, tail_glide
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
 from server.storage.queue_store import SharedBoard
@@ -58,6 +61,8 @@ class Lane:
 
     * ``order``: ``(station_m, seq, trip, speed_mps)`` sorted by station; ``seq`` is the table's insertion order, so
       cars at one station come in the order a loop over the table meets them (the nearest car ahead is the same one);
+    * ``rows``: the table's ``station_m``, ``t_unix_s`` and ``speed_mps`` in that order, as three rows of an array, so
+      that a fix makes its run of cars probes at once (:meth:`near`);
     * ``by_time``: ``(t_unix_s, trip)`` as a heap, to forget the stale probes without looking at the others (an entry
       left by a later fix of the same trip is skipped when it comes up);
     * ``top_mps``: at least the fastest probe's speed (exact after a rebuild, raised by each fix), which bounds how far
@@ -66,18 +71,11 @@ class Lane:
     Every change to the table goes through :meth:`put`, :meth:`drop` and :meth:`expire`; a table replaced as a whole
     (the shared board's sync: its ``loads`` counter moved) is indexed again at the next call (:meth:`fresh`)."""
 
-    __slots__ = ("table", "loads", "order", "entry", "seq", "next_seq", "by_time", "top_mps", "memo", "memo_from", "memo_at")
+    __slots__ = ("table", "loads", "order", "rows", "entry", "seq", "next_seq", "by_time", "top_mps")
 
     def __init__(self, table: dict) -> None:
         self.table = table
         self.loads = -1
-        self.memo: list[Probe] = []
-        """The probes of ``order[memo_from:memo_from + len(memo)]`` for the fix at ``memo_at`` (``(here_m, t_unix_s)``,
-        None: none): a fix's calls to :meth:`near` cover overlapping runs of ``order`` (the cars behind for
-        :meth:`QueueBoard.note_behind` and for the followers, the ones ahead), each car is made a probe once. Every
-        change to the table drops it."""
-        self.memo_from = 0
-        self.memo_at: tuple[float, float] | None = None
         self.fresh()
 
     def fresh(self) -> None:
@@ -86,11 +84,12 @@ class Lane:
         if loads == self.loads:
             return
         self.loads = loads
-        self.memo_at = None
         self.seq = {tid: k for k, tid in enumerate(self.table)}
         self.next_seq = len(self.seq)
         self.entry = {tid: (s, self.seq[tid], tid, v) for tid, (_, s, v) in self.table.items()}
         self.order = sorted(self.entry.values())
+        self.rows = np.array([[s for s, _, _, _ in self.order], [self.table[tid][0] for _, _, tid, _ in self.order],
+                              [v for _, _, _, v in self.order]], dtype=float).reshape(3, len(self.order))  # fmt: skip
         self.by_time = [(t, tid) for tid, (t, _, _) in self.table.items()]
         heapq.heapify(self.by_time)
         self.top_mps = max((v for _, _, v in self.table.values()), default=0.0)
@@ -98,30 +97,41 @@ class Lane:
     def _unindex(self, trip_id: str) -> None:
         entry = self.entry.pop(trip_id, None)
         if entry is not None:
-            del self.order[bisect_left(self.order, entry)]
+            k = bisect_left(self.order, entry)
+            del self.order[k]
+            self.rows = np.delete(self.rows, k, axis=1)
             del self.seq[trip_id]
 
     def put(self, trip_id: str, probe: tuple[float, float, float]) -> None:
         """The trip's probe replaces its last one (in the table and the index)."""
         t, s, v = probe
-        self.memo_at = None
         old = self.entry.get(trip_id)
         if old is not None:
-            del self.order[bisect_left(self.order, old)]
+            was = bisect_left(self.order, old)
+            del self.order[was]
             seq = self.seq[trip_id]
         else:
             seq = self.seq[trip_id] = self.next_seq
             self.next_seq += 1
         self.table[trip_id] = probe
         entry = self.entry[trip_id] = (s, seq, trip_id, v)
-        insort(self.order, entry)
+        k = bisect_left(self.order, entry)
+        self.order.insert(k, entry)
+        rows = self.rows
+        if old is None:
+            self.rows = np.insert(rows, k, (s, t, v), axis=1)
+        else:  # the cars between its old place and its new one move up or down by one
+            if k > was:
+                rows[:, was:k] = rows[:, was + 1 : k + 1]
+            elif k < was:
+                rows[:, k + 1 : was + 1] = rows[:, k:was].copy()
+            rows[:, k] = (s, t, v)
         heapq.heappush(self.by_time, (t, trip_id))
         if v > self.top_mps:
             self.top_mps = v
 
     def drop(self, trip_id: str) -> None:
         """The trip is no probe any more (off the route, ended)."""
-        self.memo_at = None
         self.table.pop(trip_id, None)
         self._unindex(trip_id)
 
@@ -133,43 +143,38 @@ class Lane:
             t, trip_id = heapq.heappop(heap)
             probe = self.table.get(trip_id)
             if probe is not None and probe[0] == t:
-                self.memo_at = None
                 del self.table[trip_id]
                 self._unindex(trip_id)
 
-    def near(self, here_m: float, t_unix_s: float, lo_m: float, hi_m: float) -> list[Probe]:
+    def near(self, here_m: float, t_unix_s: float, lo_m: float, hi_m: float) -> Probes:
         """The cars that were, at their last fix, between ``lo_m - top_mps x MAX_AGE_S`` and ``hi_m`` ahead of station
         ``here_m`` (a superset of those that can be in ``[lo_m, hi_m)`` now, rather a few too many), each where it is at
-        ``t_unix_s`` (:func:`probe_at`, made once per car and fix: ``memo``); none at ``here_m`` itself (this car)."""
+        ``t_unix_s`` (:func:`probe_at`, the run at once: :func:`_probes_at`); none at ``here_m`` itself (this car)."""
         order = self.order
         first = bisect_left(order, (here_m + lo_m - self.top_mps * MAX_AGE_S - 1e-6,))
         end = bisect_left(order, (here_m + hi_m + 1e-6,), first)
-        probes = self.probes(first, end, here_m, t_unix_s)
         mine = bisect_left(order, (here_m,), first, end)  # the cars at here_m (this one), a run of the order: left out
         past = mine
         while past < end and order[past][0] == here_m:
             past += 1
-        return probes[: mine - first] + probes[past - first :] if past > mine else probes
+        return Probes(*_probes_at(self.rows, first, mine, past, end, here_m, t_unix_s))
 
-    def probes(self, first: int, end: int, here_m: float, t_unix_s: float) -> list[Probe]:
-        """The cars ``order[first:end]`` as probes for the fix at ``here_m`` at ``t_unix_s`` (:func:`probe_at`), those
-        made for this fix already taken from ``memo``, the others added to it (the runs of one fix's calls overlap or
-        touch: each is one run around ``here_m``)."""
-        memo, have = self.memo, self.memo_from
-        if self.memo_at != (here_m, t_unix_s) or end < have or first > have + len(memo):
-            memo = self.memo = self._probe(first, end, here_m, t_unix_s)
-            self.memo_from, self.memo_at = first, (here_m, t_unix_s)
-            return memo
-        if first < have:
-            memo[:0] = self._probe(first, have, here_m, t_unix_s)
-            self.memo_from = have = first
-        if end > have + len(memo):
-            memo += self._probe(have + len(memo), end, here_m, t_unix_s)
-        return memo[first - have : end - have]
 
-    def _probe(self, first: int, end: int, here_m: float, t_unix_s: float) -> list[Probe]:
-        table = self.table
-        return [probe_at(table[tid], here_m, t_unix_s) for _, _, tid, _ in self.order[first:end]]
+@njit(cache=True)
+def _probes_at(rows: np.ndarray, first: int, mine: int, past: int, end: int, here_m: float, t_unix_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cars of columns ``first:end`` of a lane's ``rows`` but ``mine:past`` (this car) as probes for the fix at
+    ``here_m`` at ``t_unix_s``, compiled: how far ahead each is and its speed, as :func:`probe_at` has them."""
+    n = (mine - first) + (end - past)
+    ahead_m, speed_mps = np.empty(n), np.empty(n)
+    k = 0
+    for j in range(first, end):
+        if mine <= j < past:
+            continue
+        dt_s = t_unix_s - rows[1, j]
+        ahead_m[k] = rows[0, j] + rows[2, j] * (0.0 if 0.0 > dt_s else dt_s) - here_m
+        speed_mps[k] = rows[2, j]
+        k += 1
+    return ahead_m, speed_mps
 
 
 def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) -> Probe:
@@ -178,7 +183,7 @@ def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) 
     back for one stamped later) advanced at its speed (a car 2.5 s behind is not read 3.5 s behind)."""
     t, s, v = probe
     dt_s = t_unix_s - t
-    return Probe(s + v * (0.0 if 0.0 > dt_s else dt_s) - here_m, v)  # max(dt_s, 0.0), without the call (a fix makes hundreds)
+    return Probe(s + v * (0.0 if 0.0 > dt_s else dt_s) - here_m, v)  # max(dt_s, 0.0), without the call
 
 
 def _normally(advice: Advice, params: AdvisorParams, real: Observation, last: dict | None) -> Advice:
@@ -211,7 +216,7 @@ class QueueBoard:
         self._behind: dict[str, tuple[Probe, ...]] = {}  # trip -> the connected cars its last fix found it holds up (:meth:`check`)
         self._seen: dict[str, tuple[Observation, QueueEstimate]] = {}  # trip -> its last fix's lights as they are, and its queue estimate (:meth:`check`)
         self._for_queue: dict[str, bool] = {}  # trip -> the plan it follows was made for the queue in front (:meth:`check`)
-        self._passed: dict[str, tuple[tuple[LightView, tuple[Probe, ...], PastRed | None], ...]] = {}
+        self._passed: dict[str, tuple[tuple[LightView, Probes, PastRed | None], ...]] = {}
         """trip -> the light it passed last and the next one, each with the connected cars behind that may still cross it
         in the green the car crosses it in, and the passed one's last red (:meth:`note_behind`, :meth:`cuts_behind`)."""
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
@@ -304,7 +309,8 @@ class QueueBoard:
             if not 0.0 < start < math.inf:
                 continue
             reach_m = start * max(lane.top_mps, obs.speed_limit_mps, 1.0) * (1.0 + 1e-9) + 1e-6
-            behind = tuple(p for p in lane.near(here_m, t_unix_s, min(light.distance_m, 0.0) - reach_m, 0.0) if p.ahead_m < 0.0)
+            near = lane.near(here_m, t_unix_s, min(light.distance_m, 0.0) - reach_m, 0.0)
+            behind = near.where(near.ahead_m < 0.0)
             noted.append((light, behind, self._last_red(light.intersection_id, t_unix_s) if light is passed else None))
         self._passed[trip_id] = tuple(noted)
 
@@ -360,12 +366,14 @@ class QueueBoard:
         m = self.model
         far_m = max(light.distance_m for light in obs.lights) + m.jam_spacing_m + m.headway_s * lane.top_mps
         reach_m = max(far_m, obs.speed_mps * m.follow_gap_s + m.jam_spacing_m)
-        ahead = [p for p in lane.near(here_m, t_unix_s, 0.0, reach_m) if p.ahead_m > 0.0]
+        near = lane.near(here_m, t_unix_s, 0.0, reach_m)
+        ahead = near.where(near.ahead_m > 0.0)
         est = estimate(obs, ahead, m, self.arrivals_vps, self.connected_share, red_elapsed_s, self.past_red(obs, t_unix_s))
         line_m, limit_mps = obs.lights[0].distance_m, max(obs.speed_limit_mps, 1.0)
         mine_s = normal_drive_s(line_m, obs.speed_mps, limit_mps, m.drive_accel_mps2)
         window_m = (max(est.free_at_s[0], mine_s) + m.follow_gap_s) * max(lane.top_mps, limit_mps) * (1.0 + 1e-9) + 1e-6
-        behind = [p for p in lane.near(here_m, t_unix_s, line_m - window_m, 0.0) if p.ahead_m < 0.0]
+        near = lane.near(here_m, t_unix_s, line_m - window_m, 0.0)
+        behind = near.where(near.ahead_m < 0.0)
         n_behind, held = followers_held_up(obs, behind, est.free_at_s[0], m, self.arrivals_vps, self.connected_share, view_m)
         return replace(est, followers=n_behind, behind=held)
 

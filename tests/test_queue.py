@@ -13,7 +13,7 @@ from advisory.advice.advisor import advise
 from advisory.advice.behind import GIVE_UP_SLACK_S, cut_behind, cut_off, gives_up_green, platoon_through, pushed_past
 from advisory.advice.choice import WAIT_CAP_S
 from advisory.advice.kinematics import KEEP_MODES, crossing_time_s
-from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, apply, behind_s, estimate, followers, normal_drive_s
+from advisory.advice.queue import _held_until, _held_untils, PastRed, Probe, Probes, QueueEstimate, QueueModel, apply, behind_s, estimate, followers, normal_drive_s, normal_drives_s
 from advisory.advice.queue_words import said_truly, tail_glide
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation, time_price
 from advisory.advice.wording import published_speed_mps, spoken_speed
@@ -215,6 +215,38 @@ def test_normal_drive_and_given_up_greens():
     assert gives_up_green(obs, crawl, params)
     assert not gives_up_green(obs, Advice("accelerate", "green_wave", 24.6), params)
     assert not gives_up_green(_obs(distance_m=200.0, speed=5.0, reds=((5.0, 50.0),), limit=24.6), crawl, params)
+
+
+def test_normal_drives_of_many_cars_are_each_cars_normal_drive_to_the_bit():
+    """The array form (the service's runs of cars, :func:`normal_drives_s`) gives each car's :func:`normal_drive_s`
+    exactly: at the limit, speeding up and reaching it, speeding up all the way, standing, a negative speed read as 0;
+    and the probes as arrays read back as the same cars, in order."""
+    rng = np.random.default_rng(3)
+    distance_m = np.concatenate(([0.0, 5.0, 100.0, 100.0, 400.0, 1e-9], rng.uniform(0.0, 800.0, 2000)))
+    v_mps = np.concatenate(([0.0, 30.0, 13.4, -0.0, -2.0, 13.399999], rng.choice((0.0, 13.4, 25.0), 2000) * rng.uniform(0.0, 1.0, 2000)))
+    for limit_mps, accel_mps2 in ((13.4, 2.0), (0.05, 2.0), (24.6, 1.3)):
+        want = [normal_drive_s(d, v, limit_mps, accel_mps2) for d, v in zip(distance_m.tolist(), v_mps.tolist())]
+        assert normal_drives_s(distance_m, v_mps, limit_mps, accel_mps2).tolist() == want
+    cars = [Probe(-30.0, 20.0), Probe(12.5, 0.0), Probe(-30.0, 20.0)]
+    probes = Probes.of(cars)
+    assert list(probes) == cars and probes == tuple(cars) and probes[1] == cars[1] and probes[1:] == cars[1:] and Probes.of(probes) is probes
+
+
+def test_a_lights_windows_closed_until_many_instants_are_each_instants_union_to_the_bit():
+    """:func:`_held_untils` (one sweep of a light's windows for its views and timings) gives :func:`_held_until`'s
+    tuples for every instant: windows from now, past, touching, nested, one from 0 or -0.0 ending before or after the
+    instant, unsorted (as it was), none."""
+    rng = np.random.default_rng(5)
+    cases = [None, (), ((0.0, 10.0),), ((-0.0, 10.0), (10.0, 20.0)), ((-5.0, -1.0), (0.0, 3.0), (3.0, 8.0), (30.0, 60.0)),
+             ((0.0, 100.0), (10.0, 20.0), (50.0, 60.0)), ((40.0, 70.0), (5.0, 10.0))]  # fmt: skip
+    for _ in range(300):
+        edges = np.sort(rng.choice(np.arange(-20.0, 120.0, 2.5), size=2 * rng.integers(1, 5), replace=False)).tolist()
+        cases.append(tuple(zip(edges[::2], edges[1::2])))
+    for windows in cases:
+        held = _held_untils(windows)
+        for until_s in (-1.0, 0.0, 1e-9, 2.5, 3.0, 10.0, 20.0, 31.7, 60.0, 200.0, *rng.uniform(0.0, 130.0, 10).tolist()):
+            got, want = held(until_s), _held_until(windows, until_s)
+            assert got == want and [math.copysign(1.0, a) for a, _ in got or ()] == [math.copysign(1.0, a) for a, _ in want or ()], (windows, until_s)
 
 
 def _actuated_green(distance_m):

@@ -17,15 +17,16 @@ Pure: no clock, no I/O. The service gathers the probes (:mod:`server.queue`).
 
 from __future__ import annotations
 
-import functools
 import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import replace
 
+import numpy as np
+
 from advisory.advice.choice import WAIT_CAP_S
 from advisory.advice.kinematics import KEEP_MODES, crossing_time_s, line_speed_mps
-from advisory.advice.queue import PastRed, Probe, QueueEstimate, QueueModel, cleared_s, normal_drive_s, past_queue, unseen_behind
+from advisory.advice.queue import PastRed, Probe, Probes, QueueEstimate, QueueModel, cleared_s, normal_drive_s, normal_drives_s, past_queue, unseen_behind
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
 from advisory.advice.wording import phrase, published_speed_mps
 
@@ -160,7 +161,7 @@ def gives_up_green(obs: Observation, advice: Advice, params: AdvisorParams, slac
     # made: crossed outside the light's reds by the normal drive on its own, so not into a queue surely standing (before its
     # fast clearing: the sure view of :func:`~advisory.advice.queue.apply`), where it would stop too; its time there is the one behind the queue
     made = next((j for j, (lv, t) in enumerate(zip(obs.lights, alone)) if not _makes(lv, t, normal[j], j, real or obs, queue, model)), len(obs.lights))
-    known = tuple(behind)
+    known = Probes.of(behind)
     for j in range(made):
         line_m = obs.lights[j].distance_m
         late = planned[j] - normal[j]
@@ -212,15 +213,16 @@ def pushed_past(light: LightView, normal_s: float, planned_s: float, behind: Seq
     model = model or QueueModel()
     lost, line_m = 0.0, light.distance_m
     normal_at, planned_at, ahead_m = normal_s, planned_s, 0.0
-    for p in behind:
-        v = max(p.speed_mps, model.queued_mps)
-        own = normal_drive_s(line_m - p.ahead_m, p.speed_mps, limit_mps, model.drive_accel_mps2)
-        lag = max(ahead_m - p.ahead_m - model.jam_spacing_m, 0.0) / v
+    behind = Probes.of(behind)
+    for p_ahead_m, p_speed_mps in zip(behind.ahead_m.tolist(), behind.speed_mps.tolist()):
+        v = max(p_speed_mps, model.queued_mps)
+        own = normal_drive_s(line_m - p_ahead_m, p_speed_mps, limit_mps, model.drive_accel_mps2)
+        lag = max(ahead_m - p_ahead_m - model.jam_spacing_m, 0.0) / v
         normal_x, planned_x = max(own, normal_at + lag), max(own, planned_at + lag)
         start, end = next(((a, b) for a, b in light.red_windows_s if b > normal_x), (math.inf, math.inf))  # the red it meets, or the next
         if normal_x < start <= planned_x:
             lost += min(end - start, WAIT_CAP_S)
-        normal_at, planned_at, ahead_m = normal_x + model.jam_spacing_m / v, planned_x + model.jam_spacing_m / v, p.ahead_m
+        normal_at, planned_at, ahead_m = normal_x + model.jam_spacing_m / v, planned_x + model.jam_spacing_m / v, p_ahead_m
     return lost
 
 
@@ -430,7 +432,7 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
         if red_end_s is not None:
             held_s, v_held = red_end_s, 0.0
 
-    @functools.cache  # (each place's time is asked once per level of the discharge: :func:`_platoon_counts`)
+    @_once  # (each place's time is asked once per level of the discharge: :func:`_platoon_counts`)
     def normal(x):
         if x <= 0.0:
             return x / pace
@@ -450,7 +452,7 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
         at_line_s = float(crossing_time_s(line_m, v, target, params, mode))
         v_line = max(line_speed_mps(line_m, v, target, params, mode), model.queued_mps) if at_line_s >= normal(line_m) else None
 
-    @functools.cache
+    @_once
     def planned(x):
         if x <= 0.0:
             return x / pace
@@ -462,8 +464,9 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     start, end = next(((a, b) for a, b in windows if a > max(crossed_s, 0.0)), (math.inf, math.inf))
     if not math.isfinite(start):
         return 0.0  # no red known: nobody is cut off by this green's end
-    over = sum(1 for p in behind if line_m < p.ahead_m < 0.0)  # connected, already over the line: the first places
-    there = sum(1 for p in behind if p.ahead_m <= min(line_m, 0.0) and normal_drive_s(line_m - p.ahead_m, p.speed_mps, limit, model.drive_accel_mps2) < start)
+    behind = Probes.of(behind)
+    ahead_m = behind.ahead_m
+    over = int(np.count_nonzero((line_m < ahead_m) & (ahead_m < 0.0)))  # connected, already over the line: the first places
     # a connected car behind, at a light that shows no amber, is to be over the line ``no_amber_margin_s`` before the red
     # where the car in front sets its crossing, or it is told to stop (:func:`~advisory.advice.queue.estimate`, ``stop_behind``): its place is
     # cut off that much earlier (traced: a connected car 4.5 s behind a platoon held to 11.5 m/s, over the line 2 s
@@ -473,6 +476,8 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     counts = [_platoon_counts(line_m, start, margin_s, normal, planned, gap_s, model.jam_spacing_m, over + 1) for gap_s in _platoon_gaps_s(model, limit, spread)]
     if all(n_plan >= n_normal and n_plan_c >= n_normal_c for n_normal, n_plan, n_normal_c, n_plan_c in counts):
         return 0.0
+    before = behind.where(ahead_m <= min(line_m, 0.0))  # the connected cars still before the line that make it in the green
+    there = int(np.count_nonzero(normal_drives_s(line_m - before.ahead_m, before.speed_mps, limit, model.drive_accel_mps2) < start))
     share = min(max(connected_share, 0.0), 1.0)
     not_connected, connected = unseen_behind(arrivals_vps, share, crossed_s, start, (line_m + view_m) / limit)
     flow = not_connected + connected
@@ -497,6 +502,20 @@ def cut_behind(light: LightView, obs: Observation, advice: Advice, params: Advis
     after = next((lv for lv in obs.lights if lv.distance_m > line_m), None)  # the light after this one
     queued = queued_behind(light, start, end, arrivals_vps, model.fast_headway_s)  # (knock_on_s: a headway each)
     return cut * (min(end - start, WAIT_CAP_S) + model.fast_headway_s * queued + spill_s(light, after, end, queued, limit, model))
+
+
+def _once(f):
+    """``f`` of one argument, each value worked out once (:func:`functools.cache`, without the cost of making its
+    wrapper: :func:`cut_behind` makes two a call)."""
+    made: dict = {}
+
+    def once(x):
+        y = made.get(x)
+        if y is None:
+            y = made[x] = f(x)
+        return y
+
+    return once
 
 
 def knock_on_s(light: LightView, start_s: float, end_s: float, arrivals_vps: float | None, headway_s: float) -> float:

@@ -111,6 +111,7 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
     assert dict(board._cars["c"]) == loop.cars
     lane = board.lane("c")
     assert lane.order == sorted(lane.entry.values()) and {tid for _, _, tid, _ in lane.order} == set(loop.cars)
+    assert lane.rows.tolist() == [[s for s, _, _, _ in lane.order], [loop.cars[tid][0] for _, _, tid, _ in lane.order], [v for _, _, _, v in lane.order]]
 
 
 def test_a_fix_looks_at_the_cars_near_it_only():
