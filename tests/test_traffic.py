@@ -520,6 +520,26 @@ def test_an_amber_is_judged_behind_a_car_over_the_line_by_the_cars_own_drive(dis
     assert np.diff(vs).min() / STEP_S >= -3.0 - 1e-9  # no braking at all beyond the firm rate
 
 
+def test_the_second_behind_a_pace_setter_is_kept_only_where_that_car_sets_the_arrival():
+    """An actuated green turned amber half a step ago (the driver sees it a step late: red in 4.5 s) with the car
+    87.7 m out at the limit (24.58 m/s), a slow car 12.9 m past the line at 12.05 m/s ahead of it (94.5 m front to
+    front: Krauss's safe speed at 3 m/s² already below the limit, so that car "sets the pace"). It does not hold the car
+    back before the line: the car is over it in 87.7 / 24.58 = 3.57 s, 0.93 s before the red, and a stop there needs
+    24.58² / (2 x 86.7 m) = 3.48 m/s², more than the firm 3: it goes, without braking. Before, the driver added the
+    second it keeps behind a car that holds it back (``red_end_margin_s``) to its own drive, judged the amber too short
+    (4.57 s > 4.5 s) and braked at 3.48 m/s², 0.02 under the issue's hard brake (traced at 9a2b11c: paper_s400 actuated
+    900 veh/h, 50 %, seed 5, ``main.124``)."""
+    from ecodrive.traffic.driver import AdvisedDriver, LightNow
+
+    lim, line, dist, v = 24.5872, 500.0, 87.7, 24.58
+    assert v * v / (2.0 * (dist - 1.0)) > 3.0  # (the regular driver's 1 m stop gap) the firm rate cannot stop it
+    light = lambda t, x: LightNow(0, line, t >= 4.5, t < 4.5, 4.5) if x <= line else None  # noqa: E731
+    xs, vs, _ = _drive_behind(AdvisedDriver((line,), vid="main.0"), line - dist, v, lim, light, line + 12.9, 12.05, 0.0, seconds=6.0)
+    crossed = np.flatnonzero(xs > line)
+    assert crossed.size and crossed[0] * STEP_S <= 4.0  # over the line in the amber, half a second to spare at least
+    assert np.diff(vs).min() / STEP_S >= -3.0 - 1e-9  # no braking beyond the firm rate
+
+
 def test_a_driver_keeps_behind_a_braking_car_at_the_firm_rate():
     """Nothing advised, the car in front brakes to a standstill (a queue's tail it joins), 128.6 m ahead (beyond the
     standstill gap) braking at 2.4 m/s² from 8.7 m/s, the car at the limit. The driver sees its brake lights and keeps
