@@ -34,6 +34,18 @@ class Script:
         self.source = source
         self.sha = hashlib.sha1(source.encode()).hexdigest()
 
+    def head(self, keys: list, args: list) -> tuple[int, bytes]:
+        """This script's ``EVALSHA`` for ``keys`` and its first ``args`` packed once, for calls that send them again and
+        again (a trip's fixes): :meth:`command` adds the rest. (How many arguments, the packed ones without the count.)"""
+        packed = hiredis.pack_command(("EVALSHA", self.sha, len(keys), *keys, *args))
+        return 3 + len(keys) + len(args), packed[packed.index(b"\r\n") + 2 :]
+
+    @staticmethod
+    def command(head: tuple[int, bytes], tail: tuple[bytes, ...]) -> bytes:
+        """The whole command: :meth:`head`'s and then the arguments ``tail``, already bytes (as ``hiredis.pack_command``
+        writes them: numbers as their ``repr``), for :meth:`RedisPipe.run_packed`."""
+        return b"".join([b"*%d\r\n" % (head[0] + len(tail)), head[1], *[b"$%d\r\n%b\r\n" % (len(a), a) for a in tail]])
+
 
 class _Connection(asyncio.Protocol):
     """The socket: a request written at once when none is in flight, else queued and written once per loop turn
@@ -174,19 +186,19 @@ class RedisPipe:
 
     async def call(self, *args):
         """One command's reply (bytes, int, None, lists of those); Redis's error replies raised."""
-        return await self._call(args)
+        return await self._call(hiredis.pack_command(args))
 
-    async def _call(self, args: tuple):
+    async def _call(self, packed: bytes):
         conn = self._conn
-        reply = await self._send(conn if conn is not None and conn.failure is None else await self._connection(), args)
+        reply = await self._send(conn if conn is not None and conn.failure is None else await self._connection(), packed)
         if isinstance(reply, hiredis.ReplyError):
             self._raise(reply)
         return reply
 
-    def _send(self, conn: _Connection, args: tuple) -> asyncio.Future:
-        """``args`` queued on ``conn``: the future of its reply (a plain function, so that a call is one coroutine: a
-        fix's save is the hot path, issue 30)."""
-        future = conn.send(hiredis.pack_command(args))
+    def _send(self, conn: _Connection, packed: bytes) -> asyncio.Future:
+        """The command ``packed`` queued on ``conn``: the future of its reply (a plain function, so that a call is one
+        coroutine: a fix's save is the hot path, issue 30)."""
+        future = conn.send(packed)
         if self._watch is None:
             self._watch = conn.loop.call_later(self.timeout_s, self._check)
         return future
@@ -210,8 +222,12 @@ class RedisPipe:
 
     async def run(self, script: Script, keys: list, args: list):
         """``script``'s reply for ``keys`` and ``args`` (``EVALSHA``; ``EVAL`` the first time Redis lacks it)."""
+        return await self.run_packed(script, hiredis.pack_command(("EVALSHA", script.sha, len(keys), *keys, *args)))
+
+    async def run_packed(self, script: Script, command: bytes):
+        """:meth:`run` of the ``EVALSHA`` of ``script`` already packed (:meth:`Script.command`)."""
         conn = self._conn
-        reply = await self._send(conn if conn is not None and conn.failure is None else await self._connection(), ("EVALSHA", script.sha, len(keys), *keys, *args))
+        reply = await self._send(conn if conn is not None and conn.failure is None else await self._connection(), command)
         if not isinstance(reply, hiredis.ReplyError):
             return reply
         try:
@@ -221,7 +237,7 @@ class RedisPipe:
             if loading is None or loading.done():
                 loading = self._loading[script.sha] = asyncio.ensure_future(self.call("SCRIPT", "LOAD", script.source))
             await asyncio.shield(loading)
-            return await self.call("EVALSHA", script.sha, len(keys), *keys, *args)
+            return await self._call(command)
 
     async def close(self) -> None:
         if self._watch is not None:

@@ -56,7 +56,6 @@ import math
 import struct
 import time
 from collections.abc import Awaitable, Callable
-from itertools import chain
 
 import numpy as np
 from pydantic_core import from_json, to_json
@@ -415,25 +414,25 @@ end
 return {4, h[1], state, meta}
 """)
 
-# KEYS: trip, samples. ARGV: version computed from, state, new samples (bytes), keep_s, token hash, take (0/1),
-# now, rate, burst, prefix, id, every_s. The trip's token is checked, its idle clock reset, a token of its
-# bucket taken (when asked), then the state written if the trip is still at the version it was computed from:
-# 3 commands (HMGET, HSET, APPEND) on most fixes.
+# KEYS: trip, samples. ARGV: token hash, keep_s, rate, burst, prefix, id, every_s (the same for every fix of the
+# trip: :meth:`RedisTrips.save` packs them once), then take (0/1), now, version computed from, state, new samples
+# (bytes). The trip's token is checked, its idle clock reset, a token of its bucket taken (when asked), then the state
+# written if the trip is still at the version it was computed from: 3 commands (HMGET, HSET, APPEND) on most fixes.
 # -> {new version}, {0, version, state} the trip moved meanwhile, {-1} gone, {-2} not its token, {-3, wait} rate limited
 _SAVE = Script(_TRIP + """
 local h = redis.call('HMGET', KEYS[1], 'v', 'tok', 'client', 'bt', 'bs', 'ts', 'dev')
 if not h[1] then return {-1} end
-if h[2] ~= ARGV[5] then return {-2} end
-local now, keep, out = tonumber(ARGV[7]), tonumber(ARGV[4]), {}
-touch(KEYS[1], h, keep, tonumber(ARGV[12]), now, ARGV[10], ARGV[11], out)
-if ARGV[6] == '1' then
-  local wait = bucket(h, tonumber(ARGV[8]), tonumber(ARGV[9]), now, out)
+if h[2] ~= ARGV[1] then return {-2} end
+local now, keep, out = tonumber(ARGV[9]), tonumber(ARGV[2]), {}
+touch(KEYS[1], h, keep, tonumber(ARGV[7]), now, ARGV[5], ARGV[6], out)
+if ARGV[8] == '1' then
+  local wait = bucket(h, tonumber(ARGV[3]), tonumber(ARGV[4]), now, out)
   if wait > 0 then
     write(KEYS[1], out)
     return {-3, tostring(wait)}
   end
 end
-if h[1] ~= ARGV[1] then
+if h[1] ~= ARGV[10] then
   write(KEYS[1], out)
   return {0, h[1], redis.call('HGET', KEYS[1], 'state')}
 end
@@ -441,9 +440,9 @@ local nv = tonumber(h[1]) + 1
 out[#out + 1] = 'v'
 out[#out + 1] = tostring(nv)
 out[#out + 1] = 'state'
-out[#out + 1] = ARGV[2]
+out[#out + 1] = ARGV[11]
 write(KEYS[1], out)
-if #ARGV[3] > 0 and redis.call('APPEND', KEYS[2], ARGV[3]) == #ARGV[3] then  -- a new key: its expiry
+if #ARGV[12] > 0 and redis.call('APPEND', KEYS[2], ARGV[12]) == #ARGV[12] then  -- a new key: its expiry
   redis.call('PEXPIRE', KEYS[2], math.ceil(keep * 1000))
 end
 return {nv}
@@ -459,6 +458,8 @@ return 1
 
 SAMPLE = np.dtype("<f8")
 """A score sample's fields (t, v, x) as stored: little-endian doubles, 24 bytes a fix."""
+_ROW = struct.Struct("<3d")
+"""A score sample packed (as :data:`SAMPLE` rows)."""
 
 
 def _json(data) -> bytes:
@@ -536,6 +537,7 @@ class RedisTrips:
         self.keep_s = settings.trip_idle_ttl_s + self.touch_every_s
         """A trip's keys live this long after its idle clock's last reset: at least the TTL after its last request. [s]"""
         self._cache: dict[str, tuple[Trip, float]] = {}  # id -> (trip, last used, monotonic)
+        self._heads: dict[str, tuple[int, bytes]] = {}  # id -> its save's packed start (_save_head), while cached
         self._locks: dict[str, list] = {}  # id -> [lock, holders and waiters]
         self._count = 0
         self.on_shed: Callable[[], None] | None = None
@@ -665,15 +667,12 @@ class RedisTrips:
         (False: another worker wrote first; the copy now holds the store's state: apply the fix again).
         ``take``: one token of the trip's bucket first (429 when empty, nothing written)."""
         n = len(trip.trace_t)
-        samples = struct.pack(f"<{3 * n}d", *chain.from_iterable(zip(trip.trace_t, trip.trace_v, trip.trace_x))) if n else b""  # as SAMPLE rows
-        s = self.s
+        samples = b"".join(map(_ROW.pack, trip.trace_t, trip.trace_v, trip.trace_x))  # as SAMPLE rows
+        head = self._heads.get(trip.id) or self._save_head(trip)
+        command = _SAVE.command(head, (b"1" if take else b"0", b"%r" % self.clock(), b"%d" % trip.version, trip.state_json(), samples))
         try:
             with REACH:
-                r = await self.redis.run(
-                    _SAVE, keys=[self._key(trip.id), self._key(trip.id) + ":tr"],
-                    args=[trip.version, trip.state_json(), samples, self.keep_s, trip.token_hash, 1 if take else 0,
-                          self.clock(), s.rate_per_s, s.rate_burst, self.p, trip.id, self.touch_every_s],
-                )  # fmt: skip
+                r = await self.redis.run_packed(_SAVE, command)
         except ApiError:
             trip.version = -1  # not known to be written: the copy may be ahead of the store, reload its state
             raise
@@ -696,6 +695,14 @@ class RedisTrips:
         self._cache[trip.id] = (trip, time.monotonic())
         return True
 
+    def _save_head(self, trip: Trip) -> tuple[int, bytes]:
+        """The start of the trip's ``_SAVE`` command, the same for each of its fixes, packed once: a save's command and
+        samples then cost 3.0 us, against 5.2 with hiredis packing the whole command (a 1.5 kB state; issue 30)."""
+        s = self.s
+        head = self._heads[trip.id] = _SAVE.head([self._key(trip.id), self._key(trip.id) + ":tr"],
+                                                 [trip.token_hash, self.keep_s, s.rate_per_s, s.rate_burst, self.p, trip.id, self.touch_every_s])  # fmt: skip
+        return head
+
     async def samples(self, trip: Trip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         with REACH:
             data = await self.redis.call("GET", self._key(trip.id) + ":tr") or b""
@@ -717,6 +724,7 @@ class RedisTrips:
 
     def _forget(self, trip_id: str, release: bool = True) -> Trip | None:
         """Drop this worker's copy of the trip (and with ``release`` what it holds: its SPaT view)."""
+        self._heads.pop(trip_id, None)
         entry = self._cache.pop(trip_id, None)
         if entry is None:
             return None

@@ -9,6 +9,7 @@ import asyncio
 import os
 import signal
 
+import hiredis
 import pytest
 from redis.exceptions import ConnectionError, ResponseError, TimeoutError
 
@@ -72,6 +73,27 @@ def test_scripts_are_sent_whole_when_redis_does_not_know_them(store):
         assert replies == [[f"b{i}".encode(), i + 1] for i in range(50)]
         stats = (await pipe.call("INFO", "commandstats")).decode()
         assert "cmdstat_script|load:calls=1," in stats and "cmdstat_eval:" not in stats  # a burst of NOSCRIPT: one load
+        await pipe.close()
+
+    asyncio.run(run())
+
+
+def test_a_command_packed_in_two_parts_is_hiredis_packing_of_the_whole_and_runs_after_a_flush(store):
+    """``Script.head`` + ``Script.command`` (a trip's save: the same keys and first arguments at every fix) give the
+    bytes ``hiredis.pack_command`` gives for the whole command, numbers written as hiredis writes them; Redis
+    having lost the script, ``run_packed`` loads it and gets the reply."""
+    script = Script("return {KEYS[1], KEYS[2], ARGV[1], ARGV[2], ARGV[3], ARGV[4], ARGV[5], ARGV[6]}")
+    keys, first = ["eco:t:ab", "eco:t:ab:tr"], [b"\x00\r\n\xff", 1810.0, 0.1, "eco"]
+    tail = (b"%r" % 1796021301.264423, b"%d" % -1, b"", b'{"a":[1.5e-07,null]}')
+    command = Script.command(script.head(keys, first), tail)
+    assert command == hiredis.pack_command(("EVALSHA", script.sha, 2, *keys, *first, 1796021301.264423, -1, b"", b'{"a":[1.5e-07,null]}'))
+
+    async def run() -> None:
+        pipe = RedisPipe(store.url, 10.0)
+        want = [b"eco:t:ab", b"eco:t:ab:tr", b"\x00\r\n\xff", b"1810.0", b"0.1", b"eco", b"1796021301.264423", b"-1"]
+        assert await pipe.run_packed(script, command) == want
+        await pipe.call("SCRIPT", "FLUSH")
+        assert await pipe.run_packed(script, command) == want
         await pipe.close()
 
     asyncio.run(run())
