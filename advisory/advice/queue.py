@@ -322,11 +322,7 @@ def _clearing(unseen: int, arrivals: np.ndarray, start: float, end: float, prev:
     if unseen:
         arrivals = np.concatenate((np.full(unseen, max(start, 0.0)), arrivals))
     # the discharge, slow and fast, counted from the red's end (one whose end is unknown: from after every arrival)
-    if math.isfinite(end):
-        ref = end
-    else:  # (max() over the list [max(start, 0), *arrivals]: the first of them unless an arrival is later)
-        first, last = max(start, 0.0), float(arrivals.max()) if len(arrivals) else -math.inf
-        ref = (last if last > first else first) + 1.0
+    ref = end if math.isfinite(end) else max(max(start, 0.0), float(arrivals.max(initial=-math.inf))) + 1.0
     crossed, holding = _discharged(arrivals, start, ref, model.startup_s, model.headway_s, prev[1])
     crossed_fast, holding_fast = _discharged(arrivals, start, ref, model.fast_startup_s, model.fast_headway_s, prev[0])
     waits = holding > 0 and bool(np.any((start <= arrivals) & (arrivals < ref)))  # the queue waits for the red's end
