@@ -10,7 +10,8 @@ run, from the car's insertion to the zone's end, within its own unadvised time, 
 (``ecodrive.traffic.hindsight``). Per group, means over seeds of: ``bound`` (the DP against the same cars unadvised),
 ``bound_alone`` (the car in its own SUMO run, alone on the road, against its bound), ``bound_from_approach`` (the
 car's own drive up to where the service begins to advise, the DP from there), ``bound_advisable`` (that, and no line
-within the advisor's 2 s after a red ends), ``ours`` and ``glosa`` over the same cars, ``bound_free`` (only the cars
+within the advisor's 2 s after a red ends), ``bound_behind`` (that, a car's length behind the car ahead as it drove
+unadvised, at every 10 m stage), ``ours`` and ``glosa`` over the same cars, ``bound_free`` (only the cars
 whose DP drive does not run into the car ahead as it drove unadvised) and the share of cars whose DP does.
 ``--bound-only``: the unadvised run and the bounds alone (a car's bound does not depend on the other runs); ours and
 GLOSA then come from ``--matrix`` (bench_traffic.py's rows of the same seeds, every connected car: the same cars). One JSON line per scenario in ``--out`` (default
@@ -37,6 +38,7 @@ COLUMNS = (
     ("bound_alone", "hindsight_alone_saving_frac"),
     ("bound_from_approach", "hindsight_from_approach_saving_frac"),
     ("bound_advisable", "hindsight_advisable_saving_frac"),
+    ("bound_behind", "hindsight_behind_saving_frac"),
     ("bound_free", "hindsight_free_saving_frac"),
 )
 """(name in the table, the scenario's key): means over seeds."""
@@ -83,7 +85,7 @@ def _pct(x) -> str:
 
 
 def table_text(groups: list[dict]) -> str:
-    lines = ["group                                 seeds cars |   ours  glosa  bound b_alon b_appr b_advi b_free | into ahead | stops unadv | matrix ours glosa"]
+    lines = ["group                                 seeds cars |   ours  glosa  bound b_alon b_appr b_advi b_behi b_free | into ahead | stops unadv | matrix ours glosa"]
     for g in groups:
         lines.append(f"{g['corridor'][:22]:22s} {g['control']:8s} {g['demand_vph_per_lane']:4.0f} {g['penetration_frac']:4.1f} {g['seeds']:2d} {g['cars']:4d} |"
                      + "".join(_pct(g[name]) for name, _ in COLUMNS)

@@ -32,6 +32,7 @@ car's hindsight bound (the DP that knows the lights it met, from its insertion, 
 on the road), ``hindsight_saving_frac`` and ours and GLOSA over the same cars (``hindsight_ours_saving_frac``,
 ``hindsight_glosa_saving_frac``), the bound from where the service begins to advise
 (``hindsight_from_approach_saving_frac``) and also 2 s clear of each red's end (``hindsight_advisable_saving_frac``),
+that one kept behind the car ahead as it drove unadvised (``hindsight_behind_saving_frac``),
 the same car alone on the road against its bound (``hindsight_alone_saving_frac``), the cars whose bound does not run
 into the car ahead (``hindsight_free_saving_frac``), and one row per car (``hindsight_rows``).
 
@@ -192,7 +193,9 @@ def hindsight_summary(results: dict, network, params, from_m: float, after_red_s
     GLOSA: those in ``results``) over the same cars: ``hindsight_*`` keys and one row per car (``hindsight_rows``).
     ``from_m``: where the service begins to advise (the second bound, ``hindsight_from_approach_saving_frac``, keeps
     the car's own drive up to there); ``after_red_s``: the third, ``hindsight_advisable_saving_frac``, from there too
-    and no line crossed within this long after a red ends (the advisor's ``green_margin_s``). ``alone``: each car's
+    and no line crossed within this long after a red ends (the advisor's ``green_margin_s``); the fourth,
+    ``hindsight_behind_saving_frac``, is that one kept a car's length behind the car ahead as it drove unadvised
+    (:func:`~ecodrive.traffic.hindsight.behind_lights`: alone on the road the bound may drive through it). ``alone``: each car's
     run alone on the road (:func:`alone_runs`); ``hindsight_alone_*``: its bound against that drive (the empty
     road's bound, the same lights)."""
     from advisory.drivers.closed_loop import red_light_violations
@@ -213,13 +216,16 @@ def hindsight_summary(results: dict, network, params, from_m: float, after_red_s
         row = {"vid": vid, **{f"{m}_{k}": getattr(s, k) for m, s in scores.items() for k in ("cost_usd", "stops", "time_s")}}
         if "advised" in results:
             row["advice"] = dict(results["advised"].cars[vid].advice)
-        for key, start, late_s in (("hindsight", -np.inf, 0.0), ("hindsight_from_approach", from_m, 0.0), ("hindsight_advisable", from_m, after_red_s)):
+        car_ahead = base.cars[order[n - 1]] if n > 0 else None  # its whole drive, past the zone's end
+        ahead = None if car_ahead is None else Trajectory(*(np.asarray(a, dtype=float) for a in (car_ahead.t, car_ahead.x, car_ahead.v)))
+        for key, start, late_s, behind in (("hindsight", -np.inf, 0.0, None), ("hindsight_from_approach", from_m, 0.0, None),
+                                           ("hindsight_advisable", from_m, after_red_s, None), ("hindsight_behind", from_m, after_red_s, ahead)):  # fmt: skip
             reds = [[(a, min(b + late_s, nxt)) for (a, b), nxt in zip(light, [a for a, _ in light[1:]] + [np.inf])] for light in base.reds]
-            best = hindsight_drive(own[vid], lines, reds, end_m, v_lim, params, from_m=start)
+            best = hindsight_drive(own[vid], lines, reds, end_m, v_lim, params, from_m=start, ahead=behind)
             row[f"{key}_cost_usd"] = None if best is None else score_in_end_state(best, params, v_lim).cost_usd
             if key == "hindsight":
-                ahead = own.get(order[n - 1]) if n > 0 else None
-                row["hindsight_runs_into_car_ahead"] = bool(best is not None and ahead is not None and runs_into(best, ahead))
+                zone_ahead = own.get(order[n - 1]) if n > 0 else None
+                row["hindsight_runs_into_car_ahead"] = bool(best is not None and zone_ahead is not None and runs_into(best, zone_ahead))
                 row["hindsight_red_at_true_lines"] = bool(best is not None and red_light_violations(best, truth))
         if vid in alone:  # the same car alone on the road (SUMO's driver, the same departure)
             drive = zone_trajectory(alone[vid][0], end_m)
@@ -229,7 +235,7 @@ def hindsight_summary(results: dict, network, params, from_m: float, after_red_s
         rows.append(row)
     out = {"hindsight_rows": rows}
     others = [("ours", "advised"), ("glosa", "glosa")]
-    for key in ("hindsight", "hindsight_from_approach", "hindsight_advisable"):
+    for key in ("hindsight", "hindsight_from_approach", "hindsight_advisable", "hindsight_behind"):
         ok = [r for r in rows if r[f"{key}_cost_usd"] is not None]
         out[f"{key}_cars"] = len(ok)
         unadvised = sum(r["unadvised_cost_usd"] for r in ok)
@@ -340,7 +346,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if "hindsight_saving_frac" in out:
         print(f"  hindsight bound over {out['hindsight_cars']} of them: {pct(out['hindsight_saving_frac'])} (ours {pct(out['hindsight_ours_saving_frac'])}, "
               f"GLOSA {pct(out['hindsight_glosa_saving_frac'])}); from the approach {pct(out['hindsight_from_approach_saving_frac'])}, "
-              f"2 s after each red too {pct(out['hindsight_advisable_saving_frac'])}; alone on the road {pct(out['hindsight_alone_saving_frac'])}")  # fmt: skip
+              f"2 s after each red too {pct(out['hindsight_advisable_saving_frac'])}, behind the car ahead too {pct(out['hindsight_behind_saving_frac'])}; "
+              f"alone on the road {pct(out['hindsight_alone_saving_frac'])}")  # fmt: skip
     if "blind_saving_frac" in out:
         print(f"  queue-blind advice: saving {pct(out['blind_saving_frac'])}, stops per car {out['stops_per_blind_car']:.2f}, time {pct(out['blind_time_change_frac'])}, "
               f"the others {pct(out['blind_others_time_change_frac'])}")  # fmt: skip

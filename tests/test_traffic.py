@@ -233,7 +233,8 @@ def test_summary_keys_and_consistency(paired):
 
 def test_a_run_records_its_lights_reds_as_the_plan_and_the_cars_meet_them(paired):
     """Each run's red intervals (the hindsight bound's lights) are the fixed plan's to the step, in every mode; no car's
-    drive reaches a line within one, and the hindsight summary prices every connected car within its own time."""
+    drive reaches a line within one, and the hindsight summary prices every connected car within its own time, behind
+    the car ahead too."""
     from advisory.drivers.closed_loop import red_light_violations
     from advisory.signals import Scenario, TimelineSignal
     from ecodrive.traffic.sim import LINE_TOL_M
@@ -258,6 +259,10 @@ def test_a_run_records_its_lights_reds_as_the_plan_and_the_cars_meet_them(paired
     # each bound less free than the one before it: from where the service advises, then 2 s clear of each red's end
     assert all(r["hindsight_cost_usd"] <= r["hindsight_from_approach_cost_usd"] * (1 + 1e-3) for r in rows)
     assert all(r["hindsight_from_approach_cost_usd"] <= r["hindsight_advisable_cost_usd"] * (1 + 1e-3) for r in rows if r["hindsight_advisable_cost_usd"])
+    # and behind the car ahead as it drove: every car's own drive keeps behind it, so each car has that bound too
+    assert all(r["hindsight_behind_cost_usd"] is not None for r in rows)
+    assert all(r["hindsight_advisable_cost_usd"] <= r["hindsight_behind_cost_usd"] * (1 + 1e-3) for r in rows if r["hindsight_advisable_cost_usd"])
+    assert all(r["hindsight_behind_cost_usd"] <= r["unadvised_cost_usd"] * (1 + 1e-3) for r in rows)
     assert out["hindsight_saving_frac"] > out["hindsight_ours_saving_frac"]
 
 

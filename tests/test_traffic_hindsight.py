@@ -101,3 +101,45 @@ def test_a_line_between_stages_moves_to_the_nearest_one_with_its_reds():
     assert light.position_m == 210.0 and light.reds_s[0] == pytest.approx((39.8, 69.8))
     (light,) = snapped_lights([216.0], [((50.0, 80.0),)], 0.0, 10.0, 10.0, 20.0)
     assert light.position_m == 220.0 and light.reds_s[0] == pytest.approx((40.2, 70.2))
+
+
+def _queue_tail(go_s=12.0, stand_m=70.0, shift_m=0.0):
+    """By hand: a car standing at ``stand_m`` (the tail of a queue) until ``go_s``, then 2 m/s² to the limit and on."""
+    t_up = V_MPS / 2.0
+
+    def at(t):
+        tau = np.clip(t - go_s, 0.0, None)
+        up = np.minimum(tau, t_up)
+        return stand_m + shift_m + up * up + V_MPS * (tau - up), 2.0 * up
+
+    t = np.append(np.arange(0.0, go_s + t_up, 0.1), [go_s + t_up, go_s + t_up + 40.0])
+    return Trajectory(t, *at(t)), at
+
+
+def test_behind_the_car_ahead_the_bound_keeps_its_distance_and_costs_what_that_takes():
+    """A car that never stops but is slowed behind a queue's tail pulling away (Newell's follower of it, 1 s and a car's
+    length behind, at the limit where that car lets it: down to 3.4 m/s, 41 s to the zone's end; traffic-eval's
+    paper_s400 fixed 300 veh/h has ten such cars in five seeds). Alone on the road its bound glides through the car
+    ahead; kept behind that car's drive it stays a car's length behind it at every stage, costs more than alone and
+    less than the car's own drive; a car ahead that is never in the way changes nothing."""
+    params = model_params()
+    lead, at = _queue_tail()
+    t = np.append(np.arange(0.0, 12.0 + V_MPS / 2.0 + 1.0, 0.1), 12.0 + V_MPS / 2.0 + 1.0)
+    x_lead, v_lead = at(t - 1.0)
+    free = X0_M + V_MPS * t
+    x, v = np.minimum(free, x_lead - hindsight.CAR_GAP_M), np.where(free <= x_lead - hindsight.CAR_GAP_M, V_MPS, v_lead)
+    own = Trajectory(np.append(t, t[-1] + (END_M - x[-1]) / V_MPS), np.append(x, END_M), np.append(v, V_MPS))
+    assert 3.0 < own.v_mps.min() < 4.0 and not hindsight.runs_into(own, lead)  # slowed, never stopped, never too close
+    cost = {}
+    for name, ahead in (("alone", None), ("behind", lead), ("far", _queue_tail(shift_m=400.0)[0])):
+        best = hindsight_drive(own, [LINE_M], [()], END_M, V_MPS, params, ahead=ahead)
+        cost[name] = score_in_end_state(best, params, V_MPS).cost_usd
+        assert score_in_end_state(best, params, V_MPS).time_s <= score_in_end_state(own, params, V_MPS).time_s + 1e-6
+        if name == "alone":
+            assert hindsight.runs_into(best, lead)
+        if name == "behind":
+            stages = np.arange(-280.0, END_M, 10.0)  # the DP's stages, laid back from the zone's end
+            gaps = [float(lead.position_at(best.crossing_time_s(s))) - s for s in stages if best.crossing_time_s(s) > 0.0]
+            assert min(gaps) >= hindsight.CAR_GAP_M - 1e-6 and not hindsight.runs_into(best, lead)
+    assert cost["far"] == cost["alone"]
+    assert cost["alone"] < cost["behind"] < 0.6 * score_in_end_state(own, params, V_MPS).cost_usd

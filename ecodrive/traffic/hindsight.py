@@ -17,9 +17,16 @@ with it (the time a car at the limit takes over ``delta_m``): exact where the li
 10 or 20 m), within ``stage_m / 2`` of a line elsewhere (7th Street's lines lie 172.58 m apart). SUMO reports speeds
 to 0.01 m/s (24.59 for a 24.5872 m/s limit): a drive faster than the limit allows is taken as the same drive at the
 limit (the DP's fastest).
+
+Behind the car ahead (``ahead``: its drive as it went, unadvised): a line on every stage, closed from the DP's start
+until that car's front is :data:`CAR_GAP_M` past it (:func:`behind_lights`), so that the DP's drive keeps a car's
+length behind it at every stage (not checked between stages; no time gap: SUMO's driver keeps far more at speed). A
+car ahead that is not connected drives the same whatever this car is told: that drive is the one an advised car meets.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -55,6 +62,50 @@ def snapped_lights(stop_lines_m, reds_s, start_m: float, start_s: float, stage_m
     return tuple(out)
 
 
+def closed_until(reds_s, until_s: float) -> tuple[tuple[float, float], ...]:
+    """``reds_s`` (sorted, disjoint) with the line also closed from 0 until ``until_s``: their union, sorted and disjoint.
+
+    Examples
+    --------
+    >>> closed_until(((5.0, 8.0), (20.0, 30.0)), 6.0), closed_until(((-3.0, 1.0),), 0.0), closed_until((), 4.0)
+    (((0.0, 8.0), (20.0, 30.0)), ((-3.0, 1.0),), ((0.0, 4.0),))
+    """
+    if not until_s > 0.0:
+        return tuple(reds_s)
+    lo, hi, apart = 0.0, until_s, []
+    for a, b in reds_s:
+        if b < lo or a > hi:
+            apart.append((a, b))
+        else:
+            lo, hi = min(lo, a), max(hi, b)
+    return tuple(sorted([*apart, (lo, hi)]))
+
+
+def behind_lights(lights, ahead: Trajectory, start_m: float, start_s: float, zone_m: float, stage_m: float,
+                  gap_m: float = CAR_GAP_M) -> tuple[TimelineSignal, ...]:  # fmt: skip
+    """``lights`` (on the DP's axis: origin at station ``start_m``, time ``start_s``; each on a stage) and a line on every
+    stage before ``zone_m`` (the zone's end, where the DP ends), each closed from 0 until the front of ``ahead`` (on the
+    run's axes) is ``gap_m`` past it.
+
+    Examples
+    --------
+    A car ahead standing 20 m past the start until 5 s, then speeding up to 10 m/s over a second (25 m at 6 s) and on
+    at 10 m/s: the stage at 10 m is open (its front is past 17.5 m already), the one at 20 m closed until its front is at
+    27.5 m, 6 + 2.5 / 10 = 6.25 s, and the light there is red from 8 s to 9 s as before.
+
+    >>> lead = Trajectory(np.array([0.0, 5.0, 6.0, 30.0]), np.array([20.0, 20.0, 25.0, 265.0]), np.array([0.0, 0.0, 10.0, 10.0]))
+    >>> [(light.position_m, light.reds_s) for light in behind_lights((TimelineSignal(20.0, ((8.0, 9.0),)),), lead, 0.0, 0.0, 30.0, 10.0)]
+    [(10.0, ()), (20.0, ((0.0, 6.25), (8.0, 9.0)))]
+    """
+    reds = {light.position_m: light.reds_s for light in lights}
+    out = []
+    for k in range(1, int(round(zone_m / stage_m))):
+        at_m = k * stage_m
+        until = ahead.crossing_time_s(start_m + at_m + gap_m) - start_s
+        out.append(TimelineSignal(at_m, closed_until(reds.get(at_m, ()), until)))
+    return tuple(out)
+
+
 def _split(drive: Trajectory, stop_lines_m, reds_s, zone_end_m: float, speed_limit_mps: float, stage_m: float, from_m: float):
     """The DP's start on ``drive`` (its first stage at or past ``drive``'s first station and ``from_m``): the knots of
     ``drive`` before it, the start (station, time), the zone from there as a Scenario, and ``drive`` from there on its axes."""
@@ -79,14 +130,17 @@ def _joined(drive: Trajectory, keep, start_m: float, start_s: float, rest: Traje
 
 
 def hindsight_drive(drive: Trajectory, stop_lines_m, reds_s, zone_end_m: float, speed_limit_mps: float, params,
-                    grid: GridSpec = HINDSIGHT_GRID, from_m: float = -np.inf) -> Trajectory | None:  # fmt: skip
+                    grid: GridSpec = HINDSIGHT_GRID, from_m: float = -np.inf, ahead: Trajectory | None = None) -> Trajectory | None:  # fmt: skip
     """The cheapest drive of the car whose own drive (to the zone's end) is ``drive``, on the run's axes (see the
     module docstring); None where the DP finds none (or its optimum meets a red of the lights as given, which the
     DP's one-cycle reading of them did not repeat: ``hindsight_optimum``).
 
     ``stop_lines_m``: each light's station; ``reds_s``: each light's red intervals ``[start, end)`` [s]. ``from_m``:
-    the car drives its own drive up to this station (where the service begins to advise it), the DP from there."""
+    the car drives its own drive up to this station (where the service begins to advise it), the DP from there.
+    ``ahead``: the car in front's drive (on the run's axes, past the zone's end): the DP keeps behind it (module docstring)."""
     keep, start_m, start_s, truth, own = _split(drive, stop_lines_m, reds_s, zone_end_m, speed_limit_mps, grid.stage_m, from_m)
+    if ahead is not None:
+        truth = replace(truth, signals=behind_lights(truth.signals, ahead, start_m, start_s, truth.zone_length_m, grid.stage_m))
     best = hindsight_optimum(truth, params, grid, own)
     return None if best is None else _joined(drive, keep, start_m, start_s, best)
 
