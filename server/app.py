@@ -143,7 +143,7 @@ def create_app(settings: Settings | None = None, *, clock: Callable[[], float] =
         hub = SpatHub(settings, corridors_, clock)
         engine = Engine(settings, corridors_, tables, advisor_params, hub, clock)
         engine.on_advice = metrics.observe_advice
-        engine.on_ignored_fix = lambda status: metrics.fixes.labels(status).inc()
+        engine.on_ignored_fix = lambda status: metrics.count(metrics.fixes, status)
         engine.on_rate_limited = metrics.rate_limited.inc
         engine.trips.on_shed = metrics.trips_closed.labels("shed").inc
         app.state.engine = engine

@@ -13,6 +13,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+from advisory.frozen import quick_init
 from spat_feed.road.corridors import WGS84, Corridor
 
 SPEED_WINDOW_S = 4.0
@@ -24,6 +25,7 @@ REANCHOR_FIXES = 5
 (a bad first fix, a tunnel exit). Fewer are a glitch and stay rejected. [-]"""
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Fix:
     """One GPS fix as received. Angles in degrees, clockwise from true north for the heading."""
@@ -36,6 +38,7 @@ class Fix:
     accuracy_m: float | None = None
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Match:
     """A fix placed on the route. ``station_m`` within [0, length]; ``route_m`` the same along the route extended
@@ -63,6 +66,7 @@ class RouteMatcher:
         return Match(float(station_m), float(cross_m), float(offset_m), float(route_m))
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class TrackPoint:
     """An accepted fix on the route: time [s], station [m], speed used [m/s] (None: not known yet)."""

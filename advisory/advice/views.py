@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from advisory.frozen import quick_init
 from advisory.physics.params import PAPER_54KWH, VehicleParams
 
 
@@ -51,6 +52,7 @@ def packed_windows_s(timings, k: int) -> np.ndarray:
     return np.array(flat, dtype=float).reshape(len(timings), k, 2)
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class LightView:
     """One light ahead, as the advisor sees it. Times are relative to now. [m], [s]
@@ -130,6 +132,7 @@ class LightView:
         return min(starts) if starts else None
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Observation:
     """What the advisor knows at one instant. ``lights``: the lights ahead, nearest first."""
@@ -153,6 +156,7 @@ REASONS = ("green_wave", "red_ahead", "past_lights", "off_route", "no_spat", "st
 """Every ``Advice.reason`` the advisor gives (the service's API enumerates these: keep them in step)."""
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Advice:
     """One advisory. ``action``: cruise, ease_off (lift off and coast down to the target, then hold it),
@@ -229,6 +233,7 @@ class AdvisorParams:
             raise ValueError("units must be 'mph' or 'kmh'")
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class AdvisorMemory:
     """What the advisor remembers between fixes of one trip (for hysteresis and the speak flag)."""

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import math
+from bisect import bisect_left
 from collections.abc import Callable
+from itertools import accumulate
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, ProcessCollector, generate_latest
-from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+from prometheus_client import CollectorRegistry, Counter, Gauge, ProcessCollector, generate_latest
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, HistogramMetricFamily
 from prometheus_client.exposition import CONTENT_TYPE_LATEST
+from prometheus_client.utils import floatToGoString
 
 __all__ = ["Metrics", "CONTENT_TYPE_LATEST"]
 
@@ -78,16 +82,47 @@ class QueueBoardCollector:
         yield from (up, failures)
 
 
+class Latency:
+    """A histogram by labels kept as plain bucket counts: one ``bisect`` and two additions an observation, where
+    prometheus_client's ``Histogram`` takes a labelled child, a lock and a loop over its buckets (~3.4 us). A scrape reads
+    the same ``_bucket`` (cumulative, ``le`` as prometheus_client writes it), ``_count`` and ``_sum`` samples. [s]"""
+
+    def __init__(self, name: str, documentation: str, labelnames: tuple[str, ...] = (), buckets=LATENCY_BUCKETS_S, registry=None) -> None:
+        self.name, self.documentation, self.labelnames = name, documentation, tuple(labelnames)
+        self.bounds = tuple(float(b) for b in buckets)
+        self.le = [floatToGoString(b) for b in (*self.bounds, math.inf)]
+        self.series: dict[tuple[str, ...], list] = {}  # labels -> counts per bucket (+Inf last), then the sum
+        if registry is not None:
+            registry.register(self)
+
+    def observe(self, seconds: float, *labels: str) -> None:
+        counts = self.series.get(labels)
+        if counts is None:
+            counts = self.series[labels] = [0] * (len(self.bounds) + 1) + [0.0]
+        counts[bisect_left(self.bounds, seconds)] += 1  # (the first bound >= seconds: le is inclusive)
+        counts[-1] += seconds
+
+    def describe(self):
+        return [HistogramMetricFamily(self.name, self.documentation, labels=self.labelnames)]
+
+    def collect(self):
+        family = HistogramMetricFamily(self.name, self.documentation, labels=self.labelnames)
+        for labels, counts in list(self.series.items()):
+            family.add_metric(list(labels), list(zip(self.le, accumulate(counts[:-1]))), counts[-1])
+        yield family
+
+
 class Metrics:
     def __init__(self, open_trips: Callable[[], int], spat_hub: Callable[[], object | None] | None = None,
                  queue_board: Callable[[], object | None] | None = None) -> None:  # fmt: skip
         r = self.registry = CollectorRegistry(auto_describe=True)
         self._children: dict[tuple, object] = {}
+        self._counts: dict[tuple, int] = {}  # (counter, labels) -> increments not yet added to it (:meth:`count`)
         self.requests = Counter("ecodrive_http_requests", "HTTP requests by route and status", ["method", "route", "status"], registry=r)
-        self.request_s = Histogram("ecodrive_http_request_seconds", "HTTP request handling time", ["route"], buckets=LATENCY_BUCKETS_S, registry=r)
+        self.request_s = Latency("ecodrive_http_request_seconds", "HTTP request handling time", ("route",), registry=r)
         self.fixes = Counter("ecodrive_fixes", "GPS fixes by outcome", ["outcome"], registry=r)
         self.advice = Counter("ecodrive_advice", "advisories by action, source and reason (no_spat, stale_spat, clock_skew, low_confidence, ...)", ["action", "source", "reason"], registry=r)
-        self.advice_s = Histogram("ecodrive_advice_compute_seconds", "time to compute one advisory from a fix", buckets=LATENCY_BUCKETS_S, registry=r)
+        self.advice_s = Latency("ecodrive_advice_compute_seconds", "time to compute one advisory from a fix", registry=r)
         self.trips_created = Counter("ecodrive_trips_created", "trips created", registry=r)
         self.trips_closed = Counter("ecodrive_trips_closed", "trips closed", ["how"], registry=r)
         self.rate_limited = Counter("ecodrive_rate_limited", "requests refused by a rate limit", registry=r)
@@ -101,9 +136,16 @@ class Metrics:
         ProcessCollector(registry=r)  # process_resident_memory_bytes, process_open_fds, process_max_fds, CPU seconds (Linux /proc)
 
     def observe_advice(self, trip, advice, outcome: str, seconds: float) -> None:
-        self.child(self.fixes, outcome).inc()
-        self.child(self.advice, advice.action, advice.source, advice.reason).inc()
+        self.count(self.fixes, outcome)
+        self.count(self.advice, advice.action, advice.source, advice.reason)
         self.advice_s.observe(seconds)
+
+    def count(self, counter: Counter, *labels: str) -> None:
+        """``counter.labels(*labels).inc()``, batched: an int in a dict here, added to the counter when the metrics are
+        read (:meth:`render`). Per fix and per request: ~1 us against ~11 for prometheus_client's child and lock per
+        increment, on every fix (issue 30: CPU per fix)."""
+        key = (counter, labels)
+        self._counts[key] = self._counts.get(key, 0) + 1
 
     def child(self, metric, *labels: str):
         """``metric.labels(*labels)``, memoised: the hot path pays a dict lookup, not prometheus' label checks."""
@@ -114,4 +156,7 @@ class Metrics:
         return child
 
     def render(self) -> bytes:
+        counts, self._counts = self._counts, {}
+        for (counter, labels), n in counts.items():
+            self.child(counter, *labels).inc(n)
         return generate_latest(self.registry)

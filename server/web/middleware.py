@@ -86,9 +86,9 @@ class GuardMiddleware:
     def _count(self, scope, status: int, seconds: float) -> None:
         route = scope.get("route")
         path = getattr(route, "path", None) or "unmatched"
-        self.metrics.child(self.metrics.requests, scope.get("method", ""), path, str(status)).inc()
+        self.metrics.count(self.metrics.requests, scope.get("method", ""), path, str(status))
         if seconds:
-            self.metrics.child(self.metrics.request_s, path).observe(seconds)
+            self.metrics.request_s.observe(seconds, path)
 
 
 async def _send_json(send, status: int, body: dict) -> None:
