@@ -43,7 +43,7 @@ import numpy as np
 from numba import njit
 
 from advisory.advice.behind import PACED_REASON, cut_behind, gives_up_green, paced_for_behind
-from advisory.advice.queue import PastRed, Probe, Probes, QueueEstimate, QueueModel, apply, estimate, followers_held_up, normal_drive_s
+from advisory.advice.queue import PastRed, Probe, Probes, QueueEstimate, QueueModel, apply, estimate, followers_held_up, normal_drive_s, plan_of
 from advisory.advice.queue_words import drive_normally, ease_to_car_ahead, said_truly, seen_at_line, tail_glide
 from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
 from server.storage.queue_store import SharedBoard
@@ -61,8 +61,10 @@ class Lane:
 
     * ``order``: ``(station_m, seq, trip, speed_mps)`` sorted by station; ``seq`` is the table's insertion order, so
       cars at one station come in the order a loop over the table meets them (the nearest car ahead is the same one);
-    * ``rows``: the table's ``station_m``, ``t_unix_s`` and ``speed_mps`` in that order, as three rows of an array, so
-      that a fix makes its run of cars probes at once (:meth:`near`);
+    * ``rows``: the table's ``station_m``, ``t_unix_s`` and ``speed_mps`` in that order, and each car's advised motion
+      at that fix (``plan_mps``, ``plan_mode``: :func:`advisory.advice.queue.plan_of`, where this worker advised it at
+      that fix, :meth:`tell`; NaN and 0: none), as five rows of an array, so that a fix makes its run of cars probes at
+      once (:meth:`near`);
     * ``by_time``: ``(t_unix_s, trip)`` as a heap, to forget the stale probes without looking at the others (an entry
       left by a later fix of the same trip is skipped when it comes up);
     * ``top_mps``: at least the fastest probe's speed (exact after a rebuild, raised by each fix), which bounds how far
@@ -71,11 +73,13 @@ class Lane:
     Every change to the table goes through :meth:`put`, :meth:`drop` and :meth:`expire`; a table replaced as a whole
     (the shared board's sync: its ``loads`` counter moved) is indexed again at the next call (:meth:`fresh`)."""
 
-    __slots__ = ("table", "loads", "order", "rows", "entry", "seq", "next_seq", "by_time", "top_mps")
+    __slots__ = ("table", "loads", "order", "rows", "entry", "seq", "next_seq", "by_time", "top_mps", "plans")
 
     def __init__(self, table: dict) -> None:
         self.table = table
         self.loads = -1
+        self.plans: dict[str, tuple[float, float, int]] = {}
+        """trip -> the advised motion of its fix at that time: ``(t_unix_s, plan_mps, plan_mode)`` (:meth:`tell`)."""
         self.fresh()
 
     def fresh(self) -> None:
@@ -88,11 +92,26 @@ class Lane:
         self.next_seq = len(self.seq)
         self.entry = {tid: (s, self.seq[tid], tid, v) for tid, (_, s, v) in self.table.items()}
         self.order = sorted(self.entry.values())
+        plans = [self._plan(tid) for _, _, tid, _ in self.order]
         self.rows = np.array([[s for s, _, _, _ in self.order], [self.table[tid][0] for _, _, tid, _ in self.order],
-                              [v for _, _, _, v in self.order]], dtype=float).reshape(3, len(self.order))  # fmt: skip
+                              [v for _, _, _, v in self.order], [p for p, _ in plans], [m for _, m in plans]], dtype=float).reshape(5, len(self.order))  # fmt: skip
         self.by_time = [(t, tid) for tid, (t, _, _) in self.table.items()]
         heapq.heapify(self.by_time)
         self.top_mps = max((v for _, _, v in self.table.values()), default=0.0)
+
+    def _plan(self, trip_id: str) -> tuple[float, int]:
+        """The trip's advised motion at its probe's fix (:meth:`tell`), ``(nan, 0)`` where none was told at that fix."""
+        told = self.plans.get(trip_id)
+        probe = self.table.get(trip_id)
+        return (told[1], told[2]) if told is not None and probe is not None and told[0] == probe[0] else (math.nan, 0)
+
+    def tell(self, trip_id: str, t_unix_s: float, plan: tuple[float, int]) -> None:
+        """The trip was advised ``plan`` (:func:`advisory.advice.queue.plan_of`) at its fix at ``t_unix_s``: its
+        probe carries that motion while that fix is its last (a later fix's probe carries none until told)."""
+        self.plans[trip_id] = (t_unix_s, *plan)
+        entry = self.entry.get(trip_id)
+        if entry is not None and self.table[trip_id][0] == t_unix_s:
+            self.rows[3:, bisect_left(self.order, entry)] = plan
 
     def _unindex(self, trip_id: str) -> None:
         entry = self.entry.pop(trip_id, None)
@@ -119,13 +138,13 @@ class Lane:
         self.order.insert(k, entry)
         rows = self.rows
         if old is None:
-            self.rows = np.insert(rows, k, (s, t, v), axis=1)
+            self.rows = np.insert(rows, k, (s, t, v, math.nan, 0.0), axis=1)
         else:  # the cars between its old place and its new one move up or down by one
             if k > was:
                 rows[:, was:k] = rows[:, was + 1 : k + 1]
             elif k < was:
                 rows[:, k + 1 : was + 1] = rows[:, k:was].copy()
-            rows[:, k] = (s, t, v)
+            rows[:, k] = (s, t, v, math.nan, 0.0)
         heapq.heappush(self.by_time, (t, trip_id))
         if v > self.top_mps:
             self.top_mps = v
@@ -133,6 +152,7 @@ class Lane:
     def drop(self, trip_id: str) -> None:
         """The trip is no probe any more (off the route, ended)."""
         self.table.pop(trip_id, None)
+        self.plans.pop(trip_id, None)
         self._unindex(trip_id)
 
     def expire(self, t_unix_s: float, max_age_s: float) -> None:
@@ -144,12 +164,14 @@ class Lane:
             probe = self.table.get(trip_id)
             if probe is not None and probe[0] == t:
                 del self.table[trip_id]
+                self.plans.pop(trip_id, None)
                 self._unindex(trip_id)
 
     def near(self, here_m: float, t_unix_s: float, lo_m: float, hi_m: float) -> Probes:
         """The cars that were, at their last fix, between ``lo_m - top_mps x MAX_AGE_S`` and ``hi_m`` ahead of station
         ``here_m`` (a superset of those that can be in ``[lo_m, hi_m)`` now, rather a few too many), each where it is at
-        ``t_unix_s`` (:func:`probe_at`, the run at once: :func:`_probes_at`); none at ``here_m`` itself (this car)."""
+        ``t_unix_s`` (:func:`probe_at`, the run at once: :func:`_probes_at`), with its advised motion at that fix
+        (:meth:`tell`); none at ``here_m`` itself (this car)."""
         order = self.order
         first = bisect_left(order, (here_m + lo_m - self.top_mps * MAX_AGE_S - 1e-6,))
         end = bisect_left(order, (here_m + hi_m + 1e-6,), first)
@@ -161,11 +183,13 @@ class Lane:
 
 
 @njit(cache=True)
-def _probes_at(rows: np.ndarray, first: int, mine: int, past: int, end: int, here_m: float, t_unix_s: float) -> tuple[np.ndarray, np.ndarray]:
+def _probes_at(rows: np.ndarray, first: int, mine: int, past: int, end: int, here_m: float,
+               t_unix_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """The cars of columns ``first:end`` of a lane's ``rows`` but ``mine:past`` (this car) as probes for the fix at
-    ``here_m`` at ``t_unix_s``, compiled: how far ahead each is and its speed, as :func:`probe_at` has them."""
+    ``here_m`` at ``t_unix_s``, compiled: how far ahead each is and its speed, as :func:`probe_at` has them, and its
+    advised motion (:meth:`Lane.tell`)."""
     n = (mine - first) + (end - past)
-    ahead_m, speed_mps = np.empty(n), np.empty(n)
+    ahead_m, speed_mps, plan_mps, plan_mode = np.empty(n), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
     k = 0
     for j in range(first, end):
         if mine <= j < past:
@@ -173,8 +197,10 @@ def _probes_at(rows: np.ndarray, first: int, mine: int, past: int, end: int, her
         dt_s = t_unix_s - rows[1, j]
         ahead_m[k] = rows[0, j] + rows[2, j] * (0.0 if 0.0 > dt_s else dt_s) - here_m
         speed_mps[k] = rows[2, j]
+        plan_mps[k] = rows[3, j]
+        plan_mode[k] = int(rows[4, j])
         k += 1
-    return ahead_m, speed_mps
+    return ahead_m, speed_mps, plan_mps, plan_mode
 
 
 def probe_at(probe: tuple[float, float, float], here_m: float, t_unix_s: float) -> Probe:
@@ -221,6 +247,8 @@ class QueueBoard:
         in the green the car crosses it in, and the passed one's last red (:meth:`note_behind`, :meth:`cuts_behind`)."""
         self._lanes: dict[str, Lane] = {}  # corridor -> its probes indexed (Lane)
         self._view_m: dict[str, float] = {}  # trip -> how far behind it the route begins for the service (:meth:`see`) [m]
+        self._fix: dict[str, tuple[Lane, float, float]] = {}  # trip -> its last fix's lane, time [s] and speed limit [m/s] (:meth:`tell`)
+        self._plan: dict[str, tuple[float, int]] = {}  # trip -> the motion its last spoken or shown advice asks (:meth:`tell`)
         self.held = 0  # fixes answered "follow the car in front"
 
     def see(self, corridor: str, trip_id: str, t_unix_s: float, obs: Observation, last_reason: str | None = None,
@@ -243,10 +271,13 @@ class QueueBoard:
             self._for_queue.pop(trip_id, None)
             self._passed.pop(trip_id, None)
             self._view_m.pop(trip_id, None)
+            self._fix.pop(trip_id, None)
+            self._plan.pop(trip_id, None)
             return obs, None
         here = float(obs.position_m)
         self._view_m[trip_id] = max(here - view_from_m, 0.0)
         lane.put(trip_id, (t_unix_s, here, float(obs.speed_mps)))
+        self._fix[trip_id] = (lane, t_unix_s, obs.speed_limit_mps)
         lane.expire(t_unix_s, MAX_AGE_S)
         self.note_behind(lane, trip_id, here, t_unix_s, obs, passed)
         est = self.estimate(lane, here, t_unix_s, obs, self.red_elapsed(obs, t_unix_s), self._view_m[trip_id])
@@ -335,13 +366,30 @@ class QueueBoard:
             follow = Advice("none", "queue", light_red=nxt.red_now, seconds_to_change_s=countdown, message=QUEUE_MESSAGE, speak=last_reason != "queue",
                             light_id=nxt.intersection_id)  # fmt: skip
             if est.in_queue or est.follow_mps is None:
+                self.tell(trip_id, follow)
                 return obs, follow
             params = params or AdvisorParams()
             eased = ease_to_car_ahead(follow, obs.speed_mps, est.follow_mps, params)
             if eased is not follow and last_reason == "queue" and told_mps is not None:  # said already: again where the speed moved
                 eased = replace(eased, speak=abs(told_mps - eased.target_speed_mps) >= params.speak_change_mps)
+            self.tell(trip_id, eased)
             return obs, eased
         return apply(obs, est), None
+
+    def tell(self, trip_id: str, advice: Advice) -> None:
+        """The trip's fix (the last :meth:`see` noted) was answered ``advice``: its probe carries the motion it asks
+        (:func:`advisory.advice.queue.plan_of`, :meth:`Lane.tell`), which the cars behind it follow in
+        :func:`advisory.advice.queue.behind_s`; at an advisor's silence (``too_close``, ...) the motion of the advice
+        before it, which the driver goes on with."""
+        fix = self._fix.get(trip_id)
+        if fix is None:
+            return
+        lane, t_unix_s, limit_mps = fix
+        if advice.action == "none" and advice.reason in SILENT:
+            plan = self._plan.get(trip_id, (math.nan, 0))
+        else:
+            plan = self._plan[trip_id] = plan_of(advice, limit_mps)
+        lane.tell(trip_id, t_unix_s, plan)
 
     def lane(self, corridor: str) -> Lane:
         """The corridor's probes, indexed (:class:`Lane`; indexed again when the shared board replaced them)."""
@@ -392,6 +440,8 @@ class QueueBoard:
         (:func:`advisory.advice.queue_words.said_truly`): the advisor sees the queue as a red."""
         real, est = self._seen.get(trip_id, (obs, None)) if trip_id is not None else (obs, None)
         out = self._checked(obs, real, est, advice, params, trip_id, last)
+        if trip_id is not None:
+            self.tell(trip_id, out)
         if trip_id is not None and not (out.action == "none" and out.reason in SILENT):  # the plan the driver follows now
             self._for_queue[trip_id] = out.reason == "queue" or (bool(obs.lights) and obs.lights[0] != real.lights[0])
         return out
@@ -441,6 +491,8 @@ class QueueBoard:
         self._for_queue.pop(trip_id, None)
         self._passed.pop(trip_id, None)
         self._view_m.pop(trip_id, None)
+        self._fix.pop(trip_id, None)
+        self._plan.pop(trip_id, None)
 
     def state(self) -> str:
         """Where the probes come from (``/health``): ``local`` (this process, which serves every trip), ``shared``

@@ -552,6 +552,35 @@ def test_a_car_behind_one_that_takes_the_last_of_the_green_prepares_to_stop_inst
     assert advice.action == "stop" and advice.target_speed_mps == 0.0 and "Prepare to stop" in advice.message
 
 
+@pytest.mark.parametrize("told", [None, Advice("slow_down", "green_wave", 8.0), Advice("stop", "red", 0.0)])
+def test_a_car_ahead_told_to_slow_down_holds_this_one_longer_than_its_speed_now_says(told):
+    """At 20 m/s, 100 m before a light that shows no amber and turns red in 10 s, 37.5 m behind a connected car at 15
+    m/s (2 s: 30 m beyond a jam spacing). By hand (Newell's follower, :func:`behind_s`): that car holding 15 m/s is
+    7.5 m past the line after 70 m, 4.67 s, and this car crosses 2 s later, at 6.67 s; with the 2 s margin (it closes
+    in on a slower car) 8.67 s, before the red: it follows. Told to slow to 8 m/s (the advisor's gentle 1.5 m/s²:
+    53.67 m in 4.67 s, then 16.33 m at 8 m/s in 2.04 s), that car is there at 6.71 s, this car at 8.71 s, 10.71 s
+    with the margin: after the red's start, and it prepares to stop instead (before, the service took the car ahead
+    to hold its 15 m/s and told this one to follow it towards the red). Told to stop at the line, that car never
+    crosses before the red: this one prepares to stop too. The service knows what it told the car ahead: its fix's
+    advice (``QueueBoard.check``)."""
+    limit, params = 24.5872, AdvisorParams()
+    lights = (LightView(1, 100.0, red_windows_s=((10.0, 40.0), (70.0, 100.0)), amber_s=0.0),)
+    ahead = Observation(15.0, limit, tuple(replace(lv, distance_m=62.5) for lv in lights), position_m=137.5)
+    assert behind_s(100.0, [(37.5, 15.0)]) == pytest.approx(70.0 / 15.0 + 2.0)
+    board = QueueBoard()
+    seen_ahead, held_ahead = board.see("c", "ahead", 0.0, ahead)
+    if told is not None:
+        assert held_ahead is None
+        assert board.check(seen_ahead, told, params, "ahead") == told  # the service's answer to that car: the plan stands
+    seen, held = board.see("c", "car", 0.0, Observation(20.0, limit, lights, position_m=100.0))
+    if told is None:  # holding its speed: this car follows it (its lift-off to that car's speed)
+        assert held is not None and held.reason == "queue"
+        return
+    assert held is None and seen.lights[0].red_windows_s[0] == (0.0, 40.0)  # closed to it until the red's end
+    advice, _ = advise(seen)
+    assert advice.action == "stop" and "Prepare to stop" in advice.message
+
+
 def test_the_board_sees_each_probe_where_it_is_at_the_fix_not_where_it_was():
     """A corridor's fixes arrive one after the other: a car behind that posted 0.9 s before this one is counted where it
     is now (its fix advanced at its speed): 86.4 - 0.9 x 24 = 64.8 m behind at 24 m/s, 2.7 s, within the 3 s window

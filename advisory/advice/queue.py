@@ -35,8 +35,9 @@ follows the car in front (closing in on a slower connected car, it lifts off to 
 :func:`advisory.advice.queue_words.ease_to_car_ahead`), and the advice resumes, planned afresh, once it is free (never a target above what the
 traffic ahead allows; and a plan made in a queue is a crawl: every faster speed reaches the line before the queue has
 gone, and the advisor keeps a plan that still works, to the green after next).
-The cars ahead bound when this car can cross (:func:`behind_s`: each holds its speed now, its plan not known here,
-and this car follows it as in Newell's car following, a time gap and a jam spacing behind). Where that bound leaves a
+The cars ahead bound when this car can cross (:func:`behind_s`: each drives as the service advised it at its last
+fix, :func:`plan_of`, or, not advised, holds its speed now, and this car follows it as in Newell's car following, a
+time gap and a jam spacing behind). Where that bound leaves a
 car that could make a green alone no time to cross before a red that no amber announces (less ``no_amber_margin_s``
 where they set its crossing), the line is closed to it until the red's end and it is not told to follow
 (``stop_behind``): it prepares to stop. Decided within the distance the car needs to stop at the others' rate plus a
@@ -64,8 +65,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
+from advisory.advice.kinematics import KEEP_MODES, MODE_CODES, MODE_NAMES, crossing_time_s
 from advisory.advice.mixture import IMPLIED_TIMINGS, implied_timings
-from advisory.advice.views import LightView, Observation
+from advisory.advice.views import Advice, AdvisorParams, LightView, Observation
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,13 +121,16 @@ class Probes(Sequence[Probe]):
     """Many connected cars at once, as two arrays of equal length (the service makes a lane's run of them in one go:
     ``server.queue.Lane``): how far ahead of the one asking (negative: behind) [m] and their speeds [m/s]. A sequence of
     :class:`Probe` to code that reads them one at a time; the functions here that look at every car read the arrays
-    (:meth:`of`: any sequence of probes as arrays)."""
+    (:meth:`of`: any sequence of probes as arrays). ``plan_mps`` and ``plan_mode``: each car's advised motion where the
+    service advised it at that fix (:func:`plan_of`; NaN: none, the car holds its speed now), or None for all."""
 
-    __slots__ = ("ahead_m", "speed_mps")
+    __slots__ = ("ahead_m", "speed_mps", "plan_mps", "plan_mode")
 
-    def __init__(self, ahead_m: np.ndarray, speed_mps: np.ndarray) -> None:
+    def __init__(self, ahead_m: np.ndarray, speed_mps: np.ndarray, plan_mps: np.ndarray | None = None, plan_mode: np.ndarray | None = None) -> None:
         self.ahead_m = ahead_m
         self.speed_mps = speed_mps
+        self.plan_mps = plan_mps
+        self.plan_mode = plan_mode
 
     @staticmethod
     def of(probes: Sequence[Probe]) -> Probes:
@@ -136,7 +141,17 @@ class Probes(Sequence[Probe]):
 
     def where(self, keep: np.ndarray) -> Probes:
         """The cars where ``keep`` (a mask or indices) says, in its order."""
-        return Probes(self.ahead_m[keep], self.speed_mps[keep])
+        if self.plan_mps is None:
+            return Probes(self.ahead_m[keep], self.speed_mps[keep])
+        return Probes(self.ahead_m[keep], self.speed_mps[keep], self.plan_mps[keep], self.plan_mode[keep])
+
+    def cars(self, keep: np.ndarray) -> list[tuple[float, ...]]:
+        """The cars where ``keep`` says as :func:`behind_s` takes them: ``(ahead_m, speed_mps)``, with
+        ``(plan_mps, plan_mode)`` where the service advised them (:func:`plan_of`)."""
+        ahead_m, speed_mps = self.ahead_m[keep].tolist(), self.speed_mps[keep].tolist()
+        if self.plan_mps is None:
+            return list(zip(ahead_m, speed_mps))
+        return list(zip(ahead_m, speed_mps, self.plan_mps[keep].tolist(), self.plan_mode[keep].tolist()))
 
     def __len__(self) -> int:
         return len(self.ahead_m)
@@ -280,11 +295,13 @@ def estimate(
         v = obs.speed_mps
         deciding = light.distance_m <= v * v / (2.0 * model.drive_accel_mps2) + v * model.headway_s
         if light.amber_s == 0.0 and 0.0 < start and free < start and light.distance_m / v_free < start and deciding:
-            lead_cars = list(zip(ahead_m[before < ahead_m].tolist(), speed_mps[before < ahead_m].tolist()))
+            lead_cars = probes.cars(before < ahead_m)
             lead = behind_s(light.distance_m, lead_cars, model)
+            lead = lead if math.isfinite(lead) else end  # a car ahead told to stop at the line: until the red's end, at least
             nearest = min(lead_cars, default=None)
             # the margin where the cars ahead set its crossing (later than its own drive, or closing in on a slower car):
-            # their plans, not known here, make it uncertain (traced: platoons slowing for the next light's queue)
+            # how they drive their plans (advised ones: :func:`plan_of`; the others' not known) makes it uncertain (traced:
+            # platoons slowing for the next light's queue)
             held = lead > normal_drive_s(light.distance_m, v, obs.speed_limit_mps, model.drive_accel_mps2)
             margin = model.no_amber_margin_s if held or (nearest is not None and _close(obs, nearest[0], model) and _closing(obs, nearest[1])) else 0.0
             if lead + margin > start:
@@ -478,24 +495,83 @@ def _closing(obs: Observation, ahead_mps: float) -> bool:
     return ahead_mps < min(obs.speed_mps, obs.speed_limit_mps) - 1.0
 
 
-def behind_s(line_m: float, ahead: Sequence[tuple[float, float]], model: QueueModel | None = None) -> float:
+NORMAL_MODE, STOP_MODE = -1, -2
+"""Advised motions besides the kinematics' speed changes (:data:`~advisory.advice.kinematics.MODE_CODES`), for
+:func:`plan_of`: "drive normally" (speeding up to the limit as the regular driver does) and "prepare to stop"."""
+
+
+def plan_of(advice: Advice, limit_mps: float) -> tuple[float, int]:
+    """The motion ``advice`` asks of the car it is given to, as :func:`behind_s` takes it for a car ahead: the target
+    speed [m/s] and how the car gets there (a code of :data:`~advisory.advice.kinematics.MODE_CODES`, the mode the
+    advisor plans that action in, :data:`~advisory.advice.kinematics.KEEP_MODES`; :data:`NORMAL_MODE`: "drive
+    normally", to ``limit_mps``; :data:`STOP_MODE`: a stop at its next line); ``(nan, 0)`` where the advice asks no
+    motion (follow the car in front, no data, "red light ahead": the car holds its speed now, as before).
+
+    Examples
+    --------
+    >>> plan_of(Advice("slow_down", "green_wave", 8.0), 24.6), plan_of(Advice("none", "tight_green"), 24.6)
+    ((8.0, 2), (24.6, -1))
+    >>> plan_of(Advice("stop", "red"), 24.6), plan_of(Advice("none", "queue"), 24.6)
+    ((0.0, -2), (nan, 0))
+    """
+    if advice.action == "stop":
+        return 0.0, STOP_MODE
+    if advice.action in KEEP_MODES and advice.target_speed_mps is not None:
+        return min(advice.target_speed_mps, limit_mps), MODE_CODES[KEEP_MODES[advice.action]]
+    if advice.action == "resume" or (advice.action == "none" and advice.reason == "tight_green"):
+        return limit_mps, NORMAL_MODE
+    return math.nan, 0
+
+
+def plan_drive_s(distance_m: float, v_mps: float, plan_mps: float = math.nan, plan_mode: int = 0, params: AdvisorParams | None = None,
+                 accel_mps2: float = 2.0) -> float:  # fmt: skip
+    """Time for a car at ``v_mps`` to cover ``distance_m`` in its advised motion (:func:`plan_of`): the speed change
+    of the advisor's own model of that action (:func:`~advisory.advice.kinematics.crossing_time_s`, no reaction: the
+    advice is the car's latest, which it follows already), then the target held; "drive normally" speeding up to the
+    limit at ``accel_mps2`` (:func:`normal_drive_s`); a stop never covers it (inf); with no plan (NaN) or backwards (a
+    distance already covered) at its speed now. [s]
+
+    Examples
+    --------
+    At 15 m/s, told to slow to 8 m/s (gently, 1.5 m/s², then hold it): 53.67 m in 4.67 s, the 46.33 m left of 100 m
+    at 8 m/s in 5.79 s: 10.46 s, where holding 15 m/s takes 6.67 s.
+
+    >>> round(plan_drive_s(100.0, 15.0, 8.0, MODE_CODES["brake"]), 2), round(plan_drive_s(100.0, 15.0), 2)
+    (10.46, 6.67)
+    >>> round(plan_drive_s(100.0, 10.0, 20.0, NORMAL_MODE), 2), plan_drive_s(100.0, 10.0, 0.0, STOP_MODE), plan_drive_s(-5.0, 10.0, 0.0, STOP_MODE)
+    (6.25, inf, -0.5)
+    """
+    if distance_m <= 0.0 or plan_mps != plan_mps:
+        return distance_m / v_mps
+    if plan_mode == STOP_MODE:
+        return math.inf
+    if plan_mode == NORMAL_MODE:
+        return normal_drive_s(distance_m, v_mps, plan_mps, accel_mps2)
+    return float(crossing_time_s(distance_m, v_mps, float(plan_mps), params or AdvisorParams(), MODE_NAMES[int(plan_mode)], 0.0))
+
+
+def behind_s(line_m: float, ahead: Sequence[tuple[float, ...]], model: QueueModel | None = None, params: AdvisorParams | None = None) -> float:
     r"""The earliest instant this car can cross a line ``line_m`` ahead behind the cars ahead of it (``ahead``: how far
-    ahead of this car [m] and speed [m/s], each), 0 where none holds it. [s]
+    ahead of this car [m] and speed [m/s], each, and where the service advised it its advised motion, ``(plan_mps,
+    plan_mode)`` of :func:`plan_of`), 0 where none holds it. [s]
 
-    Each car ahead holds its speed now (the service does not know its plan: the connected cars traced ahead of those
-    that entered a red were slowing for the next light's queue, not speeding up to the limit as :func:`estimate` has
-    cars arriving at a queue do), and this car follows it as in Newell's simplified car following [1]_: its
-    trajectory is the one ahead shifted by a space ``jam_spacing_m`` and a time, the headway ``headway_s`` or the
-    shorter one it keeps now (its gap less the jam spacing over the speed of the car ahead: a platoon at the limit 1.2 s
-    apart stays so), so its front reaches the line that time after the car ahead is ``jam_spacing_m`` past it (or was:
-    a car ahead already past the line holds it for less than that time). Cars standing (slower than ``queued_mps``) do
-    not count here (a queue: :func:`estimate`).
+    Each car ahead drives as it was advised (:func:`plan_drive_s`: its target reached as the advisor plans that
+    action, "drive normally" at the regular driver's rate, a stop at its line never crossing it) or, not advised
+    (not connected to this service, following the car in front, no fresh advice), holds its speed now (the connected
+    cars traced ahead of those that entered a red were slowing for the next light's queue, not speeding up to the limit
+    as :func:`estimate` has cars arriving at a queue do), and this car follows it as in Newell's simplified car
+    following [1]_: its trajectory is the one ahead shifted by a space ``jam_spacing_m`` and a time, the headway
+    ``headway_s`` or the shorter one it keeps now (its gap less the jam spacing over the speed of the car ahead: a
+    platoon at the limit 1.2 s apart stays so), so its front reaches the line that time after the car ahead is
+    ``jam_spacing_m`` past it (or was: a car ahead already past the line holds it for less than that time). Cars
+    standing (slower than ``queued_mps``) do not count here (a queue: :func:`estimate`). ``params``: the advisor's
+    rates of those motions (default :class:`~advisory.advice.views.AdvisorParams`).
 
-    .. math:: t = \max\big(0, \max_k \; (d - a_k + \delta) / v_k + \min(\tau, (a_k - \delta) / v_k)\big)
+    .. math:: t = \max\big(0, \max_k \; T_k(d - a_k + \delta) + \min(\tau, (a_k - \delta) / v_k)\big)
 
-    with :math:`d` the line's distance,
-    :math:`a_k` how far ahead car :math:`k` is and :math:`v_k` its speed, :math:`\delta` the jam spacing and
-    :math:`\tau` the headway.
+    with :math:`d` the line's distance, :math:`a_k` how far ahead car :math:`k` is, :math:`v_k` its speed and
+    :math:`T_k(x)` the time it takes to drive :math:`x` (:math:`x / v_k` holding its speed), :math:`\delta` the jam
+    spacing and :math:`\tau` the headway.
 
     References
     ----------
@@ -513,13 +589,25 @@ def behind_s(line_m: float, ahead: Sequence[tuple[float, float]], model: QueueMo
     (5.0, 5.0, 1.75)
     >>> behind_s(20.0, []), behind_s(20.0, [(80.0, 20.0)])
     (0.0, 0.0)
+
+    A car 37.5 m ahead at 15 m/s (2 s), told to slow to 8 m/s (:func:`plan_drive_s`: 53.67 m in 4.67 s, then 16.33 m at
+    8 m/s in 2.04 s) is 7.5 m past a line 100 m ahead in 6.71 s, and this car crosses 2 s after it, 8.71 s from now;
+    holding 15 m/s, the 70 m in 4.67 s, 6.67 s.
+
+    >>> round(behind_s(100.0, [(37.5, 15.0, 8.0, MODE_CODES["brake"])]), 2), round(behind_s(100.0, [(37.5, 15.0)]), 2)
+    (8.71, 6.67)
     """
     model = model or QueueModel()
     out = 0.0
-    for ahead_m, v_mps in ahead:
+    for car in ahead:
+        ahead_m, v_mps = car[0], car[1]
         if ahead_m > 0.0 and v_mps >= model.queued_mps:
             lag_s = min(model.headway_s, max(ahead_m - model.jam_spacing_m, 0.0) / v_mps)
-            out = max(out, (line_m - ahead_m + model.jam_spacing_m) / v_mps + lag_s)
+            to_go_m = line_m - ahead_m + model.jam_spacing_m
+            plan_mps, plan_mode = (car[2], car[3]) if len(car) > 2 else (math.nan, 0)
+            if plan_mode == STOP_MODE and ahead_m >= line_m:  # told to stop at a line past this one
+                plan_mps = math.nan
+            out = max(out, plan_drive_s(to_go_m, v_mps, plan_mps, plan_mode, params, model.drive_accel_mps2) + lag_s)
     return out
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import random
 import types
 
+import numpy as np
 import pytest
 
 from advisory.advice.views import LightView, Observation
@@ -111,7 +112,10 @@ def test_the_index_gives_the_advice_of_the_loop_over_every_car(arrivals_vph, sha
     assert dict(board._cars["c"]) == loop.cars
     lane = board.lane("c")
     assert lane.order == sorted(lane.entry.values()) and {tid for _, _, tid, _ in lane.order} == set(loop.cars)
-    assert lane.rows.tolist() == [[s for s, _, _, _ in lane.order], [loop.cars[tid][0] for _, _, tid, _ in lane.order], [v for _, _, _, v in lane.order]]
+    assert lane.rows[:3].tolist() == [[s for s, _, _, _ in lane.order], [loop.cars[tid][0] for _, _, tid, _ in lane.order], [v for _, _, _, v in lane.order]]
+    # and each car's advised motion at its last fix (Lane.tell: here the service's own "follow" and lift-offs), NaN where none
+    np.testing.assert_array_equal(lane.rows[3:].T, [lane._plan(tid) for _, _, tid, _ in lane.order])
+    assert np.isfinite(lane.rows[3]).any()
 
 
 def test_a_fix_looks_at_the_cars_near_it_only():
