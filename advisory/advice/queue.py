@@ -495,6 +495,7 @@ def _closing(obs: Observation, ahead_mps: float) -> bool:
     return ahead_mps < min(obs.speed_mps, obs.speed_limit_mps) - 1.0
 
 
+_ADVISOR_DEFAULTS = AdvisorParams()  # (frozen: one for every call of :func:`plan_drive_s` given none)
 NORMAL_MODE, STOP_MODE = -1, -2
 """Advised motions besides the kinematics' speed changes (:data:`~advisory.advice.kinematics.MODE_CODES`), for
 :func:`plan_of`: "drive normally" (speeding up to the limit as the regular driver does) and "prepare to stop"."""
@@ -547,7 +548,7 @@ def plan_drive_s(distance_m: float, v_mps: float, plan_mps: float = math.nan, pl
         return math.inf
     if plan_mode == NORMAL_MODE:
         return normal_drive_s(distance_m, v_mps, plan_mps, accel_mps2)
-    return float(crossing_time_s(distance_m, v_mps, float(plan_mps), params or AdvisorParams(), MODE_NAMES[int(plan_mode)], 0.0))
+    return float(crossing_time_s(distance_m, v_mps, float(plan_mps), params or _ADVISOR_DEFAULTS, MODE_NAMES[int(plan_mode)], 0.0))
 
 
 def behind_s(line_m: float, ahead: Sequence[tuple[float, ...]], model: QueueModel | None = None, params: AdvisorParams | None = None) -> float:
